@@ -1,0 +1,81 @@
+//! Point clouds.
+
+use nalgebra::{Point3, Vector3};
+
+use crate::RigidTransform;
+
+/// A cloud of N points in 3-D.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PointCloud {
+    /// The points. // (N,)
+    pub points: Vec<Point3<f64>>,
+}
+
+impl PointCloud {
+    /// A cloud from its points.
+    pub fn new(points: Vec<Point3<f64>>) -> Self {
+        Self { points }
+    }
+
+    /// A cloud from f32 rows (x, y, z), as stored in `.npy` files and used by the network.
+    pub fn from_f32_rows(rows: &[[f32; 3]]) -> Self {
+        Self::new(rows.iter().map(|r| Point3::new(r[0] as f64, r[1] as f64, r[2] as f64)).collect())
+    }
+
+    /// The points as f32 rows (x, y, z). // (N, 3)
+    pub fn to_f32_rows(&self) -> Vec<[f32; 3]> {
+        self.points.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect()
+    }
+
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    /// True when the cloud has no point.
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+
+    /// Mean of the points; the origin for an empty cloud.
+    pub fn centroid(&self) -> Point3<f64> {
+        if self.points.is_empty() {
+            return Point3::origin();
+        }
+        let sum: Vector3<f64> = self.points.iter().map(|p| p.coords).sum();
+        Point3::from(sum / self.points.len() as f64)
+    }
+
+    /// The cloud moved by `transform`.
+    pub fn transformed(&self, transform: &RigidTransform) -> Self {
+        Self::new(self.points.iter().map(|p| transform.apply(p)).collect())
+    }
+
+    /// The cloud with its points reordered: `out[i] = self[order[i]]`.
+    pub fn select(&self, order: &[usize]) -> Self {
+        Self::new(order.iter().map(|&i| self.points[i]).collect())
+    }
+}
+
+impl From<Vec<Point3<f64>>> for PointCloud {
+    fn from(points: Vec<Point3<f64>>) -> Self {
+        Self::new(points)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn centroid_is_the_mean() {
+        let c = PointCloud::new(vec![Point3::new(0.0, 0.0, 0.0), Point3::new(2.0, 4.0, -6.0)]);
+        assert_eq!(c.centroid(), Point3::new(1.0, 2.0, -3.0));
+    }
+
+    #[test]
+    fn f32_rows_round_trip() {
+        let rows = [[1.5f32, -2.0, 0.25], [0.0, 1.0, 2.0]];
+        assert_eq!(PointCloud::from_f32_rows(&rows).to_f32_rows(), rows.to_vec());
+    }
+}

@@ -1,0 +1,20 @@
+//! rgm-geom — the geometry layer of rgm: point clouds, rigid transforms, Euler angles,
+//! random poses, exact kNN, weighted Kabsch, registration metrics and the classical
+//! baselines (ICP, FGR on FPFH).
+//!
+//! Layering rule: rgm-geom depends on no other rgm crate and knows nothing about tensors,
+//! gradients or networks. Everything is f64; callers convert at their boundary.
+//!
+//! Conventions: a transform `t_target_source` maps source coordinates into the target frame,
+//! `y = R x + t`.
+
+pub mod cloud;
+pub mod error;
+pub mod euler;
+pub mod transform;
+
+pub use cloud::PointCloud;
+pub use error::{GeomError, Result};
+pub use transform::RigidTransform;
+
+pub use nalgebra::{Matrix3, Matrix4, Point3, Vector3};
