@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# Installs what rgm needs on a fresh Debian/Ubuntu machine that has the Rust toolchain, gcc and
+# Python: gfortran for the statically built OpenBLAS. Safe to run again.
+set -euo pipefail
+
+need_apt=()
+command -v gfortran >/dev/null 2>&1 || need_apt+=(gfortran)
+command -v make >/dev/null 2>&1 || need_apt+=(make)
+if [ ${#need_apt[@]} -gt 0 ]; then
+  sudo=""
+  [ "$(id -u)" -ne 0 ] && sudo="sudo"
+  echo "setup: installing ${need_apt[*]} with apt-get"
+  $sudo apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${need_apt[@]}" >/dev/null
+fi
+echo "setup: ready (gfortran $(gfortran -dumpversion))"
