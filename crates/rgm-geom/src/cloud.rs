@@ -19,12 +19,19 @@ impl PointCloud {
 
     /// A cloud from f32 rows (x, y, z), as stored in `.npy` files and used by the network.
     pub fn from_f32_rows(rows: &[[f32; 3]]) -> Self {
-        Self::new(rows.iter().map(|r| Point3::new(r[0] as f64, r[1] as f64, r[2] as f64)).collect())
+        Self::new(
+            rows.iter()
+                .map(|r| Point3::new(r[0] as f64, r[1] as f64, r[2] as f64))
+                .collect(),
+        )
     }
 
     /// The points as f32 rows (x, y, z). // (N, 3)
     pub fn to_f32_rows(&self) -> Vec<[f32; 3]> {
-        self.points.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect()
+        self.points
+            .iter()
+            .map(|p| [p.x as f32, p.y as f32, p.z as f32])
+            .collect()
     }
 
     /// Number of points.
@@ -69,13 +76,19 @@ mod tests {
 
     #[test]
     fn centroid_is_the_mean() {
-        let c = PointCloud::new(vec![Point3::new(0.0, 0.0, 0.0), Point3::new(2.0, 4.0, -6.0)]);
+        let c = PointCloud::new(vec![
+            Point3::new(0.0, 0.0, 0.0),
+            Point3::new(2.0, 4.0, -6.0),
+        ]);
         assert_eq!(c.centroid(), Point3::new(1.0, 2.0, -3.0));
     }
 
     #[test]
     fn f32_rows_round_trip() {
         let rows = [[1.5f32, -2.0, 0.25], [0.0, 1.0, 2.0]];
-        assert_eq!(PointCloud::from_f32_rows(&rows).to_f32_rows(), rows.to_vec());
+        assert_eq!(
+            PointCloud::from_f32_rows(&rows).to_f32_rows(),
+            rows.to_vec()
+        );
     }
 }

@@ -5,10 +5,18 @@
 pub enum GeomError {
     /// An operation needs at least `needed` points and got `got`.
     #[error("{op}: needs at least {needed} points, got {got}")]
-    TooFewPoints { op: &'static str, needed: usize, got: usize },
+    TooFewPoints {
+        op: &'static str,
+        needed: usize,
+        got: usize,
+    },
     /// Two inputs that must have equal lengths do not.
     #[error("{op}: length mismatch, {left} vs {right}")]
-    LengthMismatch { op: &'static str, left: usize, right: usize },
+    LengthMismatch {
+        op: &'static str,
+        left: usize,
+        right: usize,
+    },
     /// The problem has no unique solution (e.g. all weights zero, collinear points).
     #[error("{op}: degenerate input: {why}")]
     Degenerate { op: &'static str, why: String },

@@ -45,7 +45,11 @@ pub fn euler_xyz_extrinsic(r: &Matrix3<f64>) -> [f64; 3] {
     let beta = sb.asin();
     if (1.0 - sb.abs()) < 1e-12 {
         // cos β = 0: only α ∓ γ is defined; with γ = 0, R[0,1] = sin β sin α − …, R[1,1] = cos α.
-        let alpha = if sb > 0.0 { r[(0, 1)].atan2(r[(1, 1)]) } else { (-r[(0, 1)]).atan2(r[(1, 1)]) };
+        let alpha = if sb > 0.0 {
+            r[(0, 1)].atan2(r[(1, 1)])
+        } else {
+            (-r[(0, 1)]).atan2(r[(1, 1)])
+        };
         return [alpha, beta, 0.0];
     }
     let alpha = r[(2, 1)].atan2(r[(2, 2)]);
@@ -59,7 +63,12 @@ mod tests {
 
     #[test]
     fn extrinsic_round_trip() {
-        for &(a, b, g) in &[(0.1, 0.2, 0.3), (-2.5, 1.2, 3.0), (1.0, -0.7, -2.0), (0.0, 0.0, 0.0)] {
+        for &(a, b, g) in &[
+            (0.1, 0.2, 0.3),
+            (-2.5, 1.2, 3.0),
+            (1.0, -0.7, -2.0),
+            (0.0, 0.0, 0.0),
+        ] {
             let r = rotation_xyz_extrinsic(a, b, g);
             let [a2, b2, g2] = euler_xyz_extrinsic(&r);
             assert!((a - a2).abs() < 1e-12 && (b - b2).abs() < 1e-12 && (g - g2).abs() < 1e-12);

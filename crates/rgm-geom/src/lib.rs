@@ -11,10 +11,12 @@
 pub mod cloud;
 pub mod error;
 pub mod euler;
+pub mod knn;
 pub mod transform;
 
 pub use cloud::PointCloud;
 pub use error::{GeomError, Result};
+pub use knn::{knn_graph, KnnIndex};
 pub use transform::RigidTransform;
 
 pub use nalgebra::{Matrix3, Matrix4, Point3, Vector3};

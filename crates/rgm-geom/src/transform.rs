@@ -24,7 +24,10 @@ impl Default for RigidTransform {
 impl RigidTransform {
     /// A transform from its parts; `rotation` is trusted to be a rotation.
     pub fn new(rotation: Matrix3<f64>, translation: Vector3<f64>) -> Self {
-        Self { rotation, translation }
+        Self {
+            rotation,
+            translation,
+        }
     }
 
     /// The identity.
@@ -44,7 +47,10 @@ impl RigidTransform {
 
     /// `self ∘ first`: apply `first`, then `self`.
     pub fn compose(&self, first: &RigidTransform) -> Self {
-        Self::new(self.rotation * first.rotation, self.rotation * first.translation + self.translation)
+        Self::new(
+            self.rotation * first.rotation,
+            self.rotation * first.translation + self.translation,
+        )
     }
 
     /// The inverse `x = Rᵀ (y − t)`.
@@ -71,27 +77,38 @@ impl RigidTransform {
     /// (RᵀR = I, det R = +1, last row 0 0 0 1).
     pub fn from_matrix4(m: &Matrix4<f64>, tol: f64) -> Result<Self> {
         if m.iter().any(|v| !v.is_finite()) {
-            return Err(GeomError::NonFinite { op: "RigidTransform::from_matrix4" });
+            return Err(GeomError::NonFinite {
+                op: "RigidTransform::from_matrix4",
+            });
         }
         let last = m.fixed_view::<1, 4>(3, 0);
         if (last[0].abs() + last[1].abs() + last[2].abs() + (last[3] - 1.0).abs()) > tol {
-            return Err(GeomError::NotRigid { why: format!("last row is {last}, expected 0 0 0 1") });
+            return Err(GeomError::NotRigid {
+                why: format!("last row is {last}, expected 0 0 0 1"),
+            });
         }
         let r: Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into();
         let orth = (r.transpose() * r - Matrix3::identity()).abs().max();
         if orth > tol {
-            return Err(GeomError::NotRigid { why: format!("rotation block is not orthonormal (|RᵀR − I| = {orth:.2e})") });
+            return Err(GeomError::NotRigid {
+                why: format!("rotation block is not orthonormal (|RᵀR − I| = {orth:.2e})"),
+            });
         }
         let det = r.determinant();
         if (det - 1.0).abs() > tol {
-            return Err(GeomError::NotRigid { why: format!("rotation block has determinant {det:.6}, expected +1") });
+            return Err(GeomError::NotRigid {
+                why: format!("rotation block has determinant {det:.6}, expected +1"),
+            });
         }
         Ok(Self::new(r, m.fixed_view::<3, 1>(0, 3).into()))
     }
 
     /// The rotation angle of `R` in degrees, `acos((trace − 1) / 2)`.
     pub fn rotation_angle_deg(&self) -> f64 {
-        ((self.rotation.trace() - 1.0) / 2.0).clamp(-1.0, 1.0).acos().to_degrees()
+        ((self.rotation.trace() - 1.0) / 2.0)
+            .clamp(-1.0, 1.0)
+            .acos()
+            .to_degrees()
     }
 
     /// A random pose as spec §1 draws G: angles a, b, c uniform in [0°, `max_angle_deg`],
@@ -132,16 +149,27 @@ mod tests {
         let p = Point3::new(1.0, 2.0, 3.0);
         let composed = a.compose(&b).apply(&p);
         assert!((composed - a.apply(&b.apply(&p))).norm() < 1e-12);
-        assert!((a.compose(&b).to_matrix4() - a.to_matrix4() * b.to_matrix4()).abs().max() < 1e-12);
+        assert!(
+            (a.compose(&b).to_matrix4() - a.to_matrix4() * b.to_matrix4())
+                .abs()
+                .max()
+                < 1e-12
+        );
     }
 
     #[test]
     fn matrix4_round_trip_and_rejection() {
         let t = pose(4);
-        assert_eq!(RigidTransform::from_matrix4(&t.to_matrix4(), 1e-9).unwrap(), t);
+        assert_eq!(
+            RigidTransform::from_matrix4(&t.to_matrix4(), 1e-9).unwrap(),
+            t
+        );
         let mut m = t.to_matrix4();
         m[(0, 0)] *= -1.0;
-        assert!(matches!(RigidTransform::from_matrix4(&m, 1e-6), Err(GeomError::NotRigid { .. })));
+        assert!(matches!(
+            RigidTransform::from_matrix4(&m, 1e-6),
+            Err(GeomError::NotRigid { .. })
+        ));
         let mut scaled = Matrix4::identity() * 2.0;
         scaled[(3, 3)] = 1.0;
         assert!(RigidTransform::from_matrix4(&scaled, 1e-6).is_err());
@@ -160,7 +188,10 @@ mod tests {
 
     #[test]
     fn rotation_angle_of_a_quarter_turn() {
-        let t = RigidTransform::new(rotation_xyz_intrinsic(0.0, 0.0, std::f64::consts::FRAC_PI_2), Vector3::zeros());
+        let t = RigidTransform::new(
+            rotation_xyz_intrinsic(0.0, 0.0, std::f64::consts::FRAC_PI_2),
+            Vector3::zeros(),
+        );
         assert!((t.rotation_angle_deg() - 90.0).abs() < 1e-12);
     }
 }

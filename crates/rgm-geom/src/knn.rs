@@ -1,0 +1,427 @@
+//! Exact nearest neighbours in 3-D on a small k-d tree of our own.
+//!
+//! Every query is exact and deterministic: results are sorted by distance, ties by point index.
+//! The tree is built here rather than taken from kiddo 4 because both of kiddo's trees panic
+//! (integer overflow in construction) when more points than a bucket holds share one
+//! coordinate — routine in real clouds with duplicated points. Splitting at the median by
+//! count keeps this tree balanced whatever the duplicates.
+
+use nalgebra::Point3;
+
+use crate::{GeomError, Result};
+
+/// Most points in a leaf.
+const LEAF_SIZE: usize = 12;
+
+/// A node of the tree: a leaf owns a range of the reordered points; a split has every point
+/// of `left` with `coord[axis] <= value` and every point of `right` with `coord[axis] >= value`.
+#[derive(Clone, Debug)]
+enum Node {
+    Leaf {
+        start: u32,
+        end: u32,
+    },
+    Split {
+        axis: u8,
+        value: f64,
+        left: u32,
+        right: u32,
+    },
+}
+
+/// An exact nearest-neighbour index over a fixed set of points, built once.
+///
+/// Coordinates must be finite (a NaN point is never reported); [`knn_graph`] checks this for
+/// its callers. Distances returned are Euclidean (not squared).
+#[derive(Clone, Debug)]
+pub struct KnnIndex {
+    /// Tree nodes, root first; empty for an empty point set.
+    nodes: Vec<Node>,
+    /// The points in tree order, each with its index in the caller's slice. // (N,)
+    points: Vec<([f64; 3], u32)>,
+}
+
+impl KnnIndex {
+    /// An index over `points`; reported indices are positions in this slice.
+    pub fn new(points: &[Point3<f64>]) -> Self {
+        let mut tree_points: Vec<([f64; 3], u32)> = points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| ([p.x, p.y, p.z], i as u32))
+            .collect();
+        let mut nodes = Vec::with_capacity(2 * points.len() / LEAF_SIZE + 1);
+        if !tree_points.is_empty() {
+            build(&mut nodes, &mut tree_points, 0);
+        }
+        Self {
+            nodes,
+            points: tree_points,
+        }
+    }
+
+    /// Number of indexed points.
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    /// True when the index holds no point.
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+
+    /// The nearest point to `query`: (index, distance); the lowest index among equally near
+    /// points. An empty index answers `(usize::MAX, f64::INFINITY)`.
+    pub fn nearest(&self, query: &Point3<f64>) -> (usize, f64) {
+        let mut best = Vec::with_capacity(1);
+        self.k_nearest_squared_into(query, 1, &mut best);
+        best.first()
+            .map_or((usize::MAX, f64::INFINITY), |&(i, d2)| (i, d2.sqrt()))
+    }
+
+    /// The `k` nearest points to `query` (fewer when the index has fewer), sorted by distance,
+    /// ties by index — also across the k-th distance: of points tied there, the lowest indices.
+    pub fn k_nearest(&self, query: &Point3<f64>, k: usize) -> Vec<(usize, f64)> {
+        let mut out = Vec::with_capacity(k.min(self.len()));
+        self.k_nearest_squared_into(query, k, &mut out);
+        out.iter_mut().for_each(|n| n.1 = n.1.sqrt());
+        out
+    }
+
+    /// [`Self::k_nearest`] into a reused buffer, with *squared* distances: for inner loops.
+    pub fn k_nearest_squared_into(
+        &self,
+        query: &Point3<f64>,
+        k: usize,
+        out: &mut Vec<(usize, f64)>,
+    ) {
+        out.clear();
+        if k == 0 || self.nodes.is_empty() {
+            return;
+        }
+        self.k_nearest_rec(0, &[query.x, query.y, query.z], k, out);
+    }
+
+    /// Every point strictly closer than `radius` to `query`, sorted by distance, ties by index.
+    pub fn within_radius(&self, query: &Point3<f64>, radius: f64) -> Vec<(usize, f64)> {
+        let mut out = Vec::new();
+        if self.nodes.is_empty() || !(radius > 0.0) {
+            return out;
+        }
+        self.within_rec(0, &[query.x, query.y, query.z], radius * radius, &mut out);
+        sort_by_distance_then_index(&mut out);
+        out.iter_mut().for_each(|n| n.1 = n.1.sqrt());
+        out
+    }
+
+    /// Open3D's hybrid search (`KDTreeSearchParamHybrid`): the at most `max_nn` nearest points
+    /// strictly closer than `radius`, sorted by distance, ties by index.
+    pub fn hybrid(&self, query: &Point3<f64>, radius: f64, max_nn: usize) -> Vec<(usize, f64)> {
+        let mut out = self.k_nearest(query, max_nn);
+        out.retain(|n| n.1 < radius);
+        out
+    }
+
+    /// Keeps `best` the sorted `k` smallest (squared distance, index) seen so far.
+    fn k_nearest_rec(&self, node: usize, q: &[f64; 3], k: usize, best: &mut Vec<(usize, f64)>) {
+        match self.nodes[node] {
+            Node::Leaf { start, end } => {
+                for (p, i) in &self.points[start as usize..end as usize] {
+                    let d2 = squared_distance(p, q);
+                    let candidate = (*i as usize, d2);
+                    if best.len() == k {
+                        let worst = best[k - 1];
+                        if !is_before(candidate, worst) {
+                            continue;
+                        }
+                        best.pop();
+                    }
+                    let at = best.partition_point(|&b| is_before(b, candidate));
+                    best.insert(at, candidate);
+                }
+            }
+            Node::Split {
+                axis,
+                value,
+                left,
+                right,
+            } => {
+                let diff = q[axis as usize] - value;
+                let (near, far) = if diff < 0.0 {
+                    (left, right)
+                } else {
+                    (right, left)
+                };
+                self.k_nearest_rec(near as usize, q, k, best);
+                // `<=`: a point as far as the current worst may still win on its index.
+                if best.len() < k || diff * diff <= best[k - 1].1 {
+                    self.k_nearest_rec(far as usize, q, k, best);
+                }
+            }
+        }
+    }
+
+    /// Appends every (index, squared distance) with squared distance below `r2`, unsorted.
+    fn within_rec(&self, node: usize, q: &[f64; 3], r2: f64, out: &mut Vec<(usize, f64)>) {
+        match self.nodes[node] {
+            Node::Leaf { start, end } => {
+                for (p, i) in &self.points[start as usize..end as usize] {
+                    let d2 = squared_distance(p, q);
+                    if d2 < r2 {
+                        out.push((*i as usize, d2));
+                    }
+                }
+            }
+            Node::Split {
+                axis,
+                value,
+                left,
+                right,
+            } => {
+                let diff = q[axis as usize] - value;
+                let (near, far) = if diff < 0.0 {
+                    (left, right)
+                } else {
+                    (right, left)
+                };
+                self.within_rec(near as usize, q, r2, out);
+                if diff * diff < r2 {
+                    self.within_rec(far as usize, q, r2, out);
+                }
+            }
+        }
+    }
+}
+
+/// Builds the subtree over `points` (which start at position `offset` of the whole array)
+/// and returns its node index.
+fn build(nodes: &mut Vec<Node>, points: &mut [([f64; 3], u32)], offset: usize) -> u32 {
+    let id = nodes.len() as u32;
+    if points.len() <= LEAF_SIZE {
+        nodes.push(Node::Leaf {
+            start: offset as u32,
+            end: (offset + points.len()) as u32,
+        });
+        return id;
+    }
+    // Split the widest axis at the median by count.
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for (p, _) in points.iter() {
+        for a in 0..3 {
+            lo[a] = lo[a].min(p[a]);
+            hi[a] = hi[a].max(p[a]);
+        }
+    }
+    let axis = (0..3)
+        .max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b])))
+        .unwrap_or(0);
+    let mid = points.len() / 2;
+    points.select_nth_unstable_by(mid, |a, b| a.0[axis].total_cmp(&b.0[axis]));
+    let value = points[mid].0[axis];
+    nodes.push(Node::Leaf { start: 0, end: 0 }); // placeholder, replaced below
+    let (left_points, right_points) = points.split_at_mut(mid);
+    let left = build(nodes, left_points, offset);
+    let right = build(nodes, right_points, offset + mid);
+    nodes[id as usize] = Node::Split {
+        axis: axis as u8,
+        value,
+        left,
+        right,
+    };
+    id
+}
+
+/// `|p − q|²`, summed x, y, z in that order (every query reports bit-identical distances).
+#[inline]
+fn squared_distance(p: &[f64; 3], q: &[f64; 3]) -> f64 {
+    let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+    d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+}
+
+/// The order of results: by distance, ties by index.
+#[inline]
+fn is_before(a: (usize, f64), b: (usize, f64)) -> bool {
+    a.1 < b.1 || (a.1 == b.1 && a.0 < b.0)
+}
+
+/// Sorts (index, distance) pairs by distance, ties by index.
+fn sort_by_distance_then_index(items: &mut [(usize, f64)]) {
+    items.sort_unstable_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+}
+
+/// The (N, K) kNN graph of a cloud, flat row-major: row i lists the K nearest points of point i,
+/// itself first (spec §2.1: a point counts as its own nearest neighbour, even when other points
+/// coincide with it), then the others by distance, ties by index.
+pub fn knn_graph(points: &[Point3<f64>], k: usize) -> Result<Vec<usize>> {
+    let n = points.len();
+    if k > n {
+        return Err(GeomError::TooFewPoints {
+            op: "knn_graph",
+            needed: k,
+            got: n,
+        });
+    }
+    if points
+        .iter()
+        .any(|p| !p.coords.iter().all(|v| v.is_finite()))
+    {
+        return Err(GeomError::NonFinite { op: "knn_graph" });
+    }
+    let index = KnnIndex::new(points);
+    let mut graph = Vec::with_capacity(n * k); // (N, K)
+    let mut row = Vec::with_capacity(k); // (K,)
+    for (i, p) in points.iter().enumerate() {
+        if k == 0 {
+            break;
+        }
+        index.k_nearest_squared_into(p, k, &mut row);
+        graph.push(i);
+        graph.extend(row.iter().map(|&(j, _)| j).filter(|&j| j != i).take(k - 1));
+    }
+    Ok(graph)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{rngs::StdRng, Rng, SeedableRng};
+
+    fn random_cloud(n: usize, seed: u64) -> Vec<Point3<f64>> {
+        let mut rng = StdRng::seed_from_u64(seed);
+        (0..n)
+            .map(|_| {
+                Point3::new(
+                    rng.gen_range(-1.0..1.0),
+                    rng.gen_range(-1.0..1.0),
+                    rng.gen_range(-1.0..1.0),
+                )
+            })
+            .collect()
+    }
+
+    /// Every point with its distance to `q`, sorted by distance then index.
+    fn brute_force(points: &[Point3<f64>], q: &Point3<f64>) -> Vec<(usize, f64)> {
+        let mut all: Vec<(usize, f64)> = points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let d = [p.x - q.x, p.y - q.y, p.z - q.z];
+                (i, d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+            })
+            .collect();
+        sort_by_distance_then_index(&mut all);
+        all.into_iter().map(|(i, d2)| (i, d2.sqrt())).collect()
+    }
+
+    #[test]
+    fn queries_match_brute_force_on_random_clouds() {
+        for seed in 0..5 {
+            let points = random_cloud(300 + 50 * seed as usize, seed);
+            let index = KnnIndex::new(&points);
+            assert_eq!(index.len(), points.len());
+            for q in random_cloud(40, 100 + seed) {
+                let all = brute_force(&points, &q);
+                assert_eq!(index.nearest(&q), all[0]);
+                for k in [1, 7, 20] {
+                    assert_eq!(index.k_nearest(&q, k), all[..k].to_vec());
+                }
+                let inside: Vec<_> = all.iter().copied().filter(|n| n.1 < 0.3).collect();
+                assert_eq!(index.within_radius(&q, 0.3), inside);
+                let hybrid: Vec<_> = inside.iter().copied().take(10).collect();
+                assert_eq!(index.hybrid(&q, 0.3, 10), hybrid);
+            }
+        }
+    }
+
+    #[test]
+    fn many_identical_points_do_not_panic_and_ties_go_by_index() {
+        let mut points = vec![Point3::new(0.5, -0.25, 0.125); 200];
+        points.extend(random_cloud(50, 9));
+        let index = KnnIndex::new(&points);
+        let q = Point3::new(0.5, -0.25, 0.125);
+        let got = index.k_nearest(&q, 20);
+        assert_eq!(got, (0..20).map(|i| (i, 0.0)).collect::<Vec<_>>());
+        assert_eq!(index.nearest(&q), (0, 0.0));
+        assert_eq!(index.within_radius(&q, 1e-9).len(), 200);
+        let graph = knn_graph(&points, 5).unwrap();
+        // Point 7's own row starts with itself, then the lowest other indices at distance 0.
+        assert_eq!(&graph[7 * 5..8 * 5], &[7, 0, 1, 2, 3]);
+    }
+
+    #[test]
+    fn grid_with_shared_coordinates_and_ties_matches_brute_force() {
+        // A 6×6×6 lattice: every coordinate shared by 36 points, distances tied everywhere.
+        let points: Vec<Point3<f64>> = (0..216)
+            .map(|i| Point3::new((i % 6) as f64, (i / 6 % 6) as f64, (i / 36) as f64))
+            .collect();
+        let index = KnnIndex::new(&points);
+        for q in points
+            .iter()
+            .step_by(7)
+            .chain([Point3::new(2.5, 2.5, 2.5)].iter())
+        {
+            let all = brute_force(&points, q);
+            for k in [1, 5, 27] {
+                assert_eq!(index.k_nearest(q, k), all[..k].to_vec());
+            }
+            let inside: Vec<_> = all.iter().copied().filter(|n| n.1 < 1.5).collect();
+            assert_eq!(index.within_radius(q, 1.5), inside);
+        }
+    }
+
+    #[test]
+    fn knn_graph_rows_are_self_then_brute_force_order() {
+        let points = random_cloud(120, 3);
+        let k = 6;
+        let graph = knn_graph(&points, k).unwrap();
+        assert_eq!(graph.len(), points.len() * k);
+        for (i, p) in points.iter().enumerate() {
+            let expected: Vec<usize> = brute_force(&points, p)
+                .iter()
+                .take(k)
+                .map(|n| n.0)
+                .collect();
+            assert_eq!(&graph[i * k..(i + 1) * k], expected.as_slice(), "row {i}");
+        }
+    }
+
+    #[test]
+    fn knn_graph_rejects_bad_input() {
+        let points = random_cloud(4, 1);
+        assert_eq!(
+            knn_graph(&points, 5),
+            Err(GeomError::TooFewPoints {
+                op: "knn_graph",
+                needed: 5,
+                got: 4
+            })
+        );
+        let mut bad = points.clone();
+        bad[2].y = f64::NAN;
+        assert_eq!(
+            knn_graph(&bad, 2),
+            Err(GeomError::NonFinite { op: "knn_graph" })
+        );
+        assert_eq!(knn_graph(&points, 4).unwrap().len(), 16);
+    }
+
+    #[test]
+    fn empty_index_answers_nothing() {
+        let index = KnnIndex::new(&[]);
+        assert!(index.is_empty());
+        let q = Point3::origin();
+        assert_eq!(index.nearest(&q), (usize::MAX, f64::INFINITY));
+        assert!(index.k_nearest(&q, 3).is_empty());
+        assert!(index.within_radius(&q, 1.0).is_empty());
+    }
+
+    #[test]
+    fn k_larger_than_the_cloud_returns_all() {
+        let points = random_cloud(5, 2);
+        let q = Point3::new(0.1, 0.2, 0.3);
+        assert_eq!(
+            KnnIndex::new(&points).k_nearest(&q, 50),
+            brute_force(&points, &q)
+        );
+    }
+}
