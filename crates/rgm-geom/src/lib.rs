@@ -11,11 +11,13 @@
 pub mod cloud;
 pub mod error;
 pub mod euler;
+pub mod kabsch;
 pub mod knn;
 pub mod transform;
 
 pub use cloud::PointCloud;
 pub use error::{GeomError, Result};
+pub use kabsch::kabsch;
 pub use knn::{knn_graph, KnnIndex};
 pub use transform::RigidTransform;
 
