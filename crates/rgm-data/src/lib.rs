@@ -1,1 +1,12 @@
+//! rgm-data — data for rgm: point-cloud files (PLY, OFF, XYZ/CSV, `.npy`), the ModelNet40
+//! loader and its splits, the registration-pair generator of the spec's data protocol (§1) and
+//! the ground-truth correspondences of each pair.
+//!
+//! Layering rule: rgm-data builds on rgm-geom only (point clouds, rigid transforms, kNN) and
+//! knows nothing of tensors, networks or matching. It needs no BLAS.
 
+pub mod error;
+pub mod io;
+
+pub use error::{DataError, Result};
+pub use io::{read_point_cloud, write_point_cloud};

@@ -1,0 +1,60 @@
+//! The crate's one error type.
+
+use std::path::PathBuf;
+
+/// Errors of rgm-data. Each variant names the file (or operation) and what is wrong with it.
+#[derive(Debug, thiserror::Error)]
+pub enum DataError {
+    /// The operating system refused a read or write.
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    /// A line of a text file (XYZ/CSV, OFF, ASCII PLY) could not be read.
+    #[error("{}:{line}: {why}: `{text}`", path.display())]
+    Line {
+        path: PathBuf,
+        line: usize,
+        text: String,
+        why: String,
+    },
+    /// A binary file or a file header is malformed (PLY header, truncated data, `.npy` header).
+    #[error("{}: {format}: {why}", path.display())]
+    Format {
+        path: PathBuf,
+        format: &'static str,
+        why: String,
+    },
+    /// A point has a NaN or infinite coordinate.
+    #[error("{}: point {index} has a non-finite coordinate ({x}, {y}, {z})", path.display())]
+    NonFinite {
+        path: PathBuf,
+        index: usize,
+        x: f64,
+        y: f64,
+        z: f64,
+    },
+    /// The file holds no point.
+    #[error("{}: the file holds no point", path.display())]
+    Empty { path: PathBuf },
+    /// The file name does not say which format it is.
+    #[error("{}: unknown point-cloud extension (expected .ply, .off, .xyz, .txt, .pts, .csv or .npy)", path.display())]
+    UnknownExtension { path: PathBuf },
+    /// A dataset folder or file does not have the expected layout or contents.
+    #[error("{}: {why}", path.display())]
+    Dataset { path: PathBuf, why: String },
+    /// An index is outside a collection.
+    #[error("{op}: index {index} out of range for length {len}")]
+    IndexOutOfRange {
+        op: &'static str,
+        index: usize,
+        len: usize,
+    },
+    /// A geometry operation failed.
+    #[error(transparent)]
+    Geom(#[from] rgm_geom::GeomError),
+}
+
+/// Result alias of rgm-data.
+pub type Result<T> = std::result::Result<T, DataError>;

@@ -1,0 +1,248 @@
+//! Point-cloud files: one module per format, one entry point for reading and one for writing,
+//! both choosing the format from the file extension.
+//!
+//! Every reader parses bytes it is given (so the tests need no files) and hands its points to
+//! [`checked_cloud`], the one place that rejects empty clouds and non-finite coordinates.
+
+pub mod npy;
+pub mod off;
+pub mod ply;
+pub mod xyz;
+
+use std::io::Write;
+use std::path::Path;
+
+use rgm_geom::{Point3, PointCloud};
+
+use crate::{DataError, Result};
+
+/// The file formats rgm reads and writes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    /// Stanford PLY: ASCII, binary little- or big-endian; written binary little-endian float.
+    Ply,
+    /// OFF (Object File Format): vertices only, faces ignored.
+    Off,
+    /// Whitespace-separated text (`.xyz`, `.txt`, `.pts`), extra columns ignored.
+    Xyz,
+    /// Comma-separated text, optional header line, extra columns ignored.
+    Csv,
+    /// NumPy `.npy`: little-endian float32/float64, C order, shape (N, 3).
+    Npy,
+}
+
+impl Format {
+    /// The format named by `path`'s extension (case-insensitive).
+    pub fn from_path(path: &Path) -> Result<Self> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        match ext.as_deref() {
+            Some("ply") => Ok(Self::Ply),
+            Some("off") => Ok(Self::Off),
+            Some("xyz" | "txt" | "pts") => Ok(Self::Xyz),
+            Some("csv") => Ok(Self::Csv),
+            Some("npy") => Ok(Self::Npy),
+            _ => Err(DataError::UnknownExtension {
+                path: path.to_path_buf(),
+            }),
+        }
+    }
+}
+
+/// Reads a point cloud, choosing the format by extension.
+pub fn read_point_cloud(path: impl AsRef<Path>) -> Result<PointCloud> {
+    let path = path.as_ref();
+    let format = Format::from_path(path)?;
+    let bytes = std::fs::read(path).map_err(|source| DataError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let points = match format {
+        Format::Ply => ply::parse(&bytes, path)?,
+        Format::Off => off::parse(&bytes, path)?,
+        Format::Xyz | Format::Csv => xyz::parse(&bytes, path)?,
+        Format::Npy => npy::parse(&bytes, path)?,
+    };
+    checked_cloud(points, path)
+}
+
+/// Writes a point cloud, choosing the format by extension: PLY binary little-endian float32,
+/// OFF and XYZ text, CSV with an `x,y,z` header, `.npy` float64 (lossless).
+pub fn write_point_cloud(path: impl AsRef<Path>, cloud: &PointCloud) -> Result<()> {
+    let path = path.as_ref();
+    let format = Format::from_path(path)?;
+    let io_error = |source| DataError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let file = std::fs::File::create(path).map_err(io_error)?;
+    let mut out = std::io::BufWriter::new(file);
+    match format {
+        Format::Ply => ply::write(&mut out, cloud),
+        Format::Off => off::write(&mut out, cloud),
+        Format::Xyz => xyz::write(&mut out, cloud, xyz::Separator::Space),
+        Format::Csv => xyz::write(&mut out, cloud, xyz::Separator::Comma),
+        Format::Npy => npy::write(&mut out, cloud, npy::Dtype::F64),
+    }
+    .and_then(|()| out.flush())
+    .map_err(io_error)
+}
+
+/// The cloud of `points`, rejecting an empty one and any non-finite coordinate.
+pub fn checked_cloud(points: Vec<Point3<f64>>, path: &Path) -> Result<PointCloud> {
+    if points.is_empty() {
+        return Err(DataError::Empty {
+            path: path.to_path_buf(),
+        });
+    }
+    if let Some(index) = points
+        .iter()
+        .position(|p| !p.coords.iter().all(|v| v.is_finite()))
+    {
+        let p = points[index];
+        return Err(DataError::NonFinite {
+            path: path.to_path_buf(),
+            index,
+            x: p.x,
+            y: p.y,
+            z: p.z,
+        });
+    }
+    Ok(PointCloud::new(points))
+}
+
+/// The error for line `line` (from 1) of a text file.
+fn line_error(path: &Path, line: usize, text: &str, why: impl Into<String>) -> DataError {
+    DataError::Line {
+        path: path.to_path_buf(),
+        line,
+        text: text.trim().to_string(),
+        why: why.into(),
+    }
+}
+
+/// The error for a malformed binary file or header.
+fn format_error(path: &Path, format: &'static str, why: impl Into<String>) -> DataError {
+    DataError::Format {
+        path: path.to_path_buf(),
+        format,
+        why: why.into(),
+    }
+}
+
+/// `bytes` as UTF-8 text, or an error naming the first bad byte.
+fn text<'a>(bytes: &'a [u8], path: &Path, format: &'static str) -> Result<&'a str> {
+    std::str::from_utf8(bytes).map_err(|e| {
+        format_error(
+            path,
+            format,
+            format!("not UTF-8 text (bad byte at offset {})", e.valid_up_to()),
+        )
+    })
+}
+
+/// Parses the first three of `tokens` as x, y, z, or says which one is wrong.
+fn parse_xyz<'a>(
+    tokens: impl IntoIterator<Item = &'a str>,
+    path: &Path,
+    line: usize,
+    text: &str,
+) -> Result<Point3<f64>> {
+    let mut xyz = [0.0; 3];
+    let mut tokens = tokens.into_iter();
+    for (axis, value) in xyz.iter_mut().enumerate() {
+        let token = tokens.next().ok_or_else(|| {
+            line_error(
+                path,
+                line,
+                text,
+                format!("expected 3 coordinates, found {axis}"),
+            )
+        })?;
+        *value = token.trim().parse().map_err(|_| {
+            line_error(
+                path,
+                line,
+                text,
+                format!("`{}` is not a number", token.trim()),
+            )
+        })?;
+    }
+    Ok(Point3::new(xyz[0], xyz[1], xyz[2]))
+}
+
+/// A scratch file path for tests, unique per process and name.
+#[cfg(test)]
+pub(crate) fn scratch_path(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("rgm-data-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample() -> PointCloud {
+        PointCloud::new(vec![
+            Point3::new(0.5, -1.25, 2.0),
+            Point3::new(1e-3, 3.0, -0.75),
+        ])
+    }
+
+    #[test]
+    fn every_extension_round_trips_through_a_file() {
+        for ext in ["ply", "off", "xyz", "txt", "pts", "csv", "npy", "PLY"] {
+            let path = scratch_path(&format!("round_trip.{ext}"));
+            write_point_cloud(&path, &sample()).unwrap();
+            let back = read_point_cloud(&path).unwrap();
+            // PLY is written as float32; the others keep f64 exactly.
+            let tol = if ext.eq_ignore_ascii_case("ply") {
+                1e-7
+            } else {
+                0.0
+            };
+            for (a, b) in back.points.iter().zip(&sample().points) {
+                assert!((a - b).norm() <= tol, "{ext}: {a} vs {b}");
+            }
+            assert_eq!(back.len(), 2, "{ext}");
+        }
+    }
+
+    #[test]
+    fn unknown_extension_and_missing_file_are_named() {
+        let err = read_point_cloud("cloud.obj").unwrap_err().to_string();
+        assert!(
+            err.contains("cloud.obj") && err.contains("unknown point-cloud extension"),
+            "{err}"
+        );
+        let err = read_point_cloud(scratch_path("does_not_exist.ply"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("does_not_exist.ply"), "{err}");
+    }
+
+    #[test]
+    fn non_finite_and_empty_clouds_are_rejected() {
+        let path = Path::new("c.xyz");
+        let points = vec![Point3::new(0.0, 0.0, 0.0), Point3::new(1.0, f64::NAN, 0.0)];
+        let err = checked_cloud(points, path).unwrap_err().to_string();
+        assert_eq!(
+            err,
+            "c.xyz: point 1 has a non-finite coordinate (1, NaN, 0)"
+        );
+        let err = checked_cloud(vec![Point3::new(f64::INFINITY, 0.0, 0.0)], path)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("point 0 has a non-finite coordinate (inf"),
+            "{err}"
+        );
+        assert_eq!(
+            checked_cloud(vec![], path).unwrap_err().to_string(),
+            "c.xyz: the file holds no point"
+        );
+    }
+}

@@ -1,0 +1,580 @@
+//! Stanford PLY: reads x, y, z of the `vertex` element from ASCII, binary little-endian or
+//! binary big-endian files, whatever their scalar type; other properties (normals, colours,
+//! lists) and other elements (faces, ...) are skipped. Writes binary little-endian float32.
+//!
+//! The body is read as a stream of values, one property after the other, element after element
+//! (the PLY definition; ASCII files are whitespace-separated tokens, binary files packed
+//! values). Elements after `vertex` are not read.
+
+use std::io::Write;
+use std::path::Path;
+
+use rgm_geom::{Point3, PointCloud};
+
+use super::{format_error, line_error};
+use crate::{DataError, Result};
+
+const FORMAT: &str = "PLY";
+
+/// How the body is encoded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Encoding {
+    Ascii,
+    BinaryLittleEndian,
+    BinaryBigEndian,
+}
+
+/// A PLY scalar type.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Scalar {
+    I8,
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    F32,
+    F64,
+}
+
+impl Scalar {
+    fn from_name(name: &str) -> Option<Self> {
+        Some(match name {
+            "char" | "int8" => Self::I8,
+            "uchar" | "uint8" => Self::U8,
+            "short" | "int16" => Self::I16,
+            "ushort" | "uint16" => Self::U16,
+            "int" | "int32" => Self::I32,
+            "uint" | "uint32" => Self::U32,
+            "float" | "float32" => Self::F32,
+            "double" | "float64" => Self::F64,
+            _ => return None,
+        })
+    }
+
+    fn size(self) -> usize {
+        match self {
+            Self::I8 | Self::U8 => 1,
+            Self::I16 | Self::U16 => 2,
+            Self::I32 | Self::U32 | Self::F32 => 4,
+            Self::F64 => 8,
+        }
+    }
+
+    /// The value packed in `b` (exactly `self.size()` bytes).
+    fn decode(self, b: &[u8], big_endian: bool) -> f64 {
+        macro_rules! num {
+            ($t:ty) => {{
+                let a = b.try_into().expect("slice of the scalar's size");
+                (if big_endian {
+                    <$t>::from_be_bytes(a)
+                } else {
+                    <$t>::from_le_bytes(a)
+                }) as f64
+            }};
+        }
+        match self {
+            Self::I8 => b[0] as i8 as f64,
+            Self::U8 => b[0] as f64,
+            Self::I16 => num!(i16),
+            Self::U16 => num!(u16),
+            Self::I32 => num!(i32),
+            Self::U32 => num!(u32),
+            Self::F32 => num!(f32),
+            Self::F64 => num!(f64),
+        }
+    }
+}
+
+/// One property of an element.
+#[derive(Clone, Debug, PartialEq)]
+enum Property {
+    Scalar {
+        name: String,
+        ty: Scalar,
+    },
+    List {
+        name: String,
+        count: Scalar,
+        item: Scalar,
+    },
+}
+
+impl Property {
+    fn name(&self) -> &str {
+        match self {
+            Self::Scalar { name, .. } | Self::List { name, .. } => name,
+        }
+    }
+}
+
+/// One element declaration: `element NAME COUNT` and its properties.
+#[derive(Clone, Debug, PartialEq)]
+struct Element {
+    name: String,
+    count: usize,
+    properties: Vec<Property>,
+}
+
+/// The parsed header.
+#[derive(Debug)]
+struct Header {
+    encoding: Encoding,
+    elements: Vec<Element>,
+    /// Byte offset of the body.
+    body_start: usize,
+    /// Number of header lines (the body's first line is `lines + 1`).
+    lines: usize,
+}
+
+fn parse_header(bytes: &[u8], path: &Path) -> Result<Header> {
+    let mut encoding = None;
+    let mut elements: Vec<Element> = Vec::new();
+    let mut offset = 0;
+    let mut line_no = 0;
+    while offset < bytes.len() {
+        let end = bytes[offset..]
+            .iter()
+            .position(|&b| b == b'\n')
+            .map_or(bytes.len(), |e| offset + e);
+        let raw = &bytes[offset..end];
+        offset = (end + 1).min(bytes.len());
+        line_no += 1;
+        let line = std::str::from_utf8(raw)
+            .map_err(|_| format_error(path, FORMAT, format!("header line {line_no} is not text")))?
+            .trim();
+        let tokens: Vec<&str> = line.split_whitespace().collect();
+        let bad = |why: &str| line_error(path, line_no, line, why);
+        if line_no == 1 {
+            if line != "ply" {
+                return Err(bad("a PLY file starts with the line `ply`"));
+            }
+            continue;
+        }
+        match tokens.as_slice() {
+            [] | ["comment" | "obj_info", ..] => {}
+            ["format", kind, _version] => {
+                encoding = Some(match *kind {
+                    "ascii" => Encoding::Ascii,
+                    "binary_little_endian" => Encoding::BinaryLittleEndian,
+                    "binary_big_endian" => Encoding::BinaryBigEndian,
+                    _ => return Err(bad(
+                        "unknown format (expected ascii, binary_little_endian, binary_big_endian)",
+                    )),
+                });
+            }
+            ["element", name, count] => {
+                let count = count
+                    .parse()
+                    .map_err(|_| bad("the element count is not a number"))?;
+                elements.push(Element {
+                    name: name.to_string(),
+                    count,
+                    properties: Vec::new(),
+                });
+            }
+            ["property", "list", count, item, name] => {
+                let (Some(count), Some(item)) = (Scalar::from_name(count), Scalar::from_name(item))
+                else {
+                    return Err(bad("unknown list property type"));
+                };
+                let element = elements
+                    .last_mut()
+                    .ok_or_else(|| bad("property before any element"))?;
+                element.properties.push(Property::List {
+                    name: name.to_string(),
+                    count,
+                    item,
+                });
+            }
+            ["property", ty, name] => {
+                let ty = Scalar::from_name(ty).ok_or_else(|| bad("unknown property type"))?;
+                let element = elements
+                    .last_mut()
+                    .ok_or_else(|| bad("property before any element"))?;
+                element.properties.push(Property::Scalar {
+                    name: name.to_string(),
+                    ty,
+                });
+            }
+            ["end_header"] => {
+                let encoding = encoding
+                    .ok_or_else(|| format_error(path, FORMAT, "the header has no `format` line"))?;
+                return Ok(Header {
+                    encoding,
+                    elements,
+                    body_start: offset,
+                    lines: line_no,
+                });
+            }
+            _ => return Err(bad("unknown header line")),
+        }
+    }
+    Err(format_error(
+        path,
+        FORMAT,
+        "the header has no `end_header` line",
+    ))
+}
+
+/// The body as a stream of values.
+trait Values {
+    /// The next value, read as `ty`; `Ok(None)` at the end of the data.
+    fn next(&mut self, ty: Scalar) -> Result<Option<f64>>;
+}
+
+/// An ASCII body: whitespace-separated tokens, with their line numbers for errors.
+struct AsciiValues<'a> {
+    path: &'a Path,
+    lines: std::str::Lines<'a>,
+    /// Number (from 1, counting the header) and text of the current line.
+    line_no: usize,
+    line: &'a str,
+    tokens: std::str::SplitWhitespace<'a>,
+}
+
+impl Values for AsciiValues<'_> {
+    fn next(&mut self, _ty: Scalar) -> Result<Option<f64>> {
+        loop {
+            if let Some(token) = self.tokens.next() {
+                let why = || format!("`{token}` is not a number");
+                let value = token
+                    .parse()
+                    .map_err(|_| line_error(self.path, self.line_no, self.line, why()))?;
+                return Ok(Some(value));
+            }
+            let Some(line) = self.lines.next() else {
+                return Ok(None);
+            };
+            self.line_no += 1;
+            self.line = line;
+            self.tokens = line.split_whitespace();
+        }
+    }
+}
+
+/// A binary body: packed values.
+struct BinaryValues<'a> {
+    bytes: &'a [u8],
+    big_endian: bool,
+}
+
+impl Values for BinaryValues<'_> {
+    fn next(&mut self, ty: Scalar) -> Result<Option<f64>> {
+        if self.bytes.len() < ty.size() {
+            return Ok(None);
+        }
+        let (value, rest) = self.bytes.split_at(ty.size());
+        self.bytes = rest;
+        Ok(Some(ty.decode(value, self.big_endian)))
+    }
+}
+
+/// The x, y, z of every vertex of a PLY file.
+pub fn parse(bytes: &[u8], path: &Path) -> Result<Vec<Point3<f64>>> {
+    let header = parse_header(bytes, path)?;
+    let vertex_index = header
+        .elements
+        .iter()
+        .position(|e| e.name == "vertex")
+        .ok_or_else(|| format_error(path, FORMAT, "the header declares no `vertex` element"))?;
+    let vertex = &header.elements[vertex_index];
+    // Position of x, y, z among the vertex properties.
+    let mut axes = [0usize; 3];
+    for (axis, name) in axes.iter_mut().zip(["x", "y", "z"]) {
+        *axis = match vertex.properties.iter().position(|p| p.name() == name) {
+            Some(i) if matches!(vertex.properties[i], Property::Scalar { .. }) => i,
+            Some(_) => {
+                return Err(format_error(
+                    path,
+                    FORMAT,
+                    format!("vertex property `{name}` is a list"),
+                ))
+            }
+            None => {
+                return Err(format_error(
+                    path,
+                    FORMAT,
+                    format!("the vertex element has no `{name}` property"),
+                ))
+            }
+        };
+    }
+    let body = &bytes[header.body_start..];
+    match header.encoding {
+        Encoding::Ascii => {
+            let text = std::str::from_utf8(body)
+                .map_err(|_| format_error(path, FORMAT, "the ASCII body is not text"))?;
+            let values = AsciiValues {
+                path,
+                lines: text.lines(),
+                line_no: header.lines,
+                line: "",
+                tokens: "".split_whitespace(),
+            };
+            read_vertices(&header.elements[..=vertex_index], &axes, values, path)
+        }
+        Encoding::BinaryLittleEndian | Encoding::BinaryBigEndian => {
+            let big_endian = header.encoding == Encoding::BinaryBigEndian;
+            read_vertices(
+                &header.elements[..=vertex_index],
+                &axes,
+                BinaryValues {
+                    bytes: body,
+                    big_endian,
+                },
+                path,
+            )
+        }
+    }
+}
+
+/// Skips every element but the last of `elements`, then reads the last (the vertices), keeping
+/// the properties at `axes`.
+fn read_vertices(
+    elements: &[Element],
+    axes: &[usize; 3],
+    mut values: impl Values,
+    path: &Path,
+) -> Result<Vec<Point3<f64>>> {
+    let (vertex, before) = elements
+        .split_last()
+        .expect("the vertex element is included");
+    let mut row = Vec::with_capacity(vertex.properties.len());
+    for element in before {
+        for r in 0..element.count {
+            read_row(element, r, &mut values, &mut row, path)?;
+        }
+    }
+    let mut points = Vec::with_capacity(vertex.count.min(1 << 24));
+    for r in 0..vertex.count {
+        read_row(vertex, r, &mut values, &mut row, path)?;
+        points.push(Point3::new(row[axes[0]], row[axes[1]], row[axes[2]]));
+    }
+    Ok(points)
+}
+
+/// Reads row `r` of `element` into `row` (one value per property; lists give their length).
+fn read_row(
+    element: &Element,
+    r: usize,
+    values: &mut impl Values,
+    row: &mut Vec<f64>,
+    path: &Path,
+) -> Result<()> {
+    let truncated = || {
+        let why = format!(
+            "the data ends in element `{}` at row {r} of {}",
+            element.name, element.count
+        );
+        format_error(path, FORMAT, why)
+    };
+    row.clear();
+    for property in &element.properties {
+        match *property {
+            Property::Scalar { ty, .. } => row.push(values.next(ty)?.ok_or_else(truncated)?),
+            Property::List {
+                count,
+                item,
+                ref name,
+            } => {
+                let n = values.next(count)?.ok_or_else(truncated)?;
+                if n < 0.0 || n.fract() != 0.0 {
+                    let why = format!(
+                        "list `{name}` of element `{}` row {r} has length {n}",
+                        element.name
+                    );
+                    return Err(DataError::Format {
+                        path: path.to_path_buf(),
+                        format: FORMAT,
+                        why,
+                    });
+                }
+                for _ in 0..n as u64 {
+                    values.next(item)?.ok_or_else(truncated)?;
+                }
+                row.push(n);
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Writes a binary little-endian PLY with float32 x, y, z.
+pub fn write(out: &mut impl Write, cloud: &PointCloud) -> std::io::Result<()> {
+    write!(
+        out,
+        "ply\nformat binary_little_endian 1.0\nelement vertex {}\n\
+         property float x\nproperty float y\nproperty float z\nend_header\n",
+        cloud.len()
+    )?;
+    for p in &cloud.points {
+        for v in [p.x, p.y, p.z] {
+            out.write_all(&(v as f32).to_le_bytes())?;
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse_bytes(b: &[u8]) -> Result<Vec<Point3<f64>>> {
+        parse(b, Path::new("s.ply"))
+    }
+
+    fn err(b: &[u8]) -> String {
+        parse_bytes(b).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn reads_ascii_with_extra_properties_and_faces() {
+        let text = "ply\nformat ascii 1.0\ncomment made by hand\nelement vertex 3\nproperty float x\n\
+                    property float y\nproperty float z\nproperty uchar red\nproperty list uchar int extra\n\
+                    element face 1\nproperty list uchar int vertex_indices\nend_header\n\
+                    0 0 0 255 2 7 8\n1 0.5 -2 0 0\n0 1 3e-1 9 1 4\n3 0 1 2\n";
+        let expected = vec![
+            Point3::new(0.0, 0.0, 0.0),
+            Point3::new(1.0, 0.5, -2.0),
+            Point3::new(0.0, 1.0, 0.3),
+        ];
+        assert_eq!(parse_bytes(text.as_bytes()).unwrap(), expected);
+    }
+
+    /// A binary PLY whose vertices are (nx: float, y: double, x: short, z: int) after a face
+    /// element, in either byte order.
+    fn mixed_binary(big_endian: bool) -> Vec<u8> {
+        let order = if big_endian {
+            "binary_big_endian"
+        } else {
+            "binary_little_endian"
+        };
+        let mut b = format!(
+            "ply\r\nformat {order} 1.0\nelement face 2\nproperty list uchar int vertex_indices\nelement vertex 2\n\
+             property float nx\nproperty double y\nproperty short x\nproperty int z\nend_header\n"
+        )
+        .into_bytes();
+        let mut put = |bytes: &[u8]| {
+            if big_endian {
+                b.extend(bytes.iter().rev())
+            } else {
+                b.extend(bytes)
+            }
+        };
+        // Faces: [3: 0 1 2], [0].
+        put(&[3]);
+        for i in [0i32, 1, 2] {
+            put(&i.to_le_bytes());
+        }
+        put(&[0]);
+        for (nx, y, x, z) in [(9.0f32, 0.25f64, -3i16, 7i32), (1.0, -1.5, 4, -2)] {
+            put(&nx.to_le_bytes());
+            put(&y.to_le_bytes());
+            put(&x.to_le_bytes());
+            put(&z.to_le_bytes());
+        }
+        b
+    }
+
+    #[test]
+    fn reads_binary_of_any_type_and_byte_order() {
+        let expected = vec![Point3::new(-3.0, 0.25, 7.0), Point3::new(4.0, -1.5, -2.0)];
+        assert_eq!(parse_bytes(&mixed_binary(false)).unwrap(), expected);
+        assert_eq!(parse_bytes(&mixed_binary(true)).unwrap(), expected);
+    }
+
+    #[test]
+    fn binary_round_trip_is_float32() {
+        let cloud = PointCloud::new(vec![
+            Point3::new(0.1, -2.5, 3.0),
+            Point3::new(1.0 / 3.0, 0.0, -1e-3),
+        ]);
+        let mut bytes = Vec::new();
+        write(&mut bytes, &cloud).unwrap();
+        let back = parse_bytes(&bytes).unwrap();
+        for (a, b) in back.iter().zip(&cloud.points) {
+            assert_eq!(
+                [a.x, a.y, a.z],
+                [b.x as f32 as f64, b.y as f32 as f64, b.z as f32 as f64]
+            );
+        }
+    }
+
+    #[test]
+    fn header_errors_are_named() {
+        assert_eq!(
+            err(b"plx\n"),
+            "s.ply:1: a PLY file starts with the line `ply`: `plx`"
+        );
+        assert_eq!(
+            err(b"ply\nformat ascii 1.0\nelement vertex 1\n"),
+            "s.ply: PLY: the header has no `end_header` line"
+        );
+        let no_z = b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n1 2\n";
+        assert_eq!(
+            err(no_z),
+            "s.ply: PLY: the vertex element has no `z` property"
+        );
+        let no_vertex = b"ply\nformat ascii 1.0\nelement face 0\nend_header\n";
+        assert_eq!(
+            err(no_vertex),
+            "s.ply: PLY: the header declares no `vertex` element"
+        );
+        let bad_type =
+            b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float128 x\nend_header\n";
+        assert_eq!(
+            err(bad_type),
+            "s.ply:4: unknown property type: `property float128 x`"
+        );
+        let no_format = b"ply\nelement vertex 0\nend_header\n";
+        assert_eq!(
+            err(no_format),
+            "s.ply: PLY: the header has no `format` line"
+        );
+    }
+
+    #[test]
+    fn truncated_and_wrong_count_data_are_named() {
+        let header = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
+        let short = format!("{header}0 0 0\n1 1 1\n");
+        assert_eq!(
+            err(short.as_bytes()),
+            "s.ply: PLY: the data ends in element `vertex` at row 2 of 3"
+        );
+        let bad_number = format!("{header}0 0 0\n1 one 1\n2 2 2\n");
+        assert_eq!(
+            err(bad_number.as_bytes()),
+            "s.ply:9: `one` is not a number: `1 one 1`"
+        );
+        let mut binary = Vec::new();
+        write(
+            &mut binary,
+            &PointCloud::new(vec![Point3::new(1.0, 2.0, 3.0); 4]),
+        )
+        .unwrap();
+        binary.truncate(binary.len() - 5);
+        assert_eq!(
+            err(&binary),
+            "s.ply: PLY: the data ends in element `vertex` at row 3 of 4"
+        );
+    }
+
+    #[test]
+    fn garbage_is_an_error_not_a_panic() {
+        let mut state = 12345u64;
+        for len in 0..200 {
+            let mut bytes = b"ply\nformat binary_little_endian 1.0\nelement face 3\nproperty list int int vertex_indices\nelement vertex 99999999999\nproperty float x\nproperty float y\nproperty float z\nend_header\n".to_vec();
+            for _ in 0..len {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                bytes.push((state >> 56) as u8);
+            }
+            assert!(parse_bytes(&bytes).is_err());
+            assert!(parse_bytes(&bytes[len.min(bytes.len())..]).is_err());
+        }
+        let huge = b"ply\nformat binary_little_endian 1.0\nelement vertex 99999999999\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
+        assert!(parse_bytes(huge).is_err());
+    }
+}
