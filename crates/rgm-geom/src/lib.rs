@@ -13,12 +13,14 @@ pub mod error;
 pub mod euler;
 pub mod kabsch;
 pub mod knn;
+pub mod metrics;
 pub mod transform;
 
 pub use cloud::PointCloud;
 pub use error::{GeomError, Result};
 pub use kabsch::kabsch;
 pub use knn::{knn_graph, KnnIndex};
+pub use metrics::{MetricsSummary, PairMetrics};
 pub use transform::RigidTransform;
 
 pub use nalgebra::{Matrix3, Matrix4, Point3, Vector3};
