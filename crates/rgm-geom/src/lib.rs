@@ -11,16 +11,22 @@
 pub mod cloud;
 pub mod error;
 pub mod euler;
+pub mod icp;
 pub mod kabsch;
 pub mod knn;
 pub mod metrics;
+pub mod registration;
 pub mod transform;
+
+#[cfg(test)]
+mod testing;
 
 pub use cloud::PointCloud;
 pub use error::{GeomError, Result};
 pub use kabsch::kabsch;
 pub use knn::{knn_graph, KnnIndex};
 pub use metrics::{MetricsSummary, PairMetrics};
+pub use registration::RegistrationResult;
 pub use transform::RigidTransform;
 
 pub use nalgebra::{Matrix3, Matrix4, Point3, Vector3};

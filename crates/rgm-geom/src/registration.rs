@@ -1,0 +1,132 @@
+//! What every registration method returns, and Open3D's way of scoring a transform.
+
+use nalgebra::Point3;
+
+use crate::{KnnIndex, RigidTransform};
+
+/// The outcome of registering a source cloud onto a target cloud.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RegistrationResult {
+    /// The estimated transform mapping source coordinates into the target frame.
+    pub t_target_source: RigidTransform,
+    /// Iterations run (transform updates).
+    pub iterations: usize,
+    /// True when the method's convergence test stopped it before its iteration limit.
+    pub converged: bool,
+    /// Source points (moved by `t_target_source`) with a target point closer than the scoring
+    /// distance.
+    pub inlier_count: usize,
+    /// `inlier_count / source points` (Open3D's fitness).
+    pub fitness: f64,
+    /// Root mean square distance over the inliers; 0 without inliers (Open3D's inlier_rmse).
+    pub inlier_rmse: f64,
+}
+
+/// Open3D's score of a transform (`GetRegistrationResultAndCorrespondences`): each source point,
+/// moved by `transform`, is paired with its nearest target point when that is strictly closer
+/// than `max_distance`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Score {
+    /// Number of source points paired.
+    pub inlier_count: usize,
+    /// `inlier_count / source points`; 0 for an empty source.
+    pub fitness: f64,
+    /// `sqrt(Σ d² / inlier_count)`; 0 without inliers.
+    pub inlier_rmse: f64,
+}
+
+/// Scores `transform` and, when `pairs` is given, fills it with the (source, target) index pairs.
+pub fn score(
+    source: &[Point3<f64>],
+    target: &KnnIndex,
+    transform: &RigidTransform,
+    max_distance: f64,
+    mut pairs: Option<&mut Vec<(usize, usize)>>,
+) -> Score {
+    if let Some(p) = pairs.as_deref_mut() {
+        p.clear();
+    }
+    let mut count = 0;
+    let mut sum_d2 = 0.0;
+    for (i, x) in source.iter().enumerate() {
+        let (j, d) = target.nearest(&transform.apply(x));
+        if d < max_distance {
+            count += 1;
+            sum_d2 += d * d;
+            if let Some(p) = pairs.as_deref_mut() {
+                p.push((i, j));
+            }
+        }
+    }
+    Score {
+        inlier_count: count,
+        fitness: if source.is_empty() {
+            0.0
+        } else {
+            count as f64 / source.len() as f64
+        },
+        inlier_rmse: if count == 0 {
+            0.0
+        } else {
+            (sum_d2 / count as f64).sqrt()
+        },
+    }
+}
+
+impl RegistrationResult {
+    /// A result for `transform` with its Open3D score.
+    pub fn scored(
+        t_target_source: RigidTransform,
+        iterations: usize,
+        converged: bool,
+        score: Score,
+    ) -> Self {
+        Self {
+            t_target_source,
+            iterations,
+            converged,
+            inlier_count: score.inlier_count,
+            fitness: score.fitness,
+            inlier_rmse: score.inlier_rmse,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Matrix3, Vector3};
+
+    #[test]
+    fn score_by_hand() {
+        // Source shifted by +0.1 x lands at 0.1, 1.1 and 5.1 on the x axis: 0.1 from targets 0
+        // and 1, while 5.1 is far from all. With max distance 0.15: 2 of 3 inliers, rmse 0.1.
+        let source = vec![
+            Point3::new(0.0, 0.0, 0.0),
+            Point3::new(1.0, 0.0, 0.0),
+            Point3::new(5.0, 0.0, 0.0),
+        ];
+        let target = vec![
+            Point3::new(0.2, 0.0, 0.0),
+            Point3::new(1.0, 0.0, 0.0),
+            Point3::new(0.0, 3.0, 0.0),
+        ];
+        let t = RigidTransform::new(Matrix3::identity(), Vector3::new(0.1, 0.0, 0.0));
+        let mut pairs = Vec::new();
+        let s = score(&source, &KnnIndex::new(&target), &t, 0.15, Some(&mut pairs));
+        assert_eq!(s.inlier_count, 2);
+        assert!((s.fitness - 2.0 / 3.0).abs() < 1e-15);
+        assert!((s.inlier_rmse - 0.1).abs() < 1e-12);
+        assert_eq!(pairs, vec![(0, 0), (1, 1)]);
+        // With max distance 0.05 nothing is paired: fitness and rmse are 0, not NaN.
+        let none = score(&source, &KnnIndex::new(&target), &t, 0.05, None);
+        assert_eq!(
+            none,
+            Score {
+                inlier_count: 0,
+                fitness: 0.0,
+                inlier_rmse: 0.0
+            }
+        );
+    }
+}
