@@ -7,6 +7,8 @@
 
 pub mod error;
 pub mod io;
+pub mod modelnet;
 
 pub use error::{DataError, Result};
 pub use io::{read_point_cloud, write_point_cloud};
+pub use modelnet::{ModelNet40, Shape, Split};

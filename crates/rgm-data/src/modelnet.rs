@@ -1,0 +1,278 @@
+//! ModelNet40: the `.npy` tree (`<category>/{train,test}/<category>_NNNN.npy`) and the HDF5
+//! release `modelnet40_ply_hdf5_2048`, with the splits of spec §1.
+//!
+//! Order: the official train and test lists are ordered by category label, then by file name
+//! (byte order; the numbers are zero-padded, so this is numeric order). The HDF5 release keeps
+//! its own order: files as listed in `train_files.txt`/`test_files.txt`, rows in file order.
+//!
+//! Splits ([`ModelNet40::split`]): the 80/20 cut of the official train split is taken **per
+//! category**, in the order above: of a category's `n` train shapes the first `⌊0.8·n⌋` train
+//! and the rest validate, so that validation covers every category that training does. (The
+//! reference code cuts its whole HDF5 list, whose rows are shuffled across categories, at
+//! `int(0.8·N)`, which is a per-category cut in expectation.) The unseen-category setting keeps
+//! the first half of the labels (0–19) for training and validation and the second half (20–39)
+//! for testing, on top of the same 80/20 cut.
+
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+
+use crate::io::{checked_cloud, npy};
+use crate::{DataError, Result};
+
+/// One shape of the dataset.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Shape {
+    /// Where it comes from: the file stem (`airplane_0001`) or `FILE.h5:ROW` for the HDF5 release.
+    pub name: String,
+    /// Category label: line number (from 0) of its category in the shape-names file.
+    pub label: usize,
+    /// The points, as stored (float32). // (N, 3)
+    pub points: Vec<[f32; 3]>,
+}
+
+/// Which part of the protocol a shape list is for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Split {
+    /// First 80 % (per category) of the official train split.
+    Train,
+    /// Last 20 % (per category) of the official train split.
+    Validation,
+    /// The official test split.
+    Test,
+}
+
+/// The dataset: category names and the official train and test splits, all points in memory.
+#[derive(Clone, Debug)]
+pub struct ModelNet40 {
+    /// Category names in label order. // (40,)
+    pub categories: Vec<String>,
+    /// The official train split in dataset order.
+    pub official_train: Vec<Shape>,
+    /// The official test split in dataset order.
+    pub official_test: Vec<Shape>,
+}
+
+/// Share of each category's official train shapes used for training.
+const TRAIN_SHARE: f64 = 0.8;
+
+fn dataset_error(path: &Path, why: impl Into<String>) -> DataError {
+    DataError::Dataset {
+        path: path.to_path_buf(),
+        why: why.into(),
+    }
+}
+
+/// Non-empty trimmed lines of a text file.
+fn read_lines(path: &Path) -> Result<Vec<String>> {
+    let text = std::fs::read_to_string(path).map_err(|source| DataError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    Ok(text
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .map(String::from)
+        .collect())
+}
+
+impl ModelNet40 {
+    /// Loads the `.npy` tree under `dir` (with `modelnet40_shape_names.txt`), in parallel.
+    pub fn open(dir: impl AsRef<Path>) -> Result<Self> {
+        let dir = dir.as_ref();
+        let categories = read_lines(&dir.join("modelnet40_shape_names.txt"))?;
+        let load_split = |split: &str| -> Result<Vec<Shape>> {
+            // (label, path) in dataset order.
+            let mut files: Vec<(usize, PathBuf)> = Vec::new();
+            for (label, category) in categories.iter().enumerate() {
+                let folder = dir.join(category).join(split);
+                let entries = std::fs::read_dir(&folder).map_err(|source| DataError::Io {
+                    path: folder.clone(),
+                    source,
+                })?;
+                let mut paths = Vec::new();
+                for entry in entries {
+                    let path = entry
+                        .map_err(|source| DataError::Io {
+                            path: folder.clone(),
+                            source,
+                        })?
+                        .path();
+                    if path.extension().is_some_and(|e| e == "npy") {
+                        paths.push(path);
+                    }
+                }
+                paths.sort();
+                files.extend(paths.into_iter().map(|p| (label, p)));
+            }
+            files
+                .par_iter()
+                .map(|(label, path)| load_npy_shape(path, *label))
+                .collect()
+        };
+        let official_train = load_split("train")?;
+        let official_test = load_split("test")?;
+        Ok(Self {
+            categories,
+            official_train,
+            official_test,
+        })
+    }
+
+    /// The shapes of `split`; with `unseen`, only the first half of the categories for
+    /// [`Split::Train`] and [`Split::Validation`] and only the second half for [`Split::Test`].
+    pub fn split(&self, split: Split, unseen: bool) -> Vec<&Shape> {
+        let half = self.categories.len() / 2;
+        let category_ok = |label: usize| match (unseen, split) {
+            (false, _) => true,
+            (true, Split::Test) => label >= half,
+            (true, _) => label < half,
+        };
+        let shapes: Vec<&Shape> = match split {
+            Split::Test => self.official_test.iter().collect(),
+            Split::Train | Split::Validation => {
+                let mut per_category = vec![0usize; self.categories.len()];
+                for s in &self.official_train {
+                    per_category[s.label] += 1;
+                }
+                let mut seen = vec![0usize; self.categories.len()];
+                self.official_train
+                    .iter()
+                    .filter(|s| {
+                        let rank = seen[s.label];
+                        seen[s.label] += 1;
+                        let in_train =
+                            (rank as f64) < (per_category[s.label] as f64 * TRAIN_SHARE).floor();
+                        in_train == (split == Split::Train)
+                    })
+                    .collect()
+            }
+        };
+        shapes
+            .into_iter()
+            .filter(|s| category_ok(s.label))
+            .collect()
+    }
+}
+
+/// One `.npy` shape file, checked (finite, non-empty).
+fn load_npy_shape(path: &Path, label: usize) -> Result<Shape> {
+    let bytes = std::fs::read(path).map_err(|source| DataError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let cloud = checked_cloud(npy::parse(&bytes, path)?, path)?;
+    let name = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    Ok(Shape {
+        name,
+        label,
+        points: cloud.to_f32_rows(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::scratch_path;
+    use rgm_geom::{Point3, PointCloud};
+
+    /// A tree with categories `a`, `b`, `c`, `d`; category k has 5 + k train shapes and 2 test
+    /// shapes; shape j of category k is the single point (k, j, 0) repeated twice.
+    fn fake_tree(name: &str) -> PathBuf {
+        let dir = scratch_path(name);
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("modelnet40_shape_names.txt"), "a\nb\nc\nd\n").unwrap();
+        for (k, cat) in ["a", "b", "c", "d"].iter().enumerate() {
+            for (split, n) in [("train", 5 + k), ("test", 2)] {
+                let folder = dir.join(cat).join(split);
+                std::fs::create_dir_all(&folder).unwrap();
+                // Written in reverse so that the loader's sorting is what orders them.
+                for j in (0..n).rev() {
+                    let cloud = PointCloud::new(vec![Point3::new(k as f64, j as f64, 0.0); 2]);
+                    let mut file =
+                        std::fs::File::create(folder.join(format!("{cat}_{:04}.npy", j + 1)))
+                            .unwrap();
+                    npy::write(&mut file, &cloud, npy::Dtype::F32).unwrap();
+                }
+            }
+        }
+        std::fs::write(dir.join("a/train/notes.txt"), "not a shape").unwrap();
+        dir
+    }
+
+    fn names(shapes: &[&Shape]) -> Vec<String> {
+        shapes.iter().map(|s| s.name.clone()).collect()
+    }
+
+    #[test]
+    fn loads_labels_and_orders_by_label_then_name() {
+        let data = ModelNet40::open(fake_tree("mn_order")).unwrap();
+        assert_eq!(data.categories, ["a", "b", "c", "d"]);
+        assert_eq!(data.official_train.len(), 5 + 6 + 7 + 8);
+        assert_eq!(data.official_test.len(), 8);
+        let first: Vec<_> = data
+            .official_train
+            .iter()
+            .take(6)
+            .map(|s| (s.name.as_str(), s.label))
+            .collect();
+        let expected = [
+            ("a_0001", 0),
+            ("a_0002", 0),
+            ("a_0003", 0),
+            ("a_0004", 0),
+            ("a_0005", 0),
+            ("b_0001", 1),
+        ];
+        assert_eq!(first, expected);
+        assert_eq!(data.official_train[6].points, vec![[1.0, 1.0, 0.0]; 2]);
+    }
+
+    #[test]
+    fn splits_cut_each_category_at_eighty_percent() {
+        let data = ModelNet40::open(fake_tree("mn_split")).unwrap();
+        // ⌊0.8·n⌋ for n = 5, 6, 7, 8 is 4, 4, 5, 6.
+        let train = data.split(Split::Train, false);
+        let validation = data.split(Split::Validation, false);
+        assert_eq!(train.len(), 4 + 4 + 5 + 6);
+        assert_eq!(
+            names(&validation),
+            ["a_0005", "b_0005", "b_0006", "c_0006", "c_0007", "d_0007", "d_0008"]
+        );
+        assert_eq!(data.split(Split::Test, false).len(), 8);
+        // Unseen: labels 0–1 train and validate, labels 2–3 test.
+        assert_eq!(data.split(Split::Train, true).len(), 4 + 4);
+        assert_eq!(
+            names(&data.split(Split::Validation, true)),
+            ["a_0005", "b_0005", "b_0006"]
+        );
+        let test = data.split(Split::Test, true);
+        assert_eq!(
+            test.iter().map(|s| s.label).collect::<Vec<_>>(),
+            [2, 2, 3, 3]
+        );
+    }
+
+    #[test]
+    fn missing_pieces_are_named() {
+        let err = ModelNet40::open(scratch_path("mn_nowhere"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("mn_nowhere/modelnet40_shape_names.txt"),
+            "{err}"
+        );
+        let dir = fake_tree("mn_broken");
+        std::fs::write(dir.join("c/test/c_0001.npy"), b"\x93NUMPY garbage").unwrap();
+        let err = ModelNet40::open(&dir).unwrap_err().to_string();
+        assert!(err.contains("c/test/c_0001.npy: npy:"), "{err}");
+        std::fs::remove_dir_all(dir.join("d/train")).unwrap();
+        let err = ModelNet40::open(&dir).unwrap_err().to_string();
+        assert!(err.contains("d/train"), "{err}");
+    }
+}
