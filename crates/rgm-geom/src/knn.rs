@@ -98,7 +98,28 @@ impl KnnIndex {
         if k == 0 || self.nodes.is_empty() {
             return;
         }
-        self.k_nearest_rec(0, &[query.x, query.y, query.z], k, out);
+        self.k_nearest_rec(0, &[query.x, query.y, query.z], k, f64::INFINITY, out);
+    }
+
+    /// [`Self::hybrid`] into a reused buffer, with *squared* distances: for inner loops.
+    pub fn hybrid_squared_into(
+        &self,
+        query: &Point3<f64>,
+        radius: f64,
+        max_nn: usize,
+        out: &mut Vec<(usize, f64)>,
+    ) {
+        out.clear();
+        if max_nn == 0 || self.nodes.is_empty() || !(radius > 0.0) {
+            return;
+        }
+        self.k_nearest_rec(
+            0,
+            &[query.x, query.y, query.z],
+            max_nn,
+            radius * radius,
+            out,
+        );
     }
 
     /// Every point strictly closer than `radius` to `query`, sorted by distance, ties by index.
@@ -116,17 +137,29 @@ impl KnnIndex {
     /// Open3D's hybrid search (`KDTreeSearchParamHybrid`): the at most `max_nn` nearest points
     /// strictly closer than `radius`, sorted by distance, ties by index.
     pub fn hybrid(&self, query: &Point3<f64>, radius: f64, max_nn: usize) -> Vec<(usize, f64)> {
-        let mut out = self.k_nearest(query, max_nn);
-        out.retain(|n| n.1 < radius);
+        let mut out = Vec::with_capacity(max_nn.min(self.len()));
+        self.hybrid_squared_into(query, radius, max_nn, &mut out);
+        out.iter_mut().for_each(|n| n.1 = n.1.sqrt());
         out
     }
 
-    /// Keeps `best` the sorted `k` smallest (squared distance, index) seen so far.
-    fn k_nearest_rec(&self, node: usize, q: &[f64; 3], k: usize, best: &mut Vec<(usize, f64)>) {
+    /// Keeps `best` the sorted `k` smallest (squared distance, index) seen so far among points
+    /// with squared distance below `r2`.
+    fn k_nearest_rec(
+        &self,
+        node: usize,
+        q: &[f64; 3],
+        k: usize,
+        r2: f64,
+        best: &mut Vec<(usize, f64)>,
+    ) {
         match self.nodes[node] {
             Node::Leaf { start, end } => {
                 for (p, i) in &self.points[start as usize..end as usize] {
                     let d2 = squared_distance(p, q);
+                    if !(d2 < r2) {
+                        continue;
+                    }
                     let candidate = (*i as usize, d2);
                     if best.len() == k {
                         let worst = best[k - 1];
@@ -151,10 +184,15 @@ impl KnnIndex {
                 } else {
                     (right, left)
                 };
-                self.k_nearest_rec(near as usize, q, k, best);
+                self.k_nearest_rec(near as usize, q, k, r2, best);
                 // `<=`: a point as far as the current worst may still win on its index.
-                if best.len() < k || diff * diff <= best[k - 1].1 {
-                    self.k_nearest_rec(far as usize, q, k, best);
+                let bound = if best.len() < k {
+                    diff * diff < r2
+                } else {
+                    diff * diff <= best[k - 1].1
+                };
+                if bound {
+                    self.k_nearest_rec(far as usize, q, k, r2, best);
                 }
             }
         }

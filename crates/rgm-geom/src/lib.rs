@@ -15,6 +15,7 @@ pub mod icp;
 pub mod kabsch;
 pub mod knn;
 pub mod metrics;
+pub mod normals;
 pub mod registration;
 pub mod transform;
 
