@@ -44,6 +44,9 @@ pub enum DataError {
     /// A dataset folder or file does not have the expected layout or contents.
     #[error("{}: {why}", path.display())]
     Dataset { path: PathBuf, why: String },
+    /// A pair setting name is not one of clean, noise, partial.
+    #[error("unknown setting `{name}` (expected clean, noise or partial)")]
+    UnknownSetting { name: String },
     /// An index is outside a collection.
     #[error("{op}: index {index} out of range for length {len}")]
     IndexOutOfRange {

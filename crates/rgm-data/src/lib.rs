@@ -5,10 +5,14 @@
 //! Layering rule: rgm-data builds on rgm-geom only (point clouds, rigid transforms, kNN) and
 //! knows nothing of tensors, networks or matching. It needs no BLAS.
 
+pub mod correspondence;
 pub mod error;
 pub mod io;
 pub mod modelnet;
+pub mod pairs;
 
+pub use correspondence::Correspondence;
 pub use error::{DataError, Result};
 pub use io::{read_point_cloud, write_point_cloud};
 pub use modelnet::{ModelNet40, Shape, Split};
+pub use pairs::{Pair, PairConfig, PairGenerator, Setting};
