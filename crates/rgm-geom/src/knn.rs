@@ -94,11 +94,7 @@ impl KnnIndex {
         k: usize,
         out: &mut Vec<(usize, f64)>,
     ) {
-        out.clear();
-        if k == 0 || self.nodes.is_empty() {
-            return;
-        }
-        self.k_nearest_rec(0, &[query.x, query.y, query.z], k, f64::INFINITY, out);
+        self.best_within(query, k, f64::INFINITY, out);
     }
 
     /// [`Self::hybrid`] into a reused buffer, with *squared* distances: for inner loops.
@@ -109,17 +105,30 @@ impl KnnIndex {
         max_nn: usize,
         out: &mut Vec<(usize, f64)>,
     ) {
-        out.clear();
-        if max_nn == 0 || self.nodes.is_empty() || !(radius > 0.0) {
+        if !(radius > 0.0) {
+            out.clear();
             return;
         }
-        self.k_nearest_rec(
+        self.best_within(query, max_nn, radius * radius, out);
+    }
+
+    /// The `k` first points by (squared distance, index) among those with squared distance
+    /// below `r2`, sorted, into `out`.
+    fn best_within(&self, query: &Point3<f64>, k: usize, r2: f64, out: &mut Vec<(usize, f64)>) {
+        out.clear();
+        if k == 0 || self.nodes.is_empty() {
+            return;
+        }
+        self.best_rec(
             0,
             &[query.x, query.y, query.z],
-            max_nn,
-            radius * radius,
+            k,
+            r2,
+            0.0,
+            &mut [0.0; 3],
             out,
         );
+        sort_by_distance_then_index(out);
     }
 
     /// Every point strictly closer than `radius` to `query`, sorted by distance, ties by index.
@@ -128,7 +137,14 @@ impl KnnIndex {
         if self.nodes.is_empty() || !(radius > 0.0) {
             return out;
         }
-        self.within_rec(0, &[query.x, query.y, query.z], radius * radius, &mut out);
+        self.within_rec(
+            0,
+            &[query.x, query.y, query.z],
+            radius * radius,
+            0.0,
+            &mut [0.0; 3],
+            &mut out,
+        );
         sort_by_distance_then_index(&mut out);
         out.iter_mut().for_each(|n| n.1 = n.1.sqrt());
         out
@@ -143,33 +159,32 @@ impl KnnIndex {
         out
     }
 
-    /// Keeps `best` the sorted `k` smallest (squared distance, index) seen so far among points
-    /// with squared distance below `r2`.
-    fn k_nearest_rec(
+    /// Keeps `heap` a max-heap (by [`is_before`]) of the `k` first points seen so far with
+    /// squared distance below `r2`. `rd` is the squared distance from `q` to the node's cell
+    /// and `off` its per-axis offsets (Arya & Mount's incremental distance).
+    #[allow(clippy::too_many_arguments)]
+    fn best_rec(
         &self,
         node: usize,
         q: &[f64; 3],
         k: usize,
         r2: f64,
-        best: &mut Vec<(usize, f64)>,
+        rd: f64,
+        off: &mut [f64; 3],
+        heap: &mut Vec<(usize, f64)>,
     ) {
         match self.nodes[node] {
             Node::Leaf { start, end } => {
                 for (p, i) in &self.points[start as usize..end as usize] {
-                    let d2 = squared_distance(p, q);
-                    if !(d2 < r2) {
+                    let candidate = (*i as usize, squared_distance(p, q));
+                    if !(candidate.1 < r2) {
                         continue;
                     }
-                    let candidate = (*i as usize, d2);
-                    if best.len() == k {
-                        let worst = best[k - 1];
-                        if !is_before(candidate, worst) {
-                            continue;
-                        }
-                        best.pop();
+                    if heap.len() < k {
+                        heap_push(heap, candidate);
+                    } else if is_before(candidate, heap[0]) {
+                        heap_replace_top(heap, candidate);
                     }
-                    let at = best.partition_point(|&b| is_before(b, candidate));
-                    best.insert(at, candidate);
                 }
             }
             Node::Split {
@@ -178,28 +193,42 @@ impl KnnIndex {
                 left,
                 right,
             } => {
-                let diff = q[axis as usize] - value;
+                let axis = axis as usize;
+                let diff = q[axis] - value;
                 let (near, far) = if diff < 0.0 {
                     (left, right)
                 } else {
                     (right, left)
                 };
-                self.k_nearest_rec(near as usize, q, k, r2, best);
+                self.best_rec(near as usize, q, k, r2, rd, off, heap);
+                let old = off[axis];
+                let far_rd = rd - old * old + diff * diff;
                 // `<=`: a point as far as the current worst may still win on its index.
-                let bound = if best.len() < k {
-                    diff * diff < r2
+                let visit = if heap.len() < k {
+                    far_rd < r2
                 } else {
-                    diff * diff <= best[k - 1].1
+                    far_rd <= heap[0].1
                 };
-                if bound {
-                    self.k_nearest_rec(far as usize, q, k, r2, best);
+                if visit {
+                    off[axis] = diff;
+                    self.best_rec(far as usize, q, k, r2, far_rd, off, heap);
+                    off[axis] = old;
                 }
             }
         }
     }
 
-    /// Appends every (index, squared distance) with squared distance below `r2`, unsorted.
-    fn within_rec(&self, node: usize, q: &[f64; 3], r2: f64, out: &mut Vec<(usize, f64)>) {
+    /// Appends every (index, squared distance) with squared distance below `r2`, unsorted;
+    /// `rd` and `off` as in [`Self::best_rec`].
+    fn within_rec(
+        &self,
+        node: usize,
+        q: &[f64; 3],
+        r2: f64,
+        rd: f64,
+        off: &mut [f64; 3],
+        out: &mut Vec<(usize, f64)>,
+    ) {
         match self.nodes[node] {
             Node::Leaf { start, end } => {
                 for (p, i) in &self.points[start as usize..end as usize] {
@@ -215,18 +244,58 @@ impl KnnIndex {
                 left,
                 right,
             } => {
-                let diff = q[axis as usize] - value;
+                let axis = axis as usize;
+                let diff = q[axis] - value;
                 let (near, far) = if diff < 0.0 {
                     (left, right)
                 } else {
                     (right, left)
                 };
-                self.within_rec(near as usize, q, r2, out);
-                if diff * diff < r2 {
-                    self.within_rec(far as usize, q, r2, out);
+                self.within_rec(near as usize, q, r2, rd, off, out);
+                let old = off[axis];
+                let far_rd = rd - old * old + diff * diff;
+                if far_rd < r2 {
+                    off[axis] = diff;
+                    self.within_rec(far as usize, q, r2, far_rd, off, out);
+                    off[axis] = old;
                 }
             }
         }
+    }
+}
+
+/// Pushes onto a max-heap ordered by [`is_before`].
+fn heap_push(heap: &mut Vec<(usize, f64)>, item: (usize, f64)) {
+    heap.push(item);
+    let mut i = heap.len() - 1;
+    while i > 0 {
+        let parent = (i - 1) / 2;
+        if !is_before(heap[parent], heap[i]) {
+            break;
+        }
+        heap.swap(parent, i);
+        i = parent;
+    }
+}
+
+/// Replaces the top (the last in order) of a non-empty max-heap and restores the heap.
+fn heap_replace_top(heap: &mut [(usize, f64)], item: (usize, f64)) {
+    heap[0] = item;
+    let mut i = 0;
+    loop {
+        let (l, r) = (2 * i + 1, 2 * i + 2);
+        let mut largest = i;
+        if l < heap.len() && is_before(heap[largest], heap[l]) {
+            largest = l;
+        }
+        if r < heap.len() && is_before(heap[largest], heap[r]) {
+            largest = r;
+        }
+        if largest == i {
+            return;
+        }
+        heap.swap(i, largest);
+        i = largest;
     }
 }
 

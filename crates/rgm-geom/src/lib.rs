@@ -11,6 +11,8 @@
 pub mod cloud;
 pub mod error;
 pub mod euler;
+pub mod fgr;
+pub mod fpfh;
 pub mod icp;
 pub mod kabsch;
 pub mod knn;

@@ -1,0 +1,411 @@
+//! Fast Global Registration (Zhou, Park & Koltun, ECCV 2016) on FPFH features, as Open3D's
+//! `registration_fgr_based_on_feature_matching` with `FastGlobalRegistrationOption`.
+//!
+//! Open3D's steps, followed one by one:
+//! 1. Features: PCA normals and FPFH of each cloud ([`crate::fpfh::features`]).
+//! 2. Initial matching: mutual nearest neighbours in the 33-D feature space (exact, brute force;
+//!    ties to the lowest index), ordered by source index.
+//! 3. Tuple test: `100 × matches` times draw three matches at random; keep the triple when each
+//!    of its three side lengths agrees between the clouds within a factor `tuple_scale`
+//!    (`scale·l_s < l_t < l_s/scale`), until `maximum_tuple_count` triples; every kept triple
+//!    adds its three matches (repeats allowed) to the final list. Open3D draws from its global
+//!    random generator; we draw from a generator seeded by `seed`, so results are reproducible.
+//! 4. Normalisation: each cloud is centred on its own mean; both are divided by the largest
+//!    distance of a centred point to its centre (unless `use_absolute_scale`).
+//! 5. Optimisation: `iteration_number` Gauss–Newton steps of the Geman–McClure objective with
+//!    line processes: weights `l = (μ / (μ + ‖p − T q‖²))²`, a step linearised in the rotation
+//!    (small angles ω, applied as `Rz(ω_z)·Ry(ω_y)·Rx(ω_x)`), the target moved onto the source.
+//!    μ starts at 1 (the normalised scale) and, with `decrease_mu`, is divided by
+//!    `division_factor` every 4th iteration while above `maximum_correspondence_distance`.
+//! 6. The transform is brought back to the original scale and inverted, to map source onto
+//!    target. With fewer than 10 matches Open3D returns the identity; so do we (`converged`
+//!    false).
+//!
+//! The result's fitness and RMSE (which Open3D leaves empty for FGR) are Open3D's score of the
+//! final transform at `evaluation_distance`.
+
+use nalgebra::{Matrix3, Matrix6, Point3, Vector3, Vector6};
+use rand::{rngs::StdRng, Rng, SeedableRng};
+
+use crate::euler::rotation_xyz_extrinsic;
+use crate::fpfh::{features, Fpfh, FpfhConfig};
+use crate::icp::check_clouds;
+use crate::normals::NormalsConfig;
+use crate::registration::{score, RegistrationResult};
+use crate::{GeomError, KnnIndex, PointCloud, Result, RigidTransform};
+
+/// Open3D returns the identity below this many matches.
+const MIN_MATCHES: usize = 10;
+
+/// Settings of [`register`]: Open3D's `FastGlobalRegistrationOption` defaults, plus the feature
+/// settings of the project's Open3D measurements.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FgrConfig {
+    /// Normals for FPFH (default radius 0.2, max_nn 30).
+    pub normals: NormalsConfig,
+    /// FPFH neighbourhood (default radius 0.4, max_nn 100).
+    pub fpfh: FpfhConfig,
+    /// μ is divided by this (default 1.4).
+    pub division_factor: f64,
+    /// Work in the clouds' own units instead of normalising by their extent (default false).
+    pub use_absolute_scale: bool,
+    /// Graduated non-convexity: decrease μ during the iterations (default true).
+    pub decrease_mu: bool,
+    /// μ stops decreasing below this (default 0.025, in normalised units).
+    pub maximum_correspondence_distance: f64,
+    /// Gauss–Newton iterations (default 64).
+    pub iteration_number: usize,
+    /// Side-length agreement factor of the tuple test (default 0.95).
+    pub tuple_scale: f64,
+    /// Most triples kept by the tuple test (default 1000).
+    pub maximum_tuple_count: usize,
+    /// Run the tuple test (default true).
+    pub tuple_test: bool,
+    /// Seed of the tuple test's random draws (default 0).
+    pub seed: u64,
+    /// Distance at which the result's fitness and RMSE are scored (default 0.1, as ICP's).
+    pub evaluation_distance: f64,
+}
+
+impl Default for FgrConfig {
+    fn default() -> Self {
+        Self {
+            normals: NormalsConfig::default(),
+            fpfh: FpfhConfig::default(),
+            division_factor: 1.4,
+            use_absolute_scale: false,
+            decrease_mu: true,
+            maximum_correspondence_distance: 0.025,
+            iteration_number: 64,
+            tuple_scale: 0.95,
+            maximum_tuple_count: 1000,
+            tuple_test: true,
+            seed: 0,
+            evaluation_distance: 0.1,
+        }
+    }
+}
+
+/// Registers `source` onto `target`: features, matching, tuple test, optimisation.
+pub fn register(
+    source: &PointCloud,
+    target: &PointCloud,
+    config: &FgrConfig,
+) -> Result<RegistrationResult> {
+    check_clouds("fgr::register", source, target)?;
+    let source_features = features(&source.points, &config.normals, &config.fpfh);
+    let target_features = features(&target.points, &config.normals, &config.fpfh);
+    register_features(source, target, &source_features, &target_features, config)
+}
+
+/// [`register`] with the features given (one per point of each cloud).
+pub fn register_features(
+    source: &PointCloud,
+    target: &PointCloud,
+    source_features: &[Fpfh],
+    target_features: &[Fpfh],
+    config: &FgrConfig,
+) -> Result<RegistrationResult> {
+    const OP: &str = "fgr::register_features";
+    check_clouds(OP, source, target)?;
+    if source_features.len() != source.len() {
+        return Err(GeomError::LengthMismatch {
+            op: OP,
+            left: source.len(),
+            right: source_features.len(),
+        });
+    }
+    if target_features.len() != target.len() {
+        return Err(GeomError::LengthMismatch {
+            op: OP,
+            left: target.len(),
+            right: target_features.len(),
+        });
+    }
+    if !(config.division_factor > 1.0 && config.tuple_scale > 0.0 && config.tuple_scale <= 1.0) {
+        return Err(GeomError::Degenerate {
+            op: OP,
+            why: format!(
+                "division_factor must be > 1 and tuple_scale in (0, 1], got {} and {}",
+                config.division_factor, config.tuple_scale
+            ),
+        });
+    }
+    let mut matches = mutual_matches(source_features, target_features);
+    if config.tuple_test {
+        matches = tuple_test(&source.points, &target.points, &matches, config);
+    }
+    let (transform, iterations, converged) = if matches.len() < MIN_MATCHES {
+        (RigidTransform::identity(), 0, false)
+    } else {
+        optimise(source, target, &matches, config)
+    };
+    let index = KnnIndex::new(&target.points);
+    let s = score(
+        &source.points,
+        &index,
+        &transform,
+        config.evaluation_distance,
+        None,
+    );
+    Ok(RegistrationResult::scored(
+        transform, iterations, converged, s,
+    ))
+}
+
+/// Mutual nearest neighbours between the two feature sets: pairs (i, j) where j is the nearest
+/// target feature of source feature i and i the nearest source feature of j. Sorted by i.
+pub fn mutual_matches(source: &[Fpfh], target: &[Fpfh]) -> Vec<(usize, usize)> {
+    // One pass over the (N, M) squared distances keeps each row's and each column's minimum.
+    let mut row_best = vec![(f64::INFINITY, usize::MAX); source.len()]; // (N,)
+    let mut col_best = vec![(f64::INFINITY, usize::MAX); target.len()]; // (M,)
+    for (i, a) in source.iter().enumerate() {
+        for (j, b) in target.iter().enumerate() {
+            let d2: f64 = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum();
+            // Strict `<` while i and j ascend keeps the lowest index among ties.
+            if d2 < row_best[i].0 {
+                row_best[i] = (d2, j);
+            }
+            if d2 < col_best[j].0 {
+                col_best[j] = (d2, i);
+            }
+        }
+    }
+    row_best
+        .iter()
+        .enumerate()
+        .filter(|&(i, &(_, j))| j != usize::MAX && col_best[j].1 == i)
+        .map(|(i, &(_, j))| (i, j))
+        .collect()
+}
+
+/// The tuple test of step 3 on `matches` (source index, target index).
+fn tuple_test(
+    source: &[Point3<f64>],
+    target: &[Point3<f64>],
+    matches: &[(usize, usize)],
+    config: &FgrConfig,
+) -> Vec<(usize, usize)> {
+    let n = matches.len();
+    let mut kept = Vec::with_capacity(3 * config.maximum_tuple_count.min(100 * n));
+    if n == 0 {
+        return kept;
+    }
+    let mut rng = StdRng::seed_from_u64(config.seed);
+    let scale = config.tuple_scale;
+    let agrees = |ls: f64, lt: f64| ls * scale < lt && lt < ls / scale;
+    let mut tuples = 0;
+    for _ in 0..100 * n {
+        let picks = [
+            matches[rng.gen_range(0..n)],
+            matches[rng.gen_range(0..n)],
+            matches[rng.gen_range(0..n)],
+        ];
+        let side = |pts: &[Point3<f64>], a: usize, b: usize| (pts[a] - pts[b]).norm();
+        let [(s0, t0), (s1, t1), (s2, t2)] = picks;
+        if agrees(side(source, s0, s1), side(target, t0, t1))
+            && agrees(side(source, s1, s2), side(target, t1, t2))
+            && agrees(side(source, s2, s0), side(target, t2, t0))
+        {
+            kept.extend_from_slice(&picks);
+            tuples += 1;
+            if tuples >= config.maximum_tuple_count {
+                break;
+            }
+        }
+    }
+    kept
+}
+
+/// Steps 4–6: (t_target_source, iterations, every solve succeeded).
+fn optimise(
+    source: &PointCloud,
+    target: &PointCloud,
+    matches: &[(usize, usize)],
+    config: &FgrConfig,
+) -> (RigidTransform, usize, bool) {
+    let mean_s = source.centroid().coords;
+    let mean_t = target.centroid().coords;
+    let extent = |c: &PointCloud, m: Vector3<f64>| {
+        c.points
+            .iter()
+            .map(|p| (p.coords - m).norm())
+            .fold(0.0, f64::max)
+    };
+    let scale = extent(source, mean_s).max(extent(target, mean_t));
+    let (scale_global, mut mu) = if config.use_absolute_scale {
+        (1.0, scale)
+    } else {
+        (scale, 1.0)
+    };
+    if !(scale_global > 0.0) {
+        // Both clouds are single points repeated: nothing to rotate.
+        return (RigidTransform::identity(), 0, false);
+    }
+    // Normalised matched points: p from the source (fixed), q from the target (moved). // (P,)
+    let p: Vec<Vector3<f64>> = matches
+        .iter()
+        .map(|&(i, _)| (source.points[i].coords - mean_s) / scale_global)
+        .collect();
+    let mut q: Vec<Vector3<f64>> = matches
+        .iter()
+        .map(|&(_, j)| (target.points[j].coords - mean_t) / scale_global)
+        .collect();
+
+    // `trans` maps normalised target points onto normalised source points.
+    let mut trans = RigidTransform::identity();
+    let mut solved = true;
+    let mut iterations = 0;
+    for iteration in 0..config.iteration_number {
+        let mut jtj = Matrix6::<f64>::zeros(); // (6, 6)
+        let mut jtr = Vector6::<f64>::zeros(); // (6,)
+        for (pi, qi) in p.iter().zip(&q) {
+            let r = pi - qi;
+            let l = mu / (r.norm_squared() + mu);
+            let w = l * l;
+            // Rows of ∂(p − (q + ω × q + t))/∂(ω, t) for x, y, z.
+            let rows = [
+                Vector6::new(0.0, -qi.z, qi.y, -1.0, 0.0, 0.0),
+                Vector6::new(qi.z, 0.0, -qi.x, 0.0, -1.0, 0.0),
+                Vector6::new(-qi.y, qi.x, 0.0, 0.0, 0.0, -1.0),
+            ];
+            for (jrow, residual) in rows.iter().zip(r.iter()) {
+                jtj.ger(w, jrow, jrow, 1.0);
+                jtr.axpy(w * residual, jrow, 1.0);
+            }
+        }
+        let Some(cholesky) = jtj.cholesky() else {
+            solved = false;
+            break;
+        };
+        let x = -cholesky.solve(&jtr);
+        if !x.iter().all(|v| v.is_finite()) {
+            solved = false;
+            break;
+        }
+        let delta = RigidTransform::new(
+            rotation_xyz_extrinsic(x[0], x[1], x[2]),
+            Vector3::new(x[3], x[4], x[5]),
+        );
+        trans = delta.compose(&trans);
+        for qi in q.iter_mut() {
+            *qi = delta.rotation * *qi + delta.translation;
+        }
+        iterations += 1;
+        if config.decrease_mu && iteration % 4 == 0 && mu > config.maximum_correspondence_distance {
+            mu /= config.division_factor;
+        }
+    }
+    // Back to the original scale: target → source is q ↦ R q − R μ_t + s t + μ_s; invert it.
+    let r: Matrix3<f64> = trans.rotation;
+    let t_source_target =
+        RigidTransform::new(r, -(r * mean_t) + trans.translation * scale_global + mean_s);
+    (t_source_target.inverse(), iterations, solved)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::box_surface;
+
+    fn feature(values: &[(usize, f64)]) -> Fpfh {
+        let mut f = [0.0; 33];
+        for &(c, v) in values {
+            f[c] = v;
+        }
+        f
+    }
+
+    #[test]
+    fn mutual_matches_by_hand() {
+        // Source features at 0, 10, 20 on channel 0; target at 1, 2, 19 (and 30).
+        // Source 0 → target 0 (d 1); target 0 → source 0: mutual.
+        // Source 10 → target 1 (d 8, vs 9 to 19); target 1 (2) → source 0 (d 2): not mutual.
+        // Source 20 → target 2 (19); target 2 → source 2: mutual. Target 3 (30) → source 2: not.
+        let s = [
+            feature(&[(0, 0.0)]),
+            feature(&[(0, 10.0)]),
+            feature(&[(0, 20.0)]),
+        ];
+        let t = [
+            feature(&[(0, 1.0)]),
+            feature(&[(0, 2.0)]),
+            feature(&[(0, 19.0)]),
+            feature(&[(0, 30.0)]),
+        ];
+        assert_eq!(mutual_matches(&s, &t), vec![(0, 0), (2, 2)]);
+        // Ties go to the lowest index: two identical target features.
+        let t = [feature(&[(5, 1.0)]), feature(&[(5, 1.0)])];
+        assert_eq!(mutual_matches(&[feature(&[(5, 1.0)])], &t), vec![(0, 0)]);
+    }
+
+    #[test]
+    fn tuple_test_keeps_consistent_triples_only() {
+        // Five true matches of a rigidly moved set and five wrong ones (targets shifted by one):
+        // every kept match must be true (a wrong one would have to fit two others within 5% on
+        // three sides).
+        let target = box_surface(10, 11);
+        let pose = RigidTransform::random(&mut StdRng::seed_from_u64(2), 45.0, 0.5);
+        let source = target.transformed(&pose.inverse());
+        let mut matches: Vec<(usize, usize)> = (0..5).map(|i| (i, i)).collect();
+        matches.extend((5..10).map(|i| (i, 5 + (i - 4) % 5)));
+        let config = FgrConfig::default();
+        let kept = tuple_test(&source.points, &target.points, &matches, &config);
+        assert!(kept.len() >= 30, "only {} kept", kept.len());
+        assert_eq!(kept.len() % 3, 0);
+        assert!(kept.iter().all(|&(i, j)| i == j), "{kept:?}");
+        // The same seed draws the same triples.
+        assert_eq!(
+            kept,
+            tuple_test(&source.points, &target.points, &matches, &config)
+        );
+    }
+
+    #[test]
+    fn optimisation_recovers_a_pose_from_exact_matches() {
+        // Exact matches (no outliers) from any starting pose: GNC converges to the true pose.
+        let target = box_surface(200, 12);
+        let pose = RigidTransform::random(&mut StdRng::seed_from_u64(4), 45.0, 0.5);
+        let source = target.transformed(&pose.inverse());
+        let matches: Vec<(usize, usize)> = (0..200).map(|i| (i, i)).collect();
+        let (t, iterations, solved) = optimise(&source, &target, &matches, &FgrConfig::default());
+        assert!(solved);
+        assert_eq!(iterations, 64);
+        let err = (t.to_matrix4() - pose.to_matrix4()).abs().max();
+        assert!(err < 1e-9, "error {err:.3e}");
+    }
+
+    #[test]
+    fn too_few_matches_give_the_identity() {
+        // Five points give at most five matches (without the tuple test, which repeats them).
+        let cloud = box_surface(5, 13);
+        let config = FgrConfig { tuple_test: false, ..FgrConfig::default() };
+        let result = register(&cloud, &cloud, &config).unwrap();
+        assert_eq!(result.t_target_source, RigidTransform::identity());
+        assert!(!result.converged);
+        assert_eq!(result.iterations, 0);
+        assert_eq!(result.fitness, 1.0);
+    }
+
+    #[test]
+    fn bad_inputs_are_errors() {
+        let c = box_surface(20, 14);
+        let f = vec![[0.0; 33]; 19];
+        assert!(matches!(
+            register_features(&c, &c, &f, &f, &FgrConfig::default()),
+            Err(GeomError::LengthMismatch { .. })
+        ));
+        let bad = FgrConfig {
+            division_factor: 1.0,
+            ..FgrConfig::default()
+        };
+        assert!(matches!(
+            register(&c, &c, &bad),
+            Err(GeomError::Degenerate { .. })
+        ));
+        assert!(matches!(
+            register(&PointCloud::default(), &c, &FgrConfig::default()),
+            Err(GeomError::TooFewPoints { .. })
+        ));
+    }
+}

@@ -1,0 +1,288 @@
+//! FPFH features (Rusu, Blodow & Beetz 2009) as Open3D's `compute_fpfh_feature` computes them.
+//!
+//! 1. Neighbours of each point: the at most `max_nn` nearest strictly within `radius`, sorted;
+//!    the first (the point itself) is skipped.
+//! 2. SPFH: for each neighbour, Open3D's pair features (φ-like angle α ∈ [−π, π], φ ∈ [−1, 1],
+//!    θ ∈ [−1, 1] — see [`pair_features`]) are binned into 11 bins each, every pair adding
+//!    `100 / (neighbours − 1)`: three 11-bin histograms, 33 values summing to 300.
+//! 3. FPFH: the neighbours' SPFHs weighted by 1 / squared distance (zero distances skipped),
+//!    each 11-bin block rescaled to sum to 100, plus the point's own SPFH.
+//!
+//! A point without neighbours other than itself gets an all-zero feature, as in Open3D.
+
+use nalgebra::{Point3, Vector3};
+
+use crate::normals::{estimate_normals, NormalsConfig};
+use crate::KnnIndex;
+
+/// Bins per pair feature.
+const BINS: usize = 11;
+/// Length of one feature: three 11-bin histograms.
+pub const FPFH_LEN: usize = 3 * BINS;
+
+/// One point's FPFH descriptor.
+pub type Fpfh = [f64; FPFH_LEN];
+
+/// Settings of [`compute_fpfh`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FpfhConfig {
+    /// Neighbourhood radius (default 0.4 for shapes in the unit sphere: the Open3D setup).
+    pub radius: f64,
+    /// Most neighbours, nearest first (default 100, the usual Open3D setting).
+    pub max_nn: usize,
+}
+
+impl Default for FpfhConfig {
+    fn default() -> Self {
+        Self {
+            radius: 0.4,
+            max_nn: 100,
+        }
+    }
+}
+
+/// Open3D's pair features of (p1, n1) and (p2, n2): `[α, φ, θ, d]`. The pair is swapped (and
+/// the direction negated) when that makes the angle between the first normal and the line
+/// smaller, so the features do not depend on which point is the source. All zero when the
+/// points coincide or when the line is parallel to the chosen first normal.
+pub fn pair_features(
+    p1: &Point3<f64>,
+    n1: &Vector3<f64>,
+    p2: &Point3<f64>,
+    n2: &Vector3<f64>,
+) -> [f64; 4] {
+    let mut dp = p2 - p1;
+    let d = dp.norm();
+    if d == 0.0 {
+        return [0.0; 4];
+    }
+    let angle1 = n1.dot(&dp) / d;
+    let angle2 = n2.dot(&dp) / d;
+    let (u, n_other, theta) = if angle1.abs().acos() > angle2.abs().acos() {
+        dp = -dp;
+        (n2, n1, -angle2)
+    } else {
+        (n1, n2, angle1)
+    };
+    let v = dp.cross(u);
+    let v_norm = v.norm();
+    if v_norm == 0.0 {
+        return [0.0; 4];
+    }
+    let v = v / v_norm;
+    let w = u.cross(&v);
+    let phi = v.dot(n_other);
+    let alpha = w.dot(n_other).atan2(u.dot(n_other));
+    [alpha, phi, theta, d]
+}
+
+/// The bin of `value` in [lo, lo + width) split into 11, clamped to the valid bins.
+#[inline]
+fn bin(value: f64, lo: f64, width: f64) -> usize {
+    let b = (BINS as f64 * (value - lo) / width).floor();
+    b.clamp(0.0, (BINS - 1) as f64) as usize
+}
+
+/// FPFH features of a bare cloud: normals by [`estimate_normals`], then [`compute_fpfh`],
+/// sharing one k-d tree. // (N, 33)
+pub fn features(points: &[Point3<f64>], normals: &NormalsConfig, fpfh: &FpfhConfig) -> Vec<Fpfh> {
+    let index = KnnIndex::new(points);
+    let normal_vectors = estimate_normals(points, &index, normals);
+    compute_fpfh(points, &normal_vectors, &index, fpfh)
+}
+
+/// FPFH features of `points` with unit `normals`; `index` must index `points`. // (N, 33)
+pub fn compute_fpfh(
+    points: &[Point3<f64>],
+    normals: &[Vector3<f64>],
+    index: &KnnIndex,
+    config: &FpfhConfig,
+) -> Vec<Fpfh> {
+    let n = points.len();
+    // Neighbourhoods, flat: point i's are neighbours[offsets[i]..offsets[i + 1]].
+    let mut offsets = Vec::with_capacity(n + 1); // (N + 1,)
+    let mut neighbours = Vec::with_capacity(n * config.max_nn.min(n)); // (ΣK,) (index, squared distance)
+    let mut found = Vec::with_capacity(config.max_nn);
+    offsets.push(0);
+    for p in points {
+        index.hybrid_squared_into(p, config.radius, config.max_nn, &mut found);
+        neighbours.extend_from_slice(&found);
+        offsets.push(neighbours.len());
+    }
+    let around = |i: usize| &neighbours[offsets[i]..offsets[i + 1]];
+
+    let mut spfh = vec![[0.0; FPFH_LEN]; n]; // (N, 33)
+    for (i, hist) in spfh.iter_mut().enumerate() {
+        let nb = around(i);
+        if nb.len() < 2 {
+            continue;
+        }
+        let increment = 100.0 / (nb.len() - 1) as f64;
+        for &(j, _) in &nb[1..] {
+            let [alpha, phi, theta, _] =
+                pair_features(&points[i], &normals[i], &points[j], &normals[j]);
+            hist[bin(alpha, -std::f64::consts::PI, 2.0 * std::f64::consts::PI)] += increment;
+            hist[BINS + bin(phi, -1.0, 2.0)] += increment;
+            hist[2 * BINS + bin(theta, -1.0, 2.0)] += increment;
+        }
+    }
+
+    let mut fpfh = vec![[0.0; FPFH_LEN]; n]; // (N, 33)
+    for (i, out) in fpfh.iter_mut().enumerate() {
+        let nb = around(i);
+        if nb.len() < 2 {
+            continue;
+        }
+        let mut block_sums = [0.0; 3];
+        for &(j, d2) in &nb[1..] {
+            if d2 == 0.0 {
+                continue;
+            }
+            for (c, (o, s)) in out.iter_mut().zip(&spfh[j]).enumerate() {
+                let weighted = s / d2;
+                block_sums[c / BINS] += weighted;
+                *o += weighted;
+            }
+        }
+        let scales = block_sums.map(|s| if s != 0.0 { 100.0 / s } else { 0.0 });
+        for (c, (o, own)) in out.iter_mut().zip(&spfh[i]).enumerate() {
+            *o = *o * scales[c / BINS] + own;
+        }
+    }
+    fpfh
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pair_features_by_hand() {
+        // p1 at the origin with normal +z, p2 at (1, 0, 0) with normal +x.
+        // dp = (1,0,0): angle1 = n1·dp = 0, angle2 = 1 → acos 0 = π/2 > acos 1 = 0: swap.
+        // u = n2 = +x, dp = (−1,0,0), θ = −angle2 = −1; v = dp × u = 0 → all zero.
+        let o = Point3::origin();
+        let x = Point3::new(1.0, 0.0, 0.0);
+        assert_eq!(
+            pair_features(&o, &Vector3::z(), &x, &Vector3::x()),
+            [0.0; 4]
+        );
+        // Normals +z and +y, dp = (1,0,0): angle1 = angle2 = 0, no swap; u = +z, θ = 0,
+        // v = dp × u = (1,0,0)×(0,0,1) = (0,−1,0), w = u × v = (0,0,1)×(0,−1,0) = (1,0,0).
+        // φ = v·n2 = −1, α = atan2(w·n2, u·n2) = atan2(0, 0) = 0, d = 1.
+        assert_eq!(
+            pair_features(&o, &Vector3::z(), &x, &Vector3::y()),
+            [0.0, -1.0, 0.0, 1.0]
+        );
+        // Normals +z and (0, 1, 1)/√2 at distance 2: no swap (angles 0 and 0);
+        // φ = v·n2 = −1/√2, α = atan2(w·n2, u·n2) = atan2(0, 1/√2) = 0.
+        let n2 = Vector3::new(0.0, 1.0, 1.0).normalize();
+        let f = pair_features(&o, &Vector3::z(), &Point3::new(2.0, 0.0, 0.0), &n2);
+        assert!(
+            (f[1] + 0.5f64.sqrt()).abs() < 1e-15 && f[0] == 0.0 && f[2] == 0.0 && f[3] == 2.0,
+            "{f:?}"
+        );
+        // Normals +z and −z: no swap, v = (0,−1,0), w = (1,0,0), φ = 0, α = atan2(0, −1) = π.
+        let f = pair_features(&o, &Vector3::z(), &x, &(-Vector3::z()));
+        assert!(
+            (f[0] - std::f64::consts::PI).abs() < 1e-15 && f[1] == 0.0,
+            "{f:?}"
+        );
+        // Coincident points: zero.
+        assert_eq!(
+            pair_features(&o, &Vector3::z(), &o, &Vector3::y()),
+            [0.0; 4]
+        );
+    }
+
+    #[test]
+    fn pair_features_do_not_depend_on_the_order() {
+        let (p1, p2) = (Point3::new(0.1, 0.2, 0.3), Point3::new(0.5, -0.1, 0.2));
+        let (n1, n2) = (
+            Vector3::new(0.2, 0.9, 0.1).normalize(),
+            Vector3::new(-0.5, 0.3, 0.8).normalize(),
+        );
+        let a = pair_features(&p1, &n1, &p2, &n2);
+        let b = pair_features(&p2, &n2, &p1, &n1);
+        for (x, y) in a.iter().zip(&b) {
+            assert!((x - y).abs() < 1e-12, "{a:?} vs {b:?}");
+        }
+    }
+
+    #[test]
+    fn bins_split_the_range_in_eleven_and_clamp() {
+        assert_eq!(bin(-1.0, -1.0, 2.0), 0);
+        assert_eq!(bin(1.0, -1.0, 2.0), 10);
+        assert_eq!(bin(0.0, -1.0, 2.0), 5);
+        assert_eq!(bin(-1.0 + 2.0 / 11.0 - 1e-9, -1.0, 2.0), 0);
+        assert_eq!(bin(-1.0 + 2.0 / 11.0 + 1e-9, -1.0, 2.0), 1);
+        assert_eq!(
+            bin(
+                -std::f64::consts::PI,
+                -std::f64::consts::PI,
+                2.0 * std::f64::consts::PI
+            ),
+            0
+        );
+        assert_eq!(
+            bin(
+                std::f64::consts::PI,
+                -std::f64::consts::PI,
+                2.0 * std::f64::consts::PI
+            ),
+            10
+        );
+    }
+
+    #[test]
+    fn three_points_by_hand() {
+        // Three points on the x axis, 1 apart, normals +z, radius 1.5: the ends see only the
+        // middle. Every pair, either direction, has α = φ = θ = 0 (v = ∓y, w = ±x, n2 = +z), so
+        // bin 5 of each block. SPFH: 100 at bins 5, 16, 27 for every point (an end: one pair of
+        // +100; the middle: two of +50). FPFH: the neighbours' SPFHs weighted by 1/1², each
+        // block rescaled to 100, plus the own 100 → 200 at bins 5, 16, 27 for every point.
+        let points = vec![
+            Point3::new(0.0, 0.0, 0.0),
+            Point3::new(1.0, 0.0, 0.0),
+            Point3::new(2.0, 0.0, 0.0),
+        ];
+        let normals = vec![Vector3::z(); 3];
+        let config = FpfhConfig {
+            radius: 1.5,
+            max_nn: 100,
+        };
+        let f = compute_fpfh(&points, &normals, &KnnIndex::new(&points), &config);
+        for feature in &f {
+            for (c, v) in feature.iter().enumerate() {
+                let expected = if c % BINS == 5 { 200.0 } else { 0.0 };
+                assert!((v - expected).abs() < 1e-12, "bin {c}: {v}");
+            }
+        }
+    }
+
+    #[test]
+    fn features_are_invariant_to_rigid_motion() {
+        use crate::testing::box_surface;
+        use crate::RigidTransform;
+        use rand::{rngs::StdRng, SeedableRng};
+        let cloud = box_surface(400, 6);
+        let pose = RigidTransform::random(&mut StdRng::seed_from_u64(3), 45.0, 0.5);
+        let moved = cloud.transformed(&pose);
+        let of = |c: &crate::PointCloud| {
+            features(&c.points, &NormalsConfig::default(), &FpfhConfig::default())
+        };
+        let (a, b) = (of(&cloud), of(&moved));
+        let mut max_diff: f64 = 0.0;
+        for (x, y) in a.iter().zip(&b) {
+            assert!(
+                (x.iter().sum::<f64>() - 600.0).abs() < 1e-9,
+                "each block sums to 200"
+            );
+            for (u, v) in x.iter().zip(y) {
+                max_diff = max_diff.max((u - v).abs());
+            }
+        }
+        // Bins may flip for values on a bin edge; that moves at most a few percent.
+        assert!(max_diff < 5.0, "max difference {max_diff}");
+    }
+}
