@@ -1,10 +1,11 @@
-//! Split sizes and load time of a ModelNet40 `.npy` tree: the numbers of `docs/data.md`.
+//! Split sizes, load time and ground-truth statistics of the first test pairs of a ModelNet40
+//! `.npy` tree: the numbers of `docs/data.md`.
 //!
-//! `cargo run --release -p rgm-data --example data_stats -- ../shared/data/modelnet40_npy1024`
+//! `cargo run --release -p rgm-data --example data_stats -- ../shared/data/modelnet40_npy1024 [PAIRS]`
 
 use std::time::Instant;
 
-use rgm_data::{ModelNet40, Split};
+use rgm_data::{ModelNet40, PairGenerator, Setting, Split};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dir = std::env::args().nth(1).ok_or("usage: data_stats DIR")?;
@@ -29,6 +30,34 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "| {name} | {} | {} |",
             data.split(split, false).len(),
             data.split(split, true).len()
+        );
+    }
+    let count: usize = std::env::args().nth(2).map_or(Ok(100), |s| s.parse())?;
+    let test = data.split(Split::Test, false);
+    println!("\nfirst {count} test pairs (all categories):");
+    println!("| setting | source points | target points | matched / source | matched / target | min matched / source | ms per pair |");
+    println!("|---|---|---|---|---|---|---|");
+    for setting in Setting::ALL {
+        let generator = PairGenerator::new(setting);
+        let start = Instant::now();
+        let pairs = (0..count)
+            .map(|i| generator.test_pair(&test, i))
+            .collect::<Result<Vec<_>, _>>()?;
+        let ms = start.elapsed().as_secs_f64() * 1e3 / count as f64;
+        let mean =
+            |f: &dyn Fn(&rgm_data::Pair) -> f64| pairs.iter().map(f).sum::<f64>() / count as f64;
+        let min_fraction = pairs
+            .iter()
+            .map(|p| p.correspondence.matched_source_fraction())
+            .fold(1.0, f64::min);
+        println!(
+            "| {} | {:.1} | {:.1} | {:.4} | {:.4} | {:.4} | {ms:.2} |",
+            setting.name(),
+            mean(&|p| p.source.len() as f64),
+            mean(&|p| p.target.len() as f64),
+            mean(&|p| p.correspondence.matched_source_fraction()),
+            mean(&|p| p.correspondence.pairs.len() as f64 / p.target.len() as f64),
+            min_fraction,
         );
     }
     Ok(())

@@ -120,6 +120,35 @@ impl ModelNet40 {
         })
     }
 
+    /// Loads the HDF5 release `modelnet40_ply_hdf5_2048` under `dir`: categories from
+    /// `shape_names.txt`, files from `train_files.txt` / `test_files.txt` (their base names, looked
+    /// up in `dir`), each with `data` (B, N, 3) float and `label` (B, 1) integer datasets. Other
+    /// datasets (`normal`, `faceId`) are ignored.
+    pub fn open_hdf5(dir: impl AsRef<Path>) -> Result<Self> {
+        let dir = dir.as_ref();
+        let categories = read_lines(&dir.join("shape_names.txt"))?;
+        let load_split = |list: &str| -> Result<Vec<Shape>> {
+            let list = dir.join(list);
+            let files: Vec<PathBuf> = read_lines(&list)?
+                .iter()
+                .map(|line| Path::new(line).file_name().map(|name| dir.join(name)))
+                .collect::<Option<_>>()
+                .ok_or_else(|| dataset_error(&list, "a line names no file"))?;
+            let per_file = files
+                .par_iter()
+                .map(|f| load_hdf5_file(f, categories.len()))
+                .collect::<Result<Vec<_>>>()?;
+            Ok(per_file.into_iter().flatten().collect())
+        };
+        let official_train = load_split("train_files.txt")?;
+        let official_test = load_split("test_files.txt")?;
+        Ok(Self {
+            categories,
+            official_train,
+            official_test,
+        })
+    }
+
     /// The shapes of `split`; with `unseen`, only the first half of the categories for
     /// [`Split::Train`] and [`Split::Validation`] and only the second half for [`Split::Test`].
     pub fn split(&self, split: Split, unseen: bool) -> Vec<&Shape> {
@@ -172,6 +201,125 @@ fn load_npy_shape(path: &Path, label: usize) -> Result<Shape> {
         label,
         points: cloud.to_f32_rows(),
     })
+}
+
+/// Every dataset value of `name` in `file` as f64, whatever its numeric type. // (elements,)
+fn read_hdf5_numbers(
+    file: &hdf5_reader::Hdf5File,
+    name: &str,
+    path: &Path,
+) -> Result<(Vec<u64>, Vec<f64>)> {
+    use hdf5_reader::Datatype;
+    let fail =
+        |e: hdf5_reader::error::Error| dataset_error(path, format!("HDF5 dataset `{name}`: {e}"));
+    let dataset = file.dataset(name).map_err(fail)?;
+    macro_rules! read_as {
+        ($t:ty) => {
+            dataset
+                .read_array::<$t>()
+                .map_err(fail)?
+                .iter()
+                .map(|&v| v as f64)
+                .collect()
+        };
+    }
+    let values: Vec<f64> = match *dataset.dtype() {
+        Datatype::FloatingPoint { size: 4, .. } => read_as!(f32),
+        Datatype::FloatingPoint { size: 8, .. } => read_as!(f64),
+        Datatype::FixedPoint {
+            size: 1,
+            signed: false,
+            ..
+        } => read_as!(u8),
+        Datatype::FixedPoint {
+            size: 1,
+            signed: true,
+            ..
+        } => read_as!(i8),
+        Datatype::FixedPoint {
+            size: 2,
+            signed: false,
+            ..
+        } => read_as!(u16),
+        Datatype::FixedPoint {
+            size: 2,
+            signed: true,
+            ..
+        } => read_as!(i16),
+        Datatype::FixedPoint {
+            size: 4,
+            signed: false,
+            ..
+        } => read_as!(u32),
+        Datatype::FixedPoint {
+            size: 4,
+            signed: true,
+            ..
+        } => read_as!(i32),
+        Datatype::FixedPoint {
+            size: 8,
+            signed: false,
+            ..
+        } => read_as!(u64),
+        Datatype::FixedPoint {
+            size: 8,
+            signed: true,
+            ..
+        } => read_as!(i64),
+        ref other => {
+            return Err(dataset_error(
+                path,
+                format!("HDF5 dataset `{name}` has type {other:?}, not a number"),
+            ))
+        }
+    };
+    Ok((dataset.shape().to_vec(), values))
+}
+
+/// The shapes of one HDF5 file of the release, named `FILE:ROW`.
+fn load_hdf5_file(path: &Path, n_categories: usize) -> Result<Vec<Shape>> {
+    let file = hdf5_reader::Hdf5File::open(path)
+        .map_err(|e| dataset_error(path, format!("not a readable HDF5 file: {e}")))?;
+    let (data_shape, data) = read_hdf5_numbers(&file, "data", path)?; // (B, N, 3)
+    let (label_shape, labels) = read_hdf5_numbers(&file, "label", path)?; // (B, 1)
+    let &[b, n, 3] = data_shape.as_slice() else {
+        return Err(dataset_error(
+            path,
+            format!("HDF5 dataset `data` has shape {data_shape:?}, expected (B, N, 3)"),
+        ));
+    };
+    if labels.len() as u64 != b || label_shape.first() != Some(&b) {
+        return Err(dataset_error(
+            path,
+            format!("HDF5 dataset `label` has shape {label_shape:?}, expected ({b}, 1)"),
+        ));
+    }
+    let file_name = path
+        .file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let n = n as usize;
+    let mut shapes = Vec::with_capacity(b as usize);
+    for (row, (&label, rows)) in labels.iter().zip(data.chunks_exact(n * 3)).enumerate() {
+        if label < 0.0 || label >= n_categories as f64 || label.fract() != 0.0 {
+            return Err(dataset_error(
+                path,
+                format!("row {row} has label {label}, outside 0..{n_categories}"),
+            ));
+        }
+        let points: Vec<_> = rows
+            .chunks_exact(3)
+            .map(|c| rgm_geom::Point3::new(c[0], c[1], c[2]))
+            .collect();
+        let row_path = PathBuf::from(format!("{}:{row}", path.display()));
+        let cloud = checked_cloud(points, &row_path)?;
+        shapes.push(Shape {
+            name: format!("{file_name}:{row}"),
+            label: label as usize,
+            points: cloud.to_f32_rows(),
+        });
+    }
+    Ok(shapes)
 }
 
 #[cfg(test)]
@@ -255,6 +403,70 @@ mod tests {
         assert_eq!(
             test.iter().map(|s| s.label).collect::<Vec<_>>(),
             [2, 2, 3, 3]
+        );
+    }
+
+    /// The fixture made by `tests/fixtures/make_hdf5_fixture.py`.
+    fn hdf5_fixture() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/modelnet40_ply_hdf5_2048")
+    }
+
+    #[test]
+    fn reads_the_hdf5_release_in_file_order() {
+        let data = ModelNet40::open_hdf5(hdf5_fixture()).unwrap();
+        assert_eq!(data.categories, ["a", "b", "c", "d"]);
+        let labels = |shapes: &[Shape]| shapes.iter().map(|s| s.label).collect::<Vec<_>>();
+        assert_eq!(labels(&data.official_train), [0, 1, 2, 3, 0, 1, 2, 3]);
+        assert_eq!(labels(&data.official_test), [2, 3]);
+        // Point j of row b in file k is (100 k + b, j, label / 2); train1 is file 1.
+        let s = &data.official_train[6];
+        assert_eq!(s.name, "ply_data_train1.h5:1");
+        assert_eq!(
+            s.points,
+            [
+                [101.0, 0.0, 1.0],
+                [101.0, 1.0, 1.0],
+                [101.0, 2.0, 1.0],
+                [101.0, 3.0, 1.0]
+            ]
+        );
+        assert_eq!(data.official_test[1].points[3], [201.0, 3.0, 1.5]);
+        // Each category has 2 train shapes: ⌊1.6⌋ = 1 trains, 1 validates.
+        assert_eq!(names(&data.split(Split::Validation, false)).len(), 4);
+    }
+
+    #[test]
+    fn hdf5_problems_are_named() {
+        let dir = scratch_path("h5_broken");
+        std::fs::create_dir_all(&dir).unwrap();
+        for f in [
+            "shape_names.txt",
+            "train_files.txt",
+            "test_files.txt",
+            "ply_data_train0.h5",
+            "ply_data_test0.h5",
+        ] {
+            std::fs::copy(hdf5_fixture().join(f), dir.join(f)).unwrap();
+        }
+        let err = ModelNet40::open_hdf5(&dir).unwrap_err().to_string();
+        assert!(err.contains("ply_data_train1.h5"), "{err}");
+        std::fs::write(dir.join("ply_data_train1.h5"), b"not hdf5 at all").unwrap();
+        let err = ModelNet40::open_hdf5(&dir).unwrap_err().to_string();
+        assert!(
+            err.contains("ply_data_train1.h5: not a readable HDF5 file"),
+            "{err}"
+        );
+        // Too few categories for the labels.
+        std::fs::copy(
+            hdf5_fixture().join("ply_data_train1.h5"),
+            dir.join("ply_data_train1.h5"),
+        )
+        .unwrap();
+        std::fs::write(dir.join("shape_names.txt"), "a\nb\n").unwrap();
+        let err = ModelNet40::open_hdf5(&dir).unwrap_err().to_string();
+        assert!(
+            err.contains("ply_data_train0.h5: row 2 has label 2, outside 0..2"),
+            "{err}"
         );
     }
 
