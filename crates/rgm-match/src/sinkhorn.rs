@@ -1,0 +1,630 @@
+//! Sinkhorn normalisation with one slack row and one slack column (spec §2.4).
+//!
+//! The padded (N+1)×(M+1) log matrix starts as S with a zero slack row and column. Each of the
+//! `iterations` rounds normalises every real row over all M+1 columns (the slack row untouched),
+//! then every real column over all N+1 rows (the slack column untouched). The slack row and column
+//! are dropped and the rest exponentiated: C̃ (N×M).
+//!
+//! Every entry of the padded matrix stays S_ij + α_i + β_j, with one potential per real row (α)
+//! and per real column (β) and zero for the slack row and column, so both forms track only the
+//! potentials:
+//! - log form (the reference): α_i = −LSE_j(S_ij + β_j), β_j = −LSE_i(S_ij + α_i), with the slack
+//!   entry's 0 inside each LSE;
+//! - scaling form: with K = exp(S), u = exp(α), v = exp(β): u_i = 1/((K·v)_i + 1),
+//!   v_j = 1/((Kᵀ·u)_j + 1), and C̃ = K ∘ u·vᵀ — two matrix-vector products per round, no exp or
+//!   log in the loop.
+//!
+//! With the slack, 0 < u, v ≤ 1. The scaling form is used when every |S_ij| ≤ ln(T::MAX)/4
+//! (22.2 in f32, 177 in f64): then K and every product K·u·v stay normal numbers (no overflow, no
+//! denormals) for N, M up to about 10⁴; otherwise, or if a scaling vector still leaves the normal
+//! range, the log form runs instead. [`SinkhornCache::form`] says which one ran.
+
+use crate::error::{check_shape, MatchError, Result};
+use ndarray::linalg::{general_mat_mul, general_mat_vec_mul};
+use ndarray::{Array1, Array2, ArrayView1, ArrayView2, ArrayViewMut2, Axis, Zip};
+use rgm_nn::Scalar;
+
+/// Which computation [`sinkhorn_forward`] uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SinkhornForm {
+    /// Log-sum-exp on the potentials: safe for any finite S, one exp per entry per half-step.
+    Log,
+    /// Scaling vectors on exp(S) where that is safe (see the module doc), the log form otherwise.
+    Scaling,
+}
+
+/// Settings of the Sinkhorn layer.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SinkhornConfig {
+    /// Rounds of row-then-column normalisation (spec: 20).
+    pub iterations: usize,
+    /// Pad one slack row and column (spec: true). Without it the result is doubly stochastic.
+    pub slack: bool,
+    /// The requested computation (default: scaling where safe).
+    pub form: SinkhornForm,
+}
+
+impl Default for SinkhornConfig {
+    fn default() -> Self {
+        Self {
+            iterations: 20,
+            slack: true,
+            form: SinkhornForm::Scaling,
+        }
+    }
+}
+
+/// What [`sinkhorn_backward`] needs from the forward pass: the potentials of every round, which
+/// the backward pass walks in reverse, and exp(S) when the scaling form ran.
+#[derive(Clone, Debug)]
+pub struct SinkhornCache<T> {
+    form: SinkhornForm,
+    slack: bool,
+    k: Array2<T>,    // (N, M) exp(S); scaling form only
+    rows: Array2<T>, // (I, N) after each round's row step: α (log form) or u = exp(α) (scaling form)
+    cols: Array2<T>, // (I, M) after each round's column step: β (log form) or v = exp(β) (scaling form)
+}
+
+impl<T: Scalar> SinkhornCache<T> {
+    /// Buffers for an N×M input and `cfg.iterations` rounds.
+    pub fn new(n: usize, m: usize, cfg: &SinkhornConfig) -> Self {
+        let rounds = cfg.iterations;
+        Self {
+            form: cfg.form,
+            slack: cfg.slack,
+            k: Array2::zeros((n, m)),
+            rows: Array2::zeros((rounds, n)),
+            cols: Array2::zeros((rounds, m)),
+        }
+    }
+
+    /// The form that actually ran.
+    pub fn form(&self) -> SinkhornForm {
+        self.form
+    }
+
+    /// The dropped slack column, P_{i,M} = exp(α_i) for each real row (N); None without slack.
+    /// A real row's padded sum is its sum in C̃ plus this entry.
+    pub fn slack_column(&self) -> Option<Array1<T>> {
+        self.slack.then(|| self.scaling(last(&self.rows)))
+    }
+
+    /// The dropped slack row, P_{N,j} = exp(β_j) for each real column (M); None without slack.
+    /// A real column's padded sum is its sum in C̃ plus this entry.
+    pub fn slack_row(&self) -> Option<Array1<T>> {
+        self.slack.then(|| self.scaling(last(&self.cols)))
+    }
+
+    /// exp(potentials), whichever form the cache holds.
+    fn scaling(&self, held: ArrayView1<'_, T>) -> Array1<T> {
+        match self.form {
+            SinkhornForm::Log => held.mapv(T::exp),
+            SinkhornForm::Scaling => held.to_owned(),
+        }
+    }
+}
+
+/// The last round's row of a (I, ·) history; I ≥ 1 is checked by the forward pass.
+fn last<T>(history: &Array2<T>) -> ArrayView1<'_, T> {
+    history.row(history.nrows() - 1)
+}
+
+/// C̃ = exp(S + α·1ᵀ + 1·βᵀ) after `cfg.iterations` rounds (see the module doc).
+///
+/// Derivative, walking the rounds in reverse with G = dC̃ ∘ C̃: dS += G, dα = Σ_j G, dβ = Σ_i G;
+/// the column step β_j = −LSE_i(S_ij + α_i) with P_ij = exp(S_ij + α_i + β_j) gives
+/// dS_ij −= P_ij·dβ_j and dα_i −= Σ_j P_ij·dβ_j; the row step α_i = −LSE_j(S_ij + β'_j) of the
+/// previous β' gives dS_ij −= P'_ij·dα_i and dβ'_j = −Σ_i P'_ij·dα_i.
+pub fn sinkhorn_forward<T: Scalar>(
+    mut c: ArrayViewMut2<'_, T>, // (N, M) out
+    s: ArrayView2<'_, T>,        // (N, M)
+    cfg: &SinkhornConfig,
+    cache: &mut SinkhornCache<T>,
+) -> Result<()> {
+    const OP: &str = "sinkhorn forward";
+    let (n, m) = s.dim();
+    check_shape(OP, "c", c.shape(), &[n, m])?;
+    check_shape(OP, "cache rows", cache.rows.shape(), &[cfg.iterations, n])?;
+    check_shape(OP, "cache cols", cache.cols.shape(), &[cfg.iterations, m])?;
+    check_shape(OP, "cache k", cache.k.shape(), &[n, m])?;
+    if cfg.iterations == 0 {
+        return Err(MatchError::Config {
+            op: OP,
+            why: "iterations must be at least 1",
+        });
+    }
+    if s.iter().any(|v| !v.is_finite()) {
+        return Err(MatchError::NonFinite { op: OP, what: "s" });
+    }
+    cache.slack = cfg.slack;
+    let bound = T::max_value().ln() / T::from_f64(4.0);
+    let scaling_safe = cfg.form == SinkhornForm::Scaling && s.iter().all(|v| v.abs() <= bound);
+    cache.form = if scaling_safe && scaling_forward(s, cfg, cache) {
+        SinkhornForm::Scaling
+    } else {
+        log_forward(s, cfg, cache);
+        SinkhornForm::Log
+    };
+    let (rows, cols) = (last(&cache.rows), last(&cache.cols));
+    match cache.form {
+        SinkhornForm::Log => Zip::indexed(&mut c)
+            .and(&s)
+            .for_each(|(i, j), c, &s| *c = (s + rows[i] + cols[j]).exp()),
+        SinkhornForm::Scaling => Zip::indexed(&mut c)
+            .and(&cache.k)
+            .for_each(|(i, j), c, &k| *c = k * rows[i] * cols[j]),
+    }
+    Ok(())
+}
+
+/// The log form's rounds: α into `cache.rows`, β into `cache.cols`.
+fn log_forward<T: Scalar>(
+    s: ArrayView2<'_, T>,
+    cfg: &SinkhornConfig,
+    cache: &mut SinkhornCache<T>,
+) {
+    let m = s.ncols();
+    // The slack entry's log value 0 joins every LSE; without slack it is −∞ (absent).
+    let slack_log = if cfg.slack {
+        T::zero()
+    } else {
+        T::neg_infinity()
+    };
+    let (alpha, beta) = (&mut cache.rows, &mut cache.cols);
+    let mut col_max = Array1::<T>::zeros(m); // (M)
+    let mut col_sum = Array1::<T>::zeros(m); // (M)
+    for t in 0..cfg.iterations {
+        // Row step: α_i = −LSE(S_ij + β_j over j, slack 0), with β = 0 before the first column step.
+        let beta_prev = |j: usize| if t == 0 { T::zero() } else { beta[[t - 1, j]] };
+        for (i, row) in s.outer_iter().enumerate() {
+            let max = (0..m).fold(slack_log, |acc, j| acc.max(row[j] + beta_prev(j)));
+            let sum = (0..m).fold((slack_log - max).exp(), |acc, j| {
+                acc + (row[j] + beta_prev(j) - max).exp()
+            });
+            alpha[[t, i]] = -(max + sum.ln());
+        }
+        // Column step: β_j = −LSE(S_ij + α_i over i, slack 0), row by row for contiguous access.
+        let a = alpha.row(t);
+        col_max.fill(slack_log);
+        for (row, &a) in s.outer_iter().zip(a) {
+            Zip::from(&mut col_max)
+                .and(&row)
+                .for_each(|mx, &v| *mx = mx.max(v + a));
+        }
+        Zip::from(&mut col_sum)
+            .and(&col_max)
+            .for_each(|sum, &mx| *sum = (slack_log - mx).exp());
+        for (row, &a) in s.outer_iter().zip(a) {
+            Zip::from(&mut col_sum)
+                .and(&col_max)
+                .and(&row)
+                .for_each(|sum, &mx, &v| *sum = *sum + (v + a - mx).exp());
+        }
+        Zip::from(beta.row_mut(t))
+            .and(&col_max)
+            .and(&col_sum)
+            .for_each(|b, &mx, &sum| *b = -(mx + sum.ln()));
+    }
+}
+
+/// The scaling form's rounds: K into `cache.k`, u into `cache.rows`, v into `cache.cols`.
+/// False if a scaling vector left the normal range (the log form must run instead).
+fn scaling_forward<T: Scalar>(
+    s: ArrayView2<'_, T>,
+    cfg: &SinkhornConfig,
+    cache: &mut SinkhornCache<T>,
+) -> bool {
+    let slack = if cfg.slack { T::one() } else { T::zero() };
+    let (k, u, v) = (&mut cache.k, &mut cache.rows, &mut cache.cols);
+    Zip::from(&mut *k).and(&s).for_each(|k, &s| *k = s.exp());
+    v.row_mut(0).fill(T::one()); // v before the first column step, overwritten by it
+    for t in 0..cfg.iterations {
+        // Row step: u_i = 1 / (Σ_j K_ij·v_j + slack)
+        let mut u_t = u.row_mut(t);
+        general_mat_vec_mul(
+            T::one(),
+            &*k,
+            &v.row(t.saturating_sub(1)),
+            T::zero(),
+            &mut u_t,
+        );
+        u_t.mapv_inplace(|kv| T::one() / (kv + slack));
+        // Column step: v_j = 1 / (Σ_i K_ij·u_i + slack)
+        let mut v_t = v.row_mut(t);
+        general_mat_vec_mul(T::one(), &k.t(), &u_t, T::zero(), &mut v_t);
+        v_t.mapv_inplace(|ku| T::one() / (ku + slack));
+    }
+    u.iter().chain(v.iter()).all(|x| x.is_normal())
+}
+
+/// Adds the gradient of [`sinkhorn_forward`] into `ds`.
+pub fn sinkhorn_backward<T: Scalar>(
+    mut ds: ArrayViewMut2<'_, T>, // (N, M)
+    dc: ArrayView2<'_, T>,        // (N, M)
+    s: ArrayView2<'_, T>,         // (N, M) the forward input
+    c: ArrayView2<'_, T>,         // (N, M) the forward output
+    cache: &SinkhornCache<T>,
+) -> Result<()> {
+    const OP: &str = "sinkhorn backward";
+    let (n, m) = s.dim();
+    check_shape(OP, "dc", dc.shape(), &[n, m])?;
+    check_shape(OP, "c", c.shape(), &[n, m])?;
+    check_shape(OP, "ds", ds.shape(), &[n, m])?;
+    check_shape(OP, "cache rows", &[cache.rows.ncols()], &[n])?;
+    check_shape(OP, "cache cols", &[cache.cols.ncols()], &[m])?;
+    // C̃ = exp(S + α + β)  →  dS += G, dα = Σ_j G, dβ = Σ_i G with G = dC̃ ∘ C̃
+    let g = &dc * &c; // (N, M)
+    ds += &g;
+    let dalpha = g.sum_axis(Axis(1)); // (N)
+    let dbeta = g.sum_axis(Axis(0)); // (M)
+    match cache.form {
+        SinkhornForm::Log => log_backward(ds, s, &cache.rows, &cache.cols, dalpha, dbeta),
+        SinkhornForm::Scaling => {
+            scaling_backward(ds, &cache.k, &cache.rows, &cache.cols, dalpha, dbeta)
+        }
+    }
+    Ok(())
+}
+
+/// The rounds in reverse, P recomputed as exp(S + α + β).
+fn log_backward<T: Scalar>(
+    mut ds: ArrayViewMut2<'_, T>, // (N, M)
+    s: ArrayView2<'_, T>,         // (N, M)
+    alpha: &Array2<T>,            // (I, N)
+    beta: &Array2<T>,             // (I, M)
+    mut dalpha: Array1<T>,        // (N) gradient of the last α
+    mut dbeta: Array1<T>,         // (M) gradient of the last β
+) {
+    let m = s.ncols();
+    let mut dbeta_prev = Array1::<T>::zeros(m); // (M)
+    for t in (0..alpha.nrows()).rev() {
+        let (a, b) = (alpha.row(t), beta.row(t));
+        dbeta_prev.fill(T::zero());
+        for (i, (s_row, mut ds_row)) in s.outer_iter().zip(ds.outer_iter_mut()).enumerate() {
+            // β_j = −LSE_i(S_ij + α_i)  →  dS_ij −= P_ij·dβ_j, dα_i −= Σ_j P_ij·dβ_j
+            let mut da = dalpha[i];
+            for j in 0..m {
+                let p_db = (s_row[j] + a[i] + b[j]).exp() * dbeta[j];
+                ds_row[j] = ds_row[j] - p_db;
+                da = da - p_db;
+            }
+            // α_i = −LSE_j(S_ij + β'_j)  →  dS_ij −= P'_ij·dα_i, dβ'_j −= P'_ij·dα_i
+            for j in 0..m {
+                let b_prev = if t == 0 { T::zero() } else { beta[[t - 1, j]] };
+                let p_da = (s_row[j] + a[i] + b_prev).exp() * da;
+                ds_row[j] = ds_row[j] - p_da;
+                dbeta_prev[j] = dbeta_prev[j] - p_da;
+            }
+        }
+        // α of earlier rounds feeds only its own column step; β' only this row step.
+        dalpha.fill(T::zero());
+        std::mem::swap(&mut dbeta, &mut dbeta_prev);
+    }
+}
+
+/// The rounds in reverse with P = K ∘ u·vᵀ: two matrix-vector products per round, and the
+/// rank-2I sum of every round's dS term applied at the end as one matrix product.
+fn scaling_backward<T: Scalar>(
+    mut ds: ArrayViewMut2<'_, T>, // (N, M)
+    k: &Array2<T>,                // (N, M)
+    u: &Array2<T>,                // (I, N)
+    v: &Array2<T>,                // (I, M)
+    mut dalpha: Array1<T>,        // (N)
+    mut dbeta: Array1<T>,         // (M)
+) {
+    let (n, m) = k.dim();
+    let rounds = u.nrows();
+    // dS −= K ∘ (Σ_t u^t·(v^t∘dβ^t)ᵀ + (u^t∘dα^t)·v^{t−1}ᵀ) = K ∘ (left · rightᵀ)
+    let mut left = Array2::<T>::zeros((n, 2 * rounds)); // (N, 2I)
+    let mut right = Array2::<T>::zeros((m, 2 * rounds)); // (M, 2I)
+    let mut v_db = Array1::<T>::zeros(m); // (M) v^t ∘ dβ^t
+    let mut k_vdb = Array1::<T>::zeros(n); // (N) K · (v^t ∘ dβ^t)
+    let mut u_da = Array1::<T>::zeros(n); // (N) u^t ∘ dα^t
+    for t in (0..rounds).rev() {
+        let (u_t, v_t) = (u.row(t), v.row(t));
+        // Column step: dα_i −= u_i·Σ_j K_ij·v_j·dβ_j
+        Zip::from(&mut v_db)
+            .and(&v_t)
+            .and(&dbeta)
+            .for_each(|x, &v, &db| *x = v * db);
+        general_mat_vec_mul(T::one(), k, &v_db, T::zero(), &mut k_vdb);
+        Zip::from(&mut u_da)
+            .and(&u_t)
+            .and(&dalpha)
+            .and(&k_vdb)
+            .for_each(|x, &u, &da, &kv| *x = u * (da - u * kv));
+        left.column_mut(2 * t).assign(&u_t);
+        right.column_mut(2 * t).assign(&v_db);
+        // Row step: dβ'_j = −v'_j·Σ_i K_ij·u_i·dα_i, with v' = 1 in the first round
+        general_mat_vec_mul(-T::one(), &k.t(), &u_da, T::zero(), &mut dbeta);
+        left.column_mut(2 * t + 1).assign(&u_da);
+        if t > 0 {
+            let v_prev = v.row(t - 1);
+            dbeta *= &v_prev;
+            right.column_mut(2 * t + 1).assign(&v_prev);
+        } else {
+            right.column_mut(2 * t + 1).fill(T::one());
+        }
+        // α of earlier rounds feeds only its own column step.
+        dalpha.fill(T::zero());
+    }
+    let mut r = Array2::<T>::zeros((n, m)); // (N, M)
+    general_mat_mul(T::one(), &left, &right.t(), T::zero(), &mut r);
+    Zip::from(&mut ds)
+        .and(k)
+        .and(&r)
+        .for_each(|ds, &k, &r| *ds = *ds - k * r);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::{array, ArrayD};
+    use rgm_nn::gradcheck::{assert_gradients, ix2, uniform};
+
+    fn config(form: SinkhornForm, slack: bool) -> SinkhornConfig {
+        SinkhornConfig {
+            form,
+            slack,
+            ..SinkhornConfig::default()
+        }
+    }
+
+    /// C̃ and the cache for `s` under `cfg`.
+    fn run<T: Scalar>(s: &Array2<T>, cfg: &SinkhornConfig) -> (Array2<T>, SinkhornCache<T>) {
+        let (n, m) = s.dim();
+        let mut cache = SinkhornCache::new(n, m, cfg);
+        let mut c = Array2::zeros((n, m));
+        sinkhorn_forward(c.view_mut(), s.view(), cfg, &mut cache).unwrap();
+        (c, cache)
+    }
+
+    fn pinned_input() -> Array2<f64> {
+        array![
+            [0.5, -1.0, 2.0, 0.0],
+            [1.5, 0.25, -0.5, 1.0],
+            [-2.0, 0.75, 0.3, -0.4]
+        ]
+    }
+
+    const BOTH: [SinkhornForm; 2] = [SinkhornForm::Log, SinkhornForm::Scaling];
+
+    /// Values from `tools/reference.py`: the spec's padded matrix normalised in place, numpy f64.
+    #[test]
+    fn matches_reference_with_slack() {
+        let expected = array![
+            [
+                0.15305908124878004,
+                0.03732084300573993,
+                0.49350148601758537,
+                0.10646225288704698
+            ],
+            [
+                0.3831525522306465,
+                0.11996033950967548,
+                0.03730528814087675,
+                0.26650678664139527
+            ],
+            [
+                0.020992057401110216,
+                0.3588383873728034,
+                0.15063294028304414,
+                0.11923670531386693
+            ]
+        ];
+        let slack_column = array![0.2096562767414257, 0.19307498409486165, 0.3502998705595079];
+        let slack_row = array![
+            0.4427963091194633,
+            0.4838804301117813,
+            0.31856028555849364,
+            0.507794255157691
+        ];
+        for form in BOTH {
+            let (c, cache) = run(&pinned_input(), &config(form, true));
+            assert_eq!(cache.form(), form);
+            assert!(c.abs_diff_eq(&expected, 1e-14), "{form:?}: {c}");
+            assert!(
+                cache
+                    .slack_column()
+                    .unwrap()
+                    .abs_diff_eq(&slack_column, 1e-14),
+                "{form:?}"
+            );
+            assert!(
+                cache.slack_row().unwrap().abs_diff_eq(&slack_row, 1e-14),
+                "{form:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn matches_reference_without_slack() {
+        let expected = array![
+            [
+                0.3154872646362161,
+                0.06985718117204769,
+                0.7135800625866591,
+                0.23440882493649423
+            ],
+            [
+                0.6362464003092673,
+                0.18089567494293182,
+                0.0434565781601912,
+                0.47273467991978296
+            ],
+            [
+                0.04826633505451651,
+                0.7492471438850205,
+                0.24296335925314969,
+                0.29285649514372275
+            ]
+        ];
+        for form in BOTH {
+            let (c, cache) = run(&pinned_input(), &config(form, false));
+            assert!(c.abs_diff_eq(&expected, 1e-14), "{form:?}: {c}");
+            assert_eq!(cache.slack_row(), None);
+        }
+    }
+
+    #[test]
+    fn forms_agree_in_f32_and_f64() {
+        let s = ix2(&uniform(&[30, 45], 7)) * 6.0; // entries in ±6, an instance-normalised range
+        let (log64, _) = run(&s, &config(SinkhornForm::Log, true));
+        let (fast64, cache) = run(&s, &config(SinkhornForm::Scaling, true));
+        assert_eq!(cache.form(), SinkhornForm::Scaling);
+        assert!(fast64.abs_diff_eq(&log64, 1e-13));
+        let s32 = s.mapv(|v| v as f32);
+        let (log32, _) = run(&s32, &config(SinkhornForm::Log, true));
+        let (fast32, _) = run(&s32, &config(SinkhornForm::Scaling, true));
+        let worst = |c: &Array2<f32>| {
+            c.iter()
+                .zip(&log64)
+                .map(|(&a, &b)| (a as f64 - b).abs())
+                .fold(0.0, f64::max)
+        };
+        // Both f32 forms stay within a few ulps of 1 of the f64 result.
+        assert!(worst(&log32) < 2e-6, "log f32 error {}", worst(&log32));
+        assert!(
+            worst(&fast32) < 2e-6,
+            "scaling f32 error {}",
+            worst(&fast32)
+        );
+    }
+
+    #[test]
+    fn scaling_falls_back_to_log_beyond_the_safe_range() {
+        // exp(100) overflows f32: the scaling form must not run, and the log form stays exact.
+        let mut s = ix2(&uniform(&[4, 5], 3)).mapv(|v| v as f32);
+        s[[1, 2]] = 100.0;
+        let (fast, cache) = run(&s, &config(SinkhornForm::Scaling, true));
+        assert_eq!(cache.form(), SinkhornForm::Log);
+        let (log, _) = run(&s, &config(SinkhornForm::Log, true));
+        assert_eq!(fast, log);
+        // S + α + β cancels values near 100, so f32 keeps about ulp(100) ≈ 8e-6 of the f64 result.
+        let (exact, _) = run(&s.mapv(f64::from), &config(SinkhornForm::Log, true));
+        let worst = fast
+            .iter()
+            .zip(&exact)
+            .map(|(&a, &b)| (f64::from(a) - b).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 3e-5, "{worst}");
+        assert!(
+            exact[[1, 2]] > 0.9,
+            "the dominant entry takes most of its row and column"
+        );
+    }
+
+    /// With slack, after the last column step each real column of the padded matrix sums to 1
+    /// up to rounding; each real row only approaches 1 (the slack column takes up the deficit
+    /// slowly: on 20×30 entries in ±3 every row sum lies in [1 − 1e-4, 1] after 20 rounds, on
+    /// 717×717 ones about 0.96, see docs/match.md).
+    #[test]
+    fn padded_marginals_with_slack() {
+        let s = ix2(&uniform(&[20, 30], 4)) * 3.0;
+        for form in BOTH {
+            let (c, cache) = run(&s, &config(form, true));
+            let cols = c.sum_axis(Axis(0)) + cache.slack_row().unwrap(); // (M)
+            let rows = c.sum_axis(Axis(1)) + cache.slack_column().unwrap(); // (N)
+            assert!(
+                cols.iter().all(|&v| (v - 1.0).abs() < 1e-13),
+                "{form:?} columns {cols}"
+            );
+            assert!(
+                rows.iter().all(|&v| v > 1.0 - 1e-4 && v <= 1.0 + 1e-13),
+                "{form:?} rows {rows}"
+            );
+            assert!(
+                rows.iter().any(|&v| v < 1.0 - 1e-6),
+                "the row sums are not yet exactly 1"
+            );
+        }
+    }
+
+    #[test]
+    fn row_shift_invariance_only_without_slack() {
+        // Without slack a row's constant cancels in its first normalisation; with slack the
+        // constant moves mass between that row and the slack column.
+        let s = ix2(&uniform(&[5, 7], 6)) * 2.0;
+        let mut shifted = s.clone();
+        shifted.row_mut(2).mapv_inplace(|v| v + 1.5);
+        for form in BOTH {
+            let plain = |s: &Array2<f64>| run(s, &config(form, false)).0;
+            assert!(plain(&s).abs_diff_eq(&plain(&shifted), 1e-13), "{form:?}");
+            let padded = |s: &Array2<f64>| run(s, &config(form, true)).0;
+            let moved = (padded(&s) - padded(&shifted)).mapv(f64::abs).sum();
+            assert!(moved > 0.1, "{form:?}: slack result moved by only {moved}");
+        }
+    }
+
+    #[test]
+    fn bad_inputs_are_errors() {
+        let cfg = SinkhornConfig::default();
+        let mut c = Array2::<f64>::zeros((2, 2));
+        let nan = array![[0.0, f64::NAN], [1.0, 2.0]];
+        let err = sinkhorn_forward(
+            c.view_mut(),
+            nan.view(),
+            &cfg,
+            &mut SinkhornCache::new(2, 2, &cfg),
+        );
+        assert_eq!(
+            err,
+            Err(MatchError::NonFinite {
+                op: "sinkhorn forward",
+                what: "s"
+            })
+        );
+        let none = SinkhornConfig {
+            iterations: 0,
+            ..cfg.clone()
+        };
+        let err = sinkhorn_forward(
+            c.view_mut(),
+            Array2::zeros((2, 2)).view(),
+            &none,
+            &mut SinkhornCache::new(2, 2, &none),
+        );
+        assert!(matches!(err, Err(MatchError::Config { .. })));
+        let err = sinkhorn_forward(
+            c.view_mut(),
+            Array2::zeros((2, 3)).view(),
+            &cfg,
+            &mut SinkhornCache::new(2, 3, &cfg),
+        );
+        assert!(matches!(err, Err(MatchError::Shape { what: "c", .. })));
+    }
+
+    #[test]
+    fn backward_matches_finite_differences() {
+        for (n, m) in [(4, 6), (6, 4)] {
+            for slack in [true, false] {
+                for form in BOTH {
+                    let cfg = config(form, slack);
+                    let inputs = [uniform(&[n, m], 11) * 2.0];
+                    let fwd = |i: &[ArrayD<f64>]| run(&ix2(&i[0]), &cfg);
+                    let what = format!("sinkhorn {n}x{m} slack={slack} {form:?}");
+                    assert_gradients(
+                        &what,
+                        1e-6,
+                        &inputs,
+                        &mut |i| fwd(i).0.into_dyn(),
+                        &mut |i, dc| {
+                            let (c, cache) = fwd(i);
+                            assert_eq!(cache.form(), form);
+                            let mut ds = Array2::zeros((n, m));
+                            sinkhorn_backward(
+                                ds.view_mut(),
+                                ix2(dc).view(),
+                                ix2(&i[0]).view(),
+                                c.view(),
+                                &cache,
+                            )
+                            .unwrap();
+                            vec![ds.into_dyn()]
+                        },
+                    );
+                }
+            }
+        }
+    }
+}
