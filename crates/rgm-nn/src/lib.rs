@@ -5,10 +5,65 @@
 //! Layering rule: rgm-nn depends on no other rgm crate and knows nothing of geometry, point
 //! clouds or matching. It owns the numeric engine: BLAS-backed matrix products, the ops, their
 //! parameters, initialisation, optimisers and weight files.
+//!
+//! # Conventions (every op follows them; crates above should too)
+//! - **Dimension letters**: B batch, N source points, M target points, K neighbours, C channels,
+//!   Q graph width, H heads, F feed-forward width.
+//! - **Shapes**: an activation is a row-major [`ndarray::Array2`] `(rows, C)`: one row per point
+//!   (`(N, C)`) or per point-neighbour pair (`(N*K, C)`, row `n*K + k`, the neighbour index
+//!   fastest); columns are channels. A batch is stacked along the rows for row-wise ops (linear,
+//!   batch norm, ReLU, max over K) and looped over where rows interact (attention, softmax of a
+//!   score matrix, L1 normalisation).
+//! - **Weights** keep PyTorch's layout: a linear / 1×1 convolution weight is `(C_out, C_in)` and
+//!   `out = inp · weightᵀ + bias`, so state dicts convert without transposes.
+//! - **Arguments**: ops take views, outputs first then inputs (llm.c order):
+//!   `forward(out, inp, .., cache)`, `backward(dinp, .., dout, inp, .., cache)`. The caller owns
+//!   every buffer (reused across steps: no allocation in the hot path once shapes are stable);
+//!   an op checks the shapes it is given and returns [`NnError::Shape`] on a mismatch.
+//! - **Gradients accumulate**: every backward *adds* into `dinp` and into the parameters' `grad`
+//!   buffers; the caller zeroes them once per step ([`Parameters::zero_grad`]). Gradient buffers
+//!   are named `d` + the name of the value (`dinp`, `dout`, `dweight`).
+//! - **Caches**: a forward pass fills an explicit cache struct holding exactly what its backward
+//!   needs beyond the forward's own inputs and outputs (which the caller keeps).
+//! - **Layers** with parameters are structs (`Linear`, `BatchNorm`, ...) holding [`Param`]s (value
+//!   and gradient side by side); parameterless ops are free functions (`relu_forward`, ...).
+//!   Layers expose their tensors by name through [`Parameters`], which the optimisers and the
+//!   safetensors reader/writer use.
+//! - **Elements**: every op is generic over [`Scalar`] (f32 for compute, f64 for the gradient
+//!   checks in [`gradcheck`]).
+//! - **Threads**: matrix products use OpenBLAS's own threads; everything else runs on the calling
+//!   thread. A caller that parallelises over independent work with rayon first sets BLAS to one
+//!   thread ([`threads::set_blas_threads`]) so the two never nest.
 
 // Links the statically built OpenBLAS that ndarray's `blas` feature calls into.
 extern crate openblas_src;
 
+pub mod error;
+pub mod gradcheck;
+pub mod init;
+pub mod io;
+pub mod ops;
+pub mod optim;
+pub mod param;
+#[cfg(test)]
+mod pytorch_pinned;
 pub mod scalar;
+pub mod threads;
 
+pub use error::{NnError, Result};
+pub use ops::attention::{AttentionCache, MultiHeadAttention};
+pub use ops::batchnorm::{BatchNorm, BatchNormCache};
+pub use ops::concat::{concat_backward, concat_forward};
+pub use ops::edge::{edge_features_backward, edge_features_forward};
+pub use ops::feedforward::{FeedForward, FeedForwardCache};
+pub use ops::layernorm::{LayerNorm, LayerNormCache};
+pub use ops::linear::Linear;
+pub use ops::matmul::{bmm_backward, bmm_forward, matmul_backward, matmul_forward};
+pub use ops::max_k::{max_k_backward, max_k_forward, MaxKCache};
+pub use ops::normalize::{
+    l1_normalize_columns_backward, l1_normalize_columns_forward, L1NormalizeCache,
+};
+pub use ops::relu::{relu_backward, relu_forward};
+pub use ops::softmax::{softmax_rows_backward, softmax_rows_forward};
+pub use param::{Param, Parameters};
 pub use scalar::Scalar;

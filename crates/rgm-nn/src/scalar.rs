@@ -1,11 +1,20 @@
 //! The element types the ops run in: f32 for compute, f64 for the gradient checks.
 
 use ndarray::{LinalgScalar, ScalarOperand};
-use num_traits::Float;
+use num_traits::{Float, NumAssign};
 
 /// A float element type of the ops (implemented for f32 and f64).
 pub trait Scalar:
-    Float + LinalgScalar + ScalarOperand + std::iter::Sum + std::fmt::Debug + std::fmt::Display + Send + Sync + 'static
+    Float
+    + NumAssign
+    + LinalgScalar
+    + ScalarOperand
+    + std::iter::Sum
+    + std::fmt::Debug
+    + std::fmt::Display
+    + Send
+    + Sync
+    + 'static
 {
     /// The value nearest to `v`.
     fn from_f64(v: f64) -> Self;

@@ -1,0 +1,413 @@
+//! Multi-head attention (the annotated transformer's `MultiHeadedAttention`, no dropout, no
+//! mask): queries from one stream, keys and values from another (the same one for
+//! self-attention).
+
+use super::linear::Linear;
+use super::softmax::{softmax_backward_row, softmax_in_place};
+use crate::error::check_shape;
+use crate::param::{join_name, ParamViewMut};
+use crate::{NnError, Parameters, Result, Scalar};
+use ndarray::linalg::general_mat_mul;
+use ndarray::{s, Array2, Array3, ArrayView2, ArrayViewMut2, Axis};
+use rand::Rng;
+
+/// `out = concat_h(softmax_rows(Q_h K_hᵀ / √(C/H)) V_h) · Woᵀ + bo` with `Q = q_in Wqᵀ + bq`,
+/// `K = kv_in Wkᵀ + bk`, `V = kv_in Wvᵀ + bv`; head h owns the contiguous channels
+/// `h·C/H .. (h+1)·C/H`. Parameters are named `linears.{0,1,2,3}` (query, key, value, output)
+/// as in the reference state dict.
+#[derive(Clone, Debug)]
+pub struct MultiHeadAttention<T: Scalar> {
+    pub heads: usize, // H
+    pub query: Linear<T>,
+    pub key: Linear<T>,
+    pub value: Linear<T>,
+    pub output: Linear<T>,
+}
+
+/// The forward's intermediates, and the backward's scratch buffers (kept to reuse memory).
+#[derive(Clone, Debug, Default)]
+pub struct AttentionCache<T> {
+    pub q: Array2<T>,     // (Nq, C) projected queries
+    pub k: Array2<T>,     // (Nk, C) projected keys
+    pub v: Array2<T>,     // (Nk, C) projected values
+    pub probs: Array3<T>, // (H, Nq, Nk) attention weights, rows sum to 1
+    pub heads: Array2<T>, // (Nq, C) concatenated head outputs, the input of the output map
+    dheads: Array2<T>,    // (Nq, C)
+    dq: Array2<T>,        // (Nq, C)
+    dk: Array2<T>,        // (Nk, C)
+    dv: Array2<T>,        // (Nk, C)
+    dprobs: Array2<T>,    // (Nq, Nk), one head at a time
+    dscores: Array2<T>,   // (Nq, Nk), one head at a time
+}
+
+fn ensure<T: Scalar>(buf: &mut Array2<T>, shape: (usize, usize)) {
+    if buf.dim() != shape {
+        *buf = Array2::zeros(shape);
+    }
+}
+
+impl<T: Scalar> MultiHeadAttention<T> {
+    /// Four `C × C` linear maps with bias, PyTorch-initialised; `c` must divide into `heads`.
+    pub fn new(c: usize, heads: usize, rng: &mut impl Rng) -> Result<Self> {
+        if heads == 0 || c % heads != 0 {
+            return Err(NnError::InvalidArgument {
+                op: "multi_head_attention",
+                why: format!("C = {c} is not divisible by H = {heads}"),
+            });
+        }
+        let mut lin = || Linear::new(c, c, true, rng);
+        Ok(Self {
+            heads,
+            query: lin(),
+            key: lin(),
+            value: lin(),
+            output: lin(),
+        })
+    }
+
+    pub fn channels(&self) -> usize {
+        self.query.c_in()
+    }
+
+    /// Runs the attention. `out`: (Nq, C), `q_in`: (Nq, C), `kv_in`: (Nk, C).
+    pub fn forward(
+        &self,
+        out: ArrayViewMut2<'_, T>,
+        q_in: ArrayView2<'_, T>,
+        kv_in: ArrayView2<'_, T>,
+        cache: &mut AttentionCache<T>,
+    ) -> Result<()> {
+        let (c, h) = (self.channels(), self.heads);
+        let (nq, nk, dk) = (q_in.nrows(), kv_in.nrows(), c / h);
+        ensure(&mut cache.q, (nq, c));
+        ensure(&mut cache.k, (nk, c));
+        ensure(&mut cache.v, (nk, c));
+        ensure(&mut cache.heads, (nq, c));
+        if cache.probs.dim() != (h, nq, nk) {
+            cache.probs = Array3::zeros((h, nq, nk));
+        }
+        self.query.forward(cache.q.view_mut(), q_in)?;
+        self.key.forward(cache.k.view_mut(), kv_in)?;
+        self.value.forward(cache.v.view_mut(), kv_in)?;
+        let scale = T::one() / T::from_f64(dk as f64).sqrt();
+        for (head, mut p) in cache.probs.axis_iter_mut(Axis(0)).enumerate() {
+            let cols = s![.., head * dk..(head + 1) * dk];
+            general_mat_mul(
+                scale,
+                &cache.q.slice(cols),
+                &cache.k.slice(cols).t(),
+                T::zero(),
+                &mut p,
+            );
+            for row in p.rows_mut() {
+                softmax_in_place(row);
+            }
+            general_mat_mul(
+                T::one(),
+                &p,
+                &cache.v.slice(cols),
+                T::zero(),
+                &mut cache.heads.slice_mut(cols),
+            );
+        }
+        self.output.forward(out, cache.heads.view())
+    }
+
+    /// Differentiates the attention, head by head, in reverse:
+    /// `dP_h = dO_h V_hᵀ`, `dV_h += P_hᵀ dO_h`, `dS_h = softmax'(dP_h)` (row-wise
+    /// `P ⊙ (dP − Σ dP ⊙ P)`), `dQ_h += dS_h K_h / √d`, `dK_h += dS_hᵀ Q_h / √d`, then the four
+    /// linear backwards. `dkv_in = None` means keys and values came from `q_in` (self-attention):
+    /// their gradient is added to `dq_in`. Inputs as given to forward.
+    pub fn backward(
+        &mut self,
+        mut dq_in: ArrayViewMut2<'_, T>,
+        dkv_in: Option<ArrayViewMut2<'_, T>>,
+        dout: ArrayView2<'_, T>,
+        q_in: ArrayView2<'_, T>,
+        kv_in: ArrayView2<'_, T>,
+        cache: &mut AttentionCache<T>,
+    ) -> Result<()> {
+        let (c, h) = (self.channels(), self.heads);
+        let (nq, nk, dk) = (q_in.nrows(), kv_in.nrows(), c / h);
+        check_shape(
+            "multi_head_attention backward",
+            "probs",
+            cache.probs.shape(),
+            &[h, nq, nk],
+        )?;
+        for (buf, shape) in [
+            (&mut cache.dheads, (nq, c)),
+            (&mut cache.dq, (nq, c)),
+            (&mut cache.dk, (nk, c)),
+            (&mut cache.dv, (nk, c)),
+            (&mut cache.dprobs, (nq, nk)),
+        ] {
+            ensure(buf, shape);
+            buf.fill(T::zero());
+        }
+        ensure(&mut cache.dscores, (nq, nk));
+        self.output
+            .backward(cache.dheads.view_mut(), dout, cache.heads.view())?;
+        let scale = T::one() / T::from_f64(dk as f64).sqrt();
+        for (head, p) in cache.probs.axis_iter(Axis(0)).enumerate() {
+            let cols = s![.., head * dk..(head + 1) * dk];
+            let d_o = cache.dheads.slice(cols);
+            general_mat_mul(
+                T::one(),
+                &d_o,
+                &cache.v.slice(cols).t(),
+                T::zero(),
+                &mut cache.dprobs,
+            );
+            general_mat_mul(
+                T::one(),
+                &p.t(),
+                &d_o,
+                T::one(),
+                &mut cache.dv.slice_mut(cols),
+            );
+            cache.dscores.fill(T::zero());
+            for ((ds, dp), y) in cache
+                .dscores
+                .rows_mut()
+                .into_iter()
+                .zip(cache.dprobs.rows())
+                .zip(p.rows())
+            {
+                softmax_backward_row(ds, dp, y);
+            }
+            general_mat_mul(
+                scale,
+                &cache.dscores,
+                &cache.k.slice(cols),
+                T::one(),
+                &mut cache.dq.slice_mut(cols),
+            );
+            general_mat_mul(
+                scale,
+                &cache.dscores.t(),
+                &cache.q.slice(cols),
+                T::one(),
+                &mut cache.dk.slice_mut(cols),
+            );
+        }
+        self.query
+            .backward(dq_in.view_mut(), cache.dq.view(), q_in)?;
+        match dkv_in {
+            Some(mut dkv) => {
+                self.key.backward(dkv.view_mut(), cache.dk.view(), kv_in)?;
+                self.value.backward(dkv, cache.dv.view(), kv_in)
+            }
+            None => {
+                self.key
+                    .backward(dq_in.view_mut(), cache.dk.view(), kv_in)?;
+                self.value.backward(dq_in, cache.dv.view(), kv_in)
+            }
+        }
+    }
+}
+
+impl<T: Scalar> Parameters<T> for MultiHeadAttention<T> {
+    fn visit_params(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ParamViewMut<'_, T>)) {
+        for (i, lin) in [
+            &mut self.query,
+            &mut self.key,
+            &mut self.value,
+            &mut self.output,
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            lin.visit_params(&join_name(prefix, &format!("linears.{i}")), f);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gradcheck::{assert_gradients, ix1, ix2, uniform};
+    use ndarray::{array, ArrayD};
+
+    const C: usize = 4;
+
+    /// The layer whose tensors are `params` = (Wq, bq, Wk, Wv, bv, Wo, bo). The key bias is
+    /// fixed: it adds `q·bk` to a whole row of scores, which the softmax ignores, so its
+    /// gradient is zero and a finite-difference check of it would compare noise with noise
+    /// (`key_bias_gets_no_gradient` checks that zero).
+    fn layer(params: &[ArrayD<f64>]) -> MultiHeadAttention<f64> {
+        let lin =
+            |w: &ArrayD<f64>, b: &ArrayD<f64>| Linear::from_values(ix2(w), Some(ix1(b))).unwrap();
+        let p = params;
+        let (query, key) = (lin(&p[0], &p[1]), lin(&p[2], &uniform(&[C], 999)));
+        MultiHeadAttention {
+            heads: 2,
+            query,
+            key,
+            value: lin(&p[3], &p[4]),
+            output: lin(&p[5], &p[6]),
+        }
+    }
+
+    fn random_params(seed: u64) -> Vec<ArrayD<f64>> {
+        [&[C, C][..], &[C], &[C, C], &[C, C], &[C], &[C, C], &[C]]
+            .iter()
+            .enumerate()
+            .map(|(i, s)| uniform(s, seed + i as u64))
+            .collect()
+    }
+
+    /// The gradients of the tensors `layer` takes from `params`, in the same order.
+    fn grads(mha: MultiHeadAttention<f64>) -> Vec<ArrayD<f64>> {
+        let b = |l: &Linear<f64>| l.bias.as_ref().unwrap().grad.clone().into_dyn();
+        vec![
+            mha.query.weight.grad.clone().into_dyn(),
+            b(&mha.query),
+            mha.key.weight.grad.clone().into_dyn(),
+            mha.value.weight.grad.clone().into_dyn(),
+            b(&mha.value),
+            mha.output.weight.grad.clone().into_dyn(),
+            b(&mha.output),
+        ]
+    }
+
+    #[test]
+    fn key_bias_gets_no_gradient() {
+        let mut mha = layer(&random_params(300));
+        let (q, kv) = (ix2(&uniform(&[3, C], 301)), ix2(&uniform(&[5, C], 302)));
+        let (mut out, mut cache) = (ndarray::Array2::zeros((3, C)), AttentionCache::default());
+        mha.forward(out.view_mut(), q.view(), kv.view(), &mut cache)
+            .unwrap();
+        let (mut dq, mut dkv) = (
+            ndarray::Array2::zeros((3, C)),
+            ndarray::Array2::zeros((5, C)),
+        );
+        let dout = ix2(&uniform(&[3, C], 303));
+        mha.backward(
+            dq.view_mut(),
+            Some(dkv.view_mut()),
+            dout.view(),
+            q.view(),
+            kv.view(),
+            &mut cache,
+        )
+        .unwrap();
+        let dbk = &mha.key.bias.as_ref().unwrap().grad;
+        assert!(dbk.iter().all(|g| g.abs() < 1e-14), "{dbk}");
+        assert!(
+            mha.query
+                .bias
+                .as_ref()
+                .unwrap()
+                .grad
+                .iter()
+                .any(|g| g.abs() > 1e-3),
+            "the other biases do get one"
+        );
+    }
+
+    #[test]
+    fn one_key_means_the_value_passes_through() {
+        // With a single key every query's weights are (1): out = (kv Wvᵀ + bv) Woᵀ + bo.
+        let eye = ndarray::Array2::<f64>::eye(C);
+        let id = || Linear::from_values(eye.clone(), Some(ndarray::Array1::zeros(C))).unwrap();
+        let mha = MultiHeadAttention {
+            heads: 2,
+            query: id(),
+            key: id(),
+            value: id(),
+            output: id(),
+        };
+        let (q, kv) = (
+            array![[1.0, 2.0, 3.0, 4.0], [0.0, -1.0, 5.0, 2.0]],
+            array![[0.5, -0.5, 2.0, 1.0]],
+        );
+        let (mut out, mut cache) = (ndarray::Array2::zeros((2, C)), AttentionCache::default());
+        mha.forward(out.view_mut(), q.view(), kv.view(), &mut cache)
+            .unwrap();
+        assert_eq!(out.row(0), kv.row(0));
+        assert_eq!(out.row(1), kv.row(0));
+    }
+
+    #[test]
+    fn cross_attention_backward_matches_finite_differences() {
+        let mut inputs = vec![uniform(&[3, C], 91), uniform(&[5, C], 92)];
+        inputs.extend(random_params(100));
+        let run = |i: &[ArrayD<f64>]| {
+            let (mut out, mut cache) = (ndarray::Array2::zeros((3, C)), AttentionCache::default());
+            layer(&i[2..])
+                .forward(
+                    out.view_mut(),
+                    ix2(&i[0]).view(),
+                    ix2(&i[1]).view(),
+                    &mut cache,
+                )
+                .unwrap();
+            (out, cache)
+        };
+        assert_gradients(
+            "cross attention",
+            1e-6,
+            &inputs,
+            &mut |i| run(i).0.into_dyn(),
+            &mut |i, dout| {
+                let (_, mut cache) = run(i);
+                let mut mha = layer(&i[2..]);
+                let (mut dq, mut dkv) = (
+                    ndarray::Array2::zeros((3, C)),
+                    ndarray::Array2::zeros((5, C)),
+                );
+                mha.backward(
+                    dq.view_mut(),
+                    Some(dkv.view_mut()),
+                    ix2(dout).view(),
+                    ix2(&i[0]).view(),
+                    ix2(&i[1]).view(),
+                    &mut cache,
+                )
+                .unwrap();
+                let mut g = vec![dq.into_dyn(), dkv.into_dyn()];
+                g.extend(grads(mha));
+                g
+            },
+        );
+    }
+
+    #[test]
+    fn self_attention_backward_matches_finite_differences() {
+        let mut inputs = vec![uniform(&[4, C], 93)];
+        inputs.extend(random_params(200));
+        let run = |i: &[ArrayD<f64>]| {
+            let (mut out, mut cache) = (ndarray::Array2::zeros((4, C)), AttentionCache::default());
+            let x = ix2(&i[0]);
+            layer(&i[1..])
+                .forward(out.view_mut(), x.view(), x.view(), &mut cache)
+                .unwrap();
+            (out, cache)
+        };
+        assert_gradients(
+            "self attention",
+            1e-6,
+            &inputs,
+            &mut |i| run(i).0.into_dyn(),
+            &mut |i, dout| {
+                let (_, mut cache) = run(i);
+                let mut mha = layer(&i[1..]);
+                let x = ix2(&i[0]);
+                let mut dx = ndarray::Array2::zeros((4, C));
+                mha.backward(
+                    dx.view_mut(),
+                    None,
+                    ix2(dout).view(),
+                    x.view(),
+                    x.view(),
+                    &mut cache,
+                )
+                .unwrap();
+                let mut g = vec![dx.into_dyn()];
+                g.extend(grads(mha));
+                g
+            },
+        );
+    }
+}

@@ -1,0 +1,234 @@
+//! The "annotated transformer" LayerNorm over the channels of each row:
+//! `y = a ⊙ (x − mean) / (std + eps) + b` with the *unbiased* standard deviation and eps added to
+//! the std (not `torch.nn.LayerNorm`, which uses the biased variance inside the square root).
+
+use crate::error::check_shape;
+use crate::param::{join_name, ParamViewMut};
+use crate::{NnError, Param, Parameters, Result, Scalar};
+use ndarray::{Array1, ArrayView2, ArrayViewMut2, Ix1, Zip};
+
+/// The annotated transformer's LayerNorm; parameters named `a_2` (scale) and `b_2` (shift) as
+/// in its state dict.
+#[derive(Clone, Debug)]
+pub struct LayerNorm<T: Scalar> {
+    pub scale: Param<T, Ix1>, // (C), "a_2", initialised to 1
+    pub shift: Param<T, Ix1>, // (C), "b_2", initialised to 0
+    pub eps: T,               // 1e-6
+}
+
+/// What [`LayerNorm::backward`] needs besides the input.
+#[derive(Clone, Debug, Default)]
+pub struct LayerNormCache<T> {
+    pub mean: Array1<T>, // (R)
+    pub std: Array1<T>,  // (R), unbiased
+}
+
+impl<T: Scalar> LayerNorm<T> {
+    /// Scale 1, shift 0, eps 1e-6 over `c` channels.
+    pub fn new(c: usize) -> Self {
+        Self {
+            scale: Param::new(Array1::ones(c)),
+            shift: Param::new(Array1::zeros(c)),
+            eps: T::from_f64(1e-6),
+        }
+    }
+
+    pub fn channels(&self) -> usize {
+        self.scale.value.len()
+    }
+
+    /// `out = a ⊙ (inp − mean) / (std + eps) + b`, row by row. `out`, `inp`: (R, C), C ≥ 2.
+    pub fn forward(
+        &self,
+        mut out: ArrayViewMut2<'_, T>,
+        inp: ArrayView2<'_, T>,
+        cache: &mut LayerNormCache<T>,
+    ) -> Result<()> {
+        let (rows, c) = inp.dim();
+        check_shape(
+            "layer_norm forward",
+            "inp",
+            inp.shape(),
+            &[rows, self.channels()],
+        )?;
+        check_shape("layer_norm forward", "out", out.shape(), &[rows, c])?;
+        if c < 2 {
+            return Err(NnError::InvalidArgument {
+                op: "layer_norm forward",
+                why: format!("unbiased std needs C >= 2, got {c}"),
+            });
+        }
+        if cache.mean.len() != rows {
+            cache.mean = Array1::zeros(rows);
+            cache.std = Array1::zeros(rows);
+        }
+        let (cf, cm1) = (T::from_f64(c as f64), T::from_f64((c - 1) as f64));
+        for r in 0..rows {
+            let x = inp.row(r);
+            let mean = x.sum() / cf;
+            let std = (x
+                .iter()
+                .fold(T::zero(), |s, &v| s + (v - mean) * (v - mean))
+                / cm1)
+                .sqrt();
+            let inv = T::one() / (std + self.eps);
+            Zip::from(out.row_mut(r))
+                .and(&x)
+                .and(&self.scale.value)
+                .and(&self.shift.value)
+                .for_each(|y, &x, &a, &b| {
+                    *y = a * (x - mean) * inv + b;
+                });
+            cache.mean[r] = mean;
+            cache.std[r] = std;
+        }
+        Ok(())
+    }
+
+    /// Differentiates `y = a ⊙ d / (s + eps) + b`, `d = x − mean`, `s = √(Σ d² / (C − 1))`.
+    /// With `g = dout ⊙ a` and `r = 1 / (s + eps)`:
+    /// `dx = r (g − mean(g)) − r² (Σ_j g_j d_j) d / ((C − 1) s)` (the last term vanishes when
+    /// `s = 0`), `da += Σ_rows dout ⊙ d r`, `db += Σ_rows dout`.
+    pub fn backward(
+        &mut self,
+        mut dinp: ArrayViewMut2<'_, T>,
+        dout: ArrayView2<'_, T>,
+        inp: ArrayView2<'_, T>,
+        cache: &LayerNormCache<T>,
+    ) -> Result<()> {
+        let (rows, c) = inp.dim();
+        check_shape(
+            "layer_norm backward",
+            "inp",
+            inp.shape(),
+            &[cache.mean.len(), self.channels()],
+        )?;
+        check_shape("layer_norm backward", "dinp", dinp.shape(), &[rows, c])?;
+        check_shape("layer_norm backward", "dout", dout.shape(), &[rows, c])?;
+        let (cf, cm1) = (T::from_f64(c as f64), T::from_f64((c - 1) as f64));
+        for r in 0..rows {
+            let (mean, std) = (cache.mean[r], cache.std[r]);
+            let inv = T::one() / (std + self.eps);
+            let (x, g_out) = (inp.row(r), dout.row(r));
+            let (mut g_mean, mut g_dot_d) = (T::zero(), T::zero());
+            Zip::from(&x)
+                .and(&g_out)
+                .and(&self.scale.value)
+                .for_each(|&x, &go, &a| {
+                    let g = go * a;
+                    g_mean = g_mean + g;
+                    g_dot_d = g_dot_d + g * (x - mean);
+                });
+            g_mean = g_mean / cf;
+            let coef = if std > T::zero() {
+                inv * inv * g_dot_d / (cm1 * std)
+            } else {
+                T::zero()
+            };
+            Zip::from(dinp.row_mut(r))
+                .and(&x)
+                .and(&g_out)
+                .and(&self.scale.value)
+                .for_each(|dx, &x, &go, &a| {
+                    *dx = *dx + inv * (go * a - g_mean) - coef * (x - mean);
+                });
+            Zip::from(&mut self.scale.grad)
+                .and(&mut self.shift.grad)
+                .and(&x)
+                .and(&g_out)
+                .for_each(|da, db, &x, &go| {
+                    *da = *da + go * (x - mean) * inv;
+                    *db = *db + go;
+                });
+        }
+        Ok(())
+    }
+}
+
+impl<T: Scalar> Parameters<T> for LayerNorm<T> {
+    fn visit_params(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ParamViewMut<'_, T>)) {
+        f(&join_name(prefix, "a_2"), self.scale.view_mut());
+        f(&join_name(prefix, "b_2"), self.shift.view_mut());
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gradcheck::{assert_gradients, ix1, ix2, uniform};
+    use ndarray::{array, Array2, ArrayD};
+
+    #[test]
+    fn forward_by_hand_uses_unbiased_std_plus_eps() {
+        // x = (1, 2, 3, 6): mean 3, unbiased var (4 + 1 + 0 + 9) / 3 = 14/3.
+        let ln = LayerNorm::<f64>::new(4);
+        let (mut y, mut cache) = (Array2::zeros((1, 4)), LayerNormCache::default());
+        ln.forward(
+            y.view_mut(),
+            array![[1.0, 2.0, 3.0, 6.0]].view(),
+            &mut cache,
+        )
+        .unwrap();
+        let s = (14.0f64 / 3.0).sqrt() + 1e-6;
+        for (got, want) in y.iter().zip([-2.0 / s, -1.0 / s, 0.0, 3.0 / s]) {
+            assert!((got - want).abs() < 1e-15, "{y}");
+        }
+    }
+
+    fn layer(i: &[ArrayD<f64>]) -> LayerNorm<f64> {
+        let mut ln = LayerNorm::new(5);
+        ln.scale.value = ix1(&i[1]);
+        ln.shift.value = ix1(&i[2]);
+        ln
+    }
+
+    #[test]
+    fn backward_matches_finite_differences() {
+        let inputs = [uniform(&[4, 5], 61), uniform(&[5], 62), uniform(&[5], 63)];
+        let run = |i: &[ArrayD<f64>]| {
+            let (mut y, mut cache) = (Array2::zeros((4, 5)), LayerNormCache::default());
+            layer(i)
+                .forward(y.view_mut(), ix2(&i[0]).view(), &mut cache)
+                .unwrap();
+            (y, cache)
+        };
+        assert_gradients(
+            "layer_norm",
+            1e-6,
+            &inputs,
+            &mut |i| run(i).0.into_dyn(),
+            &mut |i, dout| {
+                let (_, cache) = run(i);
+                let mut ln = layer(i);
+                let mut dx = Array2::zeros((4, 5));
+                ln.backward(dx.view_mut(), ix2(dout).view(), ix2(&i[0]).view(), &cache)
+                    .unwrap();
+                vec![
+                    dx.into_dyn(),
+                    ln.scale.grad.into_dyn(),
+                    ln.shift.grad.into_dyn(),
+                ]
+            },
+        );
+    }
+
+    // A constant row has std = 0, where std is not differentiable (PyTorch returns NaN there).
+    // Here the std term is dropped: y = b and dx = (g − mean(g)) / eps, finite.
+    #[test]
+    fn constant_row_gives_shift_and_finite_gradient() {
+        let mut ln = LayerNorm::<f64>::new(2);
+        ln.shift.value = array![0.5, -0.5];
+        let x = array![[0.3, 0.3]];
+        let (mut y, mut cache) = (Array2::zeros((1, 2)), LayerNormCache::default());
+        ln.forward(y.view_mut(), x.view(), &mut cache).unwrap();
+        assert_eq!(y, array![[0.5, -0.5]]);
+        let mut dx = Array2::zeros((1, 2));
+        ln.backward(dx.view_mut(), array![[1.0, 3.0]].view(), x.view(), &cache)
+            .unwrap();
+        // g = (1, 3), mean(g) = 2: dx = (−1, 1) / 1e-6.
+        assert!(
+            (dx[[0, 0]] + 1e6).abs() < 1e-6 && (dx[[0, 1]] - 1e6).abs() < 1e-6,
+            "{dx}"
+        );
+    }
+}

@@ -1,0 +1,78 @@
+//! ReLU, elementwise on any shape.
+
+use crate::error::check_shape;
+use crate::{Result, Scalar};
+use ndarray::{ArrayView, ArrayViewMut, Dimension, Zip};
+
+/// `out = max(inp, 0)`.
+pub fn relu_forward<T: Scalar, D: Dimension>(
+    mut out: ArrayViewMut<'_, T, D>,
+    inp: ArrayView<'_, T, D>,
+) -> Result<()> {
+    check_shape("relu forward", "out", out.shape(), inp.shape())?;
+    Zip::from(&mut out)
+        .and(&inp)
+        .for_each(|o, &x| *o = if x > T::zero() { x } else { T::zero() });
+    Ok(())
+}
+
+/// Differentiates `out = max(inp, 0)`: `dinp += dout · [out > 0]` (zero gradient at 0, as
+/// PyTorch). `out` is the forward's output.
+pub fn relu_backward<T: Scalar, D: Dimension>(
+    mut dinp: ArrayViewMut<'_, T, D>,
+    dout: ArrayView<'_, T, D>,
+    out: ArrayView<'_, T, D>,
+) -> Result<()> {
+    check_shape("relu backward", "dinp", dinp.shape(), out.shape())?;
+    check_shape("relu backward", "dout", dout.shape(), out.shape())?;
+    Zip::from(&mut dinp)
+        .and(&dout)
+        .and(&out)
+        .for_each(|d, &g, &y| {
+            if y > T::zero() {
+                *d = *d + g;
+            }
+        });
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gradcheck::{assert_gradients, uniform};
+    use ndarray::{array, ArrayD};
+
+    #[test]
+    fn forward_and_backward_by_hand() {
+        let x = array![[-1.0, 0.0, 2.0]];
+        let mut y = x.clone();
+        relu_forward(y.view_mut(), x.view()).unwrap();
+        assert_eq!(y, array![[0.0, 0.0, 2.0]]);
+        let mut dx = array![[1.0, 1.0, 1.0]];
+        relu_backward(dx.view_mut(), array![[5.0, 5.0, 5.0]].view(), y.view()).unwrap();
+        assert_eq!(dx, array![[1.0, 1.0, 6.0]]);
+    }
+
+    #[test]
+    fn backward_matches_finite_differences() {
+        // Random inputs stay away from the kink at 0 by far more than the step.
+        let x = uniform(&[6, 4], 11).mapv(|v: f64| if v.abs() < 0.01 { 0.5 } else { v });
+        assert_gradients(
+            "relu",
+            1e-6,
+            &[x],
+            &mut |i| {
+                let mut out = ArrayD::zeros(i[0].shape());
+                relu_forward(out.view_mut(), i[0].view()).unwrap();
+                out
+            },
+            &mut |i, dout| {
+                let mut out = ArrayD::zeros(i[0].shape());
+                relu_forward(out.view_mut(), i[0].view()).unwrap();
+                let mut dinp = ArrayD::zeros(i[0].shape());
+                relu_backward(dinp.view_mut(), dout.view(), out.view()).unwrap();
+                vec![dinp]
+            },
+        );
+    }
+}

@@ -1,0 +1,105 @@
+//! Softmax along each row of a score matrix.
+
+use crate::error::check_shape;
+use crate::{Result, Scalar};
+use ndarray::{ArrayView2, ArrayViewMut1, ArrayViewMut2, Zip};
+
+/// Replaces a row by its softmax, shifted by the row maximum so no exponent overflows.
+pub(crate) fn softmax_in_place<T: Scalar>(mut row: ArrayViewMut1<'_, T>) {
+    let max = row.iter().fold(T::neg_infinity(), |m, &v| m.max(v));
+    let mut sum = T::zero();
+    row.mapv_inplace(|v| {
+        let e = (v - max).exp();
+        sum = sum + e;
+        e
+    });
+    let inv = T::one() / sum;
+    row.mapv_inplace(|v| v * inv);
+}
+
+/// Adds the softmax backward of one row: `dinp_j += out_j · (dout_j − Σ_k dout_k out_k)`.
+pub(crate) fn softmax_backward_row<T: Scalar>(
+    mut dinp: ArrayViewMut1<'_, T>,
+    dout: ndarray::ArrayView1<'_, T>,
+    out: ndarray::ArrayView1<'_, T>,
+) {
+    let dot = dout
+        .iter()
+        .zip(out.iter())
+        .fold(T::zero(), |s, (&g, &y)| s + g * y);
+    Zip::from(&mut dinp)
+        .and(&dout)
+        .and(&out)
+        .for_each(|d, &g, &y| *d = *d + y * (g - dot));
+}
+
+/// `out[r, j] = exp(inp[r, j]) / Σ_k exp(inp[r, k])`. `out`, `inp`: (R, C).
+pub fn softmax_rows_forward<T: Scalar>(
+    mut out: ArrayViewMut2<'_, T>,
+    inp: ArrayView2<'_, T>,
+) -> Result<()> {
+    check_shape("softmax_rows forward", "out", out.shape(), inp.shape())?;
+    out.assign(&inp);
+    for row in out.rows_mut() {
+        softmax_in_place(row);
+    }
+    Ok(())
+}
+
+/// Differentiates the row softmax (Jacobian `diag(y) − y yᵀ` per row):
+/// `dinp += out ⊙ (dout − Σ_row dout ⊙ out)`. `out` is the forward's output.
+pub fn softmax_rows_backward<T: Scalar>(
+    mut dinp: ArrayViewMut2<'_, T>,
+    dout: ArrayView2<'_, T>,
+    out: ArrayView2<'_, T>,
+) -> Result<()> {
+    check_shape("softmax_rows backward", "dinp", dinp.shape(), out.shape())?;
+    check_shape("softmax_rows backward", "dout", dout.shape(), out.shape())?;
+    for ((d, g), y) in dinp.rows_mut().into_iter().zip(dout.rows()).zip(out.rows()) {
+        softmax_backward_row(d, g, y);
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gradcheck::{assert_gradients, ix2, uniform};
+    use ndarray::{array, Array2};
+
+    #[test]
+    fn forward_by_hand_and_large_scores_do_not_overflow() {
+        // softmax(0, ln 3) = (1/4, 3/4); adding 1000 to a row changes nothing (but the rounding of
+        // 1000 + ln 3).
+        let x = array![[0.0, 3.0f64.ln()], [1000.0, 1000.0 + 3.0f64.ln()]];
+        let mut y = Array2::zeros((2, 2));
+        softmax_rows_forward(y.view_mut(), x.view()).unwrap();
+        for r in 0..2 {
+            assert!(
+                (y[[r, 0]] - 0.25).abs() < 1e-12 && (y[[r, 1]] - 0.75).abs() < 1e-12,
+                "{y}"
+            );
+        }
+    }
+
+    #[test]
+    fn backward_matches_finite_differences() {
+        let fwd = |x: &Array2<f64>| {
+            let mut y = Array2::zeros(x.dim());
+            softmax_rows_forward(y.view_mut(), x.view()).unwrap();
+            y
+        };
+        assert_gradients(
+            "softmax_rows",
+            1e-6,
+            &[uniform(&[4, 5], 51) * 3.0],
+            &mut |i| fwd(&ix2(&i[0])).into_dyn(),
+            &mut |i, dout| {
+                let y = fwd(&ix2(&i[0]));
+                let mut dx = Array2::zeros(y.dim());
+                softmax_rows_backward(dx.view_mut(), ix2(dout).view(), y.view()).unwrap();
+                vec![dx.into_dyn()]
+            },
+        );
+    }
+}

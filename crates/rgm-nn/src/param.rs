@@ -1,0 +1,69 @@
+//! Trainable parameters (value and gradient side by side) and the by-name view of a layer's
+//! tensors that optimisers and weight files use.
+
+use crate::Scalar;
+use ndarray::{Array, ArrayViewMutD, Dimension};
+
+/// A trainable tensor with its gradient of the same shape. Backward passes add into `grad`;
+/// [`Parameters::zero_grad`] clears it once per step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Param<T, D: Dimension> {
+    /// The current value.
+    pub value: Array<T, D>,
+    /// The accumulated gradient of the loss with respect to `value`.
+    pub grad: Array<T, D>,
+}
+
+impl<T: Scalar, D: Dimension> Param<T, D> {
+    /// A parameter holding `value`, with a zero gradient.
+    pub fn new(value: Array<T, D>) -> Self {
+        let grad = Array::zeros(value.raw_dim());
+        Self { value, grad }
+    }
+
+    /// A dynamic-dimensional view of value and gradient, as [`Parameters`] hands it out.
+    pub fn view_mut(&mut self) -> ParamViewMut<'_, T> {
+        ParamViewMut {
+            value: self.value.view_mut().into_dyn(),
+            grad: self.grad.view_mut().into_dyn(),
+        }
+    }
+}
+
+/// Mutable views of one parameter's value and gradient, any dimensionality.
+pub struct ParamViewMut<'a, T> {
+    pub value: ArrayViewMutD<'a, T>,
+    pub grad: ArrayViewMutD<'a, T>,
+}
+
+/// A layer or model that exposes its tensors by name (PyTorch state-dict style: `prefix.name`).
+/// The visiting order must be fixed: optimisers keep their state in that order.
+pub trait Parameters<T: Scalar> {
+    /// Calls `f(name, param)` for every trainable parameter.
+    fn visit_params(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ParamViewMut<'_, T>));
+
+    /// Calls `f(name, tensor)` for every saved, non-trained tensor (batch-norm running
+    /// statistics). None by default.
+    fn visit_buffers(&mut self, _prefix: &str, _f: &mut dyn FnMut(&str, ArrayViewMutD<'_, T>)) {}
+
+    /// Sets every parameter gradient to zero (once per step, before the backward pass).
+    fn zero_grad(&mut self) {
+        self.visit_params("", &mut |_, mut p| p.grad.fill(T::zero()));
+    }
+
+    /// The total number of trainable values.
+    fn num_params(&mut self) -> usize {
+        let mut n = 0;
+        self.visit_params("", &mut |_, p| n += p.value.len());
+        n
+    }
+}
+
+/// `prefix.name`, or `name` when the prefix is empty.
+pub fn join_name(prefix: &str, name: &str) -> String {
+    if prefix.is_empty() {
+        name.to_string()
+    } else {
+        format!("{prefix}.{name}")
+    }
+}

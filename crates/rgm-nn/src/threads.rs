@@ -1,0 +1,69 @@
+//! Thread and floating-point-environment controls for compute threads.
+
+extern "C" {
+    fn openblas_set_num_threads(num_threads: std::ffi::c_int);
+    fn openblas_get_num_threads() -> std::ffi::c_int;
+}
+
+/// Sets how many threads OpenBLAS uses for every later matrix product (process-wide). Set it to
+/// 1 before running independent work on several rayon threads, so the two pools do not nest.
+pub fn set_blas_threads(n: usize) {
+    let n = n.clamp(1, std::ffi::c_int::MAX as usize) as std::ffi::c_int;
+    // SAFETY: a plain setter of OpenBLAS's global thread count; any positive value is valid.
+    unsafe { openblas_set_num_threads(n) }
+}
+
+/// The number of threads OpenBLAS currently uses.
+pub fn blas_threads() -> usize {
+    // SAFETY: a plain getter of OpenBLAS's global thread count.
+    unsafe { openblas_get_num_threads() as usize }
+}
+
+/// Makes the calling thread flush denormal results to zero and read denormal inputs as zero
+/// (x86-64 SSE flags FTZ and DAZ; a no-op elsewhere). Denormals appear when activations or
+/// gradients decay towards zero and can slow float arithmetic a hundredfold; call this once at
+/// the start of every compute thread. Returns whether the flags were set.
+pub fn flush_denormals_to_zero() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[allow(deprecated)]
+        // SAFETY: SSE is always present on x86-64; setting FTZ (bit 15) and DAZ (bit 6) of MXCSR
+        // only changes how this thread rounds subnormal floats.
+        unsafe {
+            use std::arch::x86_64::{_mm_getcsr, _mm_setcsr};
+            _mm_setcsr(_mm_getcsr() | (1 << 15) | (1 << 6));
+        }
+        true
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn blas_thread_count_round_trips() {
+        let before = blas_threads();
+        set_blas_threads(1);
+        assert_eq!(blas_threads(), 1);
+        set_blas_threads(before);
+        assert_eq!(blas_threads(), before);
+    }
+
+    #[test]
+    fn denormals_flush_to_zero_after_the_call() {
+        // Runs on its own thread so the flag does not leak into other tests.
+        std::thread::spawn(|| {
+            let tiny = std::hint::black_box(f32::MIN_POSITIVE);
+            assert!((tiny / 4.0) > 0.0, "denormal kept before the call");
+            assert!(flush_denormals_to_zero());
+            assert_eq!(std::hint::black_box(tiny) / 4.0, 0.0);
+        })
+        .join()
+        .unwrap();
+    }
+}
