@@ -181,6 +181,14 @@ pub(crate) fn scratch_path(name: &str) -> std::path::PathBuf {
     dir.join(name)
 }
 
+/// `len` seeded pseudo-random bytes, for garbage-input tests.
+#[cfg(test)]
+pub(crate) fn random_bytes(seed: u64, len: usize) -> Vec<u8> {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    (0..len).map(|_| rng.gen()).collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -156,7 +156,7 @@ pub fn write(out: &mut impl Write, cloud: &PointCloud, dtype: Dtype) -> std::io:
     out.write_all(MAGIC)?;
     out.write_all(&[1, 0])?;
     out.write_all(&(header_len as u16).to_le_bytes())?;
-    write!(out, "{dict:<width$}\n", width = header_len - 1)?;
+    writeln!(out, "{dict:<width$}", width = header_len - 1)?;
     for p in &cloud.points {
         for v in [p.x, p.y, p.z] {
             match dtype {
@@ -171,6 +171,7 @@ pub fn write(out: &mut impl Write, cloud: &PointCloud, dtype: Dtype) -> std::io:
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::io::random_bytes;
 
     fn parse_bytes(b: &[u8]) -> Result<Vec<Point3<f64>>> {
         parse(b, Path::new("a.npy"))
@@ -279,15 +280,9 @@ mod tests {
 
     #[test]
     fn garbage_is_an_error_not_a_panic() {
-        let mut state = 7u64;
         for len in 0..300 {
             let mut bytes = MAGIC.to_vec();
-            for _ in 0..len {
-                state = state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                bytes.push((state >> 56) as u8);
-            }
+            bytes.extend(random_bytes(len as u64, len));
             assert!(parse_bytes(&bytes).is_err());
         }
         let huge = with_header(

@@ -173,29 +173,34 @@ fn parse_header(bytes: &[u8], path: &Path) -> Result<Header> {
                     properties: Vec::new(),
                 });
             }
-            ["property", "list", count, item, name] => {
-                let (Some(count), Some(item)) = (Scalar::from_name(count), Scalar::from_name(item))
-                else {
-                    return Err(bad("unknown list property type"));
+            ["property", rest @ ..] => {
+                let property = match rest {
+                    ["list", count, item, name] => {
+                        let (Some(count), Some(item)) =
+                            (Scalar::from_name(count), Scalar::from_name(item))
+                        else {
+                            return Err(bad("unknown list property type"));
+                        };
+                        Property::List {
+                            name: name.to_string(),
+                            count,
+                            item,
+                        }
+                    }
+                    [ty, name] => {
+                        let ty =
+                            Scalar::from_name(ty).ok_or_else(|| bad("unknown property type"))?;
+                        Property::Scalar {
+                            name: name.to_string(),
+                            ty,
+                        }
+                    }
+                    _ => return Err(bad("malformed property line")),
                 };
                 let element = elements
                     .last_mut()
                     .ok_or_else(|| bad("property before any element"))?;
-                element.properties.push(Property::List {
-                    name: name.to_string(),
-                    count,
-                    item,
-                });
-            }
-            ["property", ty, name] => {
-                let ty = Scalar::from_name(ty).ok_or_else(|| bad("unknown property type"))?;
-                let element = elements
-                    .last_mut()
-                    .ok_or_else(|| bad("property before any element"))?;
-                element.properties.push(Property::Scalar {
-                    name: name.to_string(),
-                    ty,
-                });
+                element.properties.push(property);
             }
             ["end_header"] => {
                 let encoding = encoding
@@ -419,6 +424,7 @@ pub fn write(out: &mut impl Write, cloud: &PointCloud) -> std::io::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::io::random_bytes;
 
     fn parse_bytes(b: &[u8]) -> Result<Vec<Point3<f64>>> {
         parse(b, Path::new("s.ply"))
@@ -562,15 +568,9 @@ mod tests {
 
     #[test]
     fn garbage_is_an_error_not_a_panic() {
-        let mut state = 12345u64;
         for len in 0..200 {
             let mut bytes = b"ply\nformat binary_little_endian 1.0\nelement face 3\nproperty list int int vertex_indices\nelement vertex 99999999999\nproperty float x\nproperty float y\nproperty float z\nend_header\n".to_vec();
-            for _ in 0..len {
-                state = state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                bytes.push((state >> 56) as u8);
-            }
+            bytes.extend(random_bytes(len as u64, len));
             assert!(parse_bytes(&bytes).is_err());
             assert!(parse_bytes(&bytes[len.min(bytes.len())..]).is_err());
         }
