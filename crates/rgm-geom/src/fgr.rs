@@ -15,14 +15,17 @@
 //! 5. Optimisation: `iteration_number` Gauss–Newton steps of the Geman–McClure objective with
 //!    line processes: weights `l = (μ / (μ + ‖p − T q‖²))²`, a step linearised in the rotation
 //!    (small angles ω, applied as `Rz(ω_z)·Ry(ω_y)·Rx(ω_x)`), the target moved onto the source.
-//!    μ starts at 1 (the normalised scale) and, with `decrease_mu`, is divided by
-//!    `division_factor` every 4th iteration while above `maximum_correspondence_distance`.
+//!    μ starts at the normalising scale (as Open3D passes it; 1 with `use_absolute_scale`) and,
+//!    with `decrease_mu`, is divided by `division_factor` every 4th iteration while above
+//!    `maximum_correspondence_distance`. A failed solve leaves the transform unchanged for that
+//!    iteration (Open3D's zero step) and marks the result not converged.
 //! 6. The transform is brought back to the original scale and inverted, to map source onto
 //!    target. With fewer than 10 matches Open3D returns the identity; so do we (`converged`
 //!    false).
 //!
-//! The result's fitness and RMSE (which Open3D leaves empty for FGR) are Open3D's score of the
-//! final transform at `evaluation_distance`.
+//! The result's fitness and RMSE are Open3D's score of the final transform at
+//! `maximum_correspondence_distance` (0.025 by default, in the clouds' units), as Open3D's
+//! `EvaluateRegistration` call at the end of FGR.
 
 use nalgebra::{Matrix3, Matrix6, Point3, Vector3, Vector6};
 use rand::{rngs::StdRng, Rng, SeedableRng};
@@ -63,8 +66,6 @@ pub struct FgrConfig {
     pub tuple_test: bool,
     /// Seed of the tuple test's random draws (default 0).
     pub seed: u64,
-    /// Distance at which the result's fitness and RMSE are scored (default 0.1, as ICP's).
-    pub evaluation_distance: f64,
 }
 
 impl Default for FgrConfig {
@@ -81,7 +82,6 @@ impl Default for FgrConfig {
             maximum_tuple_count: 1000,
             tuple_test: true,
             seed: 0,
-            evaluation_distance: 0.1,
         }
     }
 }
@@ -145,7 +145,7 @@ pub fn register_features(
         &source.points,
         &index,
         &transform,
-        config.evaluation_distance,
+        config.maximum_correspondence_distance,
         None,
     );
     Ok(RegistrationResult::scored(
@@ -233,11 +233,14 @@ fn optimise(
             .fold(0.0, f64::max)
     };
     let scale = extent(source, mean_s).max(extent(target, mean_t));
-    let (scale_global, mut mu) = if config.use_absolute_scale {
-        (1.0, scale)
+    let scale_global = if config.use_absolute_scale {
+        1.0
     } else {
-        (scale, 1.0)
+        scale
     };
+    // Open3D's normalisation also returns a `scale_start` (1, or the extent with absolute
+    // scale) but passes `scale_global` to the optimisation as the first μ; followed here.
+    let mut mu = scale_global;
     if !(scale_global > 0.0) {
         // Both clouds are single points repeated: nothing to rotate.
         return (RigidTransform::identity(), 0, false);
@@ -375,11 +378,108 @@ mod tests {
         assert!(err < 1e-9, "error {err:.3e}");
     }
 
+    /// Pinned from Open3D 0.20 (`open3d-cpu`), exact correspondences, no tuple test, on the
+    /// airplane scaled by 0.5 (so that the normalising scale, 0.5, differs from 1):
+    ///
+    /// ```python
+    /// pts = 0.5 * np.load('.../airplane/test/airplane_0627.npy').astype(np.float64)
+    /// R = Rotation.from_euler('xyz', [30, 20, 10], degrees=True).as_matrix(); t = np.array([0.3, -0.2, 0.1])
+    /// src, tgt = (pts - t) @ R, pts  # as PointClouds s, tt
+    /// corr = o3d.utility.Vector2iVector(np.stack([np.arange(1024)] * 2, 1).astype(np.int32))
+    /// opt = FastGlobalRegistrationOption(tuple_test=False, iteration_number=k, decrease_mu=dm)
+    /// r = registration_fgr_based_on_correspondence(s, tt, corr, opt); T = r.transformation
+    /// # rotation error (deg) of T vs R, |t_T − t|, r.fitness, r.inlier_rmse
+    /// ```
+    #[test]
+    fn optimisation_steps_match_open3d() {
+        let target = PointCloud::new(
+            crate::testing::airplane()
+                .points
+                .iter()
+                .map(|p| Point3::from(0.5 * p.coords))
+                .collect(),
+        );
+        let rotation =
+            rotation_xyz_extrinsic(30f64.to_radians(), 20f64.to_radians(), 10f64.to_radians());
+        let pose = RigidTransform::new(rotation, Vector3::new(0.3, -0.2, 0.1));
+        let source = target.transformed(&pose.inverse());
+        let matches: Vec<(usize, usize)> = (0..1024).map(|i| (i, i)).collect();
+        let index = KnnIndex::new(&target.points);
+        let cases = [
+            (
+                1,
+                true,
+                7.773801947570894,
+                0.041863821940794604,
+                0.8095703125,
+                0.014035814446269975,
+            ),
+            (
+                2,
+                true,
+                0.22390158191183837,
+                0.0013228126614157805,
+                1.0,
+                0.0007874287562105823,
+            ),
+            (
+                2,
+                false,
+                0.22387625491881621,
+                0.0013228671957257242,
+                1.0,
+                0.0007873368500457115,
+            ),
+            (
+                3,
+                true,
+                0.00013361489370883206,
+                5.187654157751016e-07,
+                1.0,
+                5.294971508789419e-07,
+            ),
+        ];
+        for (k, decrease_mu, angle, shift, fitness, rmse) in cases {
+            let config = FgrConfig {
+                iteration_number: k,
+                decrease_mu,
+                ..FgrConfig::default()
+            };
+            let (t, _, _) = optimise(&source, &target, &matches, &config);
+            let got_angle = pose.inverse().compose(&t).rotation_angle_deg();
+            let got_shift = (t.translation - pose.translation).norm();
+            assert!(
+                (got_angle - angle).abs() < 1e-6,
+                "k={k} μ↓={decrease_mu}: angle {got_angle} vs {angle}"
+            );
+            assert!(
+                (got_shift - shift).abs() < 1e-9,
+                "k={k} μ↓={decrease_mu}: shift {got_shift} vs {shift}"
+            );
+            let s = score(
+                &source.points,
+                &index,
+                &t,
+                config.maximum_correspondence_distance,
+                None,
+            );
+            assert_eq!(s.fitness, fitness, "k={k}");
+            assert!(
+                (s.inlier_rmse - rmse).abs() < 1e-9,
+                "k={k}: rmse {} vs {rmse}",
+                s.inlier_rmse
+            );
+        }
+    }
+
     #[test]
     fn too_few_matches_give_the_identity() {
         // Five points give at most five matches (without the tuple test, which repeats them).
         let cloud = box_surface(5, 13);
-        let config = FgrConfig { tuple_test: false, ..FgrConfig::default() };
+        let config = FgrConfig {
+            tuple_test: false,
+            ..FgrConfig::default()
+        };
         let result = register(&cloud, &cloud, &config).unwrap();
         assert_eq!(result.t_target_source, RigidTransform::identity());
         assert!(!result.converged);

@@ -26,3 +26,30 @@ pub fn box_surface(n: usize, seed: u64) -> PointCloud {
         .collect();
     PointCloud::new(points)
 }
+
+/// The 1,024 points of ModelNet40's `airplane_0627` (test split), from the shared data folder.
+pub fn airplane() -> PointCloud {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/data/modelnet40_npy1024/airplane/test/airplane_0627.npy"
+    );
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{path}: {e}"));
+    // .npy v1: magic (6), version (2), header length (u16 LE), header, then <f4 rows (1024, 3).
+    assert_eq!(&bytes[..6], b"\x93NUMPY");
+    let header_len = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+    let header = std::str::from_utf8(&bytes[10..10 + header_len]).expect("an ASCII header");
+    assert!(
+        header.contains("'<f4'") && header.contains("(1024, 3)"),
+        "{header}"
+    );
+    let rows: Vec<[f32; 3]> = bytes[10 + header_len..]
+        .chunks_exact(12)
+        .map(|c| {
+            std::array::from_fn(|k| {
+                f32::from_le_bytes([c[4 * k], c[4 * k + 1], c[4 * k + 2], c[4 * k + 3]])
+            })
+        })
+        .collect();
+    assert_eq!(rows.len(), 1024);
+    PointCloud::from_f32_rows(&rows)
+}
