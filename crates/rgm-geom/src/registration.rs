@@ -95,7 +95,81 @@ impl RegistrationResult {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testing::airplane;
+    use crate::{fgr, icp, PointCloud, Result};
     use nalgebra::{Matrix3, Vector3};
+    use rand::{rngs::StdRng, Rng, SeedableRng};
+    use rand_distr::{Distribution, Normal};
+
+    /// The cloud moved by `pose`, with the protocol's jitter (σ 0.01 clipped at 0.05) and its
+    /// point order reversed (no index correspondence survives).
+    fn moved_and_jittered(
+        cloud: &PointCloud,
+        pose: &RigidTransform,
+        rng: &mut StdRng,
+    ) -> PointCloud {
+        let noise = Normal::new(0.0f64, 0.01).expect("a valid σ");
+        let mut jitter = || noise.sample(rng).clamp(-0.05, 0.05);
+        let mut points: Vec<Point3<f64>> = cloud
+            .points
+            .iter()
+            .map(|p| pose.apply(p) + Vector3::new(jitter(), jitter(), jitter()))
+            .collect();
+        points.reverse();
+        PointCloud::new(points)
+    }
+
+    /// small_gicp's accuracy check, run over every method: for seeded poses, registering the
+    /// source onto the target and the target onto the source both land within 2.5° and 0.2 of
+    /// the truth. Returns the worst (rotation °, translation) seen.
+    fn check_both_directions(
+        method: impl Fn(&PointCloud, &PointCloud) -> Result<RegistrationResult>,
+        max_angle_deg: f64,
+        max_translation: f64,
+        seeds: std::ops::Range<u64>,
+    ) -> (f64, f64) {
+        let target = airplane();
+        let mut worst: (f64, f64) = (0.0, 0.0);
+        for seed in seeds {
+            let mut rng = StdRng::seed_from_u64(seed);
+            let g = RigidTransform::random(&mut rng, max_angle_deg, max_translation);
+            let source = moved_and_jittered(&target, &g, &mut rng);
+            let gt = g.inverse(); // maps the source onto the target
+            for (from, to, truth) in [(&source, &target, gt), (&target, &source, g)] {
+                let t = method(from, to).expect("registration").t_target_source;
+                let residual = truth.inverse().compose(&t);
+                let (angle, shift) = (residual.rotation_angle_deg(), residual.translation.norm());
+                assert!(
+                    angle < 2.5 && shift < 0.2,
+                    "seed {seed}: error {angle:.3}°, {shift:.4}"
+                );
+                worst = (worst.0.max(angle), worst.1.max(shift));
+            }
+        }
+        worst
+    }
+
+    #[test]
+    fn icp_from_small_perturbations_is_accurate_both_ways() {
+        let worst = check_both_directions(
+            |s, t| icp::register(s, t, &icp::IcpConfig::default()),
+            10.0,
+            0.05,
+            0..5,
+        );
+        println!("ICP worst error: {:.3}°, {:.4}", worst.0, worst.1);
+    }
+
+    #[test]
+    fn fgr_from_protocol_poses_is_accurate_both_ways() {
+        let worst = check_both_directions(
+            |s, t| fgr::register(s, t, &fgr::FgrConfig::default()),
+            45.0,
+            0.5,
+            0..5,
+        );
+        println!("FGR worst error: {:.3}°, {:.4}", worst.0, worst.1);
+    }
 
     #[test]
     fn score_by_hand() {
