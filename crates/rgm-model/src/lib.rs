@@ -1,1 +1,12 @@
+//! rgm-model — RGM put together from the layers below, and every registration method behind one
+//! interface: [`method::Method`] runs ICP, FGR (and, as it lands, the RGM network) on a pair of
+//! clouds; [`evaluate`] runs a method over the benchmark's test pairs and scores it.
+//!
+//! Layering rule: rgm-model builds on rgm-geom, rgm-nn, rgm-match and rgm-data, and nothing
+//! builds on it but the `rgm` command and xtask. It owns no geometry or tensor op of its own.
 
+pub mod evaluate;
+pub mod method;
+
+pub use evaluate::{PairRecord, Summary};
+pub use method::{Method, Registration};

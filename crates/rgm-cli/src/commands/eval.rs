@@ -1,0 +1,50 @@
+//! `rgm eval`: a method over the ModelNet40 test pairs, scored with the paper's metrics.
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use rgm_model::evaluate::evaluate_pair;
+use rgm_model::Method;
+
+use crate::{progress, table, DataArgs, MethodArg};
+
+/// Options of `rgm eval`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The registration method to evaluate.
+    #[arg(long, value_enum)]
+    method: MethodArg,
+    #[command(flatten)]
+    data: DataArgs,
+    /// Also write every pair's transform and metrics to this JSON file.
+    #[arg(long, value_name = "FILE")]
+    json: Option<PathBuf>,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let (dataset, generator) = args.data.open()?;
+    let shapes = args.data.test_shapes(&dataset);
+    let method = Method::from(args.method);
+    let bar = progress(shapes.len(), method.name());
+    let mut records = Vec::with_capacity(shapes.len());
+    let mut recalled = 0usize;
+    for i in 0..shapes.len() {
+        let pair = generator.test_pair(&shapes, i)?;
+        let record = evaluate_pair(&method, i, &pair)?;
+        recalled += record.metrics.recall as usize;
+        records.push(record);
+        bar.set_message(format!(
+            "recall {:.1}%",
+            100.0 * recalled as f64 / records.len() as f64
+        ));
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let setting = format!(
+        "{}{}",
+        generator.setting.name(),
+        if args.data.unseen { "-unseen" } else { "" }
+    );
+    table::report(method.name(), &setting, &records, args.json.as_deref())?;
+    Ok(())
+}

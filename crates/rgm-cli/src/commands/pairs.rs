@@ -1,0 +1,58 @@
+//! `rgm pairs`: write the test pairs so outside tools run on exactly the same data.
+//!
+//! Layout of the output folder: `NNNN_source.ply`, `NNNN_target.ply` per pair, and
+//! `pairs.json` with, per pair, its index, shape, label, file names, the ground-truth 4×4
+//! `t_target_source` and the ground-truth correspondences `[source index, target index]`.
+
+use std::fs;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use rgm_data::write_point_cloud;
+
+use crate::{progress, DataArgs};
+
+/// Options of `rgm pairs`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    #[command(flatten)]
+    data: DataArgs,
+    /// The folder to write (created if missing).
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let (dataset, generator) = args.data.open()?;
+    let shapes = args.data.test_shapes(&dataset);
+    fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let bar = progress(shapes.len(), "pairs");
+    let mut entries = Vec::with_capacity(shapes.len());
+    for (i, shape) in shapes.iter().enumerate() {
+        let pair = generator.test_pair(&shapes, i)?;
+        let (source, target) = (format!("{i:04}_source.ply"), format!("{i:04}_target.ply"));
+        write_point_cloud(args.out.join(&source), &pair.source)?;
+        write_point_cloud(args.out.join(&target), &pair.target)?;
+        entries.push(serde_json::json!({
+            "index": i,
+            "shape": shape.name,
+            "label": pair.label,
+            "source": source,
+            "target": target,
+            "t_target_source": pair.t_target_source.to_rows(),
+            "correspondences": pair.correspondence.pairs,
+        }));
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let manifest = serde_json::json!({
+        "setting": generator.setting.name(),
+        "unseen": args.data.unseen,
+        "pairs": entries,
+    });
+    let path = args.out.join("pairs.json");
+    fs::write(&path, serde_json::to_string(&manifest)?)
+        .with_context(|| format!("writing {}", path.display()))?;
+    println!("wrote {} pairs to {}", shapes.len(), args.out.display());
+    Ok(())
+}

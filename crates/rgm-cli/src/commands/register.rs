@@ -1,0 +1,89 @@
+//! `rgm register SRC TGT`: the transform that maps SRC onto TGT.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use rgm_data::{read_point_cloud, write_point_cloud};
+use rgm_model::Method;
+
+use crate::MethodArg;
+
+/// Options of `rgm register`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The cloud to move (PLY, OFF, XYZ/CSV or .npy).
+    source: PathBuf,
+    /// The cloud to move it onto.
+    target: PathBuf,
+    /// The registration method.
+    #[arg(long, value_enum, default_value = "fgr")]
+    method: MethodArg,
+    /// Write the source moved by the found transform to this file (format by extension).
+    #[arg(long, value_name = "FILE")]
+    out: Option<PathBuf>,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let source = read_point_cloud(&args.source)?;
+    let target = read_point_cloud(&args.target)?;
+    let method = Method::from(args.method);
+    let registration = method.register(&source, &target).with_context(|| {
+        format!(
+            "{} failed on {} → {}",
+            method.name(),
+            args.source.display(),
+            args.target.display()
+        )
+    })?;
+    let result = &registration.result;
+    if let Some(out) = &args.out {
+        write_point_cloud(out, &source.transformed(&result.t_target_source))?;
+    }
+    let rows = result.t_target_source.to_rows();
+    if args.json {
+        let value = serde_json::json!({
+            "method": method.name(),
+            "transform": rows,
+            "time_ms": registration.time_ms,
+            "iterations": result.iterations,
+            "converged": result.converged,
+            "correspondences": result.inlier_count,
+            "fitness": result.fitness,
+            "inlier_rmse": result.inlier_rmse,
+            "source_points": source.len(),
+            "target_points": target.len(),
+        });
+        println!("{value}");
+        return Ok(());
+    }
+    println!(
+        "# transform target ← source ({}), y = R x + t",
+        method.name()
+    );
+    for row in rows {
+        println!(
+            "{:>12.8} {:>12.8} {:>12.8} {:>12.8}",
+            row[0], row[1], row[2], row[3]
+        );
+    }
+    println!(
+        "# fitness {:.4}, inlier RMSE {:.6}, correspondences {}, iterations {}{}, time {:.1} ms",
+        result.fitness,
+        result.inlier_rmse,
+        result.inlier_count,
+        result.iterations,
+        if result.converged {
+            ""
+        } else {
+            " (not converged)"
+        },
+        registration.time_ms
+    );
+    if let Some(out) = &args.out {
+        println!("# wrote the moved source to {}", out.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,120 @@
+//! `rgm score`: the paper's metrics for transforms an outside tool found on the pairs that
+//! `rgm pairs` wrote, so any method is scored by the same code as rgm's own.
+//!
+//! The transforms file: `{"method": NAME, "pairs": [{"index": i, "transform": 4×4 rows,
+//! "time_ms": t}, …]}`.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use anyhow::{anyhow, bail, Context, Result};
+use rgm_data::{read_point_cloud, Correspondence, Pair};
+use rgm_geom::{Matrix4, RigidTransform};
+use rgm_model::PairRecord;
+use serde::Deserialize;
+
+use crate::table;
+
+/// Options of `rgm score`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The outside tool's transforms (JSON, see `rgm score --help`).
+    transforms: PathBuf,
+    /// The folder written by `rgm pairs`.
+    #[arg(long, value_name = "DIR")]
+    pairs: PathBuf,
+    /// Also write every pair's metrics to this JSON file.
+    #[arg(long, value_name = "FILE")]
+    json: Option<PathBuf>,
+}
+
+#[derive(Deserialize)]
+struct Transforms {
+    method: String,
+    pairs: Vec<Found>,
+}
+
+#[derive(Deserialize)]
+struct Found {
+    index: usize,
+    transform: [[f64; 4]; 4],
+    time_ms: f64,
+}
+
+#[derive(Deserialize)]
+struct Manifest {
+    setting: String,
+    unseen: bool,
+    pairs: Vec<Entry>,
+}
+
+#[derive(Deserialize)]
+struct Entry {
+    index: usize,
+    label: usize,
+    source: String,
+    target: String,
+    t_target_source: [[f64; 4]; 4],
+}
+
+fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T> {
+    let text = fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_str(&text)
+        .with_context(|| format!("{} is not the expected JSON", path.display()))
+}
+
+fn rigid(rows: &[[f64; 4]; 4], what: &str) -> Result<RigidTransform> {
+    let m = Matrix4::from_fn(|r, c| rows[r][c]);
+    RigidTransform::from_matrix4(&m, 1e-4).map_err(|e| anyhow!("{what}: {e}"))
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let found: Transforms = read_json(&args.transforms)?;
+    let manifest: Manifest = read_json(&args.pairs.join("pairs.json"))?;
+    let mut records = Vec::with_capacity(found.pairs.len());
+    for f in &found.pairs {
+        let Some(entry) = manifest.pairs.iter().find(|e| e.index == f.index) else {
+            bail!(
+                "{}: pair {} is not in {}",
+                args.transforms.display(),
+                f.index,
+                args.pairs.join("pairs.json").display()
+            );
+        };
+        let source = read_point_cloud(args.pairs.join(&entry.source))?;
+        let target = read_point_cloud(args.pairs.join(&entry.target))?;
+        let pair = Pair {
+            correspondence: Correspondence {
+                n_source: source.len(),
+                n_target: target.len(),
+                pairs: Vec::new(),
+            },
+            source,
+            target,
+            t_target_source: rigid(
+                &entry.t_target_source,
+                &format!("ground truth of pair {}", entry.index),
+            )?,
+            shape_index: entry.index,
+            label: entry.label,
+        };
+        let transform = rigid(
+            &f.transform,
+            &format!(
+                "{}: transform of pair {}",
+                args.transforms.display(),
+                f.index
+            ),
+        )?;
+        records.push(PairRecord::score(
+            f.index, &pair, transform, f.time_ms, 0, None,
+        )?);
+    }
+    let setting = format!(
+        "{}{}",
+        manifest.setting,
+        if manifest.unseen { "-unseen" } else { "" }
+    );
+    table::report(&found.method, &setting, &records, args.json.as_deref())?;
+    Ok(())
+}
