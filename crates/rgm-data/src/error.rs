@@ -47,6 +47,9 @@ pub enum DataError {
     /// A pair setting name is not one of clean, noise, partial.
     #[error("unknown setting `{name}` (expected clean, noise or partial)")]
     UnknownSetting { name: String },
+    /// A pair-generator setting is out of its range.
+    #[error("pair config: {field} = {value} is out of range")]
+    InvalidConfig { field: &'static str, value: f64 },
     /// An index is outside a collection.
     #[error("{op}: index {index} out of range for length {len}")]
     IndexOutOfRange {

@@ -161,11 +161,18 @@ impl ModelNet40 {
         let shapes: Vec<&Shape> = match split {
             Split::Test => self.official_test.iter().collect(),
             Split::Train | Split::Validation => {
-                let mut per_category = vec![0usize; self.categories.len()];
+                // Sized by the labels present, so a hand-made dataset cannot index out of range.
+                let n_labels = self
+                    .official_train
+                    .iter()
+                    .map(|s| s.label + 1)
+                    .max()
+                    .unwrap_or(0);
+                let mut per_category = vec![0usize; n_labels];
                 for s in &self.official_train {
                     per_category[s.label] += 1;
                 }
-                let mut seen = vec![0usize; self.categories.len()];
+                let mut seen = vec![0usize; n_labels];
                 self.official_train
                     .iter()
                     .filter(|s| {
@@ -298,6 +305,12 @@ fn load_hdf5_file(path: &Path, n_categories: usize) -> Result<Vec<Shape>> {
         .file_name()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
+    if n == 0 {
+        return Err(dataset_error(
+            path,
+            "HDF5 dataset `data` has shapes of 0 points",
+        ));
+    }
     let n = n as usize;
     let mut shapes = Vec::with_capacity(b as usize);
     for (row, (&label, rows)) in labels.iter().zip(data.chunks_exact(n * 3)).enumerate() {

@@ -91,6 +91,31 @@ impl Default for PairConfig {
     }
 }
 
+impl PairConfig {
+    /// Checks every field: `num_points` ≥ 2, `keep_ratio` in (0, 1], the others finite and ≥ 0.
+    pub fn validate(&self) -> Result<()> {
+        let invalid =
+            |field: &'static str, value: f64| Err(DataError::InvalidConfig { field, value });
+        if self.num_points < 2 {
+            return invalid("num_points", self.num_points as f64);
+        }
+        if !(self.keep_ratio > 0.0 && self.keep_ratio <= 1.0) {
+            return invalid("keep_ratio", self.keep_ratio);
+        }
+        for (field, value) in [
+            ("max_angle_deg", self.max_angle_deg),
+            ("max_translation", self.max_translation),
+            ("noise_std", self.noise_std),
+            ("noise_clip", self.noise_clip),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return invalid(field, value);
+            }
+        }
+        Ok(())
+    }
+}
+
 /// One registration problem with its ground truth.
 #[derive(Clone, Debug)]
 pub struct Pair {
@@ -161,6 +186,7 @@ impl PairGenerator {
         rng: &mut impl Rng,
     ) -> Result<(PointCloud, PointCloud, RigidTransform, Correspondence)> {
         let c = &self.config;
+        c.validate()?;
         if points.len() < 2 {
             return Err(DataError::Geom(rgm_geom::GeomError::TooFewPoints {
                 op: "pair_from_points",
@@ -191,8 +217,9 @@ impl PairGenerator {
             }
         }
         if self.setting != Setting::Clean {
-            jitter(&mut source.points, c.noise_std, c.noise_clip, rng);
-            jitter(&mut target.points, c.noise_std, c.noise_clip, rng);
+            let noise = Normal::new(0.0, c.noise_std).expect("validated: finite, non-negative");
+            jitter(&mut source.points, &noise, c.noise_clip, rng);
+            jitter(&mut target.points, &noise, c.noise_clip, rng);
         }
         for (cloud, origin) in [
             (&mut target, &mut target_origin),
@@ -260,14 +287,12 @@ pub fn crop_indices(
         .collect()
 }
 
-/// Adds N(0, `std`²) noise clipped to ±`clip` to every coordinate, point by point, x then y
+/// Adds `noise` (N(0, σ²)) clipped to ±`clip` to every coordinate, point by point, x then y
 /// then z.
-pub fn jitter(points: &mut [Point3<f64>], std: f64, clip: f64, rng: &mut impl Rng) {
-    let normal = Normal::new(0.0, std)
-        .unwrap_or_else(|_| Normal::new(0.0, 0.0).expect("zero deviation is valid"));
+pub fn jitter(points: &mut [Point3<f64>], noise: &Normal<f64>, clip: f64, rng: &mut impl Rng) {
     for p in points {
         for v in p.coords.iter_mut() {
-            *v += normal.sample(rng).clamp(-clip, clip);
+            *v += noise.sample(rng).clamp(-clip, clip);
         }
     }
 }
@@ -320,14 +345,15 @@ mod tests {
     #[test]
     fn jitter_is_clipped_and_has_the_right_spread() {
         let mut points = vec![Point3::origin(); 20_000];
-        jitter(&mut points, 0.01, 0.05, &mut StdRng::seed_from_u64(3));
+        let noise = Normal::new(0.0, 0.01).unwrap();
+        jitter(&mut points, &noise, 0.05, &mut StdRng::seed_from_u64(3));
         let values: Vec<f64> = points.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
         assert!(values.iter().all(|v| v.abs() <= 0.05));
         let std = (values.iter().map(|v| v * v).sum::<f64>() / values.len() as f64).sqrt();
         assert!((std - 0.01).abs() < 2e-4, "{std}");
         // With a tiny clip every value is clipped.
         let mut points = vec![Point3::origin(); 100];
-        jitter(&mut points, 0.01, 1e-9, &mut StdRng::seed_from_u64(4));
+        jitter(&mut points, &noise, 1e-9, &mut StdRng::seed_from_u64(4));
         assert!(points
             .iter()
             .all(|p| p.coords.iter().all(|v| v.abs() == 1e-9)));
@@ -434,6 +460,50 @@ mod tests {
         assert!(generator
             .pair_from_points(&tiny, &mut StdRng::seed_from_u64(0))
             .is_err());
+    }
+
+    #[test]
+    fn invalid_configs_are_named() {
+        let cloud = scattered(10, 11);
+        for (config, message) in [
+            (
+                PairConfig {
+                    keep_ratio: 0.0,
+                    ..Default::default()
+                },
+                "pair config: keep_ratio = 0 is out of range",
+            ),
+            (
+                PairConfig {
+                    noise_std: -0.01,
+                    ..Default::default()
+                },
+                "pair config: noise_std = -0.01 is out of range",
+            ),
+            (
+                PairConfig {
+                    max_angle_deg: f64::NAN,
+                    ..Default::default()
+                },
+                "pair config: max_angle_deg = NaN is out of range",
+            ),
+            (
+                PairConfig {
+                    num_points: 1,
+                    ..Default::default()
+                },
+                "pair config: num_points = 1 is out of range",
+            ),
+        ] {
+            let generator = PairGenerator {
+                setting: Setting::Partial,
+                config,
+            };
+            let err = generator
+                .pair_from_points(&cloud, &mut StdRng::seed_from_u64(0))
+                .unwrap_err();
+            assert_eq!(err.to_string(), message);
+        }
     }
 
     #[test]
