@@ -1,12 +1,13 @@
 //! rgm-match at the paper's sizes (N = M = 717 partial, 1,024 full), in f32 as the model runs:
 //! Sinkhorn forward and backward in both forms, and the linear assignment (ours against
-//! pathfinding's Kuhn–Munkres on the same scores scaled to integers).
+//! pathfinding's Kuhn–Munkres on the same scores scaled to integers), on uniform scores and on a
+//! Sinkhorn output close to a permutation (what the model produces).
 //!
 //! Run: `cargo bench -p rgm-benches --bench matching -- --warm-up-time 1 --measurement-time 3`
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use ndarray::Array2;
-use rand::{rngs::StdRng, Rng, SeedableRng};
+use rand::{rngs::StdRng, seq::SliceRandom, Rng, SeedableRng};
 use rgm_benches::SIZES;
 use rgm_match::{
     max_score_assignment, sinkhorn_backward, sinkhorn_forward, SinkhornCache, SinkhornConfig,
@@ -48,23 +49,45 @@ fn sinkhorn(c: &mut Criterion) {
     group.finish();
 }
 
+/// A Sinkhorn output like a trained model's: log-affinity 4 on a random permutation, noise in ±1.
+fn near_permutation(n: usize, seed: u64) -> Array2<f64> {
+    let mut perm: Vec<usize> = (0..n).collect();
+    perm.shuffle(&mut StdRng::seed_from_u64(seed));
+    let mut s = uniform(n, -1.0, 1.0, seed); // (N, N)
+    for (i, &j) in perm.iter().enumerate() {
+        s[[i, j]] += 4.0;
+    }
+    let cfg = SinkhornConfig::default();
+    let mut c = Array2::zeros((n, n)); // (N, N)
+    sinkhorn_forward(
+        c.view_mut(),
+        s.view(),
+        &cfg,
+        &mut SinkhornCache::new(n, n, &cfg),
+    )
+    .unwrap();
+    c
+}
+
 fn assignment(c: &mut Criterion) {
     let mut group = c.benchmark_group("assignment");
     group.sample_size(10);
     for n in SIZES {
-        let scores = uniform(n, 0.0, 1.0, 3); // (N, N)
-        group.bench_function(BenchmarkId::new("max_score_assignment", n), |b| {
-            b.iter(|| max_score_assignment(scores.view()).unwrap())
-        });
-        let ints = pathfinding::matrix::Matrix::from_vec(
-            n,
-            n,
-            scores.iter().map(|&v| (v * 1e6) as i64).collect(),
-        )
-        .unwrap();
-        group.bench_function(BenchmarkId::new("pathfinding_kuhn_munkres", n), |b| {
-            b.iter(|| pathfinding::kuhn_munkres::kuhn_munkres(&ints))
-        });
+        for (kind, scores) in [
+            ("uniform", uniform(n, 0.0, 1.0, 3)),
+            ("sinkhorn", near_permutation(n, 4)),
+        ] {
+            group.bench_function(
+                BenchmarkId::new(format!("max_score_assignment_{kind}"), n),
+                |b| b.iter(|| max_score_assignment(scores.view()).unwrap()),
+            );
+            let ints = scores.iter().map(|&v| (v * 1e6) as i64).collect();
+            let ints = pathfinding::matrix::Matrix::from_vec(n, n, ints).unwrap();
+            group.bench_function(
+                BenchmarkId::new(format!("pathfinding_kuhn_munkres_{kind}"), n),
+                |b| b.iter(|| pathfinding::kuhn_munkres::kuhn_munkres(&ints)),
+            );
+        }
     }
     group.finish();
 }

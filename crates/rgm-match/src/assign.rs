@@ -77,68 +77,76 @@ pub fn max_score_assignment(scores: ArrayView2<'_, f64>, // (N, M)
     Ok(pairs)
 }
 
-/// The column assigned to each row in a minimum-cost assignment of a wide matrix (rows ≤ columns):
-/// shortest augmenting paths with row and column potentials (Kuhn–Munkres in the
-/// Jonker–Volgenant form), one Dijkstra-like search per row, O(N²·M).
+/// The column assigned to each row in a minimum-cost assignment of a wide matrix (rows ≤ columns).
+///
+/// Shortest augmenting paths with row and column potentials (the Jonker–Volgenant form of
+/// Kuhn–Munkres, as in Crouse 2016 and SciPy's `linear_sum_assignment`): one Dijkstra search per
+/// row over the reduced costs, which scans only the columns not yet reached and prefers a free
+/// column on ties, then one potential update over the reached rows and columns. O(N²·M) worst case.
 fn min_cost_assignment(cost: ArrayView2<'_, f64>, // (N, M) with N ≤ M
 ) -> Vec<usize> {
     let (n, m) = cost.dim();
     debug_assert!(n <= m);
-    // Column index m is a virtual start column; row_of_col[m] holds the row being inserted.
     const FREE: usize = usize::MAX;
+    let cost = cost.as_standard_layout(); // rows contiguous
     let mut row_pot = vec![0.0; n]; // (N)
-    let mut col_pot = vec![0.0; m + 1]; // (M+1)
-    let mut row_of_col = vec![FREE; m + 1]; // (M+1)
-    let mut prev_col = vec![m; m + 1]; // (M+1) the path's previous column
-    let mut min_slack = vec![0.0; m + 1]; // (M+1) shortest reduced distance to each column
-    let mut visited = vec![false; m + 1]; // (M+1)
-    for row in 0..n {
-        row_of_col[m] = row;
-        min_slack.fill(f64::INFINITY);
-        visited.fill(false);
-        let mut col = m;
-        // Grow the tree until it reaches a free column.
-        while row_of_col[col] != FREE {
-            visited[col] = true;
-            let i = row_of_col[col];
-            let mut delta = f64::INFINITY;
-            let mut next = m;
-            for j in 0..m {
-                if visited[j] {
-                    continue;
+    let mut col_pot = vec![0.0; m]; // (M)
+    let mut col_of_row = vec![FREE; n]; // (N)
+    let mut row_of_col = vec![FREE; m]; // (M)
+    let mut path = vec![0usize; m]; // (M) the row from which each column was reached
+    let mut dist = vec![0.0; m]; // (M) shortest reduced path cost to each column
+    let mut remaining = Vec::with_capacity(m); // columns not yet reached
+    let mut row_seen = vec![false; n]; // (N)
+    let mut col_seen = vec![false; m]; // (M)
+    for start in 0..n {
+        dist.fill(f64::INFINITY);
+        row_seen.fill(false);
+        col_seen.fill(false);
+        remaining.clear();
+        remaining.extend((0..m).rev());
+        // Dijkstra from `start` until a free column is reached.
+        let (mut i, mut reached) = (start, 0.0);
+        let sink = loop {
+            row_seen[i] = true;
+            let row = cost.row(i);
+            let (mut lowest, mut best) = (f64::INFINITY, 0);
+            for (k, &j) in remaining.iter().enumerate() {
+                let d = reached + row[j] - row_pot[i] - col_pot[j];
+                if d < dist[j] {
+                    path[j] = i;
+                    dist[j] = d;
                 }
-                let reduced = cost[[i, j]] - row_pot[i] - col_pot[j];
-                if reduced < min_slack[j] {
-                    min_slack[j] = reduced;
-                    prev_col[j] = col;
-                }
-                if min_slack[j] < delta {
-                    delta = min_slack[j];
-                    next = j;
-                }
-            }
-            // Shift the potentials so the tree's edges stay tight and `next` becomes reachable.
-            for j in 0..=m {
-                if visited[j] {
-                    row_pot[row_of_col[j]] += delta;
-                    col_pot[j] -= delta;
-                } else {
-                    min_slack[j] -= delta;
+                if dist[j] < lowest || (dist[j] == lowest && row_of_col[j] == FREE) {
+                    lowest = dist[j];
+                    best = k;
                 }
             }
-            col = next;
+            reached = lowest;
+            let j = remaining.swap_remove(best);
+            col_seen[j] = true;
+            if row_of_col[j] == FREE {
+                break j;
+            }
+            i = row_of_col[j];
+        };
+        // Keep every reduced cost ≥ 0 and the path's edges tight.
+        row_pot[start] += reached;
+        for r in (0..n).filter(|&r| row_seen[r] && r != start) {
+            row_pot[r] += reached - dist[col_of_row[r]];
         }
-        // Flip the path back to the start column.
-        while col != m {
-            let back = prev_col[col];
-            row_of_col[col] = row_of_col[back];
-            col = back;
+        for j in (0..m).filter(|&j| col_seen[j]) {
+            col_pot[j] -= reached - dist[j];
         }
-    }
-    let mut col_of_row = vec![0; n]; // (N)
-    for (j, &i) in row_of_col[..m].iter().enumerate() {
-        if i != FREE {
-            col_of_row[i] = j;
+        // Flip the path's assignments back to `start`.
+        let mut j = sink;
+        loop {
+            let r = path[j];
+            row_of_col[j] = r;
+            let prev = std::mem::replace(&mut col_of_row[r], j);
+            if r == start {
+                break;
+            }
+            j = prev;
         }
     }
     col_of_row

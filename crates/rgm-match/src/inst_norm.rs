@@ -84,15 +84,15 @@ impl<T: Scalar> InstNorm<T> {
         let dout_xhat_sum = Zip::from(&dout)
             .and(&inp)
             .fold(T::zero(), |acc, &g, &v| acc + g * xhat(v));
-        self.bias.grad[0] = self.bias.grad[0] + dout_sum;
-        self.weight.grad[0] = self.weight.grad[0] + dout_xhat_sum;
+        self.bias.grad[0] += dout_sum;
+        self.weight.grad[0] += dout_xhat_sum;
         let (dout_mean, dout_xhat_mean) = (dout_sum / count, dout_xhat_sum / count);
         let k = self.weight.value[0] * cache.rstd;
         Zip::from(&mut dinp)
             .and(&dout)
             .and(&inp)
             .for_each(|d, &g, &v| {
-                *d = *d + k * (g - dout_mean - xhat(v) * dout_xhat_mean);
+                *d += k * (g - dout_mean - xhat(v) * dout_xhat_mean);
             });
         Ok(())
     }

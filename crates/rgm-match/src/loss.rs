@@ -47,12 +47,12 @@ pub fn bce_backward<T: Scalar>(
     let eps = T::from_f64(GRAD_EPS);
     // Every entry as a 0: (c − 0)/max(c·(1 − c), eps)
     dc.zip_mut_with(&c, |dc, &c| {
-        *dc = *dc + scale * c / (c * (T::one() - c)).max(eps)
+        *dc += scale * c / (c * (T::one() - c)).max(eps)
     });
     // A one's entry: (c − 1) − (c − 0) = −1 in the numerator.
     for &(i, j) in gt.pairs() {
         let c = c[[i, j]];
-        dc[[i, j]] = dc[[i, j]] - scale / (c * (T::one() - c)).max(eps);
+        dc[[i, j]] -= scale / (c * (T::one() - c)).max(eps);
     }
     Ok(())
 }

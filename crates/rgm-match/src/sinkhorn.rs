@@ -198,7 +198,7 @@ fn log_forward<T: Scalar>(
             Zip::from(&mut col_sum)
                 .and(&col_max)
                 .and(&row)
-                .for_each(|sum, &mx, &v| *sum = *sum + (v + a - mx).exp());
+                .for_each(|sum, &mx, &v| *sum += (v + a - mx).exp());
         }
         Zip::from(beta.row_mut(t))
             .and(&col_max)
@@ -285,15 +285,15 @@ fn log_backward<T: Scalar>(
             let mut da = dalpha[i];
             for j in 0..m {
                 let p_db = (s_row[j] + a[i] + b[j]).exp() * dbeta[j];
-                ds_row[j] = ds_row[j] - p_db;
-                da = da - p_db;
+                ds_row[j] -= p_db;
+                da -= p_db;
             }
             // α_i = −LSE_j(S_ij + β'_j)  →  dS_ij −= P'_ij·dα_i, dβ'_j −= P'_ij·dα_i
             for j in 0..m {
                 let b_prev = if t == 0 { T::zero() } else { beta[[t - 1, j]] };
                 let p_da = (s_row[j] + a[i] + b_prev).exp() * da;
-                ds_row[j] = ds_row[j] - p_da;
-                dbeta_prev[j] = dbeta_prev[j] - p_da;
+                ds_row[j] -= p_da;
+                dbeta_prev[j] -= p_da;
             }
         }
         // α of earlier rounds feeds only its own column step; β' only this row step.
@@ -353,7 +353,7 @@ fn scaling_backward<T: Scalar>(
     Zip::from(&mut ds)
         .and(k)
         .and(&r)
-        .for_each(|ds, &k, &r| *ds = *ds - k * r);
+        .for_each(|ds, &k, &r| *ds -= k * r);
 }
 
 #[cfg(test)]
