@@ -1,0 +1,222 @@
+//! End-to-end tests of the `rgm` command: files in, transforms and tables out, clear errors.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use rgm_data::{read_point_cloud, write_point_cloud};
+use rgm_geom::euler::rotation_xyz_intrinsic;
+use rgm_geom::{Matrix4, RigidTransform, Vector3};
+
+fn rgm(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_rgm"))
+        .args(args)
+        .output()
+        .expect("the rgm binary runs")
+}
+
+fn stdout(out: &Output) -> String {
+    assert!(
+        out.status.success(),
+        "rgm failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout.clone()).expect("utf-8 output")
+}
+
+/// A fresh folder for one test's files.
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("rgm-cli-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn data_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/modelnet40_npy1024")
+}
+
+fn airplane() -> PathBuf {
+    data_dir().join("airplane/test/airplane_0627.npy")
+}
+
+/// A known pose within the protocol's range (20°, 10°, 30°; t = (0.2, −0.1, 0.3)).
+fn known_pose() -> RigidTransform {
+    let r = rotation_xyz_intrinsic(20f64.to_radians(), 10f64.to_radians(), 30f64.to_radians());
+    RigidTransform::new(r, Vector3::new(0.2, -0.1, 0.3))
+}
+
+fn parse_transform(value: &serde_json::Value) -> RigidTransform {
+    let rows = value["transform"].as_array().expect("transform rows");
+    let m = Matrix4::from_fn(|r, c| rows[r][c].as_f64().expect("a number"));
+    RigidTransform::from_matrix4(&m, 1e-6).expect("a rigid transform")
+}
+
+#[test]
+fn register_recovers_a_known_pose_as_json() {
+    let dir = scratch("register");
+    let source = read_point_cloud(airplane()).unwrap();
+    let target = source.transformed(&known_pose());
+    let (src, tgt, aligned) = (
+        dir.join("src.ply"),
+        dir.join("tgt.xyz"),
+        dir.join("aligned.npy"),
+    );
+    write_point_cloud(&src, &source).unwrap();
+    write_point_cloud(&tgt, &target).unwrap();
+    let out = rgm(&[
+        "register",
+        src.to_str().unwrap(),
+        tgt.to_str().unwrap(),
+        "--method",
+        "fgr",
+        "--json",
+        "--out",
+        aligned.to_str().unwrap(),
+    ]);
+    let value: serde_json::Value = serde_json::from_str(&stdout(&out)).expect("one JSON object");
+    assert_eq!(value["method"], "fgr");
+    assert!(value["time_ms"].as_f64().unwrap() > 0.0);
+    let found = parse_transform(&value);
+    let residual = known_pose().inverse().compose(&found);
+    assert!(
+        residual.rotation_angle_deg() < 1.0,
+        "rotation error {}°",
+        residual.rotation_angle_deg()
+    );
+    assert!(
+        residual.translation.norm() < 0.02,
+        "translation error {}",
+        residual.translation.norm()
+    );
+    // The moved source lies on the target.
+    let moved = read_point_cloud(&aligned).unwrap();
+    let worst = moved
+        .points
+        .iter()
+        .zip(&target.points)
+        .map(|(a, b)| (a - b).norm())
+        .fold(0.0, f64::max);
+    assert!(worst < 0.05, "aligned source is {worst} from the target");
+}
+
+#[test]
+fn register_prints_a_matrix_by_default() {
+    let dir = scratch("text");
+    let cloud = read_point_cloud(airplane()).unwrap();
+    let path = dir.join("same.ply");
+    write_point_cloud(&path, &cloud).unwrap();
+    let text = stdout(&rgm(&[
+        "register",
+        path.to_str().unwrap(),
+        path.to_str().unwrap(),
+        "--method",
+        "icp",
+    ]));
+    let rows: Vec<Vec<f64>> = text
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split_whitespace().map(|v| v.parse().unwrap()).collect())
+        .collect();
+    // A cloud onto itself: the identity.
+    assert_eq!(rows.len(), 4);
+    for (r, row) in rows.iter().enumerate() {
+        for (c, v) in row.iter().enumerate() {
+            assert!((v - if r == c { 1.0 } else { 0.0 }).abs() < 1e-9, "{text}");
+        }
+    }
+}
+
+#[test]
+fn bad_input_names_the_file_and_the_line() {
+    let dir = scratch("bad");
+    let bad = dir.join("bad.xyz");
+    std::fs::write(&bad, "0 0 0\n1 2 nope\n").unwrap();
+    let out = rgm(&["register", bad.to_str().unwrap(), bad.to_str().unwrap()]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("bad.xyz:2"), "{err}");
+    let missing = rgm(&["register", "/no/such/file.ply", bad.to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&missing.stderr).contains("/no/such/file.ply"));
+}
+
+#[test]
+fn eval_prints_the_metrics_table() {
+    let text = stdout(&rgm(&[
+        "eval",
+        "--method",
+        "icp",
+        "--setting",
+        "clean",
+        "--limit",
+        "3",
+        "--data",
+        data_dir().to_str().unwrap(),
+    ]));
+    let row = text
+        .lines()
+        .find(|l| l.starts_with("| icp"))
+        .expect("a row for icp");
+    let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+    assert_eq!(cells[2], "clean");
+    assert_eq!(cells[3], "3");
+}
+
+#[test]
+fn pairs_then_score_reproduces_eval() {
+    let dir = scratch("pairs");
+    let data = data_dir();
+    stdout(&rgm(&[
+        "pairs",
+        "--setting",
+        "partial",
+        "--limit",
+        "4",
+        "--out",
+        dir.to_str().unwrap(),
+        "--data",
+        data.to_str().unwrap(),
+    ]));
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("pairs.json")).unwrap()).unwrap();
+    assert_eq!(manifest["pairs"].as_array().unwrap().len(), 4);
+    // Scoring the ground truth itself: perfect rotation and translation on every pair.
+    let truth: Vec<serde_json::Value> = manifest["pairs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| serde_json::json!({"index": p["index"], "transform": p["t_target_source"], "time_ms": 0.0}))
+        .collect();
+    let file = dir.join("truth.json");
+    std::fs::write(
+        &file,
+        serde_json::json!({"method": "truth", "pairs": truth}).to_string(),
+    )
+    .unwrap();
+    let text = stdout(&rgm(&[
+        "score",
+        file.to_str().unwrap(),
+        "--pairs",
+        dir.to_str().unwrap(),
+    ]));
+    let row = text
+        .lines()
+        .find(|l| l.starts_with("| truth"))
+        .expect("a row for truth");
+    let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+    assert_eq!(cells[2], "partial");
+    assert!(
+        cells[4].parse::<f64>().unwrap() < 1e-3,
+        "MIE(R) of the truth: {row}"
+    );
+    assert_eq!(cells[9], "100.00%");
+}
+
+#[test]
+fn eval_without_data_says_how_to_give_it() {
+    let out = Command::new(env!("CARGO_BIN_EXE_rgm"))
+        .args(["eval", "--method", "icp"])
+        .env_remove("RGM_DATA")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--data"));
+}
