@@ -108,7 +108,8 @@ impl<T: Scalar> Parameters<T> for InstNorm<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ndarray::{array, Array2, ArrayD};
+    use crate::reference;
+    use ndarray::{Array2, ArrayD};
     use rgm_nn::gradcheck::{assert_gradients, ix2, uniform};
 
     fn layer(gamma: f64, beta: f64) -> InstNorm<f64> {
@@ -118,39 +119,17 @@ mod tests {
         norm
     }
 
-    /// Values from `tools/reference.py` (numpy, biased variance, eps 1e-5).
     #[test]
     fn forward_matches_reference() {
-        let s = array![
-            [0.5, -1.0, 2.0, 0.0],
-            [1.5, 0.25, -0.5, 1.0],
-            [-2.0, 0.75, 0.3, -0.4]
-        ];
-        let expected = array![
-            [
-                0.1799528769160832,
-                -1.9698115076643323,
-                2.329717261496499,
-                -0.5366352512773888
-            ],
-            [
-                1.613129133303027,
-                -0.17834118718065278,
-                -1.2532233794708605,
-                0.8965410051095553
-            ],
-            [
-                -3.4029877640512765,
-                0.5382469410128191,
-                -0.10668237436130559,
-                -1.1099057538321662
-            ]
-        ];
         let mut out = Array2::zeros((3, 4));
         layer(1.5, -0.25)
-            .forward(out.view_mut(), s.view(), &mut InstNormCache::default())
+            .forward(
+                out.view_mut(),
+                reference::s().view(),
+                &mut InstNormCache::default(),
+            )
             .unwrap();
-        assert!(out.abs_diff_eq(&expected, 1e-14), "{out}");
+        assert!(out.abs_diff_eq(&reference::inst_norm(), 1e-14), "{out}");
     }
 
     #[test]

@@ -21,6 +21,9 @@ pub mod loss;
 pub mod sinkhorn;
 pub mod var1;
 
+#[cfg(test)]
+mod reference;
+
 pub use affinity::{Affinity, AffinityCache, AffinityConfig};
 pub use assign::{hard_match, max_score_assignment, select_inliers, MatchConfig};
 pub use correspondences::Correspondences;

@@ -359,6 +359,7 @@ fn scaling_backward<T: Scalar>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::reference;
     use ndarray::{array, ArrayD};
     use rgm_nn::gradcheck::{assert_gradients, ix2, uniform};
 
@@ -379,50 +380,18 @@ mod tests {
         (c, cache)
     }
 
-    fn pinned_input() -> Array2<f64> {
-        array![
-            [0.5, -1.0, 2.0, 0.0],
-            [1.5, 0.25, -0.5, 1.0],
-            [-2.0, 0.75, 0.3, -0.4]
-        ]
-    }
-
     const BOTH: [SinkhornForm; 2] = [SinkhornForm::Log, SinkhornForm::Scaling];
 
-    /// Values from `tools/reference.py`: the spec's padded matrix normalised in place, numpy f64.
     #[test]
     fn matches_reference_with_slack() {
-        let expected = array![
-            [
-                0.15305908124878004,
-                0.03732084300573993,
-                0.49350148601758537,
-                0.10646225288704698
-            ],
-            [
-                0.3831525522306465,
-                0.11996033950967548,
-                0.03730528814087675,
-                0.26650678664139527
-            ],
-            [
-                0.020992057401110216,
-                0.3588383873728034,
-                0.15063294028304414,
-                0.11923670531386693
-            ]
-        ];
-        let slack_column = array![0.2096562767414257, 0.19307498409486165, 0.3502998705595079];
-        let slack_row = array![
-            0.4427963091194633,
-            0.4838804301117813,
-            0.31856028555849364,
-            0.507794255157691
-        ];
+        let (slack_column, slack_row) = reference::slack_column_and_row();
         for form in BOTH {
-            let (c, cache) = run(&pinned_input(), &config(form, true));
+            let (c, cache) = run(&reference::s(), &config(form, true));
             assert_eq!(cache.form(), form);
-            assert!(c.abs_diff_eq(&expected, 1e-14), "{form:?}: {c}");
+            assert!(
+                c.abs_diff_eq(&reference::sinkhorn_slack(), 1e-14),
+                "{form:?}: {c}"
+            );
             assert!(
                 cache
                     .slack_column()
@@ -439,29 +408,12 @@ mod tests {
 
     #[test]
     fn matches_reference_without_slack() {
-        let expected = array![
-            [
-                0.3154872646362161,
-                0.06985718117204769,
-                0.7135800625866591,
-                0.23440882493649423
-            ],
-            [
-                0.6362464003092673,
-                0.18089567494293182,
-                0.0434565781601912,
-                0.47273467991978296
-            ],
-            [
-                0.04826633505451651,
-                0.7492471438850205,
-                0.24296335925314969,
-                0.29285649514372275
-            ]
-        ];
         for form in BOTH {
-            let (c, cache) = run(&pinned_input(), &config(form, false));
-            assert!(c.abs_diff_eq(&expected, 1e-14), "{form:?}: {c}");
+            let (c, cache) = run(&reference::s(), &config(form, false));
+            assert!(
+                c.abs_diff_eq(&reference::sinkhorn_plain(), 1e-14),
+                "{form:?}: {c}"
+            );
             assert_eq!(cache.slack_row(), None);
         }
     }
@@ -489,6 +441,25 @@ mod tests {
             "scaling f32 error {}",
             worst(&fast32)
         );
+    }
+
+    #[test]
+    fn scaling_form_stays_normal_at_the_bound() {
+        // |S| ≤ 22 < ln(f32::MAX)/4: every entry of C̃ is ≥ e^{−3·22}/(N·M), a normal f32.
+        let s = ix2(&uniform(&[40, 60], 8)) * 22.0;
+        let (fast, cache) = run(&s.mapv(|v| v as f32), &config(SinkhornForm::Scaling, true));
+        assert_eq!(cache.form(), SinkhornForm::Scaling);
+        assert!(
+            fast.iter().all(|v| v.is_normal()),
+            "no zero, subnormal or infinite entry"
+        );
+        let (exact, _) = run(&s, &config(SinkhornForm::Log, true));
+        let worst = fast
+            .iter()
+            .zip(&exact)
+            .map(|(&a, &b)| (f64::from(a) - b).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-6, "{worst}");
     }
 
     #[test]

@@ -1,5 +1,6 @@
-"""Pinned values for rgm-match's tests, computed from the spec's formulas (RGM.md §2.4, §3)
-literally, in float64: the padded matrix is built and its rows and columns normalised in place.
+"""Pinned values for rgm-match's tests (pasted into src/reference.rs), computed from the spec's
+formulas (RGM.md §2.4, §3) literally, in float64: the padded matrix is built and its rows and
+columns normalised in place.
 
 Run: python3 crates/rgm-match/tools/reference.py   (needs numpy)
 """
