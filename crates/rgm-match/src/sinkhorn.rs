@@ -444,6 +444,36 @@ mod tests {
     }
 
     #[test]
+    fn f32_backward_of_both_forms_tracks_f64() {
+        // The model trains in f32: both backward passes stay close to the f64 gradient.
+        let (s, dc) = (
+            ix2(&uniform(&[30, 45], 12)) * 6.0,
+            ix2(&uniform(&[30, 45], 13)),
+        );
+        let grad = |s: &Array2<f64>, form| {
+            let (c, cache) = run(s, &config(form, true));
+            let mut ds = Array2::zeros(s.dim());
+            sinkhorn_backward(ds.view_mut(), dc.view(), s.view(), c.view(), &cache).unwrap();
+            ds
+        };
+        let grad32 = |form| {
+            let (s, dc) = (s.mapv(|v| v as f32), dc.mapv(|v| v as f32));
+            let (c, cache) = run(&s, &config(form, true));
+            let mut ds = Array2::zeros(s.dim());
+            sinkhorn_backward(ds.view_mut(), dc.view(), s.view(), c.view(), &cache).unwrap();
+            ds.mapv(f64::from)
+        };
+        let exact = grad(&s, SinkhornForm::Log);
+        let scale = exact.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        for form in BOTH {
+            let worst = (&grad32(form) - &exact)
+                .iter()
+                .fold(0.0f64, |m, v| m.max(v.abs()));
+            assert!(worst < 1e-5 * scale, "{form:?}: {worst:e} vs {scale:e}");
+        }
+    }
+
+    #[test]
     fn scaling_form_stays_normal_at_the_bound() {
         // |S| ≤ 22 < ln(f32::MAX)/4: every entry of C̃ is ≥ e^{−3·22}/(N·M), a normal f32.
         let s = ix2(&uniform(&[40, 60], 8)) * 22.0;
