@@ -12,8 +12,8 @@
 
 use nalgebra::{Point3, Vector3};
 
-use crate::normals::{estimate_normals, NormalsConfig};
-use crate::KnnIndex;
+use crate::knn::{KnnIndex, Neighbourhoods};
+use crate::normals::{estimate_normals, normals_from_neighbourhoods, NormalsConfig};
 
 /// Bins per pair feature.
 const BINS: usize = 11;
@@ -84,11 +84,17 @@ fn bin(value: f64, lo: f64, width: f64) -> usize {
 }
 
 /// FPFH features of a bare cloud: normals by [`estimate_normals`], then [`compute_fpfh`],
-/// sharing one k-d tree. // (N, 33)
+/// sharing one k-d tree and, when the normals' neighbourhood fits inside FPFH's (the defaults),
+/// one neighbour search. // (N, 33)
 pub fn features(points: &[Point3<f64>], normals: &NormalsConfig, fpfh: &FpfhConfig) -> Vec<Fpfh> {
     let index = KnnIndex::new(points);
-    let normal_vectors = estimate_normals(points, &index, normals);
-    compute_fpfh(points, &normal_vectors, &index, fpfh)
+    let neighbourhoods = Neighbourhoods::hybrid(&index, points, fpfh.radius, fpfh.max_nn);
+    let normal_vectors = if normals.radius <= fpfh.radius && normals.max_nn <= fpfh.max_nn {
+        normals_from_neighbourhoods(points, &neighbourhoods, normals)
+    } else {
+        estimate_normals(points, &index, normals)
+    };
+    fpfh_from_neighbourhoods(points, &normal_vectors, &neighbourhoods)
 }
 
 /// FPFH features of `points` with unit `normals`; `index` must index `points`. // (N, 33)
@@ -98,18 +104,18 @@ pub fn compute_fpfh(
     index: &KnnIndex,
     config: &FpfhConfig,
 ) -> Vec<Fpfh> {
+    let neighbourhoods = Neighbourhoods::hybrid(index, points, config.radius, config.max_nn);
+    fpfh_from_neighbourhoods(points, normals, &neighbourhoods)
+}
+
+/// FPFH from the points' hybrid neighbourhoods (as searched, self first). // (N, 33)
+fn fpfh_from_neighbourhoods(
+    points: &[Point3<f64>],
+    normals: &[Vector3<f64>],
+    neighbourhoods: &Neighbourhoods,
+) -> Vec<Fpfh> {
     let n = points.len();
-    // Neighbourhoods, flat: point i's are neighbours[offsets[i]..offsets[i + 1]].
-    let mut offsets = Vec::with_capacity(n + 1); // (N + 1,)
-    let mut neighbours = Vec::with_capacity(n * config.max_nn.min(n)); // (ΣK,) (index, squared distance)
-    let mut found = Vec::with_capacity(config.max_nn);
-    offsets.push(0);
-    for p in points {
-        index.hybrid_squared_into(p, config.radius, config.max_nn, &mut found);
-        neighbours.extend_from_slice(&found);
-        offsets.push(neighbours.len());
-    }
-    let around = |i: usize| &neighbours[offsets[i]..offsets[i + 1]];
+    let around = |i: usize| neighbourhoods.get(i);
 
     let mut spfh = vec![[0.0; FPFH_LEN]; n]; // (N, 33)
     for (i, hist) in spfh.iter_mut().enumerate() {

@@ -264,6 +264,55 @@ impl KnnIndex {
     }
 }
 
+/// The hybrid neighbourhoods of many query points, stored flat: query q's neighbours, sorted by
+/// distance then index, with *squared* distances.
+#[derive(Clone, Debug, Default)]
+pub struct Neighbourhoods {
+    /// Query q owns `items[offsets[q]..offsets[q + 1]]`. // (Q + 1,)
+    offsets: Vec<usize>,
+    /// (index, squared distance) of every neighbour of every query. // (ΣK,)
+    items: Vec<(usize, f64)>,
+}
+
+impl Neighbourhoods {
+    /// [`KnnIndex::hybrid`] for each of `queries`.
+    pub fn hybrid(index: &KnnIndex, queries: &[Point3<f64>], radius: f64, max_nn: usize) -> Self {
+        let mut offsets = Vec::with_capacity(queries.len() + 1);
+        let mut items = Vec::with_capacity(queries.len() * max_nn.min(index.len()));
+        let mut found = Vec::with_capacity(max_nn.min(index.len()));
+        offsets.push(0);
+        for q in queries {
+            index.hybrid_squared_into(q, radius, max_nn, &mut found);
+            items.extend_from_slice(&found);
+            offsets.push(items.len());
+        }
+        Self { offsets, items }
+    }
+
+    /// Number of queries.
+    pub fn len(&self) -> usize {
+        self.offsets.len().saturating_sub(1)
+    }
+
+    /// True when there is no query.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Query `q`'s neighbours: (index, squared distance), sorted.
+    pub fn get(&self, q: usize) -> &[(usize, f64)] {
+        &self.items[self.offsets[q]..self.offsets[q + 1]]
+    }
+
+    /// Query `q`'s neighbours restricted to a smaller hybrid search: the first at most `max_nn`
+    /// strictly within `radius`. Exact when `radius` and `max_nn` do not exceed those searched.
+    pub fn get_within(&self, q: usize, radius: f64, max_nn: usize) -> &[(usize, f64)] {
+        let all = self.get(q);
+        let r2 = radius * radius;
+        &all[..all.partition_point(|&(_, d2)| d2 < r2).min(max_nn)]
+    }
+}
+
 /// Pushes onto a max-heap ordered by [`is_before`].
 fn heap_push(heap: &mut Vec<(usize, f64)>, item: (usize, f64)) {
     heap.push(item);

@@ -27,7 +27,7 @@ mod testing;
 pub use cloud::PointCloud;
 pub use error::{GeomError, Result};
 pub use kabsch::kabsch;
-pub use knn::{knn_graph, KnnIndex};
+pub use knn::{knn_graph, KnnIndex, Neighbourhoods};
 pub use metrics::{MetricsSummary, PairMetrics};
 pub use registration::RegistrationResult;
 pub use transform::RigidTransform;

@@ -9,7 +9,7 @@
 
 use nalgebra::{Matrix3, Point3, SymmetricEigen, Vector3};
 
-use crate::KnnIndex;
+use crate::knn::{KnnIndex, Neighbourhoods};
 
 /// Settings of [`estimate_normals`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -35,14 +35,25 @@ pub fn estimate_normals(
     index: &KnnIndex,
     config: &NormalsConfig,
 ) -> Vec<Vector3<f64>> {
+    let neighbourhoods = Neighbourhoods::hybrid(index, points, config.radius, config.max_nn);
+    normals_from_neighbourhoods(points, &neighbourhoods, config)
+}
+
+/// [`estimate_normals`] from precomputed hybrid neighbourhoods of `points` in `points`, searched
+/// with a radius and max_nn at least those of `config` (e.g. FPFH's, to search only once). // (N,)
+pub fn normals_from_neighbourhoods(
+    points: &[Point3<f64>],
+    neighbourhoods: &Neighbourhoods,
+    config: &NormalsConfig,
+) -> Vec<Vector3<f64>> {
     let n = points.len().max(1) as f64;
     let centroid: Vector3<f64> = points.iter().map(|p| p.coords).sum::<Vector3<f64>>() / n;
-    let mut neighbours = Vec::with_capacity(config.max_nn); // (K,) (index, squared distance)
     points
         .iter()
-        .map(|p| {
-            index.hybrid_squared_into(p, config.radius, config.max_nn, &mut neighbours);
-            let normal = pca_normal(points, &neighbours).unwrap_or_else(Vector3::z);
+        .enumerate()
+        .map(|(i, p)| {
+            let around = neighbourhoods.get_within(i, config.radius, config.max_nn);
+            let normal = pca_normal(points, around).unwrap_or_else(Vector3::z);
             if normal.dot(&(p.coords - centroid)) < 0.0 {
                 -normal
             } else {

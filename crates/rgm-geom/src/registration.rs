@@ -98,7 +98,7 @@ mod tests {
     use crate::testing::airplane;
     use crate::{fgr, icp, PointCloud, Result};
     use nalgebra::{Matrix3, Vector3};
-    use rand::{rngs::StdRng, Rng, SeedableRng};
+    use rand::{rngs::StdRng, SeedableRng};
     use rand_distr::{Distribution, Normal};
 
     /// The cloud moved by `pose`, with the protocol's jitter (σ 0.01 clipped at 0.05) and its
