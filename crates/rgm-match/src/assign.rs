@@ -81,8 +81,9 @@ pub fn max_score_assignment(scores: ArrayView2<'_, f64>, // (N, M)
 ///
 /// Shortest augmenting paths with row and column potentials (the Jonker–Volgenant form of
 /// Kuhn–Munkres, as in Crouse 2016 and SciPy's `linear_sum_assignment`): one Dijkstra search per
-/// row over the reduced costs, which scans only the columns not yet reached and prefers a free
-/// column on ties, then one potential update over the reached rows and columns. O(N²·M) worst case.
+/// row left free by a greedy warm start, over the reduced costs, scanning only the columns not yet
+/// reached and preferring a free column on ties, then one potential update over the reached rows
+/// and columns. O(N²·M) worst case.
 fn min_cost_assignment(cost: ArrayView2<'_, f64>, // (N, M) with N ≤ M
 ) -> Vec<usize> {
     let (n, m) = cost.dim();
@@ -98,7 +99,25 @@ fn min_cost_assignment(cost: ArrayView2<'_, f64>, // (N, M) with N ≤ M
     let mut remaining = Vec::with_capacity(m); // columns not yet reached
     let mut row_seen = vec![false; n]; // (N)
     let mut col_seen = vec![false; m]; // (M)
+                                       // Warm start: u_i = min_j cost_ij with v = 0 is dual feasible (and keeps free columns at 0,
+                                       // as the rectangular case needs); each row takes its cheapest column if still free (a tight
+                                       // edge). Near-permutation scores leave few rows for the searches below.
+    for (i, row) in cost.outer_iter().enumerate() {
+        let (j, &min) =
+            row.iter().enumerate().fold(
+                (0, &f64::INFINITY),
+                |best, e| if e.1 < best.1 { e } else { best },
+            );
+        row_pot[i] = min;
+        if row_of_col[j] == FREE {
+            row_of_col[j] = i;
+            col_of_row[i] = j;
+        }
+    }
     for start in 0..n {
+        if col_of_row[start] != FREE {
+            continue;
+        }
         dist.fill(f64::INFINITY);
         row_seen.fill(false);
         col_seen.fill(false);
