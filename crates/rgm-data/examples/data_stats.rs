@@ -2,6 +2,7 @@
 //! `.npy` tree: the numbers of `docs/data.md`.
 //!
 //! `cargo run --release -p rgm-data --example data_stats -- ../shared/data/modelnet40_npy1024 [PAIRS]`
+//! (a folder of the HDF5 release `modelnet40_ply_hdf5_2048` works too).
 
 use std::time::Instant;
 
@@ -10,7 +11,13 @@ use rgm_data::{ModelNet40, PairGenerator, Setting, Split};
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dir = std::env::args().nth(1).ok_or("usage: data_stats DIR")?;
     let start = Instant::now();
-    let data = ModelNet40::open(&dir)?;
+    // The HDF5 release has `shape_names.txt`; the `.npy` tree `modelnet40_shape_names.txt`.
+    let hdf5 = std::path::Path::new(&dir).join("shape_names.txt").exists();
+    let data = if hdf5 {
+        ModelNet40::open_hdf5(&dir)?
+    } else {
+        ModelNet40::open(&dir)?
+    };
     let load_s = start.elapsed().as_secs_f64();
     println!(
         "loaded {} shapes ({} official train, {} official test, {} categories) in {load_s:.2} s on {} threads",
