@@ -16,6 +16,12 @@ pub fn uniform(shape: &[usize], seed: u64) -> ArrayD<f64> {
     ArrayD::from_shape_simple_fn(IxDyn(shape), || rng.gen_range(-1.0..1.0))
 }
 
+/// An op's forward as the check calls it: inputs → output.
+pub type ForwardFn<'a> = dyn FnMut(&[ArrayD<f64>]) -> ArrayD<f64> + 'a;
+
+/// An op's backward as the check calls it: (inputs, dout) → one gradient per input.
+pub type BackwardFn<'a> = dyn FnMut(&[ArrayD<f64>], &ArrayD<f64>) -> Vec<ArrayD<f64>> + 'a;
+
 /// The 1-D array held by `a` (panics if `a` is not 1-D: test inputs only).
 pub fn ix1(a: &ArrayD<f64>) -> Array1<f64> {
     a.clone()
@@ -43,8 +49,8 @@ pub fn ix3(a: &ArrayD<f64>) -> Array3<f64> {
 /// shape or when a numeric gradient is identically zero (the check would prove nothing).
 pub fn relative_errors(
     inputs: &[ArrayD<f64>],
-    forward: &mut dyn FnMut(&[ArrayD<f64>]) -> ArrayD<f64>,
-    backward: &mut dyn FnMut(&[ArrayD<f64>], &ArrayD<f64>) -> Vec<ArrayD<f64>>,
+    forward: &mut ForwardFn<'_>,
+    backward: &mut BackwardFn<'_>,
 ) -> Result<Vec<f64>, String> {
     let out = forward(inputs);
     let r = uniform(out.shape(), 0x5eed); // dL/dout
@@ -94,8 +100,8 @@ pub fn assert_gradients(
     what: &str,
     tol: f64,
     inputs: &[ArrayD<f64>],
-    forward: &mut dyn FnMut(&[ArrayD<f64>]) -> ArrayD<f64>,
-    backward: &mut dyn FnMut(&[ArrayD<f64>], &ArrayD<f64>) -> Vec<ArrayD<f64>>,
+    forward: &mut ForwardFn<'_>,
+    backward: &mut BackwardFn<'_>,
 ) {
     let errors =
         relative_errors(inputs, forward, backward).unwrap_or_else(|e| panic!("{what}: {e}"));
@@ -116,8 +122,10 @@ mod tests {
     fn catches_a_wrong_gradient() {
         let x = uniform(&[3, 2], 1);
         let mut fwd = |i: &[ArrayD<f64>]| i[0].mapv(|v| v * v);
-        let right =
-            relative_errors(&[x.clone()], &mut fwd, &mut |i, d| vec![&i[0] * 2.0 * d]).unwrap();
+        let right = relative_errors(std::slice::from_ref(&x), &mut fwd, &mut |i, d| {
+            vec![&i[0] * 2.0 * d]
+        })
+        .unwrap();
         assert!(right[0] < 1e-8, "{right:?}");
         let wrong = relative_errors(&[x], &mut fwd, &mut |i, d| vec![&i[0] * 3.0 * d]).unwrap();
         assert!(wrong[0] > 0.4, "{wrong:?}");

@@ -9,6 +9,12 @@ use std::any::TypeId;
 use std::collections::HashMap;
 use std::path::Path;
 
+/// Tensors by name, as read from a file.
+pub type Tensors<T> = HashMap<String, ArrayD<T>>;
+
+/// Named views of tensors, as written to a file.
+pub type NamedViews<'a, T> = Vec<(String, ArrayViewD<'a, T>)>;
+
 fn dtype_of<T: Scalar>() -> Dtype {
     if TypeId::of::<T>() == TypeId::of::<f32>() {
         Dtype::F32
@@ -58,9 +64,7 @@ pub fn write_tensors<T: Scalar>(
 }
 
 /// Reads every tensor of a safetensors file (F32 or F64, converted to `T`) and its metadata.
-pub fn read_tensors<T: Scalar>(
-    path: &Path,
-) -> Result<(HashMap<String, ArrayD<T>>, HashMap<String, String>)> {
+pub fn read_tensors<T: Scalar>(path: &Path) -> Result<(Tensors<T>, HashMap<String, String>)> {
     let buffer = std::fs::read(path).map_err(|source| NnError::Io {
         path: path.to_path_buf(),
         source,

@@ -1,10 +1,10 @@
 //! Optimisers with PyTorch's update rules (SGD with momentum, Adam, L2 weight decay), the
 //! multi-step learning-rate schedule, and their state in safetensors files for resuming.
 
-use crate::io::{read_tensors, write_tensors};
+use crate::io::{read_tensors, write_tensors, NamedViews};
 use crate::param::ParamViewMut;
 use crate::{NnError, Parameters, Result, Scalar};
-use ndarray::{ArrayD, ArrayViewD, Zip};
+use ndarray::{ArrayD, Zip};
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -68,7 +68,7 @@ impl<T: Scalar> Slots<T> {
     }
 
     /// The state as `kind.parameter_name` tensors, and the metadata entry listing the order.
-    fn named(&self) -> (Vec<(String, ArrayViewD<'_, T>)>, (String, String)) {
+    fn named(&self) -> (NamedViews<'_, T>, (String, String)) {
         let mut out = Vec::new();
         for (name, ts) in self.names.iter().zip(&self.tensors) {
             for (kind, t) in self.kinds.iter().zip(ts) {
@@ -150,7 +150,7 @@ impl<T: Scalar> Sgd<T> {
                 .and(&p.grad)
                 .for_each(|v, w, &g| {
                     *v = mu * *v + g + wd * *w;
-                    *w = *w - lr * *v;
+                    *w -= lr * *v;
                 });
         })
     }
@@ -229,7 +229,7 @@ impl<T: Scalar> Adam<T> {
                     let g = g + wd * *w;
                     *m = b1 * *m + (T::one() - b1) * g;
                     *v = b2 * *v + (T::one() - b2) * g * g;
-                    *w = *w - step_size * *m / (v.sqrt() / sqrt_bc2 + eps);
+                    *w -= step_size * *m / (v.sqrt() / sqrt_bc2 + eps);
                 });
         })
     }

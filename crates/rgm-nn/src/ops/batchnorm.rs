@@ -87,7 +87,7 @@ impl<T: Scalar> BatchNorm<T> {
                 Zip::from(&mut *var)
                     .and(&row)
                     .and(&cache.mean)
-                    .for_each(|v, &x, &m| *v = *v + (x - m) * (x - m));
+                    .for_each(|v, &x, &m| *v += (x - m) * (x - m));
             }
             var.mapv_inplace(|s| s / rf);
             let (m, unbias) = (self.momentum, rf / T::from_f64((rows - 1) as f64));

@@ -116,10 +116,10 @@ impl<T: Scalar> LayerNorm<T> {
                 .and(&self.scale.value)
                 .for_each(|&x, &go, &a| {
                     let g = go * a;
-                    g_mean = g_mean + g;
-                    g_dot_d = g_dot_d + g * (x - mean);
+                    g_mean += g;
+                    g_dot_d += g * (x - mean);
                 });
-            g_mean = g_mean / cf;
+            g_mean /= cf;
             let coef = if std > T::zero() {
                 inv * inv * g_dot_d / (cm1 * std)
             } else {
@@ -137,8 +137,8 @@ impl<T: Scalar> LayerNorm<T> {
                 .and(&x)
                 .and(&g_out)
                 .for_each(|da, db, &x, &go| {
-                    *da = *da + go * (x - mean) * inv;
-                    *db = *db + go;
+                    *da += go * (x - mean) * inv;
+                    *db += go;
                 });
         }
         Ok(())

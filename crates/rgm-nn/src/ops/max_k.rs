@@ -2,7 +2,7 @@
 
 use crate::error::check_shape;
 use crate::{NnError, Result, Scalar};
-use ndarray::{Array2, ArrayView2, ArrayViewMut2};
+use ndarray::{Array2, ArrayView2, ArrayViewMut2, Zip};
 
 /// What [`max_k_backward`] needs: the winning neighbour of every output entry.
 #[derive(Clone, Debug, Default)]
@@ -35,13 +35,16 @@ pub fn max_k_forward<T: Scalar>(
         best.assign(&inp.row(p * k));
         arg.fill(0);
         for j in 1..k {
-            let row = inp.row(p * k + j);
-            for ((b, a), &x) in best.iter_mut().zip(arg.iter_mut()).zip(row.iter()) {
-                if x > *b {
-                    *b = x;
-                    *a = j as u32;
-                }
-            }
+            let j32 = j as u32;
+            // Branch-free selects, so the loop vectorises.
+            Zip::from(&mut best)
+                .and(&mut arg)
+                .and(inp.row(p * k + j))
+                .for_each(|b, a, &x| {
+                    let greater = x > *b;
+                    *b = if greater { x } else { *b };
+                    *a = if greater { j32 } else { *a };
+                });
         }
     }
     Ok(())
@@ -67,7 +70,7 @@ pub fn max_k_backward<T: Scalar>(
             .enumerate()
         {
             let d = &mut dinp[[p * k + a as usize, ch]];
-            *d = *d + g;
+            *d += g;
         }
     }
     Ok(())

@@ -36,7 +36,7 @@ pub fn l1_normalize_columns_forward<T: Scalar>(
     for row in inp.rows() {
         Zip::from(&mut cache.denom)
             .and(&row)
-            .for_each(|s, &x| *s = *s + x.abs());
+            .for_each(|s, &x| *s += x.abs());
     }
     cache.denom.mapv_inplace(|s| s.max(eps));
     for (mut y, x) in out.rows_mut().into_iter().zip(inp.rows()) {
@@ -89,7 +89,7 @@ pub fn l1_normalize_columns_backward<T: Scalar>(
         Zip::from(&mut dot)
             .and(&g)
             .and(&y)
-            .for_each(|s, &g, &y| *s = *s + g * y);
+            .for_each(|s, &g, &y| *s += g * y);
     }
     for ((mut d, g), x) in dinp.rows_mut().into_iter().zip(dout.rows()).zip(inp.rows()) {
         Zip::from(&mut d)
@@ -106,7 +106,7 @@ pub fn l1_normalize_columns_backward<T: Scalar>(
                     T::zero()
                 };
                 let floored = s <= eps;
-                *d = *d + if floored { g / s } else { (g - sign * dot) / s };
+                *d += if floored { g / s } else { (g - sign * dot) / s };
             });
     }
     Ok(())

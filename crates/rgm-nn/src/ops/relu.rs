@@ -30,7 +30,7 @@ pub fn relu_backward<T: Scalar, D: Dimension>(
         .and(&out)
         .for_each(|d, &g, &y| {
             if y > T::zero() {
-                *d = *d + g;
+                *d += g;
             }
         });
     Ok(())

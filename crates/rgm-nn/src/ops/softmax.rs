@@ -10,7 +10,7 @@ pub(crate) fn softmax_in_place<T: Scalar>(mut row: ArrayViewMut1<'_, T>) {
     let mut sum = T::zero();
     row.mapv_inplace(|v| {
         let e = (v - max).exp();
-        sum = sum + e;
+        sum += e;
         e
     });
     let inv = T::one() / sum;
@@ -30,7 +30,7 @@ pub(crate) fn softmax_backward_row<T: Scalar>(
     Zip::from(&mut dinp)
         .and(&dout)
         .and(&out)
-        .for_each(|d, &g, &y| *d = *d + y * (g - dot));
+        .for_each(|d, &g, &y| *d += y * (g - dot));
 }
 
 /// `out[r, j] = exp(inp[r, j]) / Σ_k exp(inp[r, k])`. `out`, `inp`: (R, C).
