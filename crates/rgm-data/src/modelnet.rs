@@ -236,58 +236,34 @@ fn read_hdf5_numbers(
                 .collect()
         };
     }
+    let unsupported = || {
+        let why = format!(
+            "HDF5 dataset `{name}` has type {:?}, not a number",
+            dataset.dtype()
+        );
+        dataset_error(path, why)
+    };
     let values: Vec<f64> = match *dataset.dtype() {
         Datatype::FloatingPoint { size: 4, .. } => read_as!(f32),
         Datatype::FloatingPoint { size: 8, .. } => read_as!(f64),
-        Datatype::FixedPoint {
-            size: 1,
-            signed: false,
-            ..
-        } => read_as!(u8),
-        Datatype::FixedPoint {
-            size: 1,
-            signed: true,
-            ..
-        } => read_as!(i8),
-        Datatype::FixedPoint {
-            size: 2,
-            signed: false,
-            ..
-        } => read_as!(u16),
-        Datatype::FixedPoint {
-            size: 2,
-            signed: true,
-            ..
-        } => read_as!(i16),
-        Datatype::FixedPoint {
-            size: 4,
-            signed: false,
-            ..
-        } => read_as!(u32),
-        Datatype::FixedPoint {
-            size: 4,
-            signed: true,
-            ..
-        } => read_as!(i32),
-        Datatype::FixedPoint {
-            size: 8,
-            signed: false,
-            ..
-        } => read_as!(u64),
-        Datatype::FixedPoint {
-            size: 8,
-            signed: true,
-            ..
-        } => read_as!(i64),
-        ref other => {
-            return Err(dataset_error(
-                path,
-                format!("HDF5 dataset `{name}` has type {other:?}, not a number"),
-            ))
-        }
+        Datatype::FixedPoint { size, signed, .. } => match (size, signed) {
+            (1, false) => read_as!(u8),
+            (1, true) => read_as!(i8),
+            (2, false) => read_as!(u16),
+            (2, true) => read_as!(i16),
+            (4, false) => read_as!(u32),
+            (4, true) => read_as!(i32),
+            (8, false) => read_as!(u64),
+            (8, true) => read_as!(i64),
+            _ => return Err(unsupported()),
+        },
+        _ => return Err(unsupported()),
     };
     Ok((dataset.shape().to_vec(), values))
 }
+
+/// Largest dataset [`read_chunked_f32_3d`] assembles itself (4 GiB of float32).
+const MAX_FAST_ELEMENTS: usize = 1 << 30;
 
 /// Fast path for chunked float32 3-D datasets (the release's `data`, stored in chunks such as
 /// (128, 128, 1)): decodes each chunk and copies its rows into place, about 3× faster than the
@@ -311,7 +287,13 @@ fn read_chunked_f32_3d(
         hdf5_reader::ByteOrder::LittleEndian => f32::from_le_bytes,
         hdf5_reader::ByteOrder::BigEndian => f32::from_be_bytes,
     };
-    let mut out = vec![0.0f32; d0 * d1 * d2]; // (d0, d1, d2)
+    // Header dimensions are not bounded by the (compressed) file size: leave huge ones to the
+    // library's read budget.
+    let total = d0.checked_mul(d1).and_then(|n| n.checked_mul(d2));
+    let Some(total) = total.filter(|&n| n <= MAX_FAST_ELEMENTS) else {
+        return Ok(None);
+    };
+    let mut out = vec![0.0f32; total]; // (d0, d1, d2)
     let mut local = Vec::new(); // (c0, c1, c2)
     for chunk in dataset.iter_chunks()? {
         let chunk = chunk?;
