@@ -3,6 +3,8 @@
 
 use rgm_geom::{KnnIndex, Point3};
 
+use crate::{DataError, Result};
+
 /// Distance under which steps 1 and 2 of [`Correspondence::rebuild`] match points.
 pub const MATCH_RADIUS: f64 = 0.05;
 /// Distance under which step 3 of [`Correspondence::rebuild`] matches the remaining points.
@@ -20,6 +22,33 @@ pub struct Correspondence {
 }
 
 impl Correspondence {
+    /// Correspondences given from outside (e.g. read from JSON), checked: every index in range,
+    /// each source and each target index at most once. The pairs are sorted by source index.
+    pub fn new(n_source: usize, n_target: usize, mut pairs: Vec<(usize, usize)>) -> Result<Self> {
+        let invalid = |why: String| Err(DataError::InvalidCorrespondence { why });
+        let mut used_source = vec![false; n_source]; // (N,)
+        let mut used_target = vec![false; n_target]; // (M,)
+        for &(i, j) in &pairs {
+            if i >= n_source || j >= n_target {
+                return invalid(format!(
+                    "pair ({i}, {j}) is outside {n_source} × {n_target}"
+                ));
+            }
+            if std::mem::replace(&mut used_source[i], true) {
+                return invalid(format!("source point {i} is matched twice"));
+            }
+            if std::mem::replace(&mut used_target[j], true) {
+                return invalid(format!("target point {j} is matched twice"));
+            }
+        }
+        pairs.sort_unstable();
+        Ok(Self {
+            n_source,
+            n_target,
+            pairs,
+        })
+    }
+
     /// The exact correspondence of two reorderings of one cloud: source point `i` is original
     /// point `source_origin[i]`, target point `j` is `target_origin[j]`; points with the same
     /// origin match.
@@ -196,6 +225,25 @@ mod tests {
         // With t1 at 0.12 the rest are 0.12 apart: no rescue.
         let c = Correspondence::rebuild(&line(&[0.0, 0.03]), &line(&[0.035, 0.12]));
         assert_eq!(c.pairs, [(1, 0)]);
+    }
+
+    #[test]
+    fn new_checks_range_and_one_to_one() {
+        let c = Correspondence::new(3, 2, vec![(2, 0), (0, 1)]).unwrap();
+        assert_eq!(c.pairs, [(0, 1), (2, 0)]);
+        let err = |pairs| Correspondence::new(3, 2, pairs).unwrap_err().to_string();
+        assert_eq!(
+            err(vec![(0, 2)]),
+            "invalid correspondence: pair (0, 2) is outside 3 × 2"
+        );
+        assert_eq!(
+            err(vec![(1, 0), (1, 1)]),
+            "invalid correspondence: source point 1 is matched twice"
+        );
+        assert_eq!(
+            err(vec![(0, 1), (2, 1)]),
+            "invalid correspondence: target point 1 is matched twice"
+        );
     }
 
     #[test]

@@ -50,6 +50,9 @@ pub enum DataError {
     /// A pair-generator setting is out of its range.
     #[error("pair config: {field} = {value} is out of range")]
     InvalidConfig { field: &'static str, value: f64 },
+    /// Correspondences that are out of range or not one-to-one.
+    #[error("invalid correspondence: {why}")]
+    InvalidCorrespondence { why: String },
     /// An index is outside a collection.
     #[error("{op}: index {index} out of range for length {len}")]
     IndexOutOfRange {
