@@ -227,9 +227,12 @@ impl<T: Scalar> Parameters<T> for MultiHeadAttention<T> {
 mod tests {
     use super::*;
     use crate::gradcheck::{assert_gradients, ix1, ix2, uniform};
-    use ndarray::{array, ArrayD};
+    use ndarray::ArrayD;
 
-    const C: usize = 4;
+    // Sizes above ndarray's BLAS cut-off (any dimension > 7), so the checks run through
+    // cblas_dgemm with the per-head column slices and transposed views.
+    const C: usize = 16;
+    const H: usize = 4;
 
     /// The layer whose tensors are `params` = (Wq, bq, Wk, Wv, bv, Wo, bo). The key bias is
     /// fixed: it adds `q·bk` to a whole row of scores, which the softmax ignores, so its
@@ -312,16 +315,13 @@ mod tests {
         let eye = ndarray::Array2::<f64>::eye(C);
         let id = || Linear::from_values(eye.clone(), Some(ndarray::Array1::zeros(C))).unwrap();
         let mha = MultiHeadAttention {
-            heads: 2,
+            heads: H,
             query: id(),
             key: id(),
             value: id(),
             output: id(),
         };
-        let (q, kv) = (
-            array![[1.0, 2.0, 3.0, 4.0], [0.0, -1.0, 5.0, 2.0]],
-            array![[0.5, -0.5, 2.0, 1.0]],
-        );
+        let (q, kv) = (ix2(&uniform(&[2, C], 310)), ix2(&uniform(&[1, C], 311)));
         let (mut out, mut cache) = (ndarray::Array2::zeros((2, C)), AttentionCache::default());
         mha.forward(out.view_mut(), q.view(), kv.view(), &mut cache)
             .unwrap();
@@ -331,10 +331,10 @@ mod tests {
 
     #[test]
     fn cross_attention_backward_matches_finite_differences() {
-        let mut inputs = vec![uniform(&[3, C], 91), uniform(&[5, C], 92)];
+        let mut inputs = vec![uniform(&[9, C], 91), uniform(&[10, C], 92)];
         inputs.extend(random_params(100));
         let run = |i: &[ArrayD<f64>]| {
-            let (mut out, mut cache) = (ndarray::Array2::zeros((3, C)), AttentionCache::default());
+            let (mut out, mut cache) = (ndarray::Array2::zeros((9, C)), AttentionCache::default());
             layer(&i[2..])
                 .forward(
                     out.view_mut(),
@@ -354,8 +354,8 @@ mod tests {
                 let (_, mut cache) = run(i);
                 let mut mha = layer(&i[2..]);
                 let (mut dq, mut dkv) = (
-                    ndarray::Array2::zeros((3, C)),
-                    ndarray::Array2::zeros((5, C)),
+                    ndarray::Array2::zeros((9, C)),
+                    ndarray::Array2::zeros((10, C)),
                 );
                 mha.backward(
                     dq.view_mut(),
@@ -375,10 +375,10 @@ mod tests {
 
     #[test]
     fn self_attention_backward_matches_finite_differences() {
-        let mut inputs = vec![uniform(&[4, C], 93)];
+        let mut inputs = vec![uniform(&[10, C], 93)];
         inputs.extend(random_params(200));
         let run = |i: &[ArrayD<f64>]| {
-            let (mut out, mut cache) = (ndarray::Array2::zeros((4, C)), AttentionCache::default());
+            let (mut out, mut cache) = (ndarray::Array2::zeros((10, C)), AttentionCache::default());
             let x = ix2(&i[0]);
             layer(&i[1..])
                 .forward(out.view_mut(), x.view(), x.view(), &mut cache)
@@ -394,7 +394,7 @@ mod tests {
                 let (_, mut cache) = run(i);
                 let mut mha = layer(&i[1..]);
                 let x = ix2(&i[0]);
-                let mut dx = ndarray::Array2::zeros((4, C));
+                let mut dx = ndarray::Array2::zeros((10, C));
                 mha.backward(
                     dx.view_mut(),
                     None,

@@ -104,15 +104,17 @@ impl<T: Scalar> BatchNorm<T> {
                 .and(&self.running_var)
                 .for_each(|r, &v| *r = T::one() / (v + self.eps).sqrt());
         }
-        for (mut y, x) in out.rows_mut().into_iter().zip(inp.rows()) {
-            Zip::from(&mut y)
-                .and(&x)
-                .and(&cache.mean)
-                .and(&cache.rstd)
-                .and(&self.weight.value)
-                .and(&self.bias.value)
-                .for_each(|y, &x, &m, &r, &g, &b| *y = g * (x - m) * r + b);
-        }
+        // y = x · scale + shift per channel, one pass over the whole matrix.
+        let scale = &self.weight.value * &cache.rstd; // (C)
+        let shift = Zip::from(&self.bias.value)
+            .and(&scale)
+            .and(&cache.mean)
+            .map_collect(|&b, &a, &m| b - a * m); // (C)
+        Zip::from(&mut out)
+            .and(&inp)
+            .and_broadcast(&scale)
+            .and_broadcast(&shift)
+            .for_each(|y, &x, &a, &b| *y = x * a + b);
         Ok(())
     }
 
@@ -171,22 +173,18 @@ impl<T: Scalar> BatchNorm<T> {
                 .and(&slope)
                 .and(&cache.mean)
                 .map_collect(|&a, &s, &b, &m| -a * s / rf - b * m); // (C)
-            for ((d, g), x) in dinp.rows_mut().into_iter().zip(dout.rows()).zip(inp.rows()) {
-                Zip::from(d)
-                    .and(&g)
-                    .and(&x)
-                    .and(&gain)
-                    .and(&slope)
-                    .and(&offset)
-                    .for_each(|d, &g, &x, &a, &b, &o| *d += a * g + b * x + o);
-            }
+            Zip::from(&mut dinp)
+                .and(&dout)
+                .and(&inp)
+                .and_broadcast(&gain)
+                .and_broadcast(&slope)
+                .and_broadcast(&offset)
+                .for_each(|d, &g, &x, &a, &b, &o| *d += a * g + b * x + o);
         } else {
-            for (d, g) in dinp.rows_mut().into_iter().zip(dout.rows()) {
-                Zip::from(d)
-                    .and(&g)
-                    .and(&gain)
-                    .for_each(|d, &g, &a| *d += a * g);
-            }
+            Zip::from(&mut dinp)
+                .and(&dout)
+                .and_broadcast(&gain)
+                .for_each(|d, &g, &a| *d += a * g);
         }
         Ok(())
     }

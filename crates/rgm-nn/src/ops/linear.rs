@@ -130,8 +130,9 @@ mod tests {
 
     #[test]
     fn backward_matches_finite_differences() {
+        // 9 rows: above ndarray's BLAS cut-off (7), so all three products run through dgemm.
         for bias in [true, false] {
-            let mut inputs = vec![uniform(&[7, 5], 1), uniform(&[3, 5], 2)];
+            let mut inputs = vec![uniform(&[9, 5], 1), uniform(&[3, 5], 2)];
             if bias {
                 inputs.push(uniform(&[3], 3));
             }
@@ -146,13 +147,13 @@ mod tests {
                 1e-6,
                 &inputs,
                 &mut |i| {
-                    let mut out = Array2::zeros((7, 3));
+                    let mut out = Array2::zeros((9, 3));
                     layer(i).forward(out.view_mut(), ix2(&i[0]).view()).unwrap();
                     out.into_dyn()
                 },
                 &mut |i, dout| {
                     let mut lin = layer(i);
-                    let mut dinp = Array2::zeros((7, 5));
+                    let mut dinp = Array2::zeros((9, 5));
                     lin.backward(dinp.view_mut(), ix2(dout).view(), ix2(&i[0]).view())
                         .unwrap();
                     let mut grads = vec![dinp.into_dyn(), lin.weight.grad.into_dyn()];

@@ -112,17 +112,18 @@ mod tests {
     #[test]
     fn backward_matches_finite_differences_through_a_transpose() {
         // out = a · bᵀ with b stored (R, Q): the gradient of b arrives through reversed axes.
+        // P = 9, R = 10 exceed ndarray's BLAS cut-off (7): dgemm sees the transposed views.
         assert_gradients(
             "matmul",
             1e-6,
-            &[uniform(&[3, 4], 41), uniform(&[5, 4], 42)],
+            &[uniform(&[9, 4], 41), uniform(&[10, 4], 42)],
             &mut |i| {
-                let mut out = Array2::zeros((3, 5));
+                let mut out = Array2::zeros((9, 10));
                 matmul_forward(out.view_mut(), ix2(&i[0]).view(), ix2(&i[1]).t()).unwrap();
                 out.into_dyn()
             },
             &mut |i, dout| {
-                let (mut da, mut db) = (Array2::zeros((3, 4)), Array2::zeros((5, 4)));
+                let (mut da, mut db) = (Array2::zeros((9, 4)), Array2::zeros((10, 4)));
                 matmul_backward(
                     da.view_mut(),
                     db.view_mut().reversed_axes(),
