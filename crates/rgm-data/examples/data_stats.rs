@@ -11,13 +11,7 @@ use rgm_data::{ModelNet40, PairGenerator, Setting, Split};
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dir = std::env::args().nth(1).ok_or("usage: data_stats DIR")?;
     let start = Instant::now();
-    // The HDF5 release has `shape_names.txt`; the `.npy` tree `modelnet40_shape_names.txt`.
-    let hdf5 = std::path::Path::new(&dir).join("shape_names.txt").exists();
-    let data = if hdf5 {
-        ModelNet40::open_hdf5(&dir)?
-    } else {
-        ModelNet40::open(&dir)?
-    };
+    let data = ModelNet40::open(&dir)?;
     let load_s = start.elapsed().as_secs_f64();
     println!(
         "loaded {} shapes ({} official train, {} official test, {} categories) in {load_s:.2} s on {} threads",

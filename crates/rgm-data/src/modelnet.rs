@@ -78,8 +78,25 @@ fn read_lines(path: &Path) -> Result<Vec<String>> {
 }
 
 impl ModelNet40 {
-    /// Loads the `.npy` tree under `dir` (with `modelnet40_shape_names.txt`), in parallel.
+    /// Loads whichever layout `dir` holds: the `.npy` tree (it has
+    /// `modelnet40_shape_names.txt`, [`Self::open_npy`]) or the HDF5 release (it has
+    /// `shape_names.txt`, [`Self::open_hdf5`]).
     pub fn open(dir: impl AsRef<Path>) -> Result<Self> {
+        let dir = dir.as_ref();
+        if dir.join("modelnet40_shape_names.txt").is_file() {
+            Self::open_npy(dir)
+        } else if dir.join("shape_names.txt").is_file() {
+            Self::open_hdf5(dir)
+        } else {
+            let why =
+                "neither a ModelNet40 .npy tree (no modelnet40_shape_names.txt) nor the HDF5 \
+                       release modelnet40_ply_hdf5_2048 (no shape_names.txt)";
+            Err(dataset_error(dir, why))
+        }
+    }
+
+    /// Loads the `.npy` tree under `dir` (with `modelnet40_shape_names.txt`), in parallel.
+    pub fn open_npy(dir: impl AsRef<Path>) -> Result<Self> {
         let dir = dir.as_ref();
         let categories = read_lines(&dir.join("modelnet40_shape_names.txt"))?;
         let load_split = |split: &str| -> Result<Vec<Shape>> {
@@ -476,7 +493,8 @@ mod tests {
 
     #[test]
     fn reads_the_hdf5_release_in_file_order() {
-        let data = ModelNet40::open_hdf5(hdf5_fixture()).unwrap();
+        // `open` recognises the layout.
+        let data = ModelNet40::open(hdf5_fixture()).unwrap();
         assert_eq!(data.categories, ["a", "b", "c", "d"]);
         let labels = |shapes: &[Shape]| shapes.iter().map(|s| s.label).collect::<Vec<_>>();
         assert_eq!(labels(&data.official_train), [0, 1, 2, 3, 0, 1, 2, 3]);
@@ -552,6 +570,13 @@ mod tests {
     #[test]
     fn missing_pieces_are_named() {
         let err = ModelNet40::open(scratch_path("mn_nowhere"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("mn_nowhere: neither a ModelNet40 .npy tree"),
+            "{err}"
+        );
+        let err = ModelNet40::open_npy(scratch_path("mn_nowhere"))
             .unwrap_err()
             .to_string();
         assert!(
