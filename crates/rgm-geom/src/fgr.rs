@@ -161,7 +161,7 @@ pub fn mutual_matches(source: &[Fpfh], target: &[Fpfh]) -> Vec<(usize, usize)> {
     let mut col_best = vec![(f64::INFINITY, usize::MAX); target.len()]; // (M,)
     for (i, a) in source.iter().enumerate() {
         for (j, b) in target.iter().enumerate() {
-            let d2: f64 = a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum();
+            let d2 = squared_distance(a, b);
             // Strict `<` while i and j ascend keeps the lowest index among ties.
             if d2 < row_best[i].0 {
                 row_best[i] = (d2, j);
@@ -177,6 +177,25 @@ pub fn mutual_matches(source: &[Fpfh], target: &[Fpfh]) -> Vec<(usize, usize)> {
         .filter(|&(i, &(_, j))| j != usize::MAX && col_best[j].1 == i)
         .map(|(i, &(_, j))| (i, j))
         .collect()
+}
+
+/// `‖a − b‖²` with four independent partial sums (a serial sum would stall on each addition).
+#[inline]
+fn squared_distance(a: &Fpfh, b: &Fpfh) -> f64 {
+    let mut acc = [0.0; 4];
+    let whole = a.len() / 4 * 4;
+    for k in (0..whole).step_by(4) {
+        for lane in 0..4 {
+            let d = a[k + lane] - b[k + lane];
+            acc[lane] += d * d;
+        }
+    }
+    let rest: f64 = a[whole..]
+        .iter()
+        .zip(&b[whole..])
+        .map(|(x, y)| (x - y) * (x - y))
+        .sum();
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + rest
 }
 
 /// The tuple test of step 3 on `matches` (source index, target index).
@@ -260,39 +279,47 @@ fn optimise(
     let mut solved = true;
     let mut iterations = 0;
     for iteration in 0..config.iteration_number {
-        let mut jtj = Matrix6::<f64>::zeros(); // (6, 6)
-        let mut jtr = Vector6::<f64>::zeros(); // (6,)
+        // Gauss–Newton on Σ l·‖r‖², r = p − (q + ω × q + t) = (p − q) + [q]ₓ ω − t, so
+        // J = [[q]ₓ, −I] and the normal equations are weighted sums over the matches:
+        // JᵀJ = [[|q|² I − q qᵀ, [q]ₓ], [−[q]ₓ, I]], Jᵀr = [r × q, −r] — Open3D's three rank-one
+        // updates per match, summed in closed form.
+        let (mut sw, mut sq, mut sr, mut srq) =
+            (0.0, Vector3::zeros(), Vector3::zeros(), Vector3::zeros());
+        let mut sqq = Matrix3::<f64>::zeros(); // (3, 3) Σ l (|q|² I − q qᵀ)
         for (pi, qi) in p.iter().zip(&q) {
             let r = pi - qi;
             let l = mu / (r.norm_squared() + mu);
             let w = l * l;
-            // Rows of ∂(p − (q + ω × q + t))/∂(ω, t) for x, y, z.
-            let rows = [
-                Vector6::new(0.0, -qi.z, qi.y, -1.0, 0.0, 0.0),
-                Vector6::new(qi.z, 0.0, -qi.x, 0.0, -1.0, 0.0),
-                Vector6::new(-qi.y, qi.x, 0.0, 0.0, 0.0, -1.0),
-            ];
-            for (jrow, residual) in rows.iter().zip(r.iter()) {
-                jtj.ger(w, jrow, jrow, 1.0);
-                jtr.axpy(w * residual, jrow, 1.0);
+            sw += w;
+            sq += w * qi;
+            sr += w * r;
+            srq += w * r.cross(qi);
+            sqq += w * (Matrix3::from_diagonal_element(qi.norm_squared()) - qi * qi.transpose());
+        }
+        let sq_cross = sq.cross_matrix();
+        let mut jtj = Matrix6::<f64>::zeros(); // (6, 6)
+        jtj.fixed_view_mut::<3, 3>(0, 0).copy_from(&sqq);
+        jtj.fixed_view_mut::<3, 3>(0, 3).copy_from(&sq_cross);
+        jtj.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-sq_cross));
+        jtj.fixed_view_mut::<3, 3>(3, 3)
+            .copy_from(&Matrix3::from_diagonal_element(sw));
+        let jtr = Vector6::new(srq.x, srq.y, srq.z, -sr.x, -sr.y, -sr.z); // (6,)
+                                                                          // A failed solve is a zero step, as Open3D's.
+        let step = jtj
+            .cholesky()
+            .map(|c| -c.solve(&jtr))
+            .filter(|x| x.iter().all(|v| v.is_finite()));
+        if let Some(x) = step {
+            let delta = RigidTransform::new(
+                rotation_xyz_extrinsic(x[0], x[1], x[2]),
+                Vector3::new(x[3], x[4], x[5]),
+            );
+            trans = delta.compose(&trans);
+            for qi in q.iter_mut() {
+                *qi = delta.rotation * *qi + delta.translation;
             }
-        }
-        let Some(cholesky) = jtj.cholesky() else {
+        } else {
             solved = false;
-            break;
-        };
-        let x = -cholesky.solve(&jtr);
-        if !x.iter().all(|v| v.is_finite()) {
-            solved = false;
-            break;
-        }
-        let delta = RigidTransform::new(
-            rotation_xyz_extrinsic(x[0], x[1], x[2]),
-            Vector3::new(x[3], x[4], x[5]),
-        );
-        trans = delta.compose(&trans);
-        for qi in q.iter_mut() {
-            *qi = delta.rotation * *qi + delta.translation;
         }
         iterations += 1;
         if config.decrease_mu && iteration % 4 == 0 && mu > config.maximum_correspondence_distance {

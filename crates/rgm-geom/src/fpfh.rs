@@ -139,20 +139,23 @@ fn fpfh_from_neighbourhoods(
         if nb.len() < 2 {
             continue;
         }
-        let mut block_sums = [0.0; 3];
+        // Σ SPFH_j / d²_j over the neighbours (a point coinciding with this one is skipped).
         for &(j, d2) in &nb[1..] {
             if d2 == 0.0 {
                 continue;
             }
-            for (c, (o, s)) in out.iter_mut().zip(&spfh[j]).enumerate() {
-                let weighted = s / d2;
-                block_sums[c / BINS] += weighted;
-                *o += weighted;
+            let weight = 1.0 / d2;
+            for (o, s) in out.iter_mut().zip(&spfh[j]) {
+                *o += s * weight;
             }
         }
-        let scales = block_sums.map(|s| if s != 0.0 { 100.0 / s } else { 0.0 });
-        for (c, (o, own)) in out.iter_mut().zip(&spfh[i]).enumerate() {
-            *o = *o * scales[c / BINS] + own;
+        // Each block rescaled to sum to 100, plus the point's own SPFH.
+        for (block, own) in out.chunks_exact_mut(BINS).zip(spfh[i].chunks_exact(BINS)) {
+            let sum: f64 = block.iter().sum();
+            let scale = if sum != 0.0 { 100.0 / sum } else { 0.0 };
+            for (o, s) in block.iter_mut().zip(own) {
+                *o = *o * scale + s;
+            }
         }
     }
     fpfh

@@ -1,0 +1,66 @@
+//! rgm-geom's hot paths at RGM's sizes (N = 717 partial, 1,024 full; K = 20): the kNN graph,
+//! weighted Kabsch, and the classical baselines ICP and FPFH + FGR on a 717-point pair.
+//!
+//! Run: `cargo bench -p rgm-benches --bench geom -- --warm-up-time 1 --measurement-time 3`
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
+use rand::{rngs::StdRng, SeedableRng};
+use rgm_benches::{unit_ball_points, SIZES};
+use rgm_geom::fpfh::{features, FpfhConfig};
+use rgm_geom::normals::NormalsConfig;
+use rgm_geom::{fgr, icp, kabsch, knn_graph, Point3, PointCloud, RigidTransform};
+
+const K: usize = 20;
+
+/// A partial-overlap pair like the protocol's: 1,024 points on an ellipsoid (semi-axes 1, 0.6,
+/// 0.3, no symmetry axis), each cloud cropped to its 717 points farthest along its own direction,
+/// the source moved by a 45°-class pose. Returns (source, target).
+fn partial_pair() -> (PointCloud, PointCloud) {
+    let shape: Vec<Point3<f64>> = unit_ball_points(1024, 7)
+        .iter()
+        .map(|p| {
+            let d = p.coords.normalize();
+            Point3::new(d.x, 0.6 * d.y, 0.3 * d.z)
+        })
+        .collect();
+    let crop = |dir: [f64; 3]| {
+        let mut by_height: Vec<(f64, Point3<f64>)> =
+            shape.iter().map(|p| (p.x * dir[0] + p.y * dir[1] + p.z * dir[2], *p)).collect();
+        by_height.sort_by(|a, b| b.0.total_cmp(&a.0));
+        PointCloud::new(by_height[..717].iter().map(|h| h.1).collect())
+    };
+    let pose = RigidTransform::random(&mut StdRng::seed_from_u64(3), 45.0, 0.5);
+    (crop([0.6, 0.8, 0.0]).transformed(&pose), crop([0.0, 0.6, 0.8]))
+}
+
+fn knn(c: &mut Criterion) {
+    let mut group = c.benchmark_group("knn_graph_k20");
+    for n in SIZES {
+        let points = unit_ball_points(n, 1);
+        group.bench_function(BenchmarkId::from_parameter(n), |b| b.iter(|| knn_graph(&points, K).unwrap()));
+    }
+    group.finish();
+}
+
+fn kabsch_717(c: &mut Criterion) {
+    let source = unit_ball_points(717, 2);
+    let pose = RigidTransform::random(&mut StdRng::seed_from_u64(4), 45.0, 0.5);
+    let target: Vec<_> = source.iter().map(|p| pose.apply(p)).collect();
+    let weights = vec![1.0; 717];
+    c.bench_function("kabsch/717", |b| b.iter(|| kabsch(&source, &target, &weights).unwrap()));
+}
+
+fn registration(c: &mut Criterion) {
+    let (source, target) = partial_pair();
+    let mut group = c.benchmark_group("registration_717");
+    group.sample_size(20);
+    group.bench_function("icp", |b| b.iter(|| icp::register(&source, &target, &icp::IcpConfig::default()).unwrap()));
+    group.bench_function("normals_fpfh_one_cloud", |b| {
+        b.iter(|| features(&source.points, &NormalsConfig::default(), &FpfhConfig::default()))
+    });
+    group.bench_function("fpfh_fgr_pair", |b| b.iter(|| fgr::register(&source, &target, &fgr::FgrConfig::default()).unwrap()));
+    group.finish();
+}
+
+criterion_group!(benches, knn, kabsch_717, registration);
+criterion_main!(benches);
