@@ -116,3 +116,24 @@ for name, make in [("SGD", lambda ps: torch.optim.SGD(ps, lr=0.1, momentum=0.9, 
         p.grad = pinned((2, 3), 41 + t)
         opt.step()
     emit(f"{name}_AFTER_3", p)
+
+# Position-wise feed-forward: w_2(relu(w_1(x))); x (5, 4), F = 6.
+x = leaf((5, 4), 50)
+w1, b1, w2, b2 = leaf((6, 4), 51), leaf((6,), 52), leaf((4, 6), 53), leaf((4,), 54)
+out = F.linear(torch.relu(F.linear(x, w1, b1)), w2, b2)
+backprop(out)
+emit("FF_OUT", out); emit("FF_DX", x.grad); emit("FF_DW1", w1.grad); emit("FF_DB1", b1.grad); emit("FF_DW2", w2.grad)
+
+# DGCNN edge features as RGM's reference builds them: rows (x[idx[n, k]], x[n]); x (4, 3), K = 3,
+# idx[n, k] = (n + 2k) % 4 (point itself first).
+x = leaf((4, 3), 60)
+idx = torch.tensor([[(n + 2 * k) % 4 for k in range(3)] for n in range(4)])
+out = torch.cat([x[idx], x[:, None, :].expand(4, 3, 3)], dim=2).reshape(12, 6)
+backprop(out)
+emit("EDGE_OUT", out); emit("EDGE_DX", x.grad)
+
+# Product with a transposed operand: a (9, 4) @ b(10, 4)^T.
+a, b = leaf((9, 4), 70), leaf((10, 4), 71)
+out = a @ b.t()
+backprop(out)
+emit("MATMUL_OUT", out); emit("MATMUL_DA", a.grad); emit("MATMUL_DB", b.grad)
