@@ -56,6 +56,7 @@ pub use ops::batchnorm::{BatchNorm, BatchNormCache};
 pub use ops::concat::{concat_backward, concat_forward};
 pub use ops::edge::{edge_features_backward, edge_features_forward};
 pub use ops::feedforward::{FeedForward, FeedForwardCache};
+pub use ops::gram::{gram_backward, gram_forward};
 pub use ops::layernorm::{LayerNorm, LayerNormCache};
 pub use ops::linear::Linear;
 pub use ops::matmul::{bmm_backward, bmm_forward, matmul_backward, matmul_forward};

@@ -6,6 +6,7 @@ pub mod batchnorm;
 pub mod concat;
 pub mod edge;
 pub mod feedforward;
+pub mod gram;
 pub mod layernorm;
 pub mod linear;
 pub mod matmul;
