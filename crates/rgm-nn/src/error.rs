@@ -58,6 +58,17 @@ pub enum NnError {
 /// Result alias of rgm-nn.
 pub type Result<T> = std::result::Result<T, NnError>;
 
+/// Checks that every named buffer in `buffers` has the shape `expected`.
+pub fn check_shapes(
+    op: &'static str,
+    expected: &[usize],
+    buffers: &[(&'static str, &[usize])],
+) -> Result<()> {
+    buffers
+        .iter()
+        .try_for_each(|(what, got)| check_shape(op, what, got, expected))
+}
+
 /// Checks that `got` equals `expected`, naming the op and the buffer otherwise.
 pub fn check_shape(
     op: &'static str,

@@ -1,7 +1,7 @@
 //! Batch normalisation of each channel over all rows (`nn.BatchNorm1d`/`2d` on RGM's layouts:
 //! rows are points × neighbours, or points, of every cloud in the batch).
 
-use crate::error::check_shape;
+use crate::error::{check_shape, check_shapes};
 use crate::param::{join_name, ParamViewMut};
 use crate::{NnError, Param, Parameters, Result, Scalar};
 use ndarray::{Array1, ArrayView2, ArrayViewMut2, ArrayViewMutD, Ix1, Zip};
@@ -132,18 +132,19 @@ impl<T: Scalar> BatchNorm<T> {
         let (rows, c) = inp.dim();
         check_shape(
             "batch_norm backward",
-            "inp",
-            inp.shape(),
-            &[rows, cache.mean.len()],
+            "cache",
+            &[cache.mean.len()],
+            &[self.channels()],
         )?;
-        check_shape(
+        check_shapes(
             "batch_norm backward",
-            "inp",
-            inp.shape(),
             &[rows, self.channels()],
+            &[
+                ("inp", inp.shape()),
+                ("dinp", dinp.shape()),
+                ("dout", dout.shape()),
+            ],
         )?;
-        check_shape("batch_norm backward", "dinp", dinp.shape(), &[rows, c])?;
-        check_shape("batch_norm backward", "dout", dout.shape(), &[rows, c])?;
         let mut sum_g = Array1::<T>::zeros(c); // (C), Σ_rows dy
         let mut sum_gx = Array1::<T>::zeros(c); // (C), Σ_rows dy x̂
         for (g, x) in dout.rows().into_iter().zip(inp.rows()) {

@@ -2,7 +2,7 @@
 //! `y = a ⊙ (x − mean) / (std + eps) + b` with the *unbiased* standard deviation and eps added to
 //! the std (not `torch.nn.LayerNorm`, which uses the biased variance inside the square root).
 
-use crate::error::check_shape;
+use crate::error::{check_shape, check_shapes};
 use crate::param::{join_name, ParamViewMut};
 use crate::{NnError, Param, Parameters, Result, Scalar};
 use ndarray::{Array1, ArrayView2, ArrayViewMut2, Ix1, Zip};
@@ -97,14 +97,15 @@ impl<T: Scalar> LayerNorm<T> {
         cache: &LayerNormCache<T>,
     ) -> Result<()> {
         let (rows, c) = inp.dim();
-        check_shape(
+        check_shapes(
             "layer_norm backward",
-            "inp",
-            inp.shape(),
             &[cache.mean.len(), self.channels()],
+            &[
+                ("inp", inp.shape()),
+                ("dinp", dinp.shape()),
+                ("dout", dout.shape()),
+            ],
         )?;
-        check_shape("layer_norm backward", "dinp", dinp.shape(), &[rows, c])?;
-        check_shape("layer_norm backward", "dout", dout.shape(), &[rows, c])?;
         let (cf, cm1) = (T::from_f64(c as f64), T::from_f64((c - 1) as f64));
         for r in 0..rows {
             let (mean, std) = (cache.mean[r], cache.std[r]);

@@ -2,7 +2,7 @@
 //! to 1, as `torch.nn.functional.normalize(x, p=1, dim=0)` (eps 1e-12) — the intra-graph
 //! convolution's adjacency normalisation (spec §2.3).
 
-use crate::error::check_shape;
+use crate::error::{check_shape, check_shapes};
 use crate::{Result, Scalar};
 use ndarray::{Array1, ArrayView2, ArrayViewMut2, Zip};
 
@@ -59,23 +59,14 @@ pub fn l1_normalize_columns_backward<T: Scalar>(
     out: ArrayView2<'_, T>,
     cache: &L1NormalizeCache<T>,
 ) -> Result<()> {
-    check_shape(
+    check_shapes(
         "l1_normalize_columns backward",
-        "out",
-        out.shape(),
         inp.shape(),
-    )?;
-    check_shape(
-        "l1_normalize_columns backward",
-        "dinp",
-        dinp.shape(),
-        inp.shape(),
-    )?;
-    check_shape(
-        "l1_normalize_columns backward",
-        "dout",
-        dout.shape(),
-        inp.shape(),
+        &[
+            ("out", out.shape()),
+            ("dinp", dinp.shape()),
+            ("dout", dout.shape()),
+        ],
     )?;
     check_shape(
         "l1_normalize_columns backward",

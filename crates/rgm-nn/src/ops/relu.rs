@@ -1,6 +1,6 @@
 //! ReLU, elementwise on any shape.
 
-use crate::error::check_shape;
+use crate::error::{check_shape, check_shapes};
 use crate::{Result, Scalar};
 use ndarray::{ArrayView, ArrayViewMut, Dimension, Zip};
 
@@ -23,8 +23,11 @@ pub fn relu_backward<T: Scalar, D: Dimension>(
     dout: ArrayView<'_, T, D>,
     out: ArrayView<'_, T, D>,
 ) -> Result<()> {
-    check_shape("relu backward", "dinp", dinp.shape(), out.shape())?;
-    check_shape("relu backward", "dout", dout.shape(), out.shape())?;
+    check_shapes(
+        "relu backward",
+        out.shape(),
+        &[("dinp", dinp.shape()), ("dout", dout.shape())],
+    )?;
     Zip::from(&mut dinp)
         .and(&dout)
         .and(&out)

@@ -1,6 +1,6 @@
 //! Softmax along each row of a score matrix.
 
-use crate::error::check_shape;
+use crate::error::{check_shape, check_shapes};
 use crate::{Result, Scalar};
 use ndarray::{ArrayView2, ArrayViewMut1, ArrayViewMut2, Zip};
 
@@ -53,8 +53,11 @@ pub fn softmax_rows_backward<T: Scalar>(
     dout: ArrayView2<'_, T>,
     out: ArrayView2<'_, T>,
 ) -> Result<()> {
-    check_shape("softmax_rows backward", "dinp", dinp.shape(), out.shape())?;
-    check_shape("softmax_rows backward", "dout", dout.shape(), out.shape())?;
+    check_shapes(
+        "softmax_rows backward",
+        out.shape(),
+        &[("dinp", dinp.shape()), ("dout", dout.shape())],
+    )?;
     for ((d, g), y) in dinp.rows_mut().into_iter().zip(dout.rows()).zip(out.rows()) {
         softmax_backward_row(d, g, y);
     }
