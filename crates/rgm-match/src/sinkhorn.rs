@@ -14,10 +14,11 @@
 //!   v_j = 1/((Kᵀ·u)_j + 1), and C̃ = K ∘ u·vᵀ — two matrix-vector products per round, no exp or
 //!   log in the loop.
 //!
-//! With the slack, 0 < u, v ≤ 1. The scaling form is used when every |S_ij| ≤ ln(T::MAX)/4
-//! (22.2 in f32, 177 in f64): then K and every product K·u·v stay normal numbers (no overflow, no
-//! denormals) for N, M up to about 10⁴; otherwise, or if a scaling vector still leaves the normal
-//! range, the log form runs instead. [`SinkhornCache::form`] says which one ran.
+//! With the slack, 0 < u, v ≤ 1. The scaling form is used when every |S_ij| ≤ L = ln(T::MAX)/4
+//! (22.2 in f32, 177 in f64): then u_i ≥ 1/(M·e^L + 1), v_j ≥ 1/(N·e^L + 1), and K and every
+//! product K·u·v ≥ e^{−3L}/(N·M) stay normal numbers (no overflow, no denormals) for N·M up to
+//! about 10⁹; otherwise, or if a scaling vector still leaves the normal range, the log form runs
+//! instead. [`SinkhornCache::form`] says which one ran.
 
 use crate::error::{check_shape, MatchError, Result};
 use ndarray::linalg::{general_mat_mul, general_mat_vec_mul};
@@ -38,7 +39,8 @@ pub enum SinkhornForm {
 pub struct SinkhornConfig {
     /// Rounds of row-then-column normalisation (spec: 20).
     pub iterations: usize,
-    /// Pad one slack row and column (spec: true). Without it the result is doubly stochastic.
+    /// Pad one slack row and column (spec: true). Without it this is plain Sinkhorn: each real
+    /// column of C̃ sums to 1 after the last round.
     pub slack: bool,
     /// The requested computation (default: scaling where safe).
     pub form: SinkhornForm,
