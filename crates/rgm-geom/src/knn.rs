@@ -72,10 +72,17 @@ impl KnnIndex {
     /// The nearest point to `query`: (index, distance); the lowest index among equally near
     /// points. An empty index answers `(usize::MAX, f64::INFINITY)`.
     pub fn nearest(&self, query: &Point3<f64>) -> (usize, f64) {
-        let mut best = Vec::with_capacity(1);
-        self.k_nearest_squared_into(query, 1, &mut best);
-        best.first()
-            .map_or((usize::MAX, f64::INFINITY), |&(i, d2)| (i, d2.sqrt()))
+        let mut best = Nearest((usize::MAX, f64::INFINITY));
+        if !self.nodes.is_empty() {
+            self.search(
+                0,
+                &[query.x, query.y, query.z],
+                0.0,
+                &mut [0.0; 3],
+                &mut best,
+            );
+        }
+        (best.0 .0, best.0 .1.sqrt())
     }
 
     /// The `k` nearest points to `query` (fewer when the index has fewer), sorted by distance,
@@ -119,14 +126,12 @@ impl KnnIndex {
         if k == 0 || self.nodes.is_empty() {
             return;
         }
-        self.best_rec(
+        self.search(
             0,
             &[query.x, query.y, query.z],
-            k,
-            r2,
             0.0,
             &mut [0.0; 3],
-            out,
+            &mut Best { k, r2, heap: out },
         );
         sort_by_distance_then_index(out);
     }
@@ -159,32 +164,21 @@ impl KnnIndex {
         out
     }
 
-    /// Keeps `heap` a max-heap (by [`is_before`]) of the `k` first points seen so far with
-    /// squared distance below `r2`. `rd` is the squared distance from `q` to the node's cell
-    /// and `off` its per-axis offsets (Arya & Mount's incremental distance).
-    #[allow(clippy::too_many_arguments)]
-    fn best_rec(
+    /// Offers every point of the subtree at `node` that could beat `found`'s bound to `found`.
+    /// `rd` is the squared distance from `q` to the node's cell and `off` its per-axis offsets
+    /// (Arya & Mount's incremental distance).
+    fn search<F: Found>(
         &self,
         node: usize,
         q: &[f64; 3],
-        k: usize,
-        r2: f64,
         rd: f64,
         off: &mut [f64; 3],
-        heap: &mut Vec<(usize, f64)>,
+        found: &mut F,
     ) {
         match self.nodes[node] {
             Node::Leaf { start, end } => {
                 for (p, i) in &self.points[start as usize..end as usize] {
-                    let candidate = (*i as usize, squared_distance(p, q));
-                    if !(candidate.1 < r2) {
-                        continue;
-                    }
-                    if heap.len() < k {
-                        heap_push(heap, candidate);
-                    } else if is_before(candidate, heap[0]) {
-                        heap_replace_top(heap, candidate);
-                    }
+                    found.offer((*i as usize, squared_distance(p, q)));
                 }
             }
             Node::Split {
@@ -200,18 +194,12 @@ impl KnnIndex {
                 } else {
                     (right, left)
                 };
-                self.best_rec(near as usize, q, k, r2, rd, off, heap);
+                self.search(near as usize, q, rd, off, found);
                 let old = off[axis];
                 let far_rd = rd - old * old + diff * diff;
-                // `<=`: a point as far as the current worst may still win on its index.
-                let visit = if heap.len() < k {
-                    far_rd < r2
-                } else {
-                    far_rd <= heap[0].1
-                };
-                if visit {
+                if found.may_improve(far_rd) {
                     off[axis] = diff;
-                    self.best_rec(far as usize, q, k, r2, far_rd, off, heap);
+                    self.search(far as usize, q, far_rd, off, found);
                     off[axis] = old;
                 }
             }
@@ -310,6 +298,59 @@ impl Neighbourhoods {
         let all = self.get(q);
         let r2 = radius * radius;
         &all[..all.partition_point(|&(_, d2)| d2 < r2).min(max_nn)]
+    }
+}
+
+/// What a tree search collects: it is offered (index, squared distance) candidates and says
+/// whether a cell at a squared distance could still hold a better one.
+trait Found {
+    fn offer(&mut self, candidate: (usize, f64));
+    fn may_improve(&self, cell_d2: f64) -> bool;
+}
+
+/// The single first point by (distance, index).
+struct Nearest((usize, f64));
+
+impl Found for Nearest {
+    #[inline]
+    fn offer(&mut self, candidate: (usize, f64)) {
+        if is_before(candidate, self.0) {
+            self.0 = candidate;
+        }
+    }
+    #[inline]
+    fn may_improve(&self, cell_d2: f64) -> bool {
+        // `<=`: a point as far as the current best may still win on its index.
+        cell_d2 <= self.0 .1
+    }
+}
+
+/// The `k` first points with squared distance below `r2`, in a max-heap by [`is_before`].
+struct Best<'a> {
+    k: usize,
+    r2: f64,
+    heap: &'a mut Vec<(usize, f64)>,
+}
+
+impl Found for Best<'_> {
+    #[inline]
+    fn offer(&mut self, candidate: (usize, f64)) {
+        if !(candidate.1 < self.r2) {
+            return;
+        }
+        if self.heap.len() < self.k {
+            heap_push(self.heap, candidate);
+        } else if is_before(candidate, self.heap[0]) {
+            heap_replace_top(self.heap, candidate);
+        }
+    }
+    #[inline]
+    fn may_improve(&self, cell_d2: f64) -> bool {
+        if self.heap.len() < self.k {
+            cell_d2 < self.r2
+        } else {
+            cell_d2 <= self.heap[0].1
+        }
     }
 }
 
