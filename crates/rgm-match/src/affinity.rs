@@ -226,6 +226,16 @@ mod tests {
     }
 
     #[test]
+    fn parameter_names_match_the_reference_state_dict() {
+        let mut aff = Affinity::<f32>::from_values(Array2::eye(2)).unwrap();
+        let mut names = vec![];
+        aff.visit_params("affinity_0", &mut |name, p| {
+            names.push((name.to_string(), p.value.shape().to_vec()))
+        });
+        assert_eq!(names, [("affinity_0.A".to_string(), vec![2, 2])]);
+    }
+
+    #[test]
     fn width_mismatch_is_an_error() {
         let aff = Affinity::<f64>::from_values(Array2::eye(3)).unwrap();
         let mut s = Array2::zeros((2, 2));

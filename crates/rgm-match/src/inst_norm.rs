@@ -133,6 +133,20 @@ mod tests {
     }
 
     #[test]
+    fn parameter_names_match_the_reference_state_dict() {
+        let mut norm = layer(1.0, 0.0);
+        let mut names = vec![];
+        norm.visit_params("InstNorm_layer_1", &mut |name, p| {
+            names.push((name.to_string(), p.value.shape().to_vec()))
+        });
+        let expected = [
+            ("InstNorm_layer_1.weight", vec![1]),
+            ("InstNorm_layer_1.bias", vec![1]),
+        ];
+        assert_eq!(names, expected.map(|(n, s)| (n.to_string(), s)));
+    }
+
+    #[test]
     fn constant_input_gives_the_shift() {
         // var = 0: eps keeps rstd finite and x̂ = 0.
         let mut out = Array2::zeros((2, 3));
