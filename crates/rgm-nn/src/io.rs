@@ -63,42 +63,58 @@ pub fn write_tensors<T: Scalar>(
     })
 }
 
-/// Reads every tensor of a safetensors file (F32 or F64, converted to `T`) and its metadata.
-pub fn read_tensors<T: Scalar>(path: &Path) -> Result<(Tensors<T>, HashMap<String, String>)> {
-    let buffer = std::fs::read(path).map_err(|source| NnError::Io {
+fn read_bytes(path: &Path) -> Result<Vec<u8>> {
+    std::fs::read(path).map_err(|source| NnError::Io {
         path: path.to_path_buf(),
         source,
-    })?;
-    let st_err = |source| NnError::Safetensors {
+    })
+}
+
+fn parse<'b>(path: &Path, buffer: &'b [u8]) -> Result<SafeTensors<'b>> {
+    SafeTensors::deserialize(buffer).map_err(|source| NnError::Safetensors {
         path: path.to_path_buf(),
         source,
+    })
+}
+
+/// The values of one F32 or F64 tensor, converted to `T`, in the file's shape.
+fn to_array<T: Scalar>(path: &Path, name: &str, view: &TensorView<'_>) -> Result<ArrayD<T>> {
+    let values: Vec<T> = match view.dtype() {
+        Dtype::F32 => view
+            .data()
+            .chunks_exact(4)
+            .map(|b| T::from_f64(f32::from_le_bytes(b.try_into().unwrap()) as f64))
+            .collect(),
+        Dtype::F64 => view
+            .data()
+            .chunks_exact(8)
+            .map(|b| T::from_f64(f64::from_le_bytes(b.try_into().unwrap())))
+            .collect(),
+        other => {
+            return Err(NnError::TensorDtype {
+                path: path.to_path_buf(),
+                name: name.to_string(),
+                dtype: format!("{other:?}"),
+            })
+        }
     };
-    let (_, header) = SafeTensors::read_metadata(&buffer).map_err(st_err)?;
+    Ok(ArrayD::from_shape_vec(IxDyn(view.shape()), values)
+        .expect("safetensors checked the byte length"))
+}
+
+/// Reads every tensor of a safetensors file (all must be F32 or F64; converted to `T`) and
+/// its metadata.
+pub fn read_tensors<T: Scalar>(path: &Path) -> Result<(Tensors<T>, HashMap<String, String>)> {
+    let buffer = read_bytes(path)?;
+    let (_, header) =
+        SafeTensors::read_metadata(&buffer).map_err(|source| NnError::Safetensors {
+            path: path.to_path_buf(),
+            source,
+        })?;
     let metadata = header.metadata().clone().unwrap_or_default();
-    let file = SafeTensors::deserialize(&buffer).map_err(st_err)?;
     let mut tensors = HashMap::new();
-    for (name, view) in file.tensors() {
-        let values: Vec<T> = match view.dtype() {
-            Dtype::F32 => view
-                .data()
-                .chunks_exact(4)
-                .map(|b| T::from_f64(f32::from_le_bytes(b.try_into().unwrap()) as f64))
-                .collect(),
-            Dtype::F64 => view
-                .data()
-                .chunks_exact(8)
-                .map(|b| T::from_f64(f64::from_le_bytes(b.try_into().unwrap())))
-                .collect(),
-            other => {
-                return Err(NnError::TensorDtype {
-                    path: path.to_path_buf(),
-                    name,
-                    dtype: format!("{other:?}"),
-                })
-            }
-        };
-        let array = ArrayD::from_shape_vec(IxDyn(view.shape()), values)
-            .expect("safetensors checked the byte length");
+    for (name, view) in parse(path, &buffer)?.tensors() {
+        let array = to_array(path, &name, &view)?;
         tensors.insert(name, array);
     }
     Ok((tensors, metadata))
@@ -119,37 +135,48 @@ pub fn save_params<T: Scalar>(path: &Path, model: &mut dyn Parameters<T>) -> Res
 
 /// Loads every parameter and buffer of `model` from `path`, checking each shape. A tensor the
 /// model lacks is an error ([`NnError::MissingTensor`]), as is a mis-shaped one
-/// ([`NnError::TensorShape`]); tensors in the file that the model does not use are ignored.
+/// ([`NnError::TensorShape`]) or one that is not F32/F64. Trailing size-1 dimensions in the file
+/// are accepted, so a PyTorch 1×1 convolution weight `(C_out, C_in, 1, 1)` loads into a
+/// [`crate::Linear`]. Tensors the model does not use (e.g. batch norm's integer
+/// `num_batches_tracked`) are ignored.
 pub fn load_params<T: Scalar>(path: &Path, model: &mut dyn Parameters<T>) -> Result<()> {
-    let (tensors, _) = read_tensors::<T>(path)?;
+    let buffer = read_bytes(path)?;
+    let file = parse(path, &buffer)?;
     let mut err = None;
     let mut fill = |name: &str, mut dst: ndarray::ArrayViewMutD<'_, T>| {
         if err.is_some() {
             return;
         }
-        match tensors.get(name) {
-            None => {
-                err = Some(NnError::MissingTensor {
-                    path: path.to_path_buf(),
-                    name: name.to_string(),
-                })
-            }
-            Some(t) if t.shape() != dst.shape() => {
-                err = Some(NnError::TensorShape {
-                    path: path.to_path_buf(),
-                    name: name.to_string(),
-                    expected: dst.shape().to_vec(),
-                    got: t.shape().to_vec(),
-                })
-            }
-            Some(t) => dst.assign(t),
+        let Ok(view) = file.tensor(name) else {
+            err = Some(NnError::MissingTensor {
+                path: path.to_path_buf(),
+                name: name.to_string(),
+            });
+            return;
+        };
+        let (got, want) = (view.shape(), dst.shape());
+        let trailing_ones = got.len() >= want.len() && got[want.len()..].iter().all(|&d| d == 1);
+        if !trailing_ones || &got[..want.len()] != want {
+            err = Some(NnError::TensorShape {
+                path: path.to_path_buf(),
+                name: name.to_string(),
+                expected: want.to_vec(),
+                got: got.to_vec(),
+            });
+            return;
+        }
+        match to_array::<T>(path, name, &view) {
+            Ok(t) => dst.assign(
+                &t.into_shape_with_order(want.to_vec())
+                    .expect("same number of values"),
+            ),
+            Err(e) => err = Some(e),
         }
     };
     model.visit_params("", &mut |name, p| fill(name, p.value));
     model.visit_buffers("", &mut |name, b| fill(name, b));
     err.map_or(Ok(()), Err)
 }
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -207,6 +234,44 @@ mod tests {
             err.to_string()
                 .ends_with("tensor \"weight\" has shape [2, 3], expected [2, 4]"),
             "{err}"
+        );
+        std::fs::remove_file(&path).unwrap();
+    }
+
+    #[test]
+    fn pytorch_layouts_load_conv_weight_and_skip_integer_counters() {
+        // What a converted PyTorch state dict holds: a (2, 3, 1, 1) conv weight and batch
+        // norm's int64 num_batches_tracked next to the float tensors.
+        let path = temp("pytorch");
+        let w: Vec<u8> = (0..6).flat_map(|v| (v as f32).to_le_bytes()).collect();
+        let count = 7i64.to_le_bytes();
+        let views = [
+            (
+                "conv.weight",
+                TensorView::new(Dtype::F32, vec![2, 3, 1, 1], &w).unwrap(),
+            ),
+            (
+                "bn.num_batches_tracked",
+                TensorView::new(Dtype::I64, vec![], &count).unwrap(),
+            ),
+        ];
+        safetensors::serialize_to_file(views, &None, &path).unwrap();
+        let mut conv = Linear::<f64>::new(3, 2, false, &mut StdRng::seed_from_u64(0));
+        struct Conv<'a>(&'a mut Linear<f64>);
+        impl Parameters<f64> for Conv<'_> {
+            fn visit_params(
+                &mut self,
+                prefix: &str,
+                f: &mut dyn FnMut(&str, crate::param::ParamViewMut<'_, f64>),
+            ) {
+                self.0
+                    .visit_params(&crate::param::join_name(prefix, "conv"), f);
+            }
+        }
+        load_params(&path, &mut Conv(&mut conv)).unwrap();
+        assert_eq!(
+            conv.weight.value,
+            ndarray::array![[0.0, 1.0, 2.0], [3.0, 4.0, 5.0]]
         );
         std::fs::remove_file(&path).unwrap();
     }
