@@ -228,6 +228,7 @@ mod tests {
     use super::*;
     use crate::gradcheck::{assert_gradients, ix1, ix2, uniform};
     use ndarray::ArrayD;
+    use rand::{rngs::StdRng, SeedableRng};
 
     // Sizes above ndarray's BLAS cut-off (any dimension > 7), so the checks run through
     // cblas_dgemm with the per-head column slices and transposed views.
@@ -409,5 +410,51 @@ mod tests {
                 g
             },
         );
+    }
+
+    /// The f32 path (cblas_sgemm on the same views) agrees with f64 to single precision.
+    #[test]
+    fn f32_matches_f64() {
+        let mha64 = MultiHeadAttention::<f64>::new(16, 4, &mut StdRng::seed_from_u64(1)).unwrap();
+        let to32 = |l: &Linear<f64>| {
+            Linear::from_values(
+                l.weight.value.mapv(|v| v as f32),
+                l.bias.as_ref().map(|b| b.value.mapv(|v| v as f32)),
+            )
+            .unwrap()
+        };
+        let mha32 = MultiHeadAttention {
+            heads: 4,
+            query: to32(&mha64.query),
+            key: to32(&mha64.key),
+            value: to32(&mha64.value),
+            output: to32(&mha64.output),
+        };
+        let (q, kv) = (ix2(&uniform(&[9, 16], 2)), ix2(&uniform(&[10, 16], 3)));
+        let (mut out64, mut out32) = (Array2::zeros((9, 16)), Array2::<f32>::zeros((9, 16)));
+        mha64
+            .forward(
+                out64.view_mut(),
+                q.view(),
+                kv.view(),
+                &mut AttentionCache::default(),
+            )
+            .unwrap();
+        let (q32, kv32) = (q.mapv(|v| v as f32), kv.mapv(|v| v as f32));
+        mha32
+            .forward(
+                out32.view_mut(),
+                q32.view(),
+                kv32.view(),
+                &mut AttentionCache::default(),
+            )
+            .unwrap();
+        let worst = out64
+            .iter()
+            .zip(out32.iter())
+            .map(|(a, &b)| (a - b as f64).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-5, "{worst:e}");
+        assert!(out64.iter().any(|v| v.abs() > 0.1), "a non-trivial output");
     }
 }
