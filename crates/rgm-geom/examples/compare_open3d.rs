@@ -34,6 +34,18 @@ fn read_transform(path: &Path) -> RigidTransform {
     RigidTransform::from_matrix4(&m, 1e-6).expect("a rigid transform")
 }
 
+/// CPU seconds this process has used (user + system), from /proc: robust to a busy machine.
+fn cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    let after_name = stat.rsplit(')').next().unwrap_or("");
+    let fields: Vec<f64> = after_name
+        .split_whitespace()
+        .map(|v| v.parse().unwrap_or(0.0))
+        .collect();
+    // Fields 14 and 15 of the file (utime, stime) are 12 and 13 after the name; ticks of 1/100 s.
+    (fields.get(11).copied().unwrap_or(0.0) + fields.get(12).copied().unwrap_or(0.0)) / 100.0
+}
+
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
@@ -45,7 +57,8 @@ fn main() {
     let (mut fgr_m, mut icp_m, mut fgr_ms, mut icp_ms, mut same) =
         (vec![], vec![], vec![], vec![], 0);
     let (mut plain_m, mut plain_ms) = (vec![], vec![]);
-    // Open3D's actual default keeps μ fixed; ours decreases it (graduated non-convexity).
+    let mut cpu = [0.0; 3]; // CPU seconds in FGR, FGR with Open3D's defaults, ICP
+                            // Open3D's actual default keeps μ fixed; ours decreases it (graduated non-convexity).
     let open3d_default = fgr::FgrConfig {
         decrease_mu: false,
         ..fgr::FgrConfig::default()
@@ -60,15 +73,17 @@ fn main() {
             read_cloud(&file("tgt")),
             read_transform(&file("gt")),
         );
-        let t = Instant::now();
+        let (t, c0) = (Instant::now(), cpu_seconds());
         let f = fgr::register(&src, &tgt, &fgr::FgrConfig::default()).expect("fgr");
         fgr_ms.push(t.elapsed().as_secs_f64() * 1e3);
-        let t = Instant::now();
+        let (t, c1) = (Instant::now(), cpu_seconds());
         let plain = fgr::register(&src, &tgt, &open3d_default).expect("fgr");
         plain_ms.push(t.elapsed().as_secs_f64() * 1e3);
-        let t = Instant::now();
+        let (t, c2) = (Instant::now(), cpu_seconds());
         let c = icp::register(&src, &tgt, &icp::IcpConfig::default()).expect("icp");
         icp_ms.push(t.elapsed().as_secs_f64() * 1e3);
+        let c3 = cpu_seconds();
+        cpu = [cpu[0] + c1 - c0, cpu[1] + c2 - c1, cpu[2] + c3 - c2];
         let open3d = read_transform(&file("open3d_fgr"));
         let agree =
             PairMetrics::compute(&plain.t_target_source, &open3d, &src, &tgt).expect("metrics");
@@ -79,23 +94,25 @@ fn main() {
         icp_m.push(PairMetrics::compute(&c.t_target_source, &gt, &src, &tgt).expect("metrics"));
     }
     let n = fgr_m.len();
-    let show = |name: &str, m: &[PairMetrics], ms: Vec<f64>| {
+    let show = |name: &str, m: &[PairMetrics], ms: Vec<f64>, cpu_s: f64| {
         let s = rgm_geom::MetricsSummary::from_pairs(m).expect("pairs");
         println!(
-            "rgm {name}: MAE(R) {:.3} MAE(t) {:.4} recall {:.3} median time {:.1} ms",
+            "rgm {name}: MAE(R) {:.3} MAE(t) {:.4} recall {:.3} median time {:.1} ms, mean CPU {:.1} ms",
             s.mae_r_deg,
             s.mae_t,
             s.recall,
-            median(ms)
+            median(ms),
+            1e3 * cpu_s / m.len() as f64
         );
     };
     println!("pairs {n}");
-    show("FGR", &fgr_m, fgr_ms);
+    show("FGR", &fgr_m, fgr_ms, cpu[0]);
     show(
         "FGR (decrease_mu false, Open3D's default)",
         &plain_m,
         plain_ms,
+        cpu[1],
     );
-    show("ICP", &icp_m, icp_ms);
+    show("ICP", &icp_m, icp_ms, cpu[2]);
     println!("FGR with Open3D's defaults within 1° of Open3D's FGR transform: {same} of {n}");
 }

@@ -54,6 +54,7 @@ def mae(pred, gt):
 
 
 rows = []
+cpu = [0.0, 0.0]
 for i in range(pairs):
     rng = np.random.default_rng(i)
     pts = np.load(files[(i * 61) % len(files)]).astype(np.float64)
@@ -68,6 +69,7 @@ for i in range(pairs):
     np.savetxt(f'{out}/{i:04}_src.txt', src, fmt='%.17g')
     np.savetxt(f'{out}/{i:04}_tgt.txt', tgt, fmt='%.17g')
     np.savetxt(f'{out}/{i:04}_gt.txt', gt, fmt='%.17g')
+    c0 = time.process_time()
     t0 = time.perf_counter()
     s, t = cloud(src), cloud(tgt)
     param = o3d.geometry.KDTreeSearchParamHybrid(radius=0.4, max_nn=100)
@@ -76,9 +78,12 @@ for i in range(pairs):
     fgr = o3d.pipelines.registration.registration_fgr_based_on_feature_matching(
         s, t, fs, ft, o3d.pipelines.registration.FastGlobalRegistrationOption())
     t1 = time.perf_counter()
+    c1 = time.process_time()
     icp = o3d.pipelines.registration.registration_icp(
         s, t, 0.1, np.eye(4), o3d.pipelines.registration.TransformationEstimationPointToPoint())
     t2 = time.perf_counter()
+    c2 = time.process_time()
+    cpu = [cpu[0] + c1 - c0, cpu[1] + c2 - c1]
     fr, ft_ = mae(fgr.transformation, gt)
     ir, it = mae(icp.transformation, gt)
     rows.append((fr, ft_, 1e3 * (t1 - t0), ir, it, 1e3 * (t2 - t1)))
@@ -88,6 +93,6 @@ r = np.array(rows)
 rec = lambda er, et: np.mean((er < 1) & (et < 0.1))
 print(f'pairs {len(r)}')
 print(f'Open3D FGR: MAE(R) {r[:,0].mean():.3f} MAE(t) {r[:,1].mean():.4f} recall {rec(r[:,0], r[:,1]):.3f} '
-      f'median time {np.median(r[:,2]):.1f} ms (normals+FPFH+FGR, both clouds)')
+      f'median time {np.median(r[:,2]):.1f} ms, mean CPU {1e3 * cpu[0] / len(r):.1f} ms (normals+FPFH+FGR, both clouds)')
 print(f'Open3D ICP: MAE(R) {r[:,3].mean():.3f} MAE(t) {r[:,4].mean():.4f} recall {rec(r[:,3], r[:,4]):.3f} '
-      f'median time {np.median(r[:,5]):.1f} ms')
+      f'median time {np.median(r[:,5]):.1f} ms, mean CPU {1e3 * cpu[1] / len(r):.1f} ms')
