@@ -123,19 +123,8 @@ pub fn kabsch(
 mod tests {
     use super::*;
     use crate::euler::rotation_xyz_intrinsic;
+    use crate::testing::uniform_cube;
     use rand::{rngs::StdRng, Rng, SeedableRng};
-
-    fn cloud(n: usize, rng: &mut StdRng) -> Vec<Point3<f64>> {
-        (0..n)
-            .map(|_| {
-                Point3::new(
-                    rng.gen_range(-1.0..1.0),
-                    rng.gen_range(-1.0..1.0),
-                    rng.gen_range(-1.0..1.0),
-                )
-            })
-            .collect()
-    }
 
     fn assert_rotation(r: &Matrix3<f64>) {
         assert!(
@@ -164,7 +153,7 @@ mod tests {
         let mut rng = StdRng::seed_from_u64(7);
         for _ in 0..20 {
             let pose = RigidTransform::random(&mut rng, 180.0, 2.0);
-            let x = cloud(50, &mut rng);
+            let x = uniform_cube(50, &mut rng);
             let y: Vec<_> = x.iter().map(|p| pose.apply(p)).collect();
             let w: Vec<f64> = (0..50).map(|_| rng.gen_range(0.1..2.0)).collect();
             let got = kabsch(&x, &y, &w).unwrap();
@@ -177,7 +166,7 @@ mod tests {
     fn zero_weights_are_ignored() {
         let mut rng = StdRng::seed_from_u64(8);
         let pose = RigidTransform::random(&mut rng, 45.0, 0.5);
-        let x = cloud(30, &mut rng);
+        let x = uniform_cube(30, &mut rng);
         let mut y: Vec<_> = x.iter().map(|p| pose.apply(p)).collect();
         let mut w = vec![1.0; 30];
         // Ten wild outliers with weight zero change nothing.
@@ -216,7 +205,7 @@ mod tests {
         // stationary point of Σ‖R x̃ − ỹ‖²: H R symmetric (skew part zero), and no nearby rotation
         // does better.
         let mut rng = StdRng::seed_from_u64(10);
-        let x = cloud(40, &mut rng);
+        let x = uniform_cube(40, &mut rng);
         let mirror = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -1.0));
         let y: Vec<_> = x.iter().map(|p| Point3::from(mirror * p.coords)).collect();
         let got = kabsch(&x, &y, &vec![1.0; 40]).unwrap();

@@ -142,13 +142,15 @@ impl KnnIndex {
         if self.nodes.is_empty() || !(radius > 0.0) {
             return out;
         }
-        self.within_rec(
+        self.search(
             0,
             &[query.x, query.y, query.z],
-            radius * radius,
             0.0,
             &mut [0.0; 3],
-            &mut out,
+            &mut Within {
+                r2: radius * radius,
+                out: &mut out,
+            },
         );
         sort_by_distance_then_index(&mut out);
         out.iter_mut().for_each(|n| n.1 = n.1.sqrt());
@@ -200,51 +202,6 @@ impl KnnIndex {
                 if found.may_improve(far_rd) {
                     off[axis] = diff;
                     self.search(far as usize, q, far_rd, off, found);
-                    off[axis] = old;
-                }
-            }
-        }
-    }
-
-    /// Appends every (index, squared distance) with squared distance below `r2`, unsorted;
-    /// `rd` and `off` as in [`Self::best_rec`].
-    fn within_rec(
-        &self,
-        node: usize,
-        q: &[f64; 3],
-        r2: f64,
-        rd: f64,
-        off: &mut [f64; 3],
-        out: &mut Vec<(usize, f64)>,
-    ) {
-        match self.nodes[node] {
-            Node::Leaf { start, end } => {
-                for (p, i) in &self.points[start as usize..end as usize] {
-                    let d2 = squared_distance(p, q);
-                    if d2 < r2 {
-                        out.push((*i as usize, d2));
-                    }
-                }
-            }
-            Node::Split {
-                axis,
-                value,
-                left,
-                right,
-            } => {
-                let axis = axis as usize;
-                let diff = q[axis] - value;
-                let (near, far) = if diff < 0.0 {
-                    (left, right)
-                } else {
-                    (right, left)
-                };
-                self.within_rec(near as usize, q, r2, rd, off, out);
-                let old = off[axis];
-                let far_rd = rd - old * old + diff * diff;
-                if far_rd < r2 {
-                    off[axis] = diff;
-                    self.within_rec(far as usize, q, r2, far_rd, off, out);
                     off[axis] = old;
                 }
             }
@@ -351,6 +308,25 @@ impl Found for Best<'_> {
         } else {
             cell_d2 <= self.heap[0].1
         }
+    }
+}
+
+/// Every point with squared distance below `r2`, unsorted.
+struct Within<'a> {
+    r2: f64,
+    out: &'a mut Vec<(usize, f64)>,
+}
+
+impl Found for Within<'_> {
+    #[inline]
+    fn offer(&mut self, candidate: (usize, f64)) {
+        if candidate.1 < self.r2 {
+            self.out.push(candidate);
+        }
+    }
+    #[inline]
+    fn may_improve(&self, cell_d2: f64) -> bool {
+        cell_d2 < self.r2
     }
 }
 
@@ -481,19 +457,11 @@ pub fn knn_graph(points: &[Point3<f64>], k: usize) -> Result<Vec<usize>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::{rngs::StdRng, Rng, SeedableRng};
+    use crate::testing::uniform_cube;
+    use rand::{rngs::StdRng, SeedableRng};
 
     fn random_cloud(n: usize, seed: u64) -> Vec<Point3<f64>> {
-        let mut rng = StdRng::seed_from_u64(seed);
-        (0..n)
-            .map(|_| {
-                Point3::new(
-                    rng.gen_range(-1.0..1.0),
-                    rng.gen_range(-1.0..1.0),
-                    rng.gen_range(-1.0..1.0),
-                )
-            })
-            .collect()
+        uniform_cube(n, &mut StdRng::seed_from_u64(seed))
     }
 
     /// Every point with its distance to `q`, sorted by distance then index.

@@ -8,6 +8,9 @@
 //! Conventions: a transform `t_target_source` maps source coordinates into the target frame,
 //! `y = R x + t`.
 
+// `!(x > 0.0)` is used on purpose: it also rejects NaN, which `x <= 0.0` would let through.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod cloud;
 pub mod error;
 pub mod euler;

@@ -5,6 +5,19 @@ use rand::{rngs::StdRng, Rng, SeedableRng};
 
 use crate::PointCloud;
 
+/// `n` points uniform in the cube [−1, 1)³.
+pub fn uniform_cube(n: usize, rng: &mut StdRng) -> Vec<Point3<f64>> {
+    (0..n)
+        .map(|_| {
+            Point3::new(
+                rng.gen_range(-1.0..1.0),
+                rng.gen_range(-1.0..1.0),
+                rng.gen_range(-1.0..1.0),
+            )
+        })
+        .collect()
+}
+
 /// `n` points on the faces of a 1.0 × 0.6 × 0.4 box centred at the origin: a shape with no
 /// rotational symmetry, reproducible from `seed`.
 pub fn box_surface(n: usize, seed: u64) -> PointCloud {
