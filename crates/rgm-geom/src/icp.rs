@@ -196,6 +196,99 @@ mod tests {
         );
     }
 
+    /// Pinned from Open3D 0.20 on ModelNet40 `airplane_0627`:
+    ///
+    /// ```python
+    /// R = Rotation.from_euler('xyz', [4, -3, 5], degrees=True).as_matrix(); t = np.array([0.02, -0.03, 0.01])
+    /// src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts @ R.T + t))  # pcd: the airplane
+    /// r = o3d.pipelines.registration.registration_icp(src, pcd, 0.1, np.eye(4),
+    ///     TransformationEstimationPointToPoint(), ICPConvergenceCriteria(max_iteration=k))
+    /// r.transformation, r.fitness, r.inlier_rmse
+    /// ```
+    #[test]
+    fn matches_open3d_registration_icp() {
+        let target = crate::testing::airplane();
+        let r = crate::euler::rotation_xyz_extrinsic(
+            4f64.to_radians(),
+            -3f64.to_radians(),
+            5f64.to_radians(),
+        );
+        let source = target.transformed(&RigidTransform::new(r, Vector3::new(0.02, -0.03, 0.01)));
+        let cases = [
+            (
+                1,
+                [
+                    [
+                        0.9992752796246036,
+                        0.027158345576948774,
+                        0.026670954176648293,
+                        -0.003154561696485786,
+                    ],
+                    [
+                        -0.027915140288138997,
+                        0.999206062518233,
+                        0.028425157334694973,
+                        0.005744710348460372,
+                    ],
+                    [
+                        -0.02587779886047819,
+                        -0.029149080471460365,
+                        0.9992400465522813,
+                        -0.0063819910591766055,
+                    ],
+                ],
+                0.03236624198165532,
+            ),
+            (
+                30,
+                [
+                    [
+                        0.9948294478803328,
+                        0.0870362988312832,
+                        0.052335956242943876,
+                        -0.017808859555097603,
+                    ],
+                    [
+                        -0.09058031520755636,
+                        0.9934498321516351,
+                        0.0696608749212158,
+                        0.030918492519488045,
+                    ],
+                    [
+                        -0.04593012221855635,
+                        -0.0740412971499086,
+                        0.9961969233988578,
+                        -0.0112646057041147,
+                    ],
+                ],
+                4.4360767796854955e-16,
+            ),
+        ];
+        for (k, rows, rmse) in cases {
+            let config = IcpConfig {
+                max_iteration: k,
+                ..IcpConfig::default()
+            };
+            let result = register(&source, &target, &config).unwrap();
+            let m = result.t_target_source.to_matrix4();
+            for (r, row) in rows.iter().enumerate() {
+                for (c, want) in row.iter().enumerate() {
+                    assert!(
+                        (m[(r, c)] - want).abs() < 1e-9,
+                        "k={k} ({r},{c}): {} vs {want}",
+                        m[(r, c)]
+                    );
+                }
+            }
+            assert_eq!(result.fitness, 1.0);
+            assert!(
+                (result.inlier_rmse - rmse).abs() < 1e-9,
+                "k={k}: rmse {} vs {rmse}",
+                result.inlier_rmse
+            );
+        }
+    }
+
     #[test]
     fn far_apart_clouds_stop_without_pairs() {
         let target = box_surface(100, 3);

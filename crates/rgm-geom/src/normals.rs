@@ -146,6 +146,42 @@ mod tests {
         }
     }
 
+    /// Pinned from Open3D 0.20 on ModelNet40 `airplane_0627`:
+    ///
+    /// ```python
+    /// pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))  # pts: the .npy as float64
+    /// pcd.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.2, max_nn=30))
+    /// n = np.asarray(pcd.normals); n[((pts - pts.mean(0)) * n).sum(1) < 0] *= -1
+    /// n[0], n[500]
+    /// ```
+    #[test]
+    fn normals_match_open3d() {
+        let cloud = crate::testing::airplane();
+        let normals = estimate_normals(
+            &cloud.points,
+            &KnnIndex::new(&cloud.points),
+            &NormalsConfig::default(),
+        );
+        let pinned = [
+            (
+                0,
+                [
+                    -0.9080177930218877,
+                    0.3531019644704376,
+                    -0.22543888360879175,
+                ],
+            ),
+            (
+                500,
+                [0.9687423695198114, 0.24788958169310935, 0.00943275066758592],
+            ),
+        ];
+        for (i, expected) in pinned {
+            let diff = (normals[i] - Vector3::from(expected)).abs().max();
+            assert!(diff < 1e-9, "point {i}: {} vs {expected:?}", normals[i]);
+        }
+    }
+
     #[test]
     fn too_few_neighbours_fall_back_to_z() {
         // Two far-apart points: fewer than 3 neighbours each → (0, 0, ±1), signed away from the
