@@ -7,6 +7,7 @@
 
 pub mod evaluate;
 pub mod method;
+pub mod network;
 
 pub use evaluate::{PairRecord, Summary};
 pub use method::{Method, Registration};

@@ -1,0 +1,456 @@
+//! One matching block (spec §2.2–2.5): edge generator → soft adjacency → intra-graph
+//! convolution → scoring (AIS or Var1) → Sinkhorn → cross-graph convolution (block L − 2 only).
+
+use super::config::{Config, Edges, Scoring};
+use super::transformer::{EdgeTransformer, EdgeTransformerCache};
+use super::{Element, Result};
+use ndarray::linalg::general_mat_mul;
+use ndarray::{s, Array2, ArrayView2, ArrayViewMut2};
+use rand::Rng;
+use rgm_match::{
+    sinkhorn_backward, sinkhorn_forward, var1_backward, var1_forward, Affinity, AffinityCache,
+    AffinityConfig, InstNorm, InstNormCache, InstNormConfig, SinkhornCache, SinkhornConfig,
+    Var1Cache, Var1Config,
+};
+use rgm_nn::param::{join_name, ParamViewMut};
+use rgm_nn::{
+    l1_normalize_columns_backward, l1_normalize_columns_forward, matmul_backward, matmul_forward,
+    relu_backward, relu_forward, softmax_rows_backward, softmax_rows_forward, L1NormalizeCache,
+    Linear, Parameters,
+};
+
+/// The learned scoring of a block.
+#[derive(Clone, Debug)]
+pub enum Scorer<T: Element> {
+    /// `affinity_{b}.A` and `InstNorm_layer_{b}`.
+    Ais {
+        affinity: Affinity<T>,
+        inst_norm: InstNorm<T>,
+    },
+    /// No parameters: S = exp(0.5 − D).
+    Var1,
+}
+
+/// Block b's layers, under the authors' names.
+#[derive(Clone, Debug)]
+pub struct Block<T: Element> {
+    pub index: usize,                            // b
+    pub transformer: Option<EdgeTransformer<T>>, // `gmattend{b}.model`; None for Var2
+    pub a_fc: Linear<T>,                         // `gnn_layer_{b}.gconv.a_fc`: C → Q
+    pub u_fc: Linear<T>,                         // `gnn_layer_{b}.gconv.u_fc`: C → Q
+    pub scorer: Scorer<T>,
+    pub cross: Option<Linear<T>>, // `cross_graph_{b}`: 2Q → Q, block L − 2 only
+    sinkhorn: SinkhornConfig,
+}
+
+/// One cloud's side of a block pass (rows R = N for X, M for Y).
+#[derive(Clone, Debug)]
+struct Side<T> {
+    scores: Array2<T>,   // (R, R) T Tᵀ / √C
+    adj: Array2<T>,      // (R, R) E = softmax_rows(scores)
+    adj_norm: Array2<T>, // (R, R) Ê, columns summing to 1
+    l1: L1NormalizeCache<T>,
+    h_adj: Array2<T>,     // (R, Q) f_adj(F)
+    a_adj: Array2<T>,     // (R, Q) ReLU(f_adj(F))
+    h_self: Array2<T>,    // (R, Q) f_self(F)
+    a_self: Array2<T>,    // (R, Q) ReLU(f_self(F))
+    fp: Array2<T>,        // (R, Q) F' = Ê·ReLU(f_adj(F)) + ReLU(f_self(F))
+    cat: Array2<T>,       // (R, 2Q) F' ⊕ C̃F'_other (cross blocks)
+    next: Array2<T>,      // (R, Q) cross_graph(cat) (cross blocks)
+    dt: Array2<T>,        // (R, C)
+    dscores: Array2<T>,   // (R, R)
+    dadj: Array2<T>,      // (R, R)
+    dadj_norm: Array2<T>, // (R, R)
+    dh: Array2<T>,        // (R, Q)
+    da: Array2<T>,        // (R, Q)
+    dfp: Array2<T>,       // (R, Q)
+    dcat: Array2<T>,      // (R, 2Q)
+}
+
+impl<T: Element> Side<T> {
+    fn new(r: usize, c: usize, q: usize) -> Self {
+        let z = |rows, cols| Array2::zeros((rows, cols));
+        Self {
+            scores: z(r, r),
+            adj: z(r, r),
+            adj_norm: z(r, r),
+            l1: L1NormalizeCache::default(),
+            h_adj: z(r, q),
+            a_adj: z(r, q),
+            h_self: z(r, q),
+            a_self: z(r, q),
+            fp: z(r, q),
+            cat: z(r, 2 * q),
+            next: z(r, q),
+            dt: z(r, c),
+            dscores: z(r, r),
+            dadj: z(r, r),
+            dadj_norm: z(r, r),
+            dh: z(r, q),
+            da: z(r, q),
+            dfp: z(r, q),
+            dcat: z(r, 2 * q),
+        }
+    }
+}
+
+/// A block pass for one (N, M) pair: what the backward needs and its scratch.
+#[derive(Clone, Debug)]
+pub struct BlockCache<T> {
+    dims: (usize, usize), // (N, M)
+    transformer: EdgeTransformerCache<T>,
+    x: Side<T>,
+    y: Side<T>,
+    s: Array2<T>,      // (N, M) affinity (AIS) or exp(0.5 − D) (Var1)
+    s_norm: Array2<T>, // (N, M) instance-normalised affinity (AIS)
+    affinity: AffinityCache<T>,
+    inst_norm: InstNormCache<T>,
+    var1: Var1Cache<T>,
+    sinkhorn: SinkhornCache<T>,
+    /// (N, M) the block's soft correspondence C̃.
+    pub c_soft: Array2<T>,
+    dc: Array2<T>,      // (N, M)
+    ds_norm: Array2<T>, // (N, M)
+    ds: Array2<T>,      // (N, M)
+}
+
+impl<T: Element> BlockCache<T> {
+    /// Buffers for block `b` of `config` on N source and M target points.
+    pub fn new(config: &Config, b: usize, n: usize, m: usize) -> Self {
+        let (c, q) = (config.block_width(b), config.q);
+        let sinkhorn = sinkhorn_config(config);
+        Self {
+            dims: (n, m),
+            transformer: EdgeTransformerCache::default(),
+            x: Side::new(n, c, q),
+            y: Side::new(m, c, q),
+            s: Array2::zeros((n, m)),
+            s_norm: Array2::zeros((n, m)),
+            affinity: AffinityCache::new(n, q),
+            inst_norm: InstNormCache::default(),
+            var1: Var1Cache::new(n, m),
+            sinkhorn: SinkhornCache::new(n, m, &sinkhorn),
+            c_soft: Array2::zeros((n, m)),
+            dc: Array2::zeros((n, m)),
+            ds_norm: Array2::zeros((n, m)),
+            ds: Array2::zeros((n, m)),
+        }
+    }
+
+    /// (N, M) this cache is sized for.
+    pub fn dims(&self) -> (usize, usize) {
+        self.dims
+    }
+
+    /// The block's output features for X (N, Q) and Y (M, Q): the cross-graph convolution's
+    /// when the block has one, F' otherwise.
+    pub fn outputs(&self, cross: bool) -> (ArrayView2<'_, T>, ArrayView2<'_, T>) {
+        if cross {
+            (self.x.next.view(), self.y.next.view())
+        } else {
+            (self.x.fp.view(), self.y.fp.view())
+        }
+    }
+}
+
+fn sinkhorn_config(config: &Config) -> SinkhornConfig {
+    SinkhornConfig {
+        iterations: config.sinkhorn_iters,
+        ..SinkhornConfig::default()
+    }
+}
+
+/// Ê = column-L1-normalised softmax_rows(T Tᵀ / √C). `t`: (R, C).
+fn edges_forward<T: Element>(side: &mut Side<T>, t: ArrayView2<'_, T>) -> Result<()> {
+    let scale = T::one() / T::from_f64(t.ncols() as f64).sqrt();
+    general_mat_mul(scale, &t, &t.t(), T::zero(), &mut side.scores);
+    softmax_rows_forward(side.adj.view_mut(), side.scores.view())?;
+    l1_normalize_columns_forward(side.adj_norm.view_mut(), side.adj.view(), &mut side.l1)?;
+    Ok(())
+}
+
+/// Adds into `side.dt` the gradient of [`edges_forward`] given `side.dadj_norm`:
+/// Z = T Tᵀ / √C  →  dT = (dZ + dZᵀ) T / √C.
+fn edges_backward<T: Element>(side: &mut Side<T>, t: ArrayView2<'_, T>) -> Result<()> {
+    side.dadj.fill(T::zero());
+    side.dscores.fill(T::zero());
+    l1_normalize_columns_backward(
+        side.dadj.view_mut(),
+        side.dadj_norm.view(),
+        side.adj.view(),
+        side.adj_norm.view(),
+        &side.l1,
+    )?;
+    softmax_rows_backward(side.dscores.view_mut(), side.dadj.view(), side.adj.view())?;
+    let scale = T::one() / T::from_f64(t.ncols() as f64).sqrt();
+    general_mat_mul(scale, &side.dscores, &t, T::one(), &mut side.dt);
+    general_mat_mul(scale, &side.dscores.t(), &t, T::one(), &mut side.dt);
+    Ok(())
+}
+
+impl<T: Element> Block<T> {
+    /// Block `b` of `config`, PyTorch-initialised from `rng`.
+    pub fn new(config: &Config, b: usize, rng: &mut impl Rng) -> Result<Self> {
+        let (c, q) = (config.block_width(b), config.q);
+        let transformer = match config.edges {
+            Edges::Transformer => Some(EdgeTransformer::new(c, config.heads, config.ff, rng)?),
+            Edges::Full => None,
+        };
+        let a_fc = Linear::new(c, q, true, rng);
+        let u_fc = Linear::new(c, q, true, rng);
+        let scorer = match config.scoring {
+            Scoring::Ais => Scorer::Ais {
+                affinity: Affinity::new(&AffinityConfig { width: q }, rng),
+                inst_norm: InstNorm::new(&InstNormConfig::default()),
+            },
+            Scoring::Var1 => Scorer::Var1,
+        };
+        let cross = config
+            .has_cross(b)
+            .then(|| Linear::new(2 * q, q, true, rng));
+        Ok(Self {
+            index: b,
+            transformer,
+            a_fc,
+            u_fc,
+            scorer,
+            cross,
+            sinkhorn: sinkhorn_config(config),
+        })
+    }
+
+    /// F' = Ê·ReLU(f_adj(F)) + ReLU(f_self(F)) for one side. `f`: (R, C).
+    fn gconv_forward(&self, side: &mut Side<T>, f: ArrayView2<'_, T>) -> Result<()> {
+        self.a_fc.forward(side.h_adj.view_mut(), f)?;
+        relu_forward(side.a_adj.view_mut(), side.h_adj.view())?;
+        self.u_fc.forward(side.h_self.view_mut(), f)?;
+        relu_forward(side.a_self.view_mut(), side.h_self.view())?;
+        matmul_forward(side.fp.view_mut(), side.adj_norm.view(), side.a_adj.view())?;
+        side.fp += &side.a_self;
+        Ok(())
+    }
+
+    /// Adds into `df` (R, C) and `side.dadj_norm` the gradient of [`Self::gconv_forward`] given
+    /// `side.dfp`, in reverse: the Ê product, ReLU, f_adj; then ReLU, f_self.
+    fn gconv_backward(
+        &mut self,
+        mut df: ArrayViewMut2<'_, T>,
+        side: &mut Side<T>,
+        f: ArrayView2<'_, T>,
+    ) -> Result<()> {
+        side.dadj_norm.fill(T::zero());
+        side.da.fill(T::zero());
+        side.dh.fill(T::zero());
+        matmul_backward(
+            side.dadj_norm.view_mut(),
+            side.da.view_mut(),
+            side.dfp.view(),
+            side.adj_norm.view(),
+            side.a_adj.view(),
+        )?;
+        relu_backward(side.dh.view_mut(), side.da.view(), side.a_adj.view())?;
+        self.a_fc.backward(df.view_mut(), side.dh.view(), f)?;
+        side.dh.fill(T::zero());
+        relu_backward(side.dh.view_mut(), side.dfp.view(), side.a_self.view())?;
+        self.u_fc.backward(df, side.dh.view(), f)?;
+        Ok(())
+    }
+
+    /// Runs the block on F_X (N, C), F_Y (M, C) into `cache` (C̃ and the output features).
+    pub fn forward(
+        &self,
+        fx: ArrayView2<'_, T>,
+        fy: ArrayView2<'_, T>,
+        cache: &mut BlockCache<T>,
+    ) -> Result<()> {
+        let n = fx.nrows();
+        let (x, y) = (&mut cache.x, &mut cache.y);
+        match &self.transformer {
+            Some(tf) => {
+                tf.forward(fx, fy, &mut cache.transformer)?;
+                edges_forward(x, cache.transformer.tx().view())?;
+                edges_forward(y, cache.transformer.ty().view())?;
+            }
+            None => {
+                // All-ones adjacency, columns normalised: 1/R everywhere.
+                x.adj_norm.fill(T::one() / T::from_f64(n as f64));
+                y.adj_norm.fill(T::one() / T::from_f64(fy.nrows() as f64));
+            }
+        }
+        self.gconv_forward(x, fx)?;
+        self.gconv_forward(y, fy)?;
+        match &self.scorer {
+            Scorer::Ais {
+                affinity,
+                inst_norm,
+            } => {
+                affinity.forward(
+                    cache.s.view_mut(),
+                    x.fp.view(),
+                    y.fp.view(),
+                    &mut cache.affinity,
+                )?;
+                inst_norm.forward(
+                    cache.s_norm.view_mut(),
+                    cache.s.view(),
+                    &mut cache.inst_norm,
+                )?;
+            }
+            Scorer::Var1 => var1_forward(
+                cache.s_norm.view_mut(),
+                x.fp.view(),
+                y.fp.view(),
+                &Var1Config::default(),
+                &mut cache.var1,
+            )?,
+        }
+        sinkhorn_forward(
+            cache.c_soft.view_mut(),
+            cache.s_norm.view(),
+            &self.sinkhorn,
+            &mut cache.sinkhorn,
+        )?;
+        if let Some(cross) = &self.cross {
+            // next_X = cross(F'_X ⊕ C̃ F'_Y), next_Y = cross(F'_Y ⊕ C̃ᵀ F'_X)
+            let q = x.fp.ncols();
+            x.cat.slice_mut(s![.., ..q]).assign(&x.fp);
+            y.cat.slice_mut(s![.., ..q]).assign(&y.fp);
+            matmul_forward(
+                x.cat.slice_mut(s![.., q..]),
+                cache.c_soft.view(),
+                y.fp.view(),
+            )?;
+            matmul_forward(y.cat.slice_mut(s![.., q..]), cache.c_soft.t(), x.fp.view())?;
+            cross.forward(x.next.view_mut(), x.cat.view())?;
+            cross.forward(y.next.view_mut(), y.cat.view())?;
+        }
+        Ok(())
+    }
+
+    /// Adds into `dfx` (N, C), `dfy` (M, C) and the block's parameter gradients the gradient of
+    /// its pass, given the gradients of its outputs: `dc_soft` (N, M) when C̃ is the network's
+    /// output, `dnext` ((N, Q), (M, Q)) when a later block reads its features. Inputs as given
+    /// to forward. Walks the forward in reverse.
+    #[allow(clippy::too_many_arguments)]
+    pub fn backward<'a>(
+        &mut self,
+        mut dfx: ArrayViewMut2<'_, T>,
+        mut dfy: ArrayViewMut2<'_, T>,
+        dc_soft: Option<ArrayView2<'_, T>>,
+        dnext: Option<(ArrayView2<'a, T>, ArrayView2<'a, T>)>,
+        fx: ArrayView2<'_, T>,
+        fy: ArrayView2<'_, T>,
+        cache: &mut BlockCache<T>,
+    ) -> Result<()> {
+        let (x, y) = (&mut cache.x, &mut cache.y);
+        x.dfp.fill(T::zero());
+        y.dfp.fill(T::zero());
+        match dc_soft {
+            Some(d) => cache.dc.assign(&d),
+            None => cache.dc.fill(T::zero()),
+        }
+        match (&mut self.cross, dnext) {
+            (Some(cross), Some((dnx, dny))) => {
+                let q = x.fp.ncols();
+                for (side, dnext) in [(&mut *y, dny), (&mut *x, dnx)] {
+                    side.dcat.fill(T::zero());
+                    cross.backward(side.dcat.view_mut(), dnext, side.cat.view())?;
+                    side.dfp += &side.dcat.slice(s![.., ..q]);
+                }
+                // cat_Y[:, Q..] = C̃ᵀ F'_X  →  dC̃ᵀ += dcat_Y F'_Xᵀ, dF'_X += C̃ dcat_Y
+                matmul_backward(
+                    cache.dc.view_mut().reversed_axes(),
+                    x.dfp.view_mut(),
+                    y.dcat.slice(s![.., q..]),
+                    cache.c_soft.t(),
+                    x.fp.view(),
+                )?;
+                // cat_X[:, Q..] = C̃ F'_Y  →  dC̃ += dcat_X F'_Yᵀ, dF'_Y += C̃ᵀ dcat_X
+                matmul_backward(
+                    cache.dc.view_mut(),
+                    y.dfp.view_mut(),
+                    x.dcat.slice(s![.., q..]),
+                    cache.c_soft.view(),
+                    y.fp.view(),
+                )?;
+            }
+            (None, Some((dnx, dny))) => {
+                x.dfp += &dnx;
+                y.dfp += &dny;
+            }
+            (_, None) => {}
+        }
+        cache.ds_norm.fill(T::zero());
+        sinkhorn_backward(
+            cache.ds_norm.view_mut(),
+            cache.dc.view(),
+            cache.s_norm.view(),
+            cache.c_soft.view(),
+            &cache.sinkhorn,
+        )?;
+        match &mut self.scorer {
+            Scorer::Ais {
+                affinity,
+                inst_norm,
+            } => {
+                cache.ds.fill(T::zero());
+                inst_norm.backward(
+                    cache.ds.view_mut(),
+                    cache.ds_norm.view(),
+                    cache.s.view(),
+                    &cache.inst_norm,
+                )?;
+                affinity.backward(
+                    x.dfp.view_mut(),
+                    y.dfp.view_mut(),
+                    cache.ds.view(),
+                    x.fp.view(),
+                    y.fp.view(),
+                    &cache.affinity,
+                )?;
+            }
+            Scorer::Var1 => var1_backward(
+                x.dfp.view_mut(),
+                y.dfp.view_mut(),
+                cache.ds_norm.view(),
+                x.fp.view(),
+                y.fp.view(),
+                cache.s_norm.view(),
+                &cache.var1,
+            )?,
+        }
+        self.gconv_backward(dfy.view_mut(), y, fy)?;
+        self.gconv_backward(dfx.view_mut(), x, fx)?;
+        if let Some(tf) = &mut self.transformer {
+            x.dt.fill(T::zero());
+            y.dt.fill(T::zero());
+            edges_backward(y, cache.transformer.ty().view())?;
+            edges_backward(x, cache.transformer.tx().view())?;
+            tf.backward(dfx, dfy, x.dt.view(), y.dt.view(), &mut cache.transformer)?;
+        }
+        Ok(())
+    }
+}
+
+impl<T: Element> Parameters<T> for Block<T> {
+    fn visit_params(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ParamViewMut<'_, T>)) {
+        let b = self.index;
+        if let Some(tf) = &mut self.transformer {
+            tf.visit_params(&join_name(prefix, &format!("gmattend{b}.model")), f);
+        }
+        let gconv = join_name(prefix, &format!("gnn_layer_{b}.gconv"));
+        self.a_fc.visit_params(&join_name(&gconv, "a_fc"), f);
+        self.u_fc.visit_params(&join_name(&gconv, "u_fc"), f);
+        if let Scorer::Ais {
+            affinity,
+            inst_norm,
+        } = &mut self.scorer
+        {
+            affinity.visit_params(&join_name(prefix, &format!("affinity_{b}")), f);
+            inst_norm.visit_params(&join_name(prefix, &format!("InstNorm_layer_{b}")), f);
+        }
+        if let Some(cross) = &mut self.cross {
+            cross.visit_params(&join_name(prefix, &format!("cross_graph_{b}")), f);
+        }
+    }
+}

@@ -1,0 +1,217 @@
+//! The local feature extractor (spec §2.1), DGCNN style: four shared 1×1 convolutions on the
+//! (x_n, x_i) rows of every point's K neighbours, each followed by batch norm, ReLU and a max
+//! over K; the four maxima concatenated are the node features, and a fifth 1×1 convolution with
+//! batch norm and ReLU on them gives the edge features. Output: node ⊕ edge per point.
+
+use super::{zeroed, Element, Mode, Result};
+use ndarray::{s, Array2, ArrayView2};
+use rand::Rng;
+use rgm_geom::{knn_graph, Point3};
+use rgm_nn::param::{join_name, ParamViewMut};
+use rgm_nn::{
+    edge_features_forward, max_k_backward, max_k_forward, relu_backward, relu_forward, BatchNorm,
+    BatchNormCache, Linear, MaxKCache, Parameters,
+};
+
+/// `pointfeaturer.conv{1..5}` (no bias) and `pointfeaturer.bn{1..5}`.
+#[derive(Clone, Debug)]
+pub struct PointFeaturer<T: Element> {
+    pub k: usize,
+    pub convs: Vec<Linear<T>>, // 5: (C_1, 6), (C_2, C_1), (C_3, C_2), (C_4, C_3), (E, ΣC)
+    pub bns: Vec<BatchNorm<T>>, // 5: C_1 .. C_4, E
+}
+
+/// One cloud's pass through the extractor: what the backward needs, and its scratch.
+#[derive(Clone, Debug, Default)]
+pub struct FeaturerCache<T> {
+    idx: Array2<usize>,         // (N, K) neighbours, self first
+    act: Vec<Array2<T>>,        // 5: the edge rows (N*K, 6), then each ReLU output (N*K, C_i)
+    pre: Vec<Array2<T>>,        // 5: each convolution's output, (N*K, C_i) and (N, E)
+    normed: Vec<Array2<T>>,     // 5: each batch norm's output, same shapes
+    bn: Vec<BatchNormCache<T>>, // 5
+    max_k: Vec<MaxKCache>,      // 4
+    /// (N, ΣC + E) the output: node features (the four maxima) then edge features.
+    pub features: Array2<T>,
+    dact: Vec<Array2<T>>,    // 5, as act
+    dpre: Vec<Array2<T>>,    // 5, as pre
+    dnormed: Vec<Array2<T>>, // 5, as normed
+    dnode: Array2<T>,        // (N, ΣC)
+}
+
+impl<T: Element> PointFeaturer<T> {
+    /// PyTorch-initialised convolutions and fresh batch norms.
+    pub fn new(k: usize, widths: [usize; 4], edge: usize, rng: &mut impl Rng) -> Self {
+        let ins = [6, widths[0], widths[1], widths[2], widths.iter().sum()];
+        let outs = [widths[0], widths[1], widths[2], widths[3], edge];
+        Self {
+            k,
+            convs: ins
+                .iter()
+                .zip(outs)
+                .map(|(&i, o)| Linear::new(i, o, false, rng))
+                .collect(),
+            bns: outs.iter().map(|&o| BatchNorm::new(o)).collect(),
+        }
+    }
+
+    /// Node-feature width ΣC.
+    fn node_width(&self) -> usize {
+        self.convs[4].c_in()
+    }
+
+    /// Runs one cloud `points` (N, 3) into `cache.features` (N, ΣC + E). Training mode
+    /// normalises with this cloud's statistics and updates the running ones.
+    pub fn forward(
+        &mut self,
+        points: ArrayView2<'_, T>,
+        mode: Mode,
+        cache: &mut FeaturerCache<T>,
+    ) -> Result<()> {
+        let (n, k, node) = (points.nrows(), self.k, self.node_width());
+        let training = mode == Mode::Train;
+        let cloud: Vec<Point3<f64>> = points
+            .rows()
+            .into_iter()
+            .map(|p| Point3::new(p[0].to_f64(), p[1].to_f64(), p[2].to_f64()))
+            .collect();
+        cache.idx = Array2::from_shape_vec((n, k), knn_graph(&cloud, k)?)
+            .expect("knn_graph returns N*K indices");
+        let rows = |i: usize| if i < 4 { n * k } else { n };
+        let widths: Vec<usize> = self.convs.iter().map(|c| c.c_out()).collect();
+        cache.act.resize_with(5, Default::default);
+        cache.pre.resize_with(5, Default::default);
+        cache.normed.resize_with(5, Default::default);
+        cache.bn.resize_with(5, Default::default);
+        cache.max_k.resize_with(4, Default::default);
+        zeroed(&mut cache.act[0], (n * k, 6));
+        edge_features_forward(cache.act[0].view_mut(), points, cache.idx.view())?;
+        zeroed(&mut cache.features, (n, node + widths[4]));
+        let mut offset = 0;
+        for i in 0..5 {
+            zeroed(&mut cache.pre[i], (rows(i), widths[i]));
+            zeroed(&mut cache.normed[i], (rows(i), widths[i]));
+            // conv → bn → ReLU; the fifth reads the node features and writes the edge features.
+            let (done, rest) = cache.act.split_at_mut(i + 1);
+            let inp = if i < 4 {
+                done[i].view()
+            } else {
+                cache.features.slice(s![.., ..node])
+            };
+            self.convs[i].forward(cache.pre[i].view_mut(), inp)?;
+            self.bns[i].forward(
+                cache.normed[i].view_mut(),
+                cache.pre[i].view(),
+                training,
+                &mut cache.bn[i],
+            )?;
+            if i < 4 {
+                let act = &mut rest[0];
+                zeroed(act, (n * k, widths[i]));
+                relu_forward(act.view_mut(), cache.normed[i].view())?;
+                let block = s![.., offset..offset + widths[i]];
+                max_k_forward(
+                    cache.features.slice_mut(block),
+                    act.view(),
+                    k,
+                    &mut cache.max_k[i],
+                )?;
+                offset += widths[i];
+            } else {
+                relu_forward(
+                    cache.features.slice_mut(s![.., node..]),
+                    cache.normed[4].view(),
+                )?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Adds the parameter gradients of one cloud's pass, given `dfeatures` (N, ΣC + E), walking
+    /// the forward in reverse: edge ReLU, bn5, conv5 (into the node features), then for layer
+    /// 4 down to 1 the max over K, ReLU, batch norm and convolution.
+    pub fn backward(
+        &mut self,
+        dfeatures: ArrayView2<'_, T>,
+        cache: &mut FeaturerCache<T>,
+    ) -> Result<()> {
+        let (n, k, node) = (cache.idx.nrows(), self.k, self.node_width());
+        let widths: Vec<usize> = self.convs.iter().map(|c| c.c_out()).collect();
+        cache.dact.resize_with(5, Default::default);
+        cache.dpre.resize_with(5, Default::default);
+        cache.dnormed.resize_with(5, Default::default);
+        for i in 0..5 {
+            let shape = cache.pre[i].dim();
+            zeroed(&mut cache.dpre[i], shape);
+            zeroed(&mut cache.dnormed[i], shape);
+            let shape = cache.act[i].dim();
+            zeroed(&mut cache.dact[i], shape);
+        }
+        zeroed(&mut cache.dnode, (n, node));
+        // features[:, ..ΣC] = node  →  dnode = dfeatures[:, ..ΣC] (plus conv5's below)
+        cache.dnode.assign(&dfeatures.slice(s![.., ..node]));
+        // features[:, ΣC..] = ReLU(bn5(conv5(node)))
+        relu_backward(
+            cache.dnormed[4].view_mut(),
+            dfeatures.slice(s![.., node..]),
+            cache.features.slice(s![.., node..]),
+        )?;
+        self.bns[4].backward(
+            cache.dpre[4].view_mut(),
+            cache.dnormed[4].view(),
+            cache.pre[4].view(),
+            &cache.bn[4],
+        )?;
+        self.convs[4].backward(
+            cache.dnode.view_mut(),
+            cache.dpre[4].view(),
+            cache.features.slice(s![.., ..node]),
+        )?;
+        let mut offset = node;
+        for i in (0..4).rev() {
+            offset -= widths[i];
+            // node[:, block] = max_k(act_i); act_i = ReLU(bn_i(conv_i(act_{i−1})))
+            max_k_backward(
+                cache.dact[i + 1].view_mut(),
+                cache.dnode.slice(s![.., offset..offset + widths[i]]),
+                k,
+                &cache.max_k[i],
+            )?;
+            relu_backward(
+                cache.dnormed[i].view_mut(),
+                cache.dact[i + 1].view(),
+                cache.act[i + 1].view(),
+            )?;
+            self.bns[i].backward(
+                cache.dpre[i].view_mut(),
+                cache.dnormed[i].view(),
+                cache.pre[i].view(),
+                &cache.bn[i],
+            )?;
+            self.convs[i].backward(
+                cache.dact[i].view_mut(),
+                cache.dpre[i].view(),
+                cache.act[i].view(),
+            )?;
+        }
+        Ok(())
+    }
+}
+
+impl<T: Element> Parameters<T> for PointFeaturer<T> {
+    fn visit_params(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ParamViewMut<'_, T>)) {
+        for (i, (conv, bn)) in self.convs.iter_mut().zip(&mut self.bns).enumerate() {
+            conv.visit_params(&join_name(prefix, &format!("conv{}", i + 1)), f);
+            bn.visit_params(&join_name(prefix, &format!("bn{}", i + 1)), f);
+        }
+    }
+
+    fn visit_buffers(
+        &mut self,
+        prefix: &str,
+        f: &mut dyn FnMut(&str, ndarray::ArrayViewMutD<'_, T>),
+    ) {
+        for (i, bn) in self.bns.iter_mut().enumerate() {
+            bn.visit_buffers(&join_name(prefix, &format!("bn{}", i + 1)), f);
+        }
+    }
+}

@@ -1,0 +1,274 @@
+//! The RGM network (spec §2): local features → L matching blocks → soft correspondence C̃ (N, M)
+//! for one pair of clouds, with a hand-written backward pass that calls the layers' backward
+//! passes in exact reverse order of the forward.
+//!
+//! Parameters carry the authors' PyTorch names (spec appendix), so a state dict of theirs saved
+//! as safetensors loads by name ([`Rgm::load_tensors`], [`Rgm::load`]); 1×1 convolution weights
+//! stored `(out, in, 1, 1)` load into the `(out, in)` linear weights.
+//!
+//! ```no_run
+//! # use rgm_model::network::{Config, Mode, Rgm, RgmCache};
+//! # fn main() -> rgm_model::network::Result<()> {
+//! let mut rgm = Rgm::<f32>::new(Config::small(), 0)?;
+//! let (x, y) = (ndarray::Array2::<f32>::zeros((717, 3)), ndarray::Array2::<f32>::zeros((717, 3)));
+//! let mut cache = RgmCache::default();
+//! rgm.forward(x.view(), y.view(), Mode::Train, &mut cache)?;
+//! let dc = ndarray::Array2::<f32>::ones(cache.c_soft().dim()); // dLoss/dC̃
+//! rgm.backward(dc.view(), &mut cache)?; // adds into every parameter's grad
+//! # Ok(()) }
+//! ```
+
+mod block;
+mod config;
+mod error;
+mod featurer;
+mod transformer;
+
+pub use block::{Block, BlockCache, Scorer};
+pub use config::{Config, Edges, Scoring};
+pub use error::{NetworkError, Result};
+pub use featurer::{FeaturerCache, PointFeaturer};
+pub use transformer::{EdgeTransformer, EdgeTransformerCache, Stack, StackCache};
+
+use ndarray::{Array2, ArrayD, ArrayView2, ArrayViewMutD};
+use rand::{rngs::StdRng, SeedableRng};
+use rgm_match::{bce_backward, bce_forward, Correspondences};
+use rgm_nn::param::{join_name, ParamViewMut};
+use rgm_nn::{Parameters, Scalar};
+use std::collections::HashMap;
+use std::path::Path;
+
+/// The element types the network runs in (f32, f64): rgm-nn's [`Scalar`] plus `Default`, which
+/// the ops' cache structs need to be created empty.
+pub trait Element: Scalar + Default {}
+
+impl<T: Scalar + Default> Element for T {}
+
+/// Batch norm's behaviour: batch statistics (and running-statistics updates) in training,
+/// running statistics at test time. Nothing else depends on it (no dropout).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mode {
+    Train,
+    Eval,
+}
+
+/// `buf` with `shape`, all zeros (reallocated only when the shape changes).
+pub(crate) fn zeroed<T: Element>(buf: &mut Array2<T>, shape: (usize, usize)) {
+    if buf.dim() == shape {
+        buf.fill(T::zero());
+    } else {
+        *buf = Array2::zeros(shape);
+    }
+}
+
+/// The RGM network: `pointfeaturer`, then L [`Block`]s.
+#[derive(Clone, Debug)]
+pub struct Rgm<T: Element> {
+    config: Config,
+    pub featurer: PointFeaturer<T>,
+    pub blocks: Vec<Block<T>>,
+}
+
+/// One forward pass of a pair: every intermediate the backward needs, and the backward's
+/// scratch. Reused across calls (buffers are reallocated only when N or M change).
+#[derive(Clone, Debug, Default)]
+pub struct RgmCache<T> {
+    fx: FeaturerCache<T>, // X's local features (N, C)
+    fy: FeaturerCache<T>, // Y's local features (M, C)
+    blocks: Vec<BlockCache<T>>,
+    dfeat: Vec<(Array2<T>, Array2<T>)>, // per block: gradient of its inputs, (N, C_b), (M, C_b)
+    dc_soft: Array2<T>,                 // (N, M) loss gradient of C̃
+}
+
+impl<T> RgmCache<T> {
+    /// C̃ (N, M) of the last forward pass: row i, column j is the soft correspondence of source
+    /// point i and target point j. Empty before any forward.
+    pub fn c_soft(&self) -> ArrayView2<'_, T> {
+        match self.blocks.last() {
+            Some(b) => b.c_soft.view(),
+            None => ArrayView2::from_shape((0, 0), &[]).expect("empty"),
+        }
+    }
+}
+
+fn check_cloud<T: Element>(what: &'static str, p: ArrayView2<'_, T>) -> Result<()> {
+    if p.ncols() != 3 {
+        return Err(NetworkError::InputShape {
+            what,
+            got: p.shape().to_vec(),
+        });
+    }
+    Ok(())
+}
+
+impl<T: Element> Rgm<T> {
+    /// A network of `config`'s sizes with PyTorch's default initialisation drawn from `seed`.
+    pub fn new(config: Config, seed: u64) -> Result<Self> {
+        config.validate()?;
+        let mut rng = StdRng::seed_from_u64(seed);
+        let featurer = PointFeaturer::new(config.k, config.dgcnn, config.edge, &mut rng);
+        let blocks = (0..config.blocks)
+            .map(|b| Block::new(&config, b, &mut rng))
+            .collect::<Result<_>>()?;
+        Ok(Self {
+            config,
+            featurer,
+            blocks,
+        })
+    }
+
+    /// A network of `config`'s sizes with every parameter and batch-norm statistic read from
+    /// the safetensors file at `path` (see [`Rgm::load_tensors`]).
+    pub fn load(config: Config, path: &Path) -> Result<Self> {
+        let mut rgm = Self::new(config, 0)?;
+        let (tensors, _) = rgm_nn::io::read_tensors::<T>(path)?;
+        rgm.load_tensors(&tensors)?;
+        Ok(rgm)
+    }
+
+    pub fn config(&self) -> &Config {
+        &self.config
+    }
+
+    /// Sets every parameter and buffer from `tensors` by name (the authors' state-dict names).
+    /// A `(out, in, 1, 1)` tensor fills an `(out, in)` weight; tensors the network does not use
+    /// (`num_batches_tracked`, ...) are ignored; a missing or mis-shaped one is an error.
+    pub fn load_tensors(&mut self, tensors: &HashMap<String, ArrayD<T>>) -> Result<()> {
+        let mut err = None;
+        let mut fill = |name: &str, mut dst: ArrayViewMutD<'_, T>| {
+            if err.is_some() {
+                return;
+            }
+            let Some(t) = tensors.get(name) else {
+                err = Some(NetworkError::MissingTensor {
+                    name: name.to_string(),
+                });
+                return;
+            };
+            let conv_1x1 =
+                t.ndim() == 4 && t.shape()[2..] == [1, 1] && t.shape()[..2] == *dst.shape();
+            if t.shape() == dst.shape() || conv_1x1 {
+                dst.iter_mut().zip(t.iter()).for_each(|(d, &v)| *d = v);
+            } else {
+                err = Some(NetworkError::TensorShape {
+                    name: name.to_string(),
+                    expected: dst.shape().to_vec(),
+                    got: t.shape().to_vec(),
+                });
+            }
+        };
+        self.visit_params("", &mut |name, p| fill(name, p.value));
+        self.visit_buffers("", &mut fill);
+        err.map_or(Ok(()), Err)
+    }
+
+    /// Runs the network on X (N, 3) and Y (M, 3); C̃ is then [`RgmCache::c_soft`]. `Mode::Train`
+    /// uses and updates batch statistics (each cloud's on its own, X first).
+    pub fn forward(
+        &mut self,
+        x: ArrayView2<'_, T>,
+        y: ArrayView2<'_, T>,
+        mode: Mode,
+        cache: &mut RgmCache<T>,
+    ) -> Result<()> {
+        check_cloud("x", x)?;
+        check_cloud("y", y)?;
+        let (n, m) = (x.nrows(), y.nrows());
+        if cache.blocks.len() != self.blocks.len()
+            || cache.blocks.first().map(|b| b.dims()) != Some((n, m))
+        {
+            cache.blocks = (0..self.blocks.len())
+                .map(|b| BlockCache::new(&self.config, b, n, m))
+                .collect();
+        }
+        self.featurer.forward(x, mode, &mut cache.fx)?;
+        self.featurer.forward(y, mode, &mut cache.fy)?;
+        for (b, block) in self.blocks.iter().enumerate() {
+            let (done, rest) = cache.blocks.split_at_mut(b);
+            let (fx, fy) = match done.last() {
+                Some(prev) => prev.outputs(self.blocks[b - 1].cross.is_some()),
+                None => (cache.fx.features.view(), cache.fy.features.view()),
+            };
+            block.forward(fx, fy, &mut rest[0])?;
+        }
+        Ok(())
+    }
+
+    /// Adds into every parameter's gradient the gradient of a loss whose gradient with respect
+    /// to C̃ is `dc_soft` (N, M), for the pass held in `cache`: the blocks from last to first,
+    /// then the feature extractor for Y and for X.
+    pub fn backward(&mut self, dc_soft: ArrayView2<'_, T>, cache: &mut RgmCache<T>) -> Result<()> {
+        let blocks = self.blocks.len();
+        if cache.blocks.len() != blocks || dc_soft.dim() != cache.c_soft().dim() {
+            return Err(NetworkError::Backward {
+                why: format!(
+                    "dc_soft has shape {:?}, the cached forward's C̃ {:?}",
+                    dc_soft.shape(),
+                    cache.c_soft().shape()
+                ),
+            });
+        }
+        cache.dfeat.resize_with(blocks, Default::default);
+        for b in (0..blocks).rev() {
+            let (before, after) = cache.blocks.split_at_mut(b);
+            let (dnow, dlater) = cache.dfeat.split_at_mut(b + 1);
+            let (fx, fy) = match before.last() {
+                Some(prev) => prev.outputs(self.blocks[b - 1].cross.is_some()),
+                None => (cache.fx.features.view(), cache.fy.features.view()),
+            };
+            let (dx, dy) = &mut dnow[b];
+            zeroed(dx, fx.dim());
+            zeroed(dy, fy.dim());
+            let dnext = dlater.first().map(|(a, b)| (a.view(), b.view()));
+            let dc = (b + 1 == blocks).then_some(dc_soft);
+            self.blocks[b].backward(
+                dx.view_mut(),
+                dy.view_mut(),
+                dc,
+                dnext,
+                fx,
+                fy,
+                &mut after[0],
+            )?;
+        }
+        let (dx, dy) = &cache.dfeat[0];
+        self.featurer.backward(dy.view(), &mut cache.fy)?;
+        self.featurer.backward(dx.view(), &mut cache.fx)?;
+        Ok(())
+    }
+
+    /// One training pass for a pair: the forward in training mode, the BCE loss against the
+    /// ground truth `gt` (spec §3: summed over N·M entries, divided by N), and its backward
+    /// (adding into the parameter gradients). Returns the loss.
+    pub fn forward_backward(
+        &mut self,
+        x: ArrayView2<'_, T>,
+        y: ArrayView2<'_, T>,
+        gt: &Correspondences,
+        cache: &mut RgmCache<T>,
+    ) -> Result<T> {
+        self.forward(x, y, Mode::Train, cache)?;
+        let loss = bce_forward(cache.c_soft(), gt)?;
+        let mut dc = std::mem::take(&mut cache.dc_soft);
+        zeroed(&mut dc, cache.c_soft().dim());
+        bce_backward(dc.view_mut(), T::one(), cache.c_soft(), gt)?;
+        let result = self.backward(dc.view(), cache);
+        cache.dc_soft = dc;
+        result.map(|()| loss)
+    }
+}
+
+impl<T: Element> Parameters<T> for Rgm<T> {
+    fn visit_params(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ParamViewMut<'_, T>)) {
+        self.featurer
+            .visit_params(&join_name(prefix, "pointfeaturer"), f);
+        for block in &mut self.blocks {
+            block.visit_params(prefix, f);
+        }
+    }
+
+    fn visit_buffers(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ArrayViewMutD<'_, T>)) {
+        self.featurer
+            .visit_buffers(&join_name(prefix, "pointfeaturer"), f);
+    }
+}

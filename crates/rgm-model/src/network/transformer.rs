@@ -1,0 +1,311 @@
+//! The edge generator's transformer (spec §2.2): a pre-norm encoder layer and decoder layer
+//! (the annotated transformer's, one layer each, no dropout), run in both directions with the
+//! same weights: T_X = decoder(X, encoder(Y)), T_Y = decoder(Y, encoder(X)).
+
+use super::{zeroed, Element, Result};
+use ndarray::{Array2, ArrayView2, ArrayViewMut2};
+use rand::Rng;
+use rgm_nn::param::{join_name, ParamViewMut};
+use rgm_nn::{
+    AttentionCache, FeedForward, FeedForwardCache, LayerNorm, LayerNormCache, MultiHeadAttention,
+    Parameters,
+};
+
+/// An encoder (sub-layers: self-attention, feed-forward) or decoder (self-attention,
+/// cross-attention to the memory, feed-forward) with its final LayerNorm. Sub-layer i computes
+/// `x + op_i(LN_i(x))`.
+#[derive(Clone, Debug)]
+pub struct Stack<T: Element> {
+    pub self_attn: MultiHeadAttention<T>,
+    pub src_attn: Option<MultiHeadAttention<T>>, // decoder only
+    pub feed_forward: FeedForward<T>,
+    pub sublayer_norms: Vec<LayerNorm<T>>, // 2 (encoder) or 3 (decoder)
+    pub norm: LayerNorm<T>,
+}
+
+/// One pass through a [`Stack`]: what the backward needs and its scratch.
+#[derive(Clone, Debug, Default)]
+pub struct StackCache<T> {
+    xs: Vec<Array2<T>>, // S + 1: (R, C) each sub-layer's input, then the final norm's
+    normed: Vec<Array2<T>>, // S: (R, C) each sub-layer's LayerNorm output
+    ln: Vec<LayerNormCache<T>>, // S + 1
+    attn: Vec<AttentionCache<T>>, // one per attention sub-layer
+    ff: FeedForwardCache<T>,
+    /// (R, C) the stack's output.
+    pub out: Array2<T>,
+    dx: Array2<T>,      // (R, C) gradient of the current sub-layer's output
+    dnormed: Array2<T>, // (R, C)
+}
+
+/// The operation of sub-layer `i` of a stack.
+enum Op {
+    SelfAttention,
+    CrossAttention,
+    FeedForward,
+}
+
+impl<T: Element> Stack<T> {
+    fn new(c: usize, heads: usize, ff: usize, decoder: bool, rng: &mut impl Rng) -> Result<Self> {
+        let self_attn = MultiHeadAttention::new(c, heads, rng)?;
+        let src_attn = if decoder {
+            Some(MultiHeadAttention::new(c, heads, rng)?)
+        } else {
+            None
+        };
+        let feed_forward = FeedForward::new(c, ff, rng);
+        let subs = if decoder { 3 } else { 2 };
+        Ok(Self {
+            self_attn,
+            src_attn,
+            feed_forward,
+            sublayer_norms: (0..subs).map(|_| LayerNorm::new(c)).collect(),
+            norm: LayerNorm::new(c),
+        })
+    }
+
+    fn op(&self, i: usize) -> Op {
+        match (i, self.src_attn.is_some()) {
+            (0, _) => Op::SelfAttention,
+            (1, true) => Op::CrossAttention,
+            _ => Op::FeedForward,
+        }
+    }
+
+    /// `x` (R, C) through the stack into `cache.out`; `memory` (R_m, C) is the encoder output
+    /// a decoder attends to (ignored by an encoder).
+    pub fn forward(
+        &self,
+        x: ArrayView2<'_, T>,
+        memory: ArrayView2<'_, T>,
+        cache: &mut StackCache<T>,
+    ) -> Result<()> {
+        let subs = self.sublayer_norms.len();
+        let shape = x.dim();
+        cache.xs.resize_with(subs + 1, Default::default);
+        cache.normed.resize_with(subs, Default::default);
+        cache.ln.resize_with(subs + 1, Default::default);
+        cache.attn.resize_with(subs - 1, Default::default);
+        zeroed(&mut cache.xs[0], shape);
+        cache.xs[0].assign(&x);
+        zeroed(&mut cache.dx, shape); // scratch: each sub-layer's output before the residual
+        for i in 0..subs {
+            zeroed(&mut cache.normed[i], shape);
+            self.sublayer_norms[i].forward(
+                cache.normed[i].view_mut(),
+                cache.xs[i].view(),
+                &mut cache.ln[i],
+            )?;
+            let (normed, out) = (cache.normed[i].view(), cache.dx.view_mut());
+            match self.op(i) {
+                Op::SelfAttention => {
+                    self.self_attn
+                        .forward(out, normed, normed, &mut cache.attn[0])?
+                }
+                Op::CrossAttention => self.src_attn.as_ref().expect("decoder").forward(
+                    out,
+                    normed,
+                    memory,
+                    &mut cache.attn[1],
+                )?,
+                Op::FeedForward => self.feed_forward.forward(out, normed, &mut cache.ff)?,
+            }
+            // x_{i+1} = x_i + op_i(LN_i(x_i))
+            let next = &cache.xs[i] + &cache.dx;
+            cache.xs[i + 1] = next;
+        }
+        zeroed(&mut cache.out, shape);
+        self.norm.forward(
+            cache.out.view_mut(),
+            cache.xs[subs].view(),
+            &mut cache.ln[subs],
+        )?;
+        Ok(())
+    }
+
+    /// Adds into `dx` (R, C) and, for a decoder, `dmemory` (R_m, C) the gradients of the pass
+    /// given `dout` (R, C), and into the stack's parameter gradients.
+    pub fn backward(
+        &mut self,
+        mut dx: ArrayViewMut2<'_, T>,
+        dmemory: Option<ArrayViewMut2<'_, T>>,
+        dout: ArrayView2<'_, T>,
+        memory: ArrayView2<'_, T>,
+        cache: &mut StackCache<T>,
+    ) -> Result<()> {
+        let subs = self.sublayer_norms.len();
+        let shape = cache.out.dim();
+        zeroed(&mut cache.dx, shape);
+        // out = LN(x_S)
+        self.norm.backward(
+            cache.dx.view_mut(),
+            dout,
+            cache.xs[subs].view(),
+            &cache.ln[subs],
+        )?;
+        let mut dmemory = dmemory;
+        for i in (0..subs).rev() {
+            // x_{i+1} = x_i + op_i(n_i), n_i = LN_i(x_i): dx_i = dx_{i+1} + LN_i'(op_i'(dx_{i+1}))
+            zeroed(&mut cache.dnormed, shape);
+            let (dnormed, d_op, normed) = (
+                cache.dnormed.view_mut(),
+                cache.dx.view(),
+                cache.normed[i].view(),
+            );
+            match self.op(i) {
+                Op::SelfAttention => self.self_attn.backward(
+                    dnormed,
+                    None,
+                    d_op,
+                    normed,
+                    normed,
+                    &mut cache.attn[0],
+                )?,
+                Op::CrossAttention => self.src_attn.as_mut().expect("decoder").backward(
+                    dnormed,
+                    dmemory.as_mut().map(|d| d.view_mut()),
+                    d_op,
+                    normed,
+                    memory,
+                    &mut cache.attn[1],
+                )?,
+                Op::FeedForward => {
+                    self.feed_forward
+                        .backward(dnormed, d_op, normed, &mut cache.ff)?
+                }
+            }
+            self.sublayer_norms[i].backward(
+                cache.dx.view_mut(),
+                cache.dnormed.view(),
+                cache.xs[i].view(),
+                &cache.ln[i],
+            )?;
+        }
+        dx += &cache.dx;
+        Ok(())
+    }
+}
+
+impl<T: Element> Parameters<T> for Stack<T> {
+    fn visit_params(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ParamViewMut<'_, T>)) {
+        let layer = join_name(prefix, "layers.0");
+        self.self_attn
+            .visit_params(&join_name(&layer, "self_attn"), f);
+        if let Some(src) = &mut self.src_attn {
+            src.visit_params(&join_name(&layer, "src_attn"), f);
+        }
+        self.feed_forward
+            .visit_params(&join_name(&layer, "feed_forward"), f);
+        for (i, norm) in self.sublayer_norms.iter_mut().enumerate() {
+            norm.visit_params(&join_name(&layer, &format!("sublayer.{i}.norm")), f);
+        }
+        self.norm.visit_params(&join_name(prefix, "norm"), f);
+    }
+}
+
+/// The shared encoder-decoder (`gmattend{b}.model`).
+#[derive(Clone, Debug)]
+pub struct EdgeTransformer<T: Element> {
+    pub encoder: Stack<T>,
+    pub decoder: Stack<T>,
+}
+
+/// Both directions' passes.
+#[derive(Clone, Debug, Default)]
+pub struct EdgeTransformerCache<T> {
+    enc_x: StackCache<T>,
+    enc_y: StackCache<T>,
+    dec_x: StackCache<T>, // out: T_X (N, C)
+    dec_y: StackCache<T>, // out: T_Y (M, C)
+    dmem_x: Array2<T>,    // (N, C)
+    dmem_y: Array2<T>,    // (M, C)
+}
+
+impl<T> EdgeTransformerCache<T> {
+    /// T_X (N, C) after a forward pass.
+    pub fn tx(&self) -> &Array2<T> {
+        &self.dec_x.out
+    }
+
+    /// T_Y (M, C) after a forward pass.
+    pub fn ty(&self) -> &Array2<T> {
+        &self.dec_y.out
+    }
+}
+
+impl<T: Element> EdgeTransformer<T> {
+    /// Width C, H heads, feed-forward width `ff`; PyTorch initialisation.
+    pub fn new(c: usize, heads: usize, ff: usize, rng: &mut impl Rng) -> Result<Self> {
+        let encoder = Stack::new(c, heads, ff, false, rng)?;
+        Ok(Self {
+            encoder,
+            decoder: Stack::new(c, heads, ff, true, rng)?,
+        })
+    }
+
+    /// T_X = decoder(F_X, encoder(F_Y)), T_Y = decoder(F_Y, encoder(F_X)).
+    /// `fx`: (N, C), `fy`: (M, C).
+    pub fn forward(
+        &self,
+        fx: ArrayView2<'_, T>,
+        fy: ArrayView2<'_, T>,
+        cache: &mut EdgeTransformerCache<T>,
+    ) -> Result<()> {
+        self.encoder.forward(fx, fx, &mut cache.enc_x)?;
+        self.encoder.forward(fy, fy, &mut cache.enc_y)?;
+        self.decoder
+            .forward(fx, cache.enc_y.out.view(), &mut cache.dec_x)?;
+        self.decoder
+            .forward(fy, cache.enc_x.out.view(), &mut cache.dec_y)?;
+        Ok(())
+    }
+
+    /// Adds into `dfx` (N, C), `dfy` (M, C) the gradients given `dtx` (N, C), `dty` (M, C):
+    /// the four passes in reverse.
+    pub fn backward(
+        &mut self,
+        mut dfx: ArrayViewMut2<'_, T>,
+        mut dfy: ArrayViewMut2<'_, T>,
+        dtx: ArrayView2<'_, T>,
+        dty: ArrayView2<'_, T>,
+        cache: &mut EdgeTransformerCache<T>,
+    ) -> Result<()> {
+        zeroed(&mut cache.dmem_x, cache.enc_x.out.dim());
+        zeroed(&mut cache.dmem_y, cache.enc_y.out.dim());
+        self.decoder.backward(
+            dfy.view_mut(),
+            Some(cache.dmem_x.view_mut()),
+            dty,
+            cache.enc_x.out.view(),
+            &mut cache.dec_y,
+        )?;
+        self.decoder.backward(
+            dfx.view_mut(),
+            Some(cache.dmem_y.view_mut()),
+            dtx,
+            cache.enc_y.out.view(),
+            &mut cache.dec_x,
+        )?;
+        let empty = Array2::zeros((0, 0));
+        self.encoder.backward(
+            dfy,
+            None,
+            cache.dmem_y.view(),
+            empty.view(),
+            &mut cache.enc_y,
+        )?;
+        self.encoder.backward(
+            dfx,
+            None,
+            cache.dmem_x.view(),
+            empty.view(),
+            &mut cache.enc_x,
+        )
+    }
+}
+
+impl<T: Element> Parameters<T> for EdgeTransformer<T> {
+    fn visit_params(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ParamViewMut<'_, T>)) {
+        self.encoder.visit_params(&join_name(prefix, "encoder"), f);
+        self.decoder.visit_params(&join_name(prefix, "decoder"), f);
+    }
+}
