@@ -150,6 +150,35 @@ mod tests {
     }
 
     #[test]
+    fn degenerate_clouds_give_finite_results_not_panics() {
+        let line: Vec<Point3<f64>> = (0..50)
+            .map(|i| Point3::new(0.02 * i as f64, 0.0, 0.0))
+            .collect();
+        let clouds = [
+            vec![Point3::new(0.1, 0.2, 0.3)],
+            vec![Point3::new(0.1, 0.2, 0.3); 3],
+            vec![Point3::new(0.1, 0.2, 0.3); 200],
+            line,
+        ];
+        for points in clouds {
+            let cloud = PointCloud::new(points);
+            let results = [
+                icp::register(&cloud, &cloud, &icp::IcpConfig::default()).unwrap(),
+                fgr::register(&cloud, &cloud, &fgr::FgrConfig::default()).unwrap(),
+            ];
+            for r in results {
+                let m = r.t_target_source.to_matrix4();
+                assert!(
+                    m.iter().all(|v| v.is_finite()),
+                    "{} points: {m}",
+                    cloud.len()
+                );
+                assert!(r.fitness.is_finite() && r.inlier_rmse.is_finite());
+            }
+        }
+    }
+
+    #[test]
     fn icp_from_small_perturbations_is_accurate_both_ways() {
         let worst = check_both_directions(
             |s, t| icp::register(s, t, &icp::IcpConfig::default()),
