@@ -24,20 +24,27 @@ fn partial_pair() -> (PointCloud, PointCloud) {
         })
         .collect();
     let crop = |dir: [f64; 3]| {
-        let mut by_height: Vec<(f64, Point3<f64>)> =
-            shape.iter().map(|p| (p.x * dir[0] + p.y * dir[1] + p.z * dir[2], *p)).collect();
+        let mut by_height: Vec<(f64, Point3<f64>)> = shape
+            .iter()
+            .map(|p| (p.x * dir[0] + p.y * dir[1] + p.z * dir[2], *p))
+            .collect();
         by_height.sort_by(|a, b| b.0.total_cmp(&a.0));
         PointCloud::new(by_height[..717].iter().map(|h| h.1).collect())
     };
     let pose = RigidTransform::random(&mut StdRng::seed_from_u64(3), 45.0, 0.5);
-    (crop([0.6, 0.8, 0.0]).transformed(&pose), crop([0.0, 0.6, 0.8]))
+    (
+        crop([0.6, 0.8, 0.0]).transformed(&pose),
+        crop([0.0, 0.6, 0.8]),
+    )
 }
 
 fn knn(c: &mut Criterion) {
     let mut group = c.benchmark_group("knn_graph_k20");
     for n in SIZES {
         let points = unit_ball_points(n, 1);
-        group.bench_function(BenchmarkId::from_parameter(n), |b| b.iter(|| knn_graph(&points, K).unwrap()));
+        group.bench_function(BenchmarkId::from_parameter(n), |b| {
+            b.iter(|| knn_graph(&points, K).unwrap())
+        });
     }
     group.finish();
 }
@@ -47,18 +54,30 @@ fn kabsch_717(c: &mut Criterion) {
     let pose = RigidTransform::random(&mut StdRng::seed_from_u64(4), 45.0, 0.5);
     let target: Vec<_> = source.iter().map(|p| pose.apply(p)).collect();
     let weights = vec![1.0; 717];
-    c.bench_function("kabsch/717", |b| b.iter(|| kabsch(&source, &target, &weights).unwrap()));
+    c.bench_function("kabsch/717", |b| {
+        b.iter(|| kabsch(&source, &target, &weights).unwrap())
+    });
 }
 
 fn registration(c: &mut Criterion) {
     let (source, target) = partial_pair();
     let mut group = c.benchmark_group("registration_717");
     group.sample_size(20);
-    group.bench_function("icp", |b| b.iter(|| icp::register(&source, &target, &icp::IcpConfig::default()).unwrap()));
-    group.bench_function("normals_fpfh_one_cloud", |b| {
-        b.iter(|| features(&source.points, &NormalsConfig::default(), &FpfhConfig::default()))
+    group.bench_function("icp", |b| {
+        b.iter(|| icp::register(&source, &target, &icp::IcpConfig::default()).unwrap())
     });
-    group.bench_function("fpfh_fgr_pair", |b| b.iter(|| fgr::register(&source, &target, &fgr::FgrConfig::default()).unwrap()));
+    group.bench_function("normals_fpfh_one_cloud", |b| {
+        b.iter(|| {
+            features(
+                &source.points,
+                &NormalsConfig::default(),
+                &FpfhConfig::default(),
+            )
+        })
+    });
+    group.bench_function("fpfh_fgr_pair", |b| {
+        b.iter(|| fgr::register(&source, &target, &fgr::FgrConfig::default()).unwrap())
+    });
     group.finish();
 }
 
