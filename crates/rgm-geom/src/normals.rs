@@ -183,6 +183,27 @@ mod tests {
     }
 
     #[test]
+    fn wider_neighbourhoods_restricted_give_the_same_normals() {
+        // FPFH's neighbourhoods (0.4, 100) cut down to (0.2, 30) are exactly the normals' own.
+        let cloud = crate::testing::airplane();
+        let index = KnnIndex::new(&cloud.points);
+        let config = NormalsConfig::default();
+        let wide = Neighbourhoods::hybrid(&index, &cloud.points, 0.4, 100);
+        let own = Neighbourhoods::hybrid(&index, &cloud.points, config.radius, config.max_nn);
+        for i in 0..cloud.len() {
+            assert_eq!(
+                wide.get_within(i, config.radius, config.max_nn),
+                own.get(i),
+                "point {i}"
+            );
+        }
+        assert_eq!(
+            normals_from_neighbourhoods(&cloud.points, &wide, &config),
+            estimate_normals(&cloud.points, &index, &config)
+        );
+    }
+
+    #[test]
     fn too_few_neighbours_fall_back_to_z() {
         // Two far-apart points: fewer than 3 neighbours each → (0, 0, ±1), signed away from the
         // centroid (both have z = 0 relative to it, so the dot is 0 and +z stays).
