@@ -68,7 +68,7 @@ impl Config {
     }
 
     /// Every stage narrowed for training on a small CPU: DGCNN 32-32-64-128, edge 256
-    /// (C = 512), Q 256, H 4, FF 512, K 20, L 2 — 3,677,828 parameters.
+    /// (C = 512), Q 256, H 4, FF 512, K 20, L 2 — 6,263,236 parameters.
     pub fn small() -> Self {
         Self {
             dgcnn: [32, 32, 64, 128],
