@@ -3,13 +3,14 @@
 //! self-attention).
 
 use super::linear::Linear;
-use super::softmax::{softmax_backward_row, softmax_in_place};
+use super::softmax::{softmax_backward_in_place, softmax_in_place};
 use crate::error::check_shape;
 use crate::param::{join_name, ParamViewMut};
 use crate::{NnError, Parameters, Result, Scalar};
 use ndarray::linalg::general_mat_mul;
-use ndarray::{s, Array2, Array3, ArrayView2, ArrayViewMut2, Axis};
+use ndarray::{s, Array2, Array3, ArrayView1, ArrayView2, ArrayViewMut1, ArrayViewMut2, Axis};
 use rand::Rng;
+use rayon::prelude::*;
 
 /// `out = concat_h(softmax_rows(Q_h K_hᵀ / √(C/H)) V_h) · Woᵀ + bo` with `Q = q_in Wqᵀ + bq`,
 /// `K = kv_in Wkᵀ + bk`, `V = kv_in Wvᵀ + bv`; head h owns the contiguous channels
@@ -36,8 +37,7 @@ pub struct AttentionCache<T> {
     dq: Array2<T>,        // (Nq, C)
     dk: Array2<T>,        // (Nk, C)
     dv: Array2<T>,        // (Nk, C)
-    dprobs: Array2<T>,    // (Nq, Nk), one head at a time
-    dscores: Array2<T>,   // (Nq, Nk), one head at a time
+    dprobs: Array3<T>,    // (H, Nq, Nk), then the score gradients in place
 }
 
 fn ensure<T: Scalar>(buf: &mut Array2<T>, shape: (usize, usize)) {
@@ -99,9 +99,18 @@ impl<T: Scalar> MultiHeadAttention<T> {
                 T::zero(),
                 &mut p,
             );
-            for row in p.rows_mut() {
-                softmax_in_place(row);
-            }
+        }
+        // The H·Nq score rows are independent: rayon spreads them over the cores while no BLAS
+        // call runs (the two pools never nest).
+        let probs = cache
+            .probs
+            .as_slice_mut()
+            .expect("probs is standard layout"); // (H*Nq*Nk)
+        probs
+            .par_chunks_mut(nk.max(1))
+            .for_each(|row| softmax_in_place(ArrayViewMut1::from(row)));
+        for (head, p) in cache.probs.axis_iter(Axis(0)).enumerate() {
+            let cols = s![.., head * dk..(head + 1) * dk];
             general_mat_mul(
                 T::one(),
                 &p,
@@ -140,25 +149,25 @@ impl<T: Scalar> MultiHeadAttention<T> {
             (&mut cache.dq, (nq, c)),
             (&mut cache.dk, (nk, c)),
             (&mut cache.dv, (nk, c)),
-            (&mut cache.dprobs, (nq, nk)),
         ] {
             ensure(buf, shape);
             buf.fill(T::zero());
         }
-        ensure(&mut cache.dscores, (nq, nk));
+        if cache.dprobs.dim() != (h, nq, nk) {
+            cache.dprobs = Array3::zeros((h, nq, nk));
+        }
         self.output
             .backward(cache.dheads.view_mut(), dout, cache.heads.view())?;
         let scale = T::one() / T::from_f64(dk as f64).sqrt();
-        for (head, p) in cache.probs.axis_iter(Axis(0)).enumerate() {
+        for (head, (p, mut dp)) in cache
+            .probs
+            .axis_iter(Axis(0))
+            .zip(cache.dprobs.axis_iter_mut(Axis(0)))
+            .enumerate()
+        {
             let cols = s![.., head * dk..(head + 1) * dk];
             let d_o = cache.dheads.slice(cols);
-            general_mat_mul(
-                T::one(),
-                &d_o,
-                &cache.v.slice(cols).t(),
-                T::zero(),
-                &mut cache.dprobs,
-            );
+            general_mat_mul(T::one(), &d_o, &cache.v.slice(cols).t(), T::zero(), &mut dp);
             general_mat_mul(
                 T::one(),
                 &p.t(),
@@ -166,26 +175,31 @@ impl<T: Scalar> MultiHeadAttention<T> {
                 T::one(),
                 &mut cache.dv.slice_mut(cols),
             );
-            cache.dscores.fill(T::zero());
-            for ((ds, dp), y) in cache
-                .dscores
-                .rows_mut()
-                .into_iter()
-                .zip(cache.dprobs.rows())
-                .zip(p.rows())
-            {
-                softmax_backward_row(ds, dp, y);
-            }
+        }
+        // dP → dS row by row, in place, spread over the cores by rayon (no BLAS call runs).
+        let probs = cache.probs.as_slice().expect("probs is standard layout"); // (H*Nq*Nk)
+        let dprobs = cache
+            .dprobs
+            .as_slice_mut()
+            .expect("dprobs is standard layout"); // (H*Nq*Nk)
+        dprobs
+            .par_chunks_mut(nk.max(1))
+            .zip(probs.par_chunks(nk.max(1)))
+            .for_each(|(d, y)| {
+                softmax_backward_in_place(ArrayViewMut1::from(d), ArrayView1::from(y));
+            });
+        for (head, ds) in cache.dprobs.axis_iter(Axis(0)).enumerate() {
+            let cols = s![.., head * dk..(head + 1) * dk];
             general_mat_mul(
                 scale,
-                &cache.dscores,
+                &ds,
                 &cache.k.slice(cols),
                 T::one(),
                 &mut cache.dq.slice_mut(cols),
             );
             general_mat_mul(
                 scale,
-                &cache.dscores.t(),
+                &ds.t(),
                 &cache.q.slice(cols),
                 T::one(),
                 &mut cache.dk.slice_mut(cols),

@@ -2,7 +2,7 @@
 
 use crate::error::{check_shape, check_shapes};
 use crate::{Result, Scalar};
-use ndarray::{ArrayView2, ArrayViewMut1, ArrayViewMut2, Zip};
+use ndarray::{ArrayView1, ArrayView2, ArrayViewMut1, ArrayViewMut2, Zip};
 
 /// Replaces a row by its softmax, shifted by the row maximum so no exponent overflows.
 pub(crate) fn softmax_in_place<T: Scalar>(mut row: ArrayViewMut1<'_, T>) {
@@ -17,20 +17,35 @@ pub(crate) fn softmax_in_place<T: Scalar>(mut row: ArrayViewMut1<'_, T>) {
     row.mapv_inplace(|v| v * inv);
 }
 
-/// Adds the softmax backward of one row: `dinp_j += out_j · (dout_j − Σ_k dout_k out_k)`.
-pub(crate) fn softmax_backward_row<T: Scalar>(
-    mut dinp: ArrayViewMut1<'_, T>,
-    dout: ndarray::ArrayView1<'_, T>,
-    out: ndarray::ArrayView1<'_, T>,
-) {
-    let dot = dout
-        .iter()
+/// `Σ_k dout_k out_k` of one row, shared by both forms of the softmax backward.
+fn row_dot<T: Scalar>(dout: ArrayView1<'_, T>, out: ArrayView1<'_, T>) -> T {
+    dout.iter()
         .zip(out.iter())
-        .fold(T::zero(), |s, (&g, &y)| s + g * y);
+        .fold(T::zero(), |s, (&g, &y)| s + g * y)
+}
+
+/// Adds the softmax backward of one row: `dinp_j += out_j · (dout_j − Σ_k dout_k out_k)`.
+fn softmax_backward_row<T: Scalar>(
+    mut dinp: ArrayViewMut1<'_, T>,
+    dout: ArrayView1<'_, T>,
+    out: ArrayView1<'_, T>,
+) {
+    let dot = row_dot(dout, out);
     Zip::from(&mut dinp)
         .and(&dout)
         .and(&out)
         .for_each(|d, &g, &y| *d += y * (g - dot));
+}
+
+/// Replaces a row's output gradient by its input gradient: `d_j ← out_j · (d_j − Σ_k d_k out_k)`.
+pub(crate) fn softmax_backward_in_place<T: Scalar>(
+    mut d: ArrayViewMut1<'_, T>,
+    out: ArrayView1<'_, T>,
+) {
+    let dot = row_dot(d.view(), out);
+    Zip::from(&mut d)
+        .and(&out)
+        .for_each(|d, &y| *d = y * (*d - dot));
 }
 
 /// `out[r, j] = exp(inp[r, j]) / Σ_k exp(inp[r, k])`. `out`, `inp`: (R, C).
