@@ -52,12 +52,12 @@ pub fn pair_features(
     n2: &Vector3<f64>,
 ) -> [f64; 4] {
     let mut dp = p2 - p1;
-    let d = dp.norm();
+    let d = dot(&dp, &dp).sqrt();
     if d == 0.0 {
         return [0.0; 4];
     }
-    let angle1 = n1.dot(&dp) / d;
-    let angle2 = n2.dot(&dp) / d;
+    let angle1 = dot(n1, &dp) / d;
+    let angle2 = dot(n2, &dp) / d;
     let (u, n_other, theta) = if angle1.abs().acos() > angle2.abs().acos() {
         dp = -dp;
         (n2, n1, -angle2)
@@ -65,15 +65,22 @@ pub fn pair_features(
         (n1, n2, angle1)
     };
     let v = dp.cross(u);
-    let v_norm = v.norm();
+    let v_norm = dot(&v, &v).sqrt();
     if v_norm == 0.0 {
         return [0.0; 4];
     }
     let v = v / v_norm;
     let w = u.cross(&v);
-    let phi = v.dot(n_other);
-    let alpha = w.dot(n_other).atan2(u.dot(n_other));
+    let phi = dot(&v, n_other);
+    let alpha = dot(&w, n_other).atan2(dot(u, n_other));
     [alpha, phi, theta, d]
+}
+
+/// `a · b`, summed x, y, z in that order (as Eigen does for 3-vectors: Open3D's features are
+/// reproduced to the last bit).
+#[inline]
+fn dot(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+    a.x * b.x + a.y * b.y + a.z * b.z
 }
 
 /// The bin of `value` in [lo, lo + width) split into 11, clamped to the valid bins.
@@ -139,19 +146,31 @@ fn fpfh_from_neighbourhoods(
         if nb.len() < 2 {
             continue;
         }
-        // Σ SPFH_j / d²_j over the neighbours (a point coinciding with this one is skipped).
+        // Σ SPFH_j / d²_j over the neighbours (a point coinciding with this one is skipped), and
+        // each block's total, accumulated in Open3D's order.
+        let mut block_sums = [0.0; 3];
         for &(j, d2) in &nb[1..] {
             if d2 == 0.0 {
                 continue;
             }
-            let weight = 1.0 / d2;
-            for (o, s) in out.iter_mut().zip(&spfh[j]) {
-                *o += s * weight;
+            for ((o, s), sum) in out
+                .chunks_exact_mut(BINS)
+                .zip(spfh[j].chunks_exact(BINS))
+                .zip(&mut block_sums)
+            {
+                for (oc, sc) in o.iter_mut().zip(s) {
+                    let weighted = sc / d2;
+                    *sum += weighted;
+                    *oc += weighted;
+                }
             }
         }
         // Each block rescaled to sum to 100, plus the point's own SPFH.
-        for (block, own) in out.chunks_exact_mut(BINS).zip(spfh[i].chunks_exact(BINS)) {
-            let sum: f64 = block.iter().sum();
+        for ((block, own), sum) in out
+            .chunks_exact_mut(BINS)
+            .zip(spfh[i].chunks_exact(BINS))
+            .zip(block_sums)
+        {
             let scale = if sum != 0.0 { 100.0 / sum } else { 0.0 };
             for (o, s) in block.iter_mut().zip(own) {
                 *o = *o * scale + s;

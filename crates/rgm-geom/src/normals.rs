@@ -7,7 +7,7 @@
 //! fallback (0, 0, 1). PCA leaves the sign free; we flip each normal so that
 //! `n · (p − centroid) ≥ 0` — the setup the project's Open3D measurements used.
 
-use nalgebra::{Matrix3, Point3, SymmetricEigen, Vector3};
+use nalgebra::{Matrix3, Point3, Vector3};
 
 use crate::knn::{KnnIndex, Neighbourhoods};
 
@@ -64,31 +64,165 @@ pub fn normals_from_neighbourhoods(
 }
 
 /// The unit eigenvector of the smallest eigenvalue of the neighbours' covariance; `None` with
-/// fewer than 3 neighbours or a zero covariance (Open3D then uses (0, 0, 1)).
+/// fewer than 3 neighbours or a zero covariance (Open3D then uses (0, 0, 1)). Computed as Open3D
+/// does, operation for operation (one-pass covariance in neighbour order, then the closed-form
+/// solver of Eberly's "A Robust Eigensolver for 3×3 Symmetric Matrices"), because FPFH depends
+/// on the normals' last bits (see `fpfh`).
 fn pca_normal(points: &[Point3<f64>], neighbours: &[(usize, f64)]) -> Option<Vector3<f64>> {
     if neighbours.len() < 3 {
         return None;
     }
-    let k = neighbours.len() as f64;
-    let mean: Vector3<f64> = neighbours
-        .iter()
-        .map(|&(j, _)| points[j].coords)
-        .sum::<Vector3<f64>>()
-        / k;
-    let mut cov = Matrix3::zeros(); // (3, 3)
+    // Cumulants Σx, Σy, Σz, Σxx, Σxy, Σxz, Σyy, Σyz, Σzz over the neighbours, then means.
+    let mut c = [0.0; 9];
     for &(j, _) in neighbours {
-        let d = points[j].coords - mean;
-        cov += d * d.transpose();
+        let [x, y, z] = [points[j].x, points[j].y, points[j].z];
+        let terms = [x, y, z, x * x, x * y, x * z, y * y, y * z, z * z];
+        for (ci, t) in c.iter_mut().zip(terms) {
+            *ci += t;
+        }
     }
-    cov /= k;
-    if cov.abs().max() == 0.0 {
-        return None;
+    let k = neighbours.len() as f64;
+    c.iter_mut().for_each(|ci| *ci /= k);
+    let (xx, yy, zz) = (c[3] - c[0] * c[0], c[6] - c[1] * c[1], c[8] - c[2] * c[2]);
+    let (xy, xz, yz) = (c[4] - c[0] * c[1], c[5] - c[0] * c[2], c[7] - c[1] * c[2]);
+    let cov = Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz); // (3, 3)
+    let normal = smallest_eigenvector(&cov);
+    (normal != Vector3::zeros() && normal.iter().all(|v| v.is_finite())).then_some(normal)
+}
+
+/// `a · b`, summed x, y, z in that order.
+fn dot(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+    a.x * b.x + a.y * b.y + a.z * b.z
+}
+
+/// Unit eigenvector of the smallest eigenvalue of a symmetric 3×3 matrix (Eberly's closed form,
+/// as Open3D's `FastEigen3x3`); zero for the zero matrix.
+fn smallest_eigenvector(cov: &Matrix3<f64>) -> Vector3<f64> {
+    let max_coeff = cov.max();
+    if max_coeff == 0.0 {
+        return Vector3::zeros();
     }
-    let eigen = SymmetricEigen::new(cov);
-    let smallest = eigen.eigenvalues.imin();
-    let normal: Vector3<f64> = eigen.eigenvectors.column(smallest).into();
-    let norm = normal.norm();
-    (norm > 0.0 && norm.is_finite()).then(|| normal / norm)
+    let a = cov / max_coeff;
+    let off = a[(0, 1)] * a[(0, 1)] + a[(0, 2)] * a[(0, 2)] + a[(1, 2)] * a[(1, 2)];
+    if !(off > 0.0) {
+        // Diagonal: the axis of the strictly smallest diagonal entry, else z.
+        let d = [cov[(0, 0)], cov[(1, 1)], cov[(2, 2)]];
+        return if d[0] < d[1] && d[0] < d[2] {
+            Vector3::x()
+        } else if d[1] < d[0] && d[1] < d[2] {
+            Vector3::y()
+        } else {
+            Vector3::z()
+        };
+    }
+    // Eigenvalues q + p·β with β = 2 cos(θ/3 + 2πk/3), θ = acos(det(B)/2), B = (A − qI)/p.
+    let q = (a[(0, 0)] + a[(1, 1)] + a[(2, 2)]) / 3.0;
+    let (b00, b11, b22) = (a[(0, 0)] - q, a[(1, 1)] - q, a[(2, 2)] - q);
+    let p = ((b00 * b00 + b11 * b11 + b22 * b22 + off * 2.0) / 6.0).sqrt();
+    let c00 = b11 * b22 - a[(1, 2)] * a[(1, 2)];
+    let c01 = a[(0, 1)] * b22 - a[(1, 2)] * a[(0, 2)];
+    let c02 = a[(0, 1)] * a[(1, 2)] - b11 * a[(0, 2)];
+    let det = (b00 * c00 - a[(0, 1)] * c01 + a[(0, 2)] * c02) / (p * p * p);
+    let half_det = (det * 0.5).clamp(-1.0, 1.0);
+    let angle = half_det.acos() / 3.0;
+    const TWO_THIRDS_PI: f64 = 2.094_395_102_393_195_5;
+    let beta2 = angle.cos() * 2.0;
+    let beta0 = (angle + TWO_THIRDS_PI).cos() * 2.0;
+    let beta1 = -(beta0 + beta2);
+    let eval = [q + p * beta0, q + p * beta1, q + p * beta2];
+    let is_smallest = |i: usize| (0..3).filter(|&j| j != i).all(|j| eval[i] < eval[j]);
+    // Start from the eigenvalue farthest from the other two (the best conditioned).
+    let first = if half_det >= 0.0 { 2 } else { 0 };
+    let evec_first = eigenvector_of_simple(&a, eval[first]);
+    if is_smallest(first) {
+        return evec_first;
+    }
+    let evec1 = eigenvector_in_complement(&a, &evec_first, eval[1]);
+    if is_smallest(1) {
+        return evec1;
+    }
+    // The third is the cross product of the other two, in Open3D's order.
+    if half_det >= 0.0 {
+        evec1.cross(&evec_first)
+    } else {
+        evec_first.cross(&evec1)
+    }
+}
+
+/// Eigenvector for an eigenvalue of multiplicity one: the largest cross product of two rows of
+/// `a − λI`, normalised.
+fn eigenvector_of_simple(a: &Matrix3<f64>, lambda: f64) -> Vector3<f64> {
+    let row0 = Vector3::new(a[(0, 0)] - lambda, a[(0, 1)], a[(0, 2)]);
+    let row1 = Vector3::new(a[(0, 1)], a[(1, 1)] - lambda, a[(1, 2)]);
+    let row2 = Vector3::new(a[(0, 2)], a[(1, 2)], a[(2, 2)] - lambda);
+    let crosses = [row0.cross(&row1), row0.cross(&row2), row1.cross(&row2)];
+    let d = [
+        dot(&crosses[0], &crosses[0]),
+        dot(&crosses[1], &crosses[1]),
+        dot(&crosses[2], &crosses[2]),
+    ];
+    let mut best = 0;
+    if d[1] > d[best] {
+        best = 1;
+    }
+    if d[2] > d[best] {
+        best = 2;
+    }
+    crosses[best] / d[best].sqrt()
+}
+
+/// Eigenvector for `lambda` orthogonal to the unit eigenvector `e`: solve the 2×2 problem in an
+/// orthonormal basis (U, V) of e's complement.
+fn eigenvector_in_complement(a: &Matrix3<f64>, e: &Vector3<f64>, lambda: f64) -> Vector3<f64> {
+    let u = if e.x.abs() > e.y.abs() {
+        let inv = 1.0 / (e.x * e.x + e.z * e.z).sqrt();
+        Vector3::new(-e.z * inv, 0.0, e.x * inv)
+    } else {
+        let inv = 1.0 / (e.y * e.y + e.z * e.z).sqrt();
+        Vector3::new(0.0, e.z * inv, -e.y * inv)
+    };
+    let v = e.cross(&u);
+    let times = |w: &Vector3<f64>| {
+        Vector3::new(
+            a[(0, 0)] * w.x + a[(0, 1)] * w.y + a[(0, 2)] * w.z,
+            a[(0, 1)] * w.x + a[(1, 1)] * w.y + a[(1, 2)] * w.z,
+            a[(0, 2)] * w.x + a[(1, 2)] * w.y + a[(2, 2)] * w.z,
+        )
+    };
+    let (au, av) = (times(&u), times(&v));
+    let mut m00 = dot(&u, &au) - lambda;
+    let mut m01 = dot(&u, &av);
+    let mut m11 = dot(&v, &av) - lambda;
+    let (abs00, abs01, abs11) = (m00.abs(), m01.abs(), m11.abs());
+    if abs00 >= abs11 {
+        if abs00.max(abs01) > 0.0 {
+            if abs00 >= abs01 {
+                m01 /= m00;
+                m00 = 1.0 / (1.0 + m01 * m01).sqrt();
+                m01 *= m00;
+            } else {
+                m00 /= m01;
+                m01 = 1.0 / (1.0 + m00 * m00).sqrt();
+                m00 *= m01;
+            }
+            m01 * u - m00 * v
+        } else {
+            u
+        }
+    } else if abs11.max(abs01) > 0.0 {
+        if abs11 >= abs01 {
+            m01 /= m11;
+            m11 = 1.0 / (1.0 + m01 * m01).sqrt();
+            m01 *= m11;
+        } else {
+            m11 /= m01;
+            m01 = 1.0 / (1.0 + m11 * m11).sqrt();
+            m11 *= m01;
+        }
+        m11 * u - m01 * v
+    } else {
+        u
+    }
 }
 
 #[cfg(test)]
