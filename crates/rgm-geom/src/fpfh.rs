@@ -9,6 +9,12 @@
 //!    each 11-bin block rescaled to sum to 100, plus the point's own SPFH.
 //!
 //! A point without neighbours other than itself gets an all-zero feature, as in Open3D.
+//!
+//! Every operation follows Open3D's order (dot products x + y + z, the 1/d² weights divided in,
+//! block sums accumulated neighbour by neighbour), and with [`crate::normals`]' Open3D-exact
+//! normals the features of ModelNet40 `airplane_0627` equal Open3D 0.20's bit for bit. That
+//! matters: where two neighbours share a normal, Open3D's swap test compares equal angles and
+//! decides the sign of θ on the last bit.
 
 use nalgebra::{Point3, Vector3};
 
@@ -58,7 +64,9 @@ pub fn pair_features(
     }
     let angle1 = dot(n1, &dp) / d;
     let angle2 = dot(n2, &dp) / d;
-    let (u, n_other, theta) = if angle1.abs().acos() > angle2.abs().acos() {
+    // Open3D writes `acos|a₁| > acos|a₂|`; acos is decreasing, so that is `|a₁| < |a₂|` — and
+    // on 1-ulp ties (where libm's acos returns equal values) Open3D's build decides as `<`.
+    let (u, n_other, theta) = if angle1.abs() < angle2.abs() {
         dp = -dp;
         (n2, n1, -angle2)
     } else {
@@ -289,14 +297,12 @@ mod tests {
     }
 
     /// Pinned from Open3D 0.20 on ModelNet40 `airplane_0627`, normals as in
-    /// `normals::tests::normals_match_open3d`. FPFH is sensitive to the last bits of the normals
-    /// (ours differ from Open3D's by up to 2e-11): fed Open3D's own normals, our FPFH matches
-    /// Open3D's on 1,023 of the 1,024 points to 1e-9; with our normals, 832 points differ (by up
-    /// to 2.4 in one bin, mostly far less). Points 0 and 2 are among those that agree exactly:
+    /// `normals::tests::normals_match_open3d`. On that shape all 1,024 features agree with
+    /// Open3D's bit for bit (checked against the full array); three are pinned:
     ///
     /// ```python
     /// f = o3d.pipelines.registration.compute_fpfh_feature(pcd, o3d.geometry.KDTreeSearchParamHybrid(radius=0.4, max_nn=100))
-    /// np.asarray(f.data).T[[0, 2]]
+    /// np.asarray(f.data).T[[0, 2, 500]]
     /// ```
     #[test]
     fn features_match_open3d() {
@@ -306,7 +312,7 @@ mod tests {
             &NormalsConfig::default(),
             &FpfhConfig::default(),
         );
-        let pinned: [(usize, [f64; 33]); 2] = [
+        let pinned: [(usize, [f64; 33]); 3] = [
             (
                 0,
                 [
@@ -383,11 +389,49 @@ mod tests {
                     2.232485290584233,
                 ],
             ),
+            (
+                500,
+                [
+                    16.69849196277767,
+                    3.5856227217027223,
+                    15.090409822193003,
+                    5.515576056527119,
+                    10.276730046743094,
+                    67.55232907243109,
+                    9.447361865009638,
+                    14.626577251138706,
+                    21.309424740365067,
+                    9.388155826034488,
+                    26.509320635077493,
+                    53.78067478799315,
+                    10.416708971814023,
+                    2.661529064577639,
+                    6.017929503269723,
+                    27.106659502124447,
+                    38.3511947117924,
+                    32.1847564843135,
+                    6.356419319103762,
+                    5.709976963782962,
+                    6.716235910754604,
+                    10.697914780473864,
+                    10.327353774709692,
+                    8.005411884058566,
+                    18.604473705105317,
+                    22.009276340434738,
+                    30.743884174794275,
+                    12.350140142043337,
+                    33.047015566212146,
+                    30.137720900890717,
+                    13.975275265592684,
+                    12.660175097372276,
+                    8.139273148786272,
+                ],
+            ),
         ];
         for (i, expected) in pinned {
             for (c, (got, want)) in f[i].iter().zip(&expected).enumerate() {
                 assert!(
-                    (got - want).abs() < 1e-9,
+                    (got - want).abs() < 1e-12,
                     "point {i} bin {c}: {got} vs {want}"
                 );
             }
