@@ -7,7 +7,7 @@
 //! fallback (0, 0, 1). PCA leaves the sign free; we flip each normal so that
 //! `n · (p − centroid) ≥ 0` — the setup the project's Open3D measurements used.
 //!
-//! The covariance and eigenvector are computed with Open3D's arithmetic (see [`pca_normal`]), so
+//! The covariance and eigenvector are computed with Open3D's arithmetic (see `pca_normal`), so
 //! the normals equal Open3D's bit for bit (checked on ModelNet40 `airplane_0627`).
 
 use nalgebra::{Matrix3, Point3, Vector3};
