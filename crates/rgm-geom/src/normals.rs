@@ -174,6 +174,20 @@ fn eigenvector_of_simple(a: &Matrix3<f64>, lambda: f64) -> Vector3<f64> {
     crosses[best] / d[best].sqrt()
 }
 
+/// `(x, y) / ‖(x, y)‖` for a non-zero pair, dividing by the larger entry first (no overflow).
+fn unit_direction(mut x: f64, mut y: f64) -> (f64, f64) {
+    if x.abs() >= y.abs() {
+        y /= x;
+        x = 1.0 / (1.0 + y * y).sqrt();
+        y *= x;
+    } else {
+        x /= y;
+        y = 1.0 / (1.0 + x * x).sqrt();
+        x *= y;
+    }
+    (x, y)
+}
+
 /// Eigenvector for `lambda` orthogonal to the unit eigenvector `e`: solve the 2×2 problem in an
 /// orthonormal basis (U, V) of e's complement.
 fn eigenvector_in_complement(a: &Matrix3<f64>, e: &Vector3<f64>, lambda: f64) -> Vector3<f64> {
@@ -193,39 +207,20 @@ fn eigenvector_in_complement(a: &Matrix3<f64>, e: &Vector3<f64>, lambda: f64) ->
         )
     };
     let (au, av) = (times(&u), times(&v));
-    let mut m00 = dot(&u, &au) - lambda;
-    let mut m01 = dot(&u, &av);
-    let mut m11 = dot(&v, &av) - lambda;
-    let (abs00, abs01, abs11) = (m00.abs(), m01.abs(), m11.abs());
-    if abs00 >= abs11 {
-        if abs00.max(abs01) > 0.0 {
-            if abs00 >= abs01 {
-                m01 /= m00;
-                m00 = 1.0 / (1.0 + m01 * m01).sqrt();
-                m01 *= m00;
-            } else {
-                m00 /= m01;
-                m01 = 1.0 / (1.0 + m00 * m00).sqrt();
-                m00 *= m01;
-            }
-            m01 * u - m00 * v
-        } else {
-            u
+    let m00 = dot(&u, &au) - lambda;
+    let m01 = dot(&u, &av);
+    let m11 = dot(&v, &av) - lambda;
+    // The null vector of [[m00, m01], [m01, m11]] from its larger row, normalised.
+    if m00.abs() >= m11.abs() {
+        if m00.abs().max(m01.abs()) > 0.0 {
+            let (m00, m01) = unit_direction(m00, m01);
+            return m01 * u - m00 * v;
         }
-    } else if abs11.max(abs01) > 0.0 {
-        if abs11 >= abs01 {
-            m01 /= m11;
-            m11 = 1.0 / (1.0 + m01 * m01).sqrt();
-            m01 *= m11;
-        } else {
-            m11 /= m01;
-            m01 = 1.0 / (1.0 + m11 * m11).sqrt();
-            m11 *= m01;
-        }
-        m11 * u - m01 * v
-    } else {
-        u
+    } else if m11.abs().max(m01.abs()) > 0.0 {
+        let (m11, m01) = unit_direction(m11, m01);
+        return m11 * u - m01 * v;
     }
+    u
 }
 
 #[cfg(test)]
