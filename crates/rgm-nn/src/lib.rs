@@ -31,9 +31,10 @@
 //!   safetensors reader/writer use.
 //! - **Elements**: every op is generic over [`Scalar`] (f32 for compute, f64 for the gradient
 //!   checks in [`gradcheck`]).
-//! - **Threads**: matrix products use OpenBLAS's own threads; everything else runs on the calling
+//! - **Threads**: matrix products use OpenBLAS's own threads; the attention's row softmax (and its
+//!   backward) runs on rayon's pool between BLAS calls; everything else runs on the calling
 //!   thread. A caller that parallelises over independent work with rayon first sets BLAS to one
-//!   thread ([`threads::set_blas_threads`]) so the two never nest.
+//!   thread ([`threads::set_blas_threads`]) so the two pools never nest.
 
 // Links the statically built OpenBLAS that ndarray's `blas` feature calls into.
 extern crate openblas_src;
