@@ -40,8 +40,8 @@ use crate::{GeomError, KnnIndex, PointCloud, Result, RigidTransform};
 /// Open3D returns the identity below this many matches.
 const MIN_MATCHES: usize = 10;
 
-/// Settings of [`register`]: Open3D's `FastGlobalRegistrationOption` defaults, plus the feature
-/// settings of the project's Open3D measurements.
+/// Settings of [`register`]: Open3D's `FastGlobalRegistrationOption` defaults except
+/// `decrease_mu`, plus the feature settings of the project's Open3D measurements.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FgrConfig {
     /// Normals for FPFH (default radius 0.2, max_nn 30).
@@ -52,7 +52,9 @@ pub struct FgrConfig {
     pub division_factor: f64,
     /// Work in the clouds' own units instead of normalising by their extent (default false).
     pub use_absolute_scale: bool,
-    /// Graduated non-convexity: decrease μ during the iterations (default true).
+    /// Graduated non-convexity: decrease μ during the iterations. Default true, the paper's
+    /// algorithm; Open3D's default is false (μ stays at its loose start), which is markedly less
+    /// accurate (`docs/geom.md`). Set false to reproduce Open3D's defaults.
     pub decrease_mu: bool,
     /// μ stops decreasing below this (default 0.025, in normalised units).
     pub maximum_correspondence_distance: f64,
