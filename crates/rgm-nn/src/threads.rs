@@ -41,6 +41,21 @@ pub fn flush_denormals_to_zero() -> bool {
     }
 }
 
+/// Flushes denormals on every thread that computes: the calling thread, OpenBLAS's workers (they
+/// load the calling thread's SSE control word with each job, so they follow it — checked by
+/// `tests/denormals.rs`) and rayon's global pool, built here with the flag set in each worker.
+/// Call it once at the start of the program, before any op (rayon's pool can only be built
+/// once). Returns false if rayon's pool already existed (its workers then keep denormals).
+pub fn flush_denormals_everywhere() -> bool {
+    flush_denormals_to_zero();
+    rayon::ThreadPoolBuilder::new()
+        .start_handler(|_| {
+            flush_denormals_to_zero();
+        })
+        .build_global()
+        .is_ok()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
