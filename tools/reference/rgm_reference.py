@@ -286,6 +286,24 @@ def dump_fixture(out, seed=0, n=12, m=10):
     print(f"wrote {len(tensors)} tensors to {out}: loss {loss.item():.12f}")
 
 
+def export_state_dict(out, config, points, seed):
+    """What a converted checkpoint looks like: the state dict under the authors' names (the
+    (out, in, 1, 1) conv weights kept 4-D), float32; plus `input.x`, `input.y` and the
+    evaluation-mode `output.c_soft_eval` of the same weights, to check a loader against."""
+    from safetensors.torch import save_file
+
+    torch.manual_seed(seed)
+    model = RGM(**config).eval()
+    x = torch.rand(1, points, 3) * 2 - 1
+    y = torch.rand(1, points, 3) * 2 - 1
+    with torch.no_grad():
+        c_soft = model(x, y)
+    tensors = {k: v.contiguous() for k, v in model.state_dict().items() if v.dtype.is_floating_point}
+    tensors.update({"input.x": x[0], "input.y": y[0], "output.c_soft_eval": c_soft[0]})
+    save_file(tensors, out, metadata={"format": "rgm-state-dict", "config": json.dumps(config)})
+    print(f"wrote {len(tensors)} tensors to {out}")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="cmd", required=True)
@@ -293,9 +311,19 @@ def main():
     dump.add_argument("--out", required=True)
     dump.add_argument("--seed", type=int, default=0)
     sub.add_parser("params", help="print the paper-size parameter count and names")
+    export = sub.add_parser(
+        "export",
+        help="save a randomly initialised state dict (authors' names, float32) as safetensors, with a test pair and its evaluation-mode C̃",
+    )
+    export.add_argument("--out", required=True)
+    export.add_argument("--preset", choices=["paper", "tiny"], default="paper")
+    export.add_argument("--points", type=int, default=717)
+    export.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     if args.cmd == "dump":
         dump_fixture(args.out, args.seed)
+    elif args.cmd == "export":
+        export_state_dict(args.out, PAPER if args.preset == "paper" else TINY, args.points, args.seed)
     else:
         model = RGM(**PAPER)
         total = sum(p.numel() for p in model.parameters())

@@ -9,6 +9,7 @@ mod table;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+use anyhow::Context;
 use clap::{Parser, Subcommand, ValueEnum};
 use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
 use rgm_model::Method;
@@ -42,6 +43,42 @@ pub enum MethodArg {
     Icp,
     /// Fast Global Registration on FPFH features.
     Fgr,
+    /// The RGM network (needs --weights until a trained model ships with rgm).
+    Rgm,
+}
+
+/// The method and, for RGM, its weights.
+#[derive(clap::Args, Debug, Clone)]
+pub struct MethodArgs {
+    /// The registration method.
+    #[arg(long, value_enum, default_value = "fgr")]
+    method: MethodArg,
+    /// RGM weights: a safetensors file with the authors' parameter names
+    /// (`tools/reference/rgm_reference.py` documents them).
+    #[arg(long, value_name = "FILE", required_if_eq("method", "rgm"))]
+    weights: Option<PathBuf>,
+    /// The RGM network sizes the weights were trained with: paper, small or tiny.
+    #[arg(long, default_value = "paper", value_name = "NAME")]
+    preset: String,
+}
+
+impl MethodArgs {
+    /// The method these options select, with its weights loaded.
+    fn build(&self) -> anyhow::Result<Method> {
+        Ok(match self.method {
+            MethodArg::Icp => Method::icp(),
+            MethodArg::Fgr => Method::fgr(),
+            MethodArg::Rgm => {
+                let weights = self
+                    .weights
+                    .as_ref()
+                    .expect("clap requires --weights with rgm");
+                let config = rgm_model::network::Config::preset(&self.preset)?;
+                Method::rgm(config, weights)
+                    .with_context(|| format!("loading RGM weights from {}", weights.display()))?
+            }
+        })
+    }
 }
 
 /// The test-pair protocols of the paper (spec §1).
@@ -78,15 +115,6 @@ impl From<SettingArg> for Setting {
             SettingArg::Clean => Setting::Clean,
             SettingArg::Noise => Setting::Noise,
             SettingArg::Partial => Setting::Partial,
-        }
-    }
-}
-
-impl From<MethodArg> for Method {
-    fn from(arg: MethodArg) -> Self {
-        match arg {
-            MethodArg::Icp => Method::icp(),
-            MethodArg::Fgr => Method::fgr(),
         }
     }
 }

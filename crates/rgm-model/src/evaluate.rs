@@ -57,7 +57,11 @@ impl PairRecord {
 
 /// Runs `method` on test pair `index` and scores it. A method error is recorded as a failure
 /// scored as the identity transform, not returned: one bad pair must not stop an evaluation.
-pub fn evaluate_pair(method: &Method, index: usize, pair: &Pair) -> rgm_geom::Result<PairRecord> {
+pub fn evaluate_pair(
+    method: &mut Method,
+    index: usize,
+    pair: &Pair,
+) -> rgm_geom::Result<PairRecord> {
     let start = Instant::now();
     match method.register(&pair.source, &pair.target) {
         Ok(reg) => PairRecord::score(

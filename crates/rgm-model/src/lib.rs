@@ -1,6 +1,6 @@
 //! rgm-model — RGM put together from the layers below, and every registration method behind one
-//! interface: [`method::Method`] runs ICP, FGR (and, as it lands, the RGM network) on a pair of
-//! clouds; [`evaluate`] runs a method over the benchmark's test pairs and scores it.
+//! interface: [`method::Method`] runs ICP, FGR or the RGM network ([`pipeline`], spec §4) on a
+//! pair of clouds; [`evaluate`] runs a method over the benchmark's test pairs and scores it.
 //!
 //! Layering rule: rgm-model builds on rgm-geom, rgm-nn, rgm-match and rgm-data, and nothing
 //! builds on it but the `rgm` command and xtask. It owns no geometry or tensor op of its own.
@@ -8,6 +8,8 @@
 pub mod evaluate;
 pub mod method;
 pub mod network;
+pub mod pipeline;
 
 pub use evaluate::{PairRecord, Summary};
-pub use method::{Method, Registration};
+pub use method::{Method, MethodError, Registration};
+pub use pipeline::{PipelineConfig, RgmRegistrar};

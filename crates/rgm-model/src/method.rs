@@ -1,10 +1,32 @@
 //! The registration methods rgm can run, behind one interface.
 
+use std::path::Path;
 use std::time::Instant;
 
 use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::icp::{self, IcpConfig};
-use rgm_geom::{PointCloud, RegistrationResult};
+use rgm_geom::{GeomError, PointCloud, RegistrationResult};
+use rgm_match::MatchError;
+
+use crate::network::{Config, NetworkError, Rgm};
+use crate::pipeline::{PipelineConfig, RgmRegistrar};
+
+/// Why a method found no transform.
+#[derive(Debug, thiserror::Error)]
+pub enum MethodError {
+    /// A geometric step failed (too few points, degenerate Kabsch, ...).
+    #[error(transparent)]
+    Geom(#[from] GeomError),
+    /// The network could not be built, loaded or run.
+    #[error(transparent)]
+    Network(#[from] NetworkError),
+    /// Matching failed.
+    #[error(transparent)]
+    Match(#[from] MatchError),
+    /// No correspondence survived inlier selection (and cycle consistency).
+    #[error("rgm: no correspondences found in pass {pass} (no row and column of C̃ above the inlier threshold agree)")]
+    NoCorrespondences { pass: usize },
+}
 
 /// A registration method with its configuration.
 #[derive(Clone, Debug)]
@@ -13,6 +35,8 @@ pub enum Method {
     Icp(IcpConfig),
     /// Fast Global Registration on FPFH features.
     Fgr(FgrConfig),
+    /// The RGM network and the test-time procedure of spec §4.
+    Rgm(Box<RgmRegistrar>),
 }
 
 /// A method's result on one pair and the time the method itself took.
@@ -35,24 +59,36 @@ impl Method {
         Self::Fgr(FgrConfig::default())
     }
 
+    /// RGM of `config`'s sizes with the weights in the safetensors file `weights` (the
+    /// authors' parameter names), and the paper's test-time settings.
+    pub fn rgm(config: Config, weights: &Path) -> Result<Self, MethodError> {
+        let network = Rgm::load(config, weights)?;
+        Ok(Self::Rgm(Box::new(RgmRegistrar::new(
+            network,
+            PipelineConfig::default(),
+        ))))
+    }
+
     /// The method's short name, as the command line and the tables spell it.
     pub fn name(&self) -> &'static str {
         match self {
             Self::Icp(_) => "icp",
             Self::Fgr(_) => "fgr",
+            Self::Rgm(_) => "rgm",
         }
     }
 
     /// The transform that maps `source` onto `target`, timed.
     pub fn register(
-        &self,
+        &mut self,
         source: &PointCloud,
         target: &PointCloud,
-    ) -> rgm_geom::Result<Registration> {
+    ) -> Result<Registration, MethodError> {
         let start = Instant::now();
         let result = match self {
             Self::Icp(config) => icp::register(source, target, config)?,
             Self::Fgr(config) => fgr::register(source, target, config)?,
+            Self::Rgm(registrar) => registrar.register(source, target)?,
         };
         Ok(Registration {
             result,

@@ -4,16 +4,14 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use rgm_model::evaluate::evaluate_pair;
-use rgm_model::Method;
 
-use crate::{progress, table, DataArgs, MethodArg};
+use crate::{progress, table, DataArgs, MethodArgs};
 
 /// Options of `rgm eval`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The registration method to evaluate.
-    #[arg(long, value_enum)]
-    method: MethodArg,
+    #[command(flatten)]
+    method: MethodArgs,
     #[command(flatten)]
     data: DataArgs,
     /// Also write every pair's transform and metrics to this JSON file.
@@ -24,13 +22,13 @@ pub struct Args {
 pub fn run(args: Args) -> Result<()> {
     let (dataset, generator) = args.data.open()?;
     let shapes = args.data.test_shapes(&dataset);
-    let method = Method::from(args.method);
+    let mut method = args.method.build()?;
     let bar = progress(shapes.len(), method.name());
     let mut records = Vec::with_capacity(shapes.len());
     let mut recalled = 0usize;
     for i in 0..shapes.len() {
         let pair = generator.test_pair(&shapes, i)?;
-        let record = evaluate_pair(&method, i, &pair)?;
+        let record = evaluate_pair(&mut method, i, &pair)?;
         recalled += record.metrics.recall as usize;
         records.push(record);
         bar.set_message(format!(

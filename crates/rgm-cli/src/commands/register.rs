@@ -4,9 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use rgm_data::{read_point_cloud, write_point_cloud};
-use rgm_model::Method;
 
-use crate::MethodArg;
+use crate::MethodArgs;
 
 /// Options of `rgm register`.
 #[derive(clap::Args, Debug)]
@@ -15,9 +14,8 @@ pub struct Args {
     source: PathBuf,
     /// The cloud to move it onto.
     target: PathBuf,
-    /// The registration method.
-    #[arg(long, value_enum, default_value = "fgr")]
-    method: MethodArg,
+    #[command(flatten)]
+    method: MethodArgs,
     /// Write the source moved by the found transform to this file (format by extension).
     #[arg(long, value_name = "FILE")]
     out: Option<PathBuf>,
@@ -29,7 +27,7 @@ pub struct Args {
 pub fn run(args: Args) -> Result<()> {
     let source = read_point_cloud(&args.source)?;
     let target = read_point_cloud(&args.target)?;
-    let method = Method::from(args.method);
+    let mut method = args.method.build()?;
     let registration = method.register(&source, &target).with_context(|| {
         format!(
             "{} failed on {} → {}",
