@@ -10,8 +10,9 @@ use ndarray::Array2;
 use rand::{rngs::StdRng, Rng, SeedableRng};
 use rgm_benches::SIZES;
 use rgm_nn::{
-    edge_features_forward, max_k_backward, max_k_forward, AttentionCache, BatchNorm,
-    BatchNormCache, LayerNorm, LayerNormCache, Linear, MaxKCache, MultiHeadAttention,
+    edge_features_forward, gram_forward, l1_normalize_columns_forward, max_k_backward,
+    max_k_forward, softmax_rows_forward, AttentionCache, BatchNorm, BatchNormCache,
+    L1NormalizeCache, LayerNorm, LayerNormCache, Linear, MaxKCache, MultiHeadAttention,
 };
 
 const K: usize = 20;
@@ -207,5 +208,44 @@ fn edge_and_max(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, sgemm, linear, attention, norms, edge_and_max);
+/// The soft adjacency of one cloud: scores T Tᵀ/√C, row softmax, L1 normalisation of the columns.
+fn adjacency(c: &mut Criterion) {
+    let mut group = c.benchmark_group("adjacency");
+    group.sample_size(10);
+    let ch = 512;
+    for n in SIZES {
+        let t = uniform(n, ch, 17); // (N, C)
+        let (mut scores, mut soft, mut adj) = (
+            Array2::<f32>::zeros((n, n)),
+            Array2::<f32>::zeros((n, n)),
+            Array2::<f32>::zeros((n, n)),
+        ); // (N, N) each
+        let mut cache = L1NormalizeCache::default();
+        let alpha = 1.0 / (ch as f32).sqrt();
+        group.throughput(Throughput::Elements((2 * n * n * ch) as u64));
+        group.bench_function(BenchmarkId::new("gram", n), |b| {
+            b.iter(|| gram_forward(scores.view_mut(), t.view(), alpha).unwrap())
+        });
+        group.throughput(Throughput::Elements((n * n) as u64));
+        group.bench_function(BenchmarkId::new("softmax_rows", n), |b| {
+            b.iter(|| softmax_rows_forward(soft.view_mut(), scores.view()).unwrap())
+        });
+        group.bench_function(BenchmarkId::new("l1_normalize_columns", n), |b| {
+            b.iter(|| {
+                l1_normalize_columns_forward(adj.view_mut(), soft.view(), &mut cache).unwrap()
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(
+    benches,
+    sgemm,
+    linear,
+    attention,
+    norms,
+    edge_and_max,
+    adjacency
+);
 criterion_main!(benches);

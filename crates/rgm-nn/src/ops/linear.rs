@@ -167,6 +167,7 @@ mod tests {
     #[test]
     fn backward_accumulates_and_zero_grad_clears() {
         let mut lin = Linear::<f64>::new(2, 2, true, &mut StdRng::seed_from_u64(0));
+        assert_eq!(lin.num_params(), 6, "2×2 weight and 2 biases");
         let (inp, dout) = (array![[1.0, 2.0]], array![[1.0, -1.0]]);
         let mut dinp = Array2::zeros((1, 2));
         lin.backward(dinp.view_mut(), dout.view(), inp.view())
