@@ -344,44 +344,56 @@ mod tests {
         assert_eq!(out.row(1), kv.row(0));
     }
 
-    #[test]
-    fn cross_attention_backward_matches_finite_differences() {
-        let mut inputs = vec![uniform(&[9, C], 91), uniform(&[10, C], 92)];
+    /// Checks every input and parameter gradient: cross-attention (9 queries, 10 keys) takes
+    /// inputs `[q, kv, params..]`; self-attention (10 rows) `[x, params..]` with `dkv_in = None`.
+    fn check_attention(self_attention: bool) {
+        let (nq, nk) = if self_attention { (10, 10) } else { (9, 10) };
+        let streams = if self_attention { 1 } else { 2 };
+        let mut inputs = vec![uniform(&[nq, C], 91)];
+        if !self_attention {
+            inputs.push(uniform(&[nk, C], 92));
+        }
         inputs.extend(random_params(100));
         let run = |i: &[ArrayD<f64>]| {
-            let (mut out, mut cache) = (ndarray::Array2::zeros((9, C)), AttentionCache::default());
-            layer(&i[2..])
-                .forward(
-                    out.view_mut(),
-                    ix2(&i[0]).view(),
-                    ix2(&i[1]).view(),
-                    &mut cache,
-                )
+            let (q, kv) = (ix2(&i[0]), ix2(&i[streams - 1]));
+            let (mut out, mut cache) = (ndarray::Array2::zeros((nq, C)), AttentionCache::default());
+            layer(&i[streams..])
+                .forward(out.view_mut(), q.view(), kv.view(), &mut cache)
                 .unwrap();
             (out, cache)
         };
+        let what = if self_attention {
+            "self attention"
+        } else {
+            "cross attention"
+        };
         assert_gradients(
-            "cross attention",
+            what,
             1e-6,
             &inputs,
             &mut |i| run(i).0.into_dyn(),
             &mut |i, dout| {
                 let (_, mut cache) = run(i);
-                let mut mha = layer(&i[2..]);
+                let (q, kv) = (ix2(&i[0]), ix2(&i[streams - 1]));
+                let mut mha = layer(&i[streams..]);
                 let (mut dq, mut dkv) = (
-                    ndarray::Array2::zeros((9, C)),
-                    ndarray::Array2::zeros((10, C)),
+                    ndarray::Array2::zeros((nq, C)),
+                    ndarray::Array2::zeros((nk, C)),
                 );
+                let dkv_in = (!self_attention).then(|| dkv.view_mut());
                 mha.backward(
                     dq.view_mut(),
-                    Some(dkv.view_mut()),
+                    dkv_in,
                     ix2(dout).view(),
-                    ix2(&i[0]).view(),
-                    ix2(&i[1]).view(),
+                    q.view(),
+                    kv.view(),
                     &mut cache,
                 )
                 .unwrap();
-                let mut g = vec![dq.into_dyn(), dkv.into_dyn()];
+                let mut g = vec![dq.into_dyn()];
+                if !self_attention {
+                    g.push(dkv.into_dyn());
+                }
                 g.extend(grads(mha));
                 g
             },
@@ -389,41 +401,13 @@ mod tests {
     }
 
     #[test]
+    fn cross_attention_backward_matches_finite_differences() {
+        check_attention(false);
+    }
+
+    #[test]
     fn self_attention_backward_matches_finite_differences() {
-        let mut inputs = vec![uniform(&[10, C], 93)];
-        inputs.extend(random_params(200));
-        let run = |i: &[ArrayD<f64>]| {
-            let (mut out, mut cache) = (ndarray::Array2::zeros((10, C)), AttentionCache::default());
-            let x = ix2(&i[0]);
-            layer(&i[1..])
-                .forward(out.view_mut(), x.view(), x.view(), &mut cache)
-                .unwrap();
-            (out, cache)
-        };
-        assert_gradients(
-            "self attention",
-            1e-6,
-            &inputs,
-            &mut |i| run(i).0.into_dyn(),
-            &mut |i, dout| {
-                let (_, mut cache) = run(i);
-                let mut mha = layer(&i[1..]);
-                let x = ix2(&i[0]);
-                let mut dx = ndarray::Array2::zeros((10, C));
-                mha.backward(
-                    dx.view_mut(),
-                    None,
-                    ix2(dout).view(),
-                    x.view(),
-                    x.view(),
-                    &mut cache,
-                )
-                .unwrap();
-                let mut g = vec![dx.into_dyn()];
-                g.extend(grads(mha));
-                g
-            },
-        );
+        check_attention(true);
     }
 
     /// The f32 path (cblas_sgemm on the same views) agrees with f64 to single precision.
