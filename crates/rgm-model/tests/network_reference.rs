@@ -50,6 +50,19 @@ fn reference_model(t: &HashMap<String, ArrayD<f64>>) -> Rgm<f64> {
     rgm
 }
 
+/// The reference's training step: the forward in training mode on its inputs, the BCE loss
+/// against its ground truth, the backward. Returns the network, the pass and the loss.
+fn reference_step(t: &HashMap<String, ArrayD<f64>>) -> (Rgm<f64>, RgmCache<f64>, f64) {
+    let mut rgm = reference_model(t);
+    let (x, y) = (matrix(t, "input.x"), matrix(t, "input.y"));
+    let gt = ground_truth(&matrix(t, "input.gt"));
+    let mut cache = RgmCache::default();
+    let loss = rgm
+        .forward_backward(x.view(), y.view(), &gt, &mut cache)
+        .unwrap();
+    (rgm, cache, loss)
+}
+
 fn ground_truth(gt: &Array2<f64>) -> Correspondences {
     let pairs = gt
         .indexed_iter()
@@ -78,13 +91,8 @@ fn relative_difference(what: &str, got: &ArrayD<f64>, want: &ArrayD<f64>) -> f64
 #[test]
 fn forward_loss_and_running_statistics_match_the_reference() {
     let t = fixture();
-    let mut rgm = reference_model(&t);
+    let (mut rgm, mut cache, loss) = reference_step(&t);
     let (x, y) = (matrix(&t, "input.x"), matrix(&t, "input.y"));
-    let gt = ground_truth(&matrix(&t, "input.gt"));
-    let mut cache = RgmCache::default();
-    let loss = rgm
-        .forward_backward(x.view(), y.view(), &gt, &mut cache)
-        .unwrap();
     let c_soft = cache.c_soft().to_owned().into_dyn();
     assert!(relative_difference("C̃ (train)", &c_soft, &t["output.c_soft"]) < TOL);
     let want_loss = t["output.loss"][[0]];
@@ -106,11 +114,7 @@ fn forward_loss_and_running_statistics_match_the_reference() {
 #[test]
 fn every_parameter_gradient_matches_the_reference() {
     let t = fixture();
-    let mut rgm = reference_model(&t);
-    let (x, y) = (matrix(&t, "input.x"), matrix(&t, "input.y"));
-    let gt = ground_truth(&matrix(&t, "input.gt"));
-    rgm.forward_backward(x.view(), y.view(), &gt, &mut RgmCache::default())
-        .unwrap();
+    let (mut rgm, _, _) = reference_step(&t);
     let grads = with_prefix(&t, "grad.");
     let mut worst = (0.0f64, String::new());
     let mut compared = 0;

@@ -20,6 +20,8 @@ use rgm_nn::{
 };
 
 /// The learned scoring of a block.
+// One per block: the size difference of the variants costs nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug)]
 pub enum Scorer<T: Element> {
     /// `affinity_{b}.A` and `InstNorm_layer_{b}`.
