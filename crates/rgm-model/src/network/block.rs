@@ -184,9 +184,11 @@ fn edges_backward<T: Element>(side: &mut Side<T>, t: ArrayView2<'_, T>) -> Resul
         &side.l1,
     )?;
     softmax_rows_backward(side.dscores.view_mut(), side.dadj.view(), side.adj.view())?;
+    // dZ + dZᵀ into the spent dadj buffer, so one product serves both factors of T Tᵀ.
+    side.dadj.assign(&side.dscores.t());
+    side.dadj += &side.dscores;
     let scale = T::one() / T::from_f64(t.ncols() as f64).sqrt();
-    general_mat_mul(scale, &side.dscores, &t, T::one(), &mut side.dt);
-    general_mat_mul(scale, &side.dscores.t(), &t, T::one(), &mut side.dt);
+    general_mat_mul(scale, &side.dadj, &t, T::one(), &mut side.dt);
     Ok(())
 }
 

@@ -110,8 +110,10 @@ impl<T: Element> Stack<T> {
                 Op::FeedForward => self.feed_forward.forward(out, normed, &mut cache.ff)?,
             }
             // x_{i+1} = x_i + op_i(LN_i(x_i))
-            let next = &cache.xs[i] + &cache.dx;
-            cache.xs[i + 1] = next;
+            let (done, rest) = cache.xs.split_at_mut(i + 1);
+            zeroed(&mut rest[0], shape);
+            rest[0].assign(&done[i]);
+            rest[0] += &cache.dx;
         }
         zeroed(&mut cache.out, shape);
         self.norm.forward(
