@@ -145,3 +145,50 @@ fn every_parameter_gradient_matches_the_reference() {
         worst.0
     );
 }
+
+#[test]
+fn f32_pass_stays_close_to_the_f64_reference() {
+    // The compute type: the same fixture rounded to f32 (inputs and weights), one training step.
+    let t = fixture();
+    let t32: HashMap<String, ndarray::ArrayD<f32>> = t
+        .iter()
+        .map(|(k, v)| (k.clone(), v.mapv(|v| v as f32)))
+        .collect();
+    let mut rgm = Rgm::<f32>::new(Config::tiny(), 7).unwrap();
+    let mut tensors: HashMap<String, ndarray::ArrayD<f32>> = t32
+        .iter()
+        .filter_map(|(k, v)| k.strip_prefix("param.").map(|k| (k.to_string(), v.clone())))
+        .collect();
+    rgm.visit_buffers("", &mut |name, b| {
+        tensors.insert(name.to_string(), b.to_owned());
+    });
+    rgm.load_tensors(&tensors).unwrap();
+    let as2 = |name: &str| t32[name].clone().into_dimensionality::<Ix2>().unwrap();
+    let gt = ground_truth(&matrix(&t, "input.gt"));
+    let mut cache = RgmCache::default();
+    let loss = rgm
+        .forward_backward(
+            as2("input.x").view(),
+            as2("input.y").view(),
+            &gt,
+            &mut cache,
+        )
+        .unwrap();
+    let c_soft = cache.c_soft().mapv(|v| v as f64).into_dyn();
+    assert!(relative_difference("C̃ (f32)", &c_soft, &t["output.c_soft"]) < 1e-5);
+    let want_loss = t["output.loss"][[0]];
+    assert!(
+        (loss as f64 - want_loss).abs() < 1e-5 * want_loss,
+        "{loss} vs {want_loss}"
+    );
+    let grads = with_prefix(&t, "grad.");
+    let mut worst = 0.0f64;
+    rgm.visit_params("", &mut |name, p| {
+        let want = grads[name].to_shape(p.grad.raw_dim()).unwrap().to_owned();
+        if want.iter().any(|g| g.abs() > 1e-14) {
+            worst = worst.max(relative_difference(name, &p.grad.mapv(|v| v as f64), &want));
+        }
+    });
+    println!("f32 worst gradient relative difference {worst:.3e}");
+    assert!(worst < 5e-4, "{worst:e}"); // measured 4.4e-5
+}
