@@ -8,7 +8,7 @@
 
 use ndarray::{Array2, ArrayD, Ix2};
 use rgm_match::Correspondences;
-use rgm_model::network::{Config, Mode, Rgm, RgmCache};
+use rgm_model::network::{Config, Element, Mode, Rgm, RgmCache};
 use rgm_nn::Parameters;
 use std::collections::HashMap;
 use std::path::Path;
@@ -32,7 +32,10 @@ fn matrix(t: &HashMap<String, ArrayD<f64>>, name: &str) -> Array2<f64> {
 }
 
 /// Tensors under `prefix.` with the prefix stripped.
-fn with_prefix(t: &HashMap<String, ArrayD<f64>>, prefix: &str) -> HashMap<String, ArrayD<f64>> {
+fn with_prefix<T: Element>(
+    t: &HashMap<String, ArrayD<T>>,
+    prefix: &str,
+) -> HashMap<String, ArrayD<T>> {
     t.iter()
         .filter_map(|(k, v)| k.strip_prefix(prefix).map(|k| (k.to_string(), v.clone())))
         .collect()
@@ -40,8 +43,8 @@ fn with_prefix(t: &HashMap<String, ArrayD<f64>>, prefix: &str) -> HashMap<String
 
 /// The tiny network with the reference's parameters and fresh batch-norm statistics (those the
 /// reference started its training step from).
-fn reference_model(t: &HashMap<String, ArrayD<f64>>) -> Rgm<f64> {
-    let mut rgm = Rgm::<f64>::new(Config::tiny(), 7).unwrap();
+fn reference_model<T: Element>(t: &HashMap<String, ArrayD<T>>) -> Rgm<T> {
+    let mut rgm = Rgm::<T>::new(Config::tiny(), 7).unwrap();
     let mut tensors = with_prefix(t, "param.");
     rgm.visit_buffers("", &mut |name, b| {
         tensors.insert(name.to_string(), b.to_owned());
@@ -154,15 +157,7 @@ fn f32_pass_stays_close_to_the_f64_reference() {
         .iter()
         .map(|(k, v)| (k.clone(), v.mapv(|v| v as f32)))
         .collect();
-    let mut rgm = Rgm::<f32>::new(Config::tiny(), 7).unwrap();
-    let mut tensors: HashMap<String, ndarray::ArrayD<f32>> = t32
-        .iter()
-        .filter_map(|(k, v)| k.strip_prefix("param.").map(|k| (k.to_string(), v.clone())))
-        .collect();
-    rgm.visit_buffers("", &mut |name, b| {
-        tensors.insert(name.to_string(), b.to_owned());
-    });
-    rgm.load_tensors(&tensors).unwrap();
+    let mut rgm = reference_model(&t32);
     let as2 = |name: &str| t32[name].clone().into_dimensionality::<Ix2>().unwrap();
     let gt = ground_truth(&matrix(&t, "input.gt"));
     let mut cache = RgmCache::default();
