@@ -14,6 +14,7 @@ Usage:
     pip install torch safetensors numpy
     python3 tools/reference/rgm_reference.py dump --out crates/rgm-model/tests/fixtures/tiny.safetensors
     python3 tools/reference/rgm_reference.py params        # paper size: 25,002,889 values
+    python3 tools/reference/rgm_reference.py convert model.pth --out rgm_weights.safetensors
 
 Semantics that the spec leaves to the reference code and this file assumes:
 * both clouds go through the feature extractor in two separate calls (batch-norm statistics of
@@ -304,6 +305,29 @@ def export_state_dict(out, config, points, seed):
     print(f"wrote {len(tensors)} tensors to {out}")
 
 
+def convert_checkpoint(path, out):
+    """An authors' checkpoint → safetensors under the same names, float32. The state dict may
+    sit at the top level or under "model"/"state_dict"; a `module.` prefix (DataParallel) is
+    dropped, and so are integer buffers (`num_batches_tracked`), which rgm does not use."""
+    from safetensors.torch import save_file
+
+    state = torch.load(path, map_location="cpu", weights_only=False)
+    for key in ("state_dict", "model"):
+        if isinstance(state, dict) and key in state and isinstance(state[key], dict):
+            state = state[key]
+    tensors = {
+        name.removeprefix("module."): t.detach().float().contiguous()
+        for name, t in state.items()
+        if torch.is_tensor(t) and t.dtype.is_floating_point
+    }
+    names = set(RGM(**PAPER).state_dict())
+    missing = sorted(n for n in names if n not in tensors and not n.endswith("num_batches_tracked"))
+    if missing:
+        raise SystemExit(f"{path}: not a paper-size RGM checkpoint; missing {missing[:5]}")
+    save_file(tensors, out, metadata={"format": "rgm-state-dict", "source": str(path)})
+    print(f"wrote {len(tensors)} tensors to {out}; use: rgm register SRC TGT --method rgm --weights {out}")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="cmd", required=True)
@@ -319,9 +343,14 @@ def main():
     export.add_argument("--preset", choices=["paper", "tiny"], default="paper")
     export.add_argument("--points", type=int, default=717)
     export.add_argument("--seed", type=int, default=0)
+    convert = sub.add_parser("convert", help="turn an authors' PyTorch checkpoint (.pth) into a weight file for `rgm --weights`")
+    convert.add_argument("checkpoint")
+    convert.add_argument("--out", required=True)
     args = parser.parse_args()
     if args.cmd == "dump":
         dump_fixture(args.out, args.seed)
+    elif args.cmd == "convert":
+        convert_checkpoint(args.checkpoint, args.out)
     elif args.cmd == "export":
         export_state_dict(args.out, PAPER if args.preset == "paper" else TINY, args.points, args.seed)
     else:
