@@ -36,14 +36,8 @@ struct Row {
 #[derive(Deserialize)]
 struct BenchmarkJson {
     full_id: String,
-    throughput: Option<Throughput>,
-}
-
-#[derive(Deserialize)]
-enum Throughput {
-    Elements(u64),
-    Bytes(u64),
-    BytesDecimal(u64),
+    /// `{"Elements": n}`, `{"Bytes": n}` or absent.
+    throughput: Option<serde_json::Value>,
 }
 
 #[derive(Deserialize)]
@@ -142,10 +136,7 @@ fn read_row(new_dir: &Path) -> Result<Row> {
     let bench: BenchmarkJson = serde_json::from_str(&read("benchmark.json")?)?;
     let estimates: Estimates = serde_json::from_str(&read("estimates.json")?)?;
     let median_ns = estimates.median.point_estimate;
-    let elements = match bench.throughput {
-        Some(Throughput::Elements(n)) => Some(n),
-        Some(Throughput::Bytes(_) | Throughput::BytesDecimal(_)) | None => None,
-    };
+    let elements = bench.throughput.as_ref().and_then(|t| t.get("Elements")).and_then(|n| n.as_u64());
     Ok(Row {
         id: bench.full_id,
         median_ns,
