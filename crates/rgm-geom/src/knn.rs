@@ -72,7 +72,23 @@ impl KnnIndex {
     /// The nearest point to `query`: (index, distance); the lowest index among equally near
     /// points. An empty index answers `(usize::MAX, f64::INFINITY)`.
     pub fn nearest(&self, query: &Point3<f64>) -> (usize, f64) {
-        let mut best = Nearest((usize::MAX, f64::INFINITY));
+        let (i, d2) = self.nearest_squared_below(query, f64::INFINITY);
+        (i, d2.sqrt())
+    }
+
+    /// The nearest point strictly closer than `radius`, if any: the search prunes every cell
+    /// farther than `radius`, so it is much cheaper than [`Self::nearest`] for small radii
+    /// (ICP's correspondence search).
+    pub fn nearest_within(&self, query: &Point3<f64>, radius: f64) -> Option<(usize, f64)> {
+        let r2 = radius * radius;
+        let (i, d2) = self.nearest_squared_below(query, r2);
+        (i != usize::MAX && d2 < r2).then(|| (i, d2.sqrt()))
+    }
+
+    /// (index, squared distance) of the nearest point with squared distance at most `bound`;
+    /// `(usize::MAX, bound)` when there is none.
+    fn nearest_squared_below(&self, query: &Point3<f64>, bound: f64) -> (usize, f64) {
+        let mut best = Nearest((usize::MAX, bound));
         if !self.nodes.is_empty() {
             self.search(
                 0,
@@ -82,7 +98,7 @@ impl KnnIndex {
                 &mut best,
             );
         }
-        (best.0 .0, best.0 .1.sqrt())
+        best.0
     }
 
     /// The `k` nearest points to `query` (fewer when the index has fewer), sorted by distance,
@@ -487,6 +503,10 @@ mod tests {
             for q in random_cloud(40, 100 + seed) {
                 let all = brute_force(&points, &q);
                 assert_eq!(index.nearest(&q), all[0]);
+                for r in [0.02, 0.1, 0.5] {
+                    let expected = (all[0].1 < r).then_some(all[0]);
+                    assert_eq!(index.nearest_within(&q, r), expected, "radius {r}");
+                }
                 for k in [1, 7, 20] {
                     assert_eq!(index.k_nearest(&q, k), all[..k].to_vec());
                 }

@@ -49,8 +49,7 @@ pub fn score(
     let mut count = 0;
     let mut sum_d2 = 0.0;
     for (i, x) in source.iter().enumerate() {
-        let (j, d) = target.nearest(&transform.apply(x));
-        if d < max_distance {
+        if let Some((j, d)) = target.nearest_within(&transform.apply(x), max_distance) {
             count += 1;
             sum_d2 += d * d;
             if let Some(p) = pairs.as_deref_mut() {
