@@ -33,6 +33,10 @@ enum Command {
     /// Write the ModelNet40 test pairs (PLY + ground-truth JSON) for outside tools.
     Pairs(commands::pairs::Args),
     /// Score transforms produced by an outside tool on the pairs written by `rgm pairs`.
+    ///
+    /// The transforms file is JSON: {"method": NAME, "pairs": [{"index": I, "transform":
+    /// [[4 numbers] × 4 rows], "time_ms": T}, …]}, one entry per pair index of the pairs folder;
+    /// `tools/open3d/register_pairs.py` writes one for Open3D.
     Score(commands::score::Args),
 }
 

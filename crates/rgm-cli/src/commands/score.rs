@@ -18,7 +18,7 @@ use crate::table;
 /// Options of `rgm score`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The outside tool's transforms (JSON, see `rgm score --help`).
+    /// The outside tool's transforms (JSON; the format is under `rgm help score`).
     transforms: PathBuf,
     /// The folder written by `rgm pairs`.
     #[arg(long, value_name = "DIR")]
