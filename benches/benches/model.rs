@@ -31,10 +31,16 @@ fn network(c: &mut Criterion) {
         let mut rgm = Rgm::<f32>::new(config, 0).unwrap();
         let mut cache = RgmCache::default();
         group.bench_function(BenchmarkId::new("forward_eval", name), |bench| {
-            bench.iter(|| rgm.forward(x.view(), y.view(), Mode::Eval, &mut cache).unwrap())
+            bench.iter(|| {
+                rgm.forward(x.view(), y.view(), Mode::Eval, &mut cache)
+                    .unwrap()
+            })
         });
         group.bench_function(BenchmarkId::new("forward_backward_train", name), |bench| {
-            bench.iter(|| rgm.forward_backward(x.view(), y.view(), &gt, &mut cache).unwrap())
+            bench.iter(|| {
+                rgm.forward_backward(x.view(), y.view(), &gt, &mut cache)
+                    .unwrap()
+            })
         });
     }
     group.finish();

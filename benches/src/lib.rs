@@ -11,7 +11,11 @@ pub fn unit_ball_points(n: usize, seed: u64) -> Vec<Point3<f64>> {
     let mut rng = StdRng::seed_from_u64(seed);
     let mut out = Vec::with_capacity(n);
     while out.len() < n {
-        let p = Point3::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0));
+        let p = Point3::new(
+            rng.gen_range(-1.0..1.0),
+            rng.gen_range(-1.0..1.0),
+            rng.gen_range(-1.0..1.0),
+        );
         if p.coords.norm_squared() <= 1.0 {
             out.push(p);
         }

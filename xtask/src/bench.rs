@@ -136,7 +136,11 @@ fn read_row(new_dir: &Path) -> Result<Row> {
     let bench: BenchmarkJson = serde_json::from_str(&read("benchmark.json")?)?;
     let estimates: Estimates = serde_json::from_str(&read("estimates.json")?)?;
     let median_ns = estimates.median.point_estimate;
-    let elements = bench.throughput.as_ref().and_then(|t| t.get("Elements")).and_then(|n| n.as_u64());
+    let elements = bench
+        .throughput
+        .as_ref()
+        .and_then(|t| t.get("Elements"))
+        .and_then(|n| n.as_u64());
     Ok(Row {
         id: bench.full_id,
         median_ns,
