@@ -82,10 +82,17 @@ pub fn run(args: Args) -> Result<()> {
     fs::write(
         docs.join("bench.json"),
         serde_json::to_string_pretty(
-            &serde_json::json!({ "machine": machine, "quick": args.quick, "benches": rows }),
+            &serde_json::json!({ "machine": machine, "quick": args.quick, "only": args.only, "benches": rows }),
         )?,
     )?;
-    fs::write(docs.join("bench.md"), markdown(&rows, &machine, args.quick))?;
+    let mut command = String::from("cargo xtask bench");
+    if args.quick {
+        command += " --quick";
+    }
+    for name in &args.only {
+        command += &format!(" --only {name}");
+    }
+    fs::write(docs.join("bench.md"), markdown(&rows, &machine, &command))?;
     println!(
         "wrote docs/bench.md and docs/bench.json ({} benches)",
         rows.len()
@@ -170,12 +177,9 @@ fn machine_description() -> String {
     format!("{model}, {cores} cores, {mem_gib:.0} GiB")
 }
 
-fn markdown(rows: &[Row], machine: &str, quick: bool) -> String {
+fn markdown(rows: &[Row], machine: &str, command: &str) -> String {
     let mut out = String::from("# Benchmarks\n\n");
-    out += &format!(
-        "Machine: {machine}. Produced by `cargo xtask bench{}`; medians of criterion samples.\n",
-        if quick { " --quick" } else { "" }
-    );
+    out += &format!("Machine: {machine}. Produced by `{command}`; medians of criterion samples.\n");
     out += "Throughput is the bench's declared work per iteration (FLOPs for the nn and matching benches) per second.\n\n";
     out += "| bench | median | throughput (G/s) |\n|---|---:|---:|\n";
     for row in rows {
