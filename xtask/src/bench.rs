@@ -57,10 +57,6 @@ pub fn run(args: Args) -> Result<()> {
     cargo
         .current_dir(&root)
         .args(["bench", "-p", "rgm-benches"]);
-    // Only the criterion targets: the library's test harness rejects criterion's options.
-    if args.only.is_empty() {
-        cargo.arg("--benches");
-    }
     for name in &args.only {
         cargo.args(["--bench", name]);
     }
