@@ -61,7 +61,7 @@ pub struct MethodArgs {
     /// (`tools/reference/rgm_reference.py` documents them).
     #[arg(long, value_name = "FILE", required_if_eq("method", "rgm"))]
     weights: Option<PathBuf>,
-    /// The RGM network sizes the weights were trained with: paper, small or tiny.
+    /// The RGM network sizes the weights were trained with: paper, small, fast or tiny.
     #[arg(long, default_value = "paper", value_name = "NAME")]
     preset: String,
 }

@@ -28,6 +28,7 @@ fn paper_size_has_the_authors_parameter_count() {
 #[test]
 fn small_and_ablation_sizes() {
     assert_eq!(counts(Config::small()).0, 6_263_236);
+    assert_eq!(counts(Config::fast()).0, 1_572_324);
     // Var1 drops each block's Q×Q affinity and the two instance-norm scalars.
     let var1 = Config {
         scoring: Scoring::Var1,
@@ -47,6 +48,7 @@ fn small_and_ablation_sizes() {
 #[test]
 fn presets_by_name_and_invalid_configurations() {
     assert_eq!(Config::preset("small").unwrap(), Config::small());
+    assert_eq!(Config::preset("fast").unwrap(), Config::fast());
     assert!(matches!(
         Config::preset("huge"),
         Err(NetworkError::Config { .. })
