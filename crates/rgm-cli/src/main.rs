@@ -38,6 +38,11 @@ enum Command {
     /// [[4 numbers] × 4 rows], "time_ms": T}, …]}, one entry per pair index of the pairs folder;
     /// `tools/open3d/register_pairs.py` writes one for Open3D.
     Score(commands::score::Args),
+    /// Train the RGM network on ModelNet40 pairs; resumes an interrupted run in --out.
+    ///
+    /// Writes checkpoints, best.safetensors and log.jsonl (one JSON line per checkpoint and per
+    /// validation) into the run folder.
+    Train(commands::train::Args),
 }
 
 /// Registration methods selectable from the command line.
@@ -159,6 +164,7 @@ fn main() -> ExitCode {
         Command::Eval(args) => commands::eval::run(args),
         Command::Pairs(args) => commands::pairs::run(args),
         Command::Score(args) => commands::score::run(args),
+        Command::Train(args) => commands::train::run(args),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

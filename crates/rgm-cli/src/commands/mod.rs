@@ -4,3 +4,4 @@ pub mod eval;
 pub mod pairs;
 pub mod register;
 pub mod score;
+pub mod train;

@@ -1,0 +1,181 @@
+//! `rgm train`: train the RGM network on ModelNet40 pairs, resumable.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use rgm_data::ModelNet40;
+use rgm_model::network::Config;
+use rgm_model::train::{Event, LogRecord, OptimizerKind, TrainConfig, Trainer};
+
+use crate::{progress, SettingArg};
+
+/// Options of `rgm train`. Defaults are the paper's schedule (spec §3) on the `fast` preset,
+/// matching on 384-point clouds.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The ModelNet40 `.npy` tree (e.g. ../shared/data/modelnet40_npy1024).
+    #[arg(long, env = "RGM_DATA", value_name = "DIR")]
+    data: PathBuf,
+    /// The run folder: checkpoints, log.jsonl, best.safetensors. If it already holds a run,
+    /// training resumes from its last checkpoint (same options required; --epochs may grow).
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// The pair protocol to train on.
+    #[arg(long, value_enum, default_value = "partial")]
+    setting: SettingArg,
+    /// Train and validate on categories 0–19 only (the unseen-categories protocol).
+    #[arg(long)]
+    unseen: bool,
+    /// Network sizes: paper, small, fast or tiny.
+    #[arg(long, default_value = "fast", value_name = "NAME")]
+    preset: String,
+    /// Cut each cloud of a pair to at most N points for matching (0: the whole clouds).
+    #[arg(long, default_value_t = 384, value_name = "N")]
+    match_points: usize,
+    /// Epochs in all.
+    #[arg(long, default_value_t = 200)]
+    epochs: usize,
+    /// Pairs per optimiser step.
+    #[arg(long, default_value_t = 4)]
+    batch: usize,
+    /// sgd (momentum, as the paper) or adam.
+    #[arg(long, value_enum, default_value = "sgd")]
+    optimizer: OptimizerArg,
+    /// Learning rate before the first milestone.
+    #[arg(long, default_value_t = 1e-3)]
+    lr: f64,
+    /// SGD momentum.
+    #[arg(long, default_value_t = 0.9)]
+    momentum: f64,
+    /// L2 weight decay.
+    #[arg(long, default_value_t = 0.0)]
+    weight_decay: f64,
+    /// Epochs at which the learning rate is multiplied by --gamma.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "120,140",
+        value_name = "E,E"
+    )]
+    milestones: Vec<usize>,
+    /// Learning-rate factor at each milestone.
+    #[arg(long, default_value_t = 0.2)]
+    gamma: f64,
+    /// Use only the first N training shapes per epoch.
+    #[arg(long, value_name = "N")]
+    train_shapes: Option<usize>,
+    /// Validate on the first N validation shapes after each epoch (default: all).
+    #[arg(long, value_name = "N")]
+    val_shapes: Option<usize>,
+    /// Worker threads (default: one per core).
+    #[arg(long, value_name = "N")]
+    workers: Option<usize>,
+    /// Save the last checkpoint every N batches.
+    #[arg(long, default_value_t = 50, value_name = "N")]
+    checkpoint_every: usize,
+    /// Seed of the initial weights and of the shape order.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum OptimizerArg {
+    Sgd,
+    Adam,
+}
+
+impl Args {
+    fn config(&self) -> Result<TrainConfig> {
+        let network = Config::preset(&self.preset)?;
+        let workers = self
+            .workers
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+        Ok(TrainConfig {
+            setting: rgm_data::Setting::from(self.setting).name().to_string(),
+            unseen: self.unseen,
+            network,
+            match_points: (self.match_points > 0).then_some(self.match_points),
+            epochs: self.epochs,
+            batch: self.batch,
+            optimizer: match self.optimizer {
+                OptimizerArg::Sgd => OptimizerKind::Sgd,
+                OptimizerArg::Adam => OptimizerKind::Adam,
+            },
+            lr: self.lr,
+            momentum: self.momentum,
+            weight_decay: self.weight_decay,
+            milestones: self.milestones.clone(),
+            gamma: self.gamma,
+            train_shapes: self.train_shapes,
+            val_shapes: self.val_shapes,
+            workers,
+            checkpoint_every: self.checkpoint_every,
+            seed: self.seed,
+        })
+    }
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let config = args.config()?;
+    let dataset = ModelNet40::open(&args.data)?;
+    let mut trainer = Trainer::open(config, &args.out)
+        .with_context(|| format!("opening the run in {}", args.out.display()))?;
+    let state = trainer.state();
+    if state.steps > 0 {
+        eprintln!(
+            "resuming {} at epoch {}, batch {} ({} pairs seen)",
+            args.out.display(),
+            state.epoch + 1,
+            state.batch,
+            state.pairs_seen
+        );
+    }
+    let mut bar: Option<indicatif::ProgressBar> = None;
+    let epochs = trainer.config().epochs;
+    trainer.run(&dataset, &mut |event| match event {
+        Event::Batch {
+            epoch,
+            batch,
+            batches,
+            loss,
+        } => {
+            let bar = bar.get_or_insert_with(|| {
+                let bar = progress(batches, &format!("epoch {}/{epochs}", epoch + 1));
+                bar.set_position(batch as u64 - 1);
+                bar
+            });
+            bar.set_message(format!("loss {loss:.3}"));
+            bar.set_position(batch as u64);
+        }
+        Event::Validating { done, total } => {
+            if let Some(bar) = bar.take() {
+                bar.finish_and_clear();
+            }
+            if done == 0 {
+                eprintln!("epoch done; validating on {total} pairs");
+            }
+        }
+        Event::Logged(LogRecord::Validation { result, .. }) => eprintln!(
+            "epoch {}: validation loss {:.4}, matching accuracy {:.1}%, MIE(R) {:.2}°, \
+             MIE(t) {:.4}, recall {:.1}%",
+            result.epoch + 1,
+            result.loss,
+            100.0 * result.match_accuracy,
+            result.mie_r_deg,
+            result.mie_t,
+            100.0 * result.recall
+        ),
+        Event::Logged(LogRecord::Train { .. }) => {}
+    })?;
+    if let Some(bar) = bar.take() {
+        bar.finish_and_clear();
+    }
+    let best = trainer.state().best;
+    eprintln!(
+        "done: {} epochs; best weights {} (recall {:.1}%)",
+        trainer.state().epoch,
+        args.out.join("best.safetensors").display(),
+        100.0 * best.map_or(0.0, |b| b.recall)
+    );
+    Ok(())
+}

@@ -1,0 +1,726 @@
+//! Training RGM (spec §3): BCE between C̃ and the ground-truth correspondences, SGD with momentum
+//! (or Adam) over batches of pairs, a step learning rate, validation after every epoch, and a run
+//! folder that holds everything needed to resume after an interruption.
+//!
+//! The run folder:
+//! - `config.json` — the [`TrainConfig`] (network sizes included);
+//! - `state.json` — where the run is ([`TrainState`]: epoch, next batch, best validation);
+//! - `last.safetensors`, `last.optim.safetensors` — weights and optimiser state, written every
+//!   [`TrainConfig::checkpoint_every`] batches and at the end of every epoch;
+//! - `best.safetensors` — the weights with the best validation result so far;
+//! - `log.jsonl` — one JSON object per line: `"kind": "train"` (mean loss of the batches since
+//!   the previous line) and `"kind": "validation"` (after every epoch), see [`LogRecord`].
+//!
+//! Pairs are made on the fly ([`PairGenerator::train_pair`], a new random pose, crop and noise
+//! every epoch), optionally cut to [`TrainConfig::match_points`] points per cloud. A batch is
+//! spread over [`TrainConfig::workers`] threads, each with its own copy of the network; their
+//! gradients are summed into the main network, which takes the step and hands its weights back.
+//! Batch norm uses each cloud's own statistics (as in a batch of one); the workers' running
+//! statistics are averaged after every batch.
+
+use std::fs;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use ndarray::Array2;
+use rand::rngs::StdRng;
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
+use rayon::prelude::*;
+use rgm_data::pairs::train_seed;
+use rgm_data::{ModelNet40, Pair, PairGenerator, Setting, Shape, Split};
+use rgm_match::{bce_forward, Correspondences};
+use rgm_nn::optim::{Adam, MultiStepLr, Sgd};
+use rgm_nn::{Parameters, Scalar};
+use serde::{Deserialize, Serialize};
+
+use crate::evaluate::{evaluate_pair, PairRecord, Summary};
+use crate::method::Method;
+use crate::network::{Config, Mode, NetworkError, Rgm, RgmCache};
+use crate::pipeline::{PipelineConfig, RgmRegistrar};
+
+/// Why training could not start or go on.
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: {source}")]
+    Json {
+        path: PathBuf,
+        source: serde_json::Error,
+    },
+    #[error("training configuration: {why}")]
+    Config { why: String },
+    #[error(transparent)]
+    Network(#[from] NetworkError),
+    #[error(transparent)]
+    Nn(#[from] rgm_nn::NnError),
+    #[error(transparent)]
+    Data(#[from] rgm_data::DataError),
+    #[error(transparent)]
+    Match(#[from] rgm_match::MatchError),
+    #[error(transparent)]
+    Geom(#[from] rgm_geom::GeomError),
+}
+
+pub type Result<T> = std::result::Result<T, TrainError>;
+
+/// The optimiser of a run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum OptimizerKind {
+    /// SGD with momentum, as the paper.
+    Sgd,
+    /// Adam (β 0.9, 0.999).
+    Adam,
+}
+
+/// Everything that defines a training run; saved as `config.json` in the run folder.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrainConfig {
+    /// "clean", "noise" or "partial" (spec §1).
+    pub setting: String,
+    /// Train and validate on categories 0–19 only.
+    pub unseen: bool,
+    /// The network's sizes.
+    pub network: Config,
+    /// Cut each cloud of every pair to at most this many points (None: the whole pair).
+    pub match_points: Option<usize>,
+    /// Epochs in all (one epoch = every training shape once).
+    pub epochs: usize,
+    /// Pairs per optimiser step.
+    pub batch: usize,
+    pub optimizer: OptimizerKind,
+    /// Learning rate before the first milestone.
+    pub lr: f64,
+    /// SGD momentum (unused by Adam).
+    pub momentum: f64,
+    pub weight_decay: f64,
+    /// Epochs at which the learning rate is multiplied by `gamma`.
+    pub milestones: Vec<usize>,
+    pub gamma: f64,
+    /// Use only the first N training shapes per epoch (None: all).
+    pub train_shapes: Option<usize>,
+    /// Validate on the first N validation shapes (None: all).
+    pub val_shapes: Option<usize>,
+    /// Threads, each working on its own pairs of a batch.
+    pub workers: usize,
+    /// Save `last.*` every this many batches.
+    pub checkpoint_every: usize,
+    /// Seed of the initial weights and of the shape order of every epoch.
+    pub seed: u64,
+}
+
+impl TrainConfig {
+    /// The paper's schedule (spec §3: SGD, momentum 0.9, lr 1e-3, batch 4, 200 epochs, ×0.2 at
+    /// 120 and 140) for `setting` with `network`'s sizes, on both cores.
+    pub fn paper(setting: Setting, network: Config) -> Self {
+        Self {
+            setting: setting.name().to_string(),
+            unseen: false,
+            network,
+            match_points: None,
+            epochs: 200,
+            batch: 4,
+            optimizer: OptimizerKind::Sgd,
+            lr: 1e-3,
+            momentum: 0.9,
+            weight_decay: 0.0,
+            milestones: vec![120, 140],
+            gamma: 0.2,
+            train_shapes: None,
+            val_shapes: None,
+            workers: 2,
+            checkpoint_every: 50,
+            seed: 0,
+        }
+    }
+
+    /// The pair setting, parsed.
+    pub fn pair_setting(&self) -> Result<Setting> {
+        self.setting.parse().map_err(|_| TrainError::Config {
+            why: format!("unknown setting {:?}", self.setting),
+        })
+    }
+
+    fn validate(&self) -> Result<()> {
+        self.pair_setting()?;
+        self.network.validate()?;
+        let why = if self.batch == 0 {
+            "batch must be positive"
+        } else if self.workers == 0 {
+            "workers must be positive"
+        } else if self.checkpoint_every == 0 {
+            "checkpoint_every must be positive"
+        } else if !(self.lr > 0.0 && self.lr.is_finite()) {
+            "lr must be a positive number"
+        } else if self.match_points.is_some_and(|p| p <= self.network.k) {
+            "match_points must exceed the network's K"
+        } else {
+            return Ok(());
+        };
+        Err(TrainError::Config { why: why.into() })
+    }
+
+    /// Whether a run saved with `saved` can go on under `self`: everything equal but the
+    /// number of epochs (a run may be extended).
+    fn same_run(&self, saved: &Self) -> bool {
+        Self {
+            epochs: saved.epochs,
+            ..self.clone()
+        } == *saved
+    }
+}
+
+/// The validation result of one epoch.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Validation {
+    pub epoch: usize,
+    pub pairs: usize,
+    /// Mean BCE per pair (spec §3), network in evaluation mode.
+    pub loss: f64,
+    /// Fraction of ground-truth matched source points whose largest entry of C̃ is their match.
+    pub match_accuracy: f64,
+    pub mie_r_deg: f64,
+    pub mie_t: f64,
+    pub mae_r_deg: f64,
+    pub mae_t: f64,
+    /// Fraction of pairs registered (spec §5: MAE(R) < 1° and MAE(t) < 0.1).
+    pub recall: f64,
+    /// Pairs on which the test-time procedure found no correspondences.
+    pub failures: usize,
+}
+
+impl Validation {
+    /// Whether `self` beats `other`: higher recall, then lower loss.
+    fn beats(&self, other: &Self) -> bool {
+        (self.recall, -self.loss) > (other.recall, -other.loss)
+    }
+}
+
+/// Where a run is; saved as `state.json` with every checkpoint.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct TrainState {
+    /// The epoch in progress (from 0).
+    pub epoch: usize,
+    /// The next batch of that epoch.
+    pub batch: usize,
+    /// Optimiser steps taken.
+    pub steps: u64,
+    /// Training pairs processed.
+    pub pairs_seen: u64,
+    /// Seconds spent training and validating, over all sessions.
+    pub seconds: f64,
+    /// The best validation so far (its weights are `best.safetensors`).
+    pub best: Option<Validation>,
+}
+
+/// One line of `log.jsonl`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase")]
+pub enum LogRecord {
+    /// Mean training loss over the batches since the previous train record.
+    Train {
+        epoch: usize,
+        batch: usize,
+        batches: usize,
+        pairs_seen: u64,
+        lr: f64,
+        loss: f64,
+        seconds: f64,
+    },
+    /// The validation after an epoch.
+    Validation {
+        #[serde(flatten)]
+        result: Validation,
+        pairs_seen: u64,
+        seconds: f64,
+    },
+}
+
+/// What [`Trainer::run`] reports as it goes (for progress bars).
+#[derive(Clone, Debug)]
+pub enum Event {
+    /// A batch is done: its mean loss.
+    Batch {
+        epoch: usize,
+        batch: usize,
+        batches: usize,
+        loss: f64,
+    },
+    /// Validation is running: pairs done of total.
+    Validating { done: usize, total: usize },
+    /// A line was appended to the log.
+    Logged(LogRecord),
+}
+
+enum Optimizer {
+    Sgd(Sgd<f32>),
+    Adam(Adam<f32>),
+}
+
+impl Optimizer {
+    fn new(config: &TrainConfig) -> Self {
+        match config.optimizer {
+            OptimizerKind::Sgd => {
+                Self::Sgd(Sgd::new(config.lr, config.momentum, config.weight_decay))
+            }
+            OptimizerKind::Adam => Self::Adam(Adam::new(config.lr, config.weight_decay)),
+        }
+    }
+
+    fn load(kind: OptimizerKind, path: &Path) -> Result<Self> {
+        Ok(match kind {
+            OptimizerKind::Sgd => Self::Sgd(Sgd::load(path)?),
+            OptimizerKind::Adam => Self::Adam(Adam::load(path)?),
+        })
+    }
+
+    fn set_lr(&mut self, lr: f64) {
+        match self {
+            Self::Sgd(o) => o.lr = lr,
+            Self::Adam(o) => o.lr = lr,
+        }
+    }
+
+    fn step(&mut self, model: &mut Rgm<f32>) -> Result<()> {
+        match self {
+            Self::Sgd(o) => o.step(model)?,
+            Self::Adam(o) => o.step(model)?,
+        }
+        Ok(())
+    }
+
+    fn save(&self, path: &Path) -> Result<()> {
+        match self {
+            Self::Sgd(o) => o.save(path)?,
+            Self::Adam(o) => o.save(path)?,
+        }
+        Ok(())
+    }
+}
+
+/// One worker's network copy and forward/backward buffers.
+struct Worker {
+    network: Rgm<f32>,
+    cache: RgmCache<f32>,
+}
+
+/// A cloud as the network's (N, 3) f32 input.
+fn rows(cloud: &rgm_geom::PointCloud) -> Array2<f32> {
+    Array2::from_shape_fn((cloud.len(), 3), |(i, c)| cloud.points[i][c] as f32) // (N, 3)
+}
+
+fn ground_truth(pair: &Pair) -> Result<Correspondences> {
+    let c = &pair.correspondence;
+    Ok(Correspondences::new(
+        c.n_source,
+        c.n_target,
+        c.pairs.clone(),
+    )?)
+}
+
+/// A training run bound to its folder.
+pub struct Trainer {
+    config: TrainConfig,
+    dir: PathBuf,
+    network: Rgm<f32>,
+    optimizer: Optimizer,
+    state: TrainState,
+    workers: Vec<Worker>,
+}
+
+fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> TrainError + '_ {
+    move |source| TrainError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// Writes `path` through a temporary file and a rename, so an interruption never
+/// leaves a half-written file behind.
+fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    let tmp = path.with_extension("tmp");
+    write(&tmp)?;
+    fs::rename(&tmp, path).map_err(io_err(path))
+}
+
+fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
+    write_atomic(path, |tmp| {
+        let text = serde_json::to_string_pretty(value).map_err(|source| TrainError::Json {
+            path: tmp.to_path_buf(),
+            source,
+        })?;
+        fs::write(tmp, text).map_err(io_err(tmp))
+    })
+}
+
+fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T> {
+    let text = fs::read_to_string(path).map_err(io_err(path))?;
+    serde_json::from_str(&text).map_err(|source| TrainError::Json {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+impl Trainer {
+    /// The run in `dir`: resumed from its last checkpoint when `dir` holds one (its saved
+    /// configuration must equal `config` except for the number of epochs), a new run otherwise.
+    pub fn open(config: TrainConfig, dir: &Path) -> Result<Self> {
+        config.validate()?;
+        let state_path = dir.join("state.json");
+        let (network, optimizer, state) = if state_path.exists() {
+            let saved: TrainConfig = read_json(&dir.join("config.json"))?;
+            if !config.same_run(&saved) {
+                return Err(TrainError::Config {
+                    why: format!(
+                        "{} holds a run with other settings ({}); give the same options (only \
+                         --epochs may change) or another --out folder",
+                        dir.display(),
+                        dir.join("config.json").display()
+                    ),
+                });
+            }
+            let network = Rgm::load(config.network.clone(), &dir.join("last.safetensors"))?;
+            let optimizer = Optimizer::load(config.optimizer, &dir.join("last.optim.safetensors"))?;
+            (network, optimizer, read_json(&state_path)?)
+        } else {
+            fs::create_dir_all(dir).map_err(io_err(dir))?;
+            let network = Rgm::new(config.network.clone(), config.seed)?;
+            (network, Optimizer::new(&config), TrainState::default())
+        };
+        write_json(&dir.join("config.json"), &config)?;
+        let workers = (0..config.workers)
+            .map(|_| Worker {
+                network: network.clone(),
+                cache: RgmCache::default(),
+            })
+            .collect();
+        Ok(Self {
+            config,
+            dir: dir.to_path_buf(),
+            network,
+            optimizer,
+            state,
+            workers,
+        })
+    }
+
+    pub fn config(&self) -> &TrainConfig {
+        &self.config
+    }
+
+    pub fn state(&self) -> &TrainState {
+        &self.state
+    }
+
+    /// The network being trained.
+    pub fn network(&self) -> &Rgm<f32> {
+        &self.network
+    }
+
+    /// The learning rate of `epoch`.
+    pub fn lr(&self, epoch: usize) -> f64 {
+        MultiStepLr {
+            base: self.config.lr,
+            milestones: self.config.milestones.clone(),
+            gamma: self.config.gamma,
+        }
+        .lr(epoch)
+    }
+
+    /// Trains until the configured number of epochs is done, validating after each epoch and
+    /// checkpointing as it goes. `dataset` must be the one the run started on.
+    pub fn run(&mut self, dataset: &ModelNet40, on_event: &mut dyn FnMut(Event)) -> Result<()> {
+        let setting = self.config.pair_setting()?;
+        let generator = PairGenerator::new(setting);
+        let mut train = dataset.split(Split::Train, self.config.unseen);
+        train.truncate(self.config.train_shapes.unwrap_or(usize::MAX));
+        let mut val = dataset.split(Split::Validation, self.config.unseen);
+        val.truncate(self.config.val_shapes.unwrap_or(usize::MAX));
+        if train.is_empty() || val.is_empty() {
+            return Err(TrainError::Config {
+                why: format!(
+                    "{} training and {} validation shapes: both must be non-empty",
+                    train.len(),
+                    val.len()
+                ),
+            });
+        }
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(self.config.workers)
+            .start_handler(|_| {
+                rgm_nn::threads::flush_denormals_to_zero();
+            })
+            .build()
+            .map_err(|e| TrainError::Config {
+                why: format!("cannot start {} worker threads: {e}", self.config.workers),
+            })?;
+        rgm_nn::threads::set_blas_threads(1);
+        let batches = train.len().div_ceil(self.config.batch);
+        let mut since_log = (0.0, 0usize); // (loss sum, batches)
+        while self.state.epoch < self.config.epochs {
+            let epoch = self.state.epoch;
+            let lr = self.lr(epoch);
+            self.optimizer.set_lr(lr);
+            let mut order: Vec<usize> = (0..train.len()).collect();
+            order.shuffle(&mut StdRng::seed_from_u64(
+                self.config.seed ^ train_seed(epoch, 0),
+            ));
+            let mut clock = Instant::now();
+            while self.state.batch < batches {
+                let b = self.state.batch;
+                let chunk =
+                    &order[b * self.config.batch..((b + 1) * self.config.batch).min(order.len())];
+                let loss = pool.install(|| self.step(&generator, &train, epoch, chunk))?;
+                self.state.batch += 1;
+                self.state.steps += 1;
+                self.state.pairs_seen += chunk.len() as u64;
+                since_log = (since_log.0 + loss, since_log.1 + 1);
+                on_event(Event::Batch {
+                    epoch,
+                    batch: b + 1,
+                    batches,
+                    loss,
+                });
+                if self.state.batch % self.config.checkpoint_every == 0
+                    || self.state.batch == batches
+                {
+                    self.state.seconds += clock.elapsed().as_secs_f64();
+                    clock = Instant::now();
+                    let record = LogRecord::Train {
+                        epoch,
+                        batch: self.state.batch,
+                        batches,
+                        pairs_seen: self.state.pairs_seen,
+                        lr,
+                        loss: since_log.0 / since_log.1 as f64,
+                        seconds: self.state.seconds,
+                    };
+                    since_log = (0.0, 0);
+                    self.log(&record)?;
+                    on_event(Event::Logged(record));
+                    self.checkpoint()?;
+                }
+            }
+            on_event(Event::Validating {
+                done: 0,
+                total: val.len(),
+            });
+            let result = pool.install(|| self.validate(&generator, &val, epoch))?;
+            on_event(Event::Validating {
+                done: val.len(),
+                total: val.len(),
+            });
+            self.state.seconds += clock.elapsed().as_secs_f64();
+            if self.state.best.map_or(true, |best| result.beats(&best)) {
+                write_atomic(&self.dir.join("best.safetensors"), |tmp| {
+                    Ok(rgm_nn::io::save_params(tmp, &mut self.network)?)
+                })?;
+                self.state.best = Some(result);
+            }
+            self.state.epoch += 1;
+            self.state.batch = 0;
+            let record = LogRecord::Validation {
+                result,
+                pairs_seen: self.state.pairs_seen,
+                seconds: self.state.seconds,
+            };
+            self.log(&record)?;
+            self.checkpoint()?;
+            on_event(Event::Logged(record));
+        }
+        Ok(())
+    }
+
+    /// One optimiser step on the training shapes `chunk` of `epoch`; returns the mean loss.
+    fn step(
+        &mut self,
+        generator: &PairGenerator,
+        shapes: &[&Shape],
+        epoch: usize,
+        chunk: &[usize],
+    ) -> Result<f64> {
+        let workers = self.workers.len();
+        let match_points = self.config.match_points;
+        let losses: Vec<Result<f64>> = self
+            .workers
+            .par_iter_mut()
+            .enumerate()
+            .map(|(w, worker)| {
+                worker.network.zero_grad();
+                let mut sum = 0.0;
+                for &i in chunk.iter().skip(w).step_by(workers) {
+                    let mut pair = generator.train_pair(shapes, epoch, i)?;
+                    if let Some(points) = match_points {
+                        let seed = !train_seed(epoch, i);
+                        pair = pair.subsampled(points, &mut StdRng::seed_from_u64(seed));
+                    }
+                    let gt = ground_truth(&pair)?;
+                    let (x, y) = (rows(&pair.source), rows(&pair.target));
+                    let loss = worker.network.forward_backward(
+                        x.view(),
+                        y.view(),
+                        &gt,
+                        &mut worker.cache,
+                    )?;
+                    sum += loss.to_f64();
+                }
+                Ok(sum)
+            })
+            .collect();
+        let mut total = 0.0;
+        for loss in losses {
+            total += loss?;
+        }
+        let scale = 1.0 / chunk.len() as f32;
+        self.network.zero_grad();
+        for worker in &mut self.workers {
+            let mut grads = Vec::new();
+            worker
+                .network
+                .visit_params("", &mut |_, p| grads.push(p.grad.to_owned()));
+            let mut grads = grads.into_iter();
+            self.network.visit_params("", &mut |_, mut p| {
+                let g = grads.next().expect("same network layout");
+                p.grad.scaled_add(scale, &g);
+            });
+        }
+        self.average_buffers();
+        self.optimizer.step(&mut self.network)?;
+        self.broadcast();
+        Ok(total / chunk.len() as f64)
+    }
+
+    /// Sets the main network's batch-norm running statistics to the workers' mean.
+    fn average_buffers(&mut self) {
+        let scale = 1.0 / self.workers.len() as f32;
+        let mut sums = Vec::new();
+        for (k, worker) in self.workers.iter_mut().enumerate() {
+            let mut n = 0;
+            worker.network.visit_buffers("", &mut |_, b| {
+                if k == 0 {
+                    sums.push(b.mapv(|v| v * scale));
+                } else {
+                    sums[n].scaled_add(scale, &b);
+                }
+                n += 1;
+            });
+        }
+        let mut sums = sums.into_iter();
+        self.network.visit_buffers("", &mut |_, mut b| {
+            b.assign(&sums.next().expect("same network layout"))
+        });
+    }
+
+    /// Copies the main network's weights and buffers into every worker.
+    fn broadcast(&mut self) {
+        for worker in &mut self.workers {
+            worker.network.clone_from(&self.network);
+        }
+    }
+
+    /// Validation of `epoch` on the pairs of `shapes` (seeded like test pairs): loss and
+    /// matching accuracy of C̃, and the test-time procedure's metrics.
+    fn validate(
+        &mut self,
+        generator: &PairGenerator,
+        shapes: &[&Shape],
+        epoch: usize,
+    ) -> Result<Validation> {
+        let total = shapes.len();
+        let workers = self.workers.len();
+        let match_points = self.config.match_points;
+        let per_worker: Vec<Result<Vec<(PairRecord, f64, usize, usize)>>> = self
+            .workers
+            .par_iter_mut()
+            .enumerate()
+            .map(|(w, worker)| {
+                let mut method = Method::Rgm(Box::new(RgmRegistrar::new(
+                    worker.network.clone(),
+                    PipelineConfig::default(),
+                )));
+                let mut out = Vec::new();
+                for i in (w..total).step_by(workers) {
+                    let mut pair = generator.test_pair(shapes, i)?;
+                    if let Some(points) = match_points {
+                        pair = pair.subsampled(points, &mut StdRng::seed_from_u64(!(i as u64)));
+                    }
+                    let gt = ground_truth(&pair)?;
+                    let (x, y) = (rows(&pair.source), rows(&pair.target));
+                    worker
+                        .network
+                        .forward(x.view(), y.view(), Mode::Eval, &mut worker.cache)?;
+                    let c = worker.cache.c_soft();
+                    let loss = bce_forward(c, &gt)?.to_f64();
+                    let hits = gt
+                        .pairs()
+                        .iter()
+                        .filter(|&&(i, j)| {
+                            let row = c.row(i);
+                            let best = row.iter().enumerate().fold(
+                                (0, f32::NEG_INFINITY),
+                                |a, (k, &v)| if v > a.1 { (k, v) } else { a },
+                            );
+                            best.0 == j
+                        })
+                        .count();
+                    let record = evaluate_pair(&mut method, i, &pair)?;
+                    out.push((record, loss, hits, gt.pairs().len()));
+                }
+                Ok(out)
+            })
+            .collect();
+        let mut rows_out = Vec::with_capacity(total);
+        for part in per_worker {
+            rows_out.extend(part?);
+        }
+        let records: Vec<PairRecord> = rows_out.iter().map(|r| r.0.clone()).collect();
+        let summary = Summary::from_records(&records)?;
+        let loss = rows_out.iter().map(|r| r.1).sum::<f64>() / total as f64;
+        let (hits, matched) = rows_out.iter().fold((0, 0), |(h, m), r| (h + r.2, m + r.3));
+        let m = summary.metrics;
+        Ok(Validation {
+            epoch,
+            pairs: total,
+            loss,
+            match_accuracy: hits as f64 / matched.max(1) as f64,
+            mie_r_deg: m.mie_r_deg,
+            mie_t: m.mie_t,
+            mae_r_deg: m.mae_r_deg,
+            mae_t: m.mae_t,
+            recall: m.recall,
+            failures: summary.failures,
+        })
+    }
+
+    fn log(&self, record: &LogRecord) -> Result<()> {
+        let path = self.dir.join("log.jsonl");
+        let line = serde_json::to_string(record).map_err(|source| TrainError::Json {
+            path: path.clone(),
+            source,
+        })?;
+        let mut file = fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&path)
+            .map_err(io_err(&path))?;
+        writeln!(file, "{line}").map_err(io_err(&path))
+    }
+
+    /// Writes `last.safetensors`, `last.optim.safetensors` and `state.json` (in that order:
+    /// the state names a position only once its weights are on disk).
+    fn checkpoint(&mut self) -> Result<()> {
+        write_atomic(&self.dir.join("last.safetensors"), |tmp| {
+            Ok(rgm_nn::io::save_params(tmp, &mut self.network)?)
+        })?;
+        write_atomic(&self.dir.join("last.optim.safetensors"), |tmp| {
+            self.optimizer.save(tmp)
+        })?;
+        write_json(&self.dir.join("state.json"), &self.state)
+    }
+}
