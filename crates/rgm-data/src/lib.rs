@@ -1,6 +1,6 @@
-//! rgm-data — data for rgm: point-cloud files (PLY, OFF, XYZ/CSV, `.npy`), the ModelNet40
-//! loader and its splits, the registration-pair generator of the spec's data protocol (§1) and
-//! the ground-truth correspondences of each pair.
+#![doc = include_str!("../README.md")]
+//!
+//! # Layering
 //!
 //! Layering rule: rgm-data builds on rgm-geom only (point clouds, rigid transforms, kNN) and
 //! knows nothing of tensors, networks or matching. It needs no BLAS.

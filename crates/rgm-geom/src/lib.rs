@@ -1,6 +1,6 @@
-//! rgm-geom — the geometry layer of rgm: point clouds, rigid transforms, Euler angles,
-//! random poses, exact kNN, weighted Kabsch, registration metrics and the classical
-//! baselines (ICP, FGR on FPFH).
+#![doc = include_str!("../README.md")]
+//!
+//! # Layering and conventions
 //!
 //! Layering rule: rgm-geom depends on no other rgm crate and knows nothing about tensors,
 //! gradients or networks. Everything is f64; callers convert at their boundary.

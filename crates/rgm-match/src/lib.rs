@@ -1,6 +1,6 @@
-//! rgm-match — the matching half of RGM: the AIS affinity, instance normalisation, Sinkhorn with
-//! slack, the "Var1" ablation affinity, the BCE loss (spec §2.4, §2.7, §3), and the test-time hard
-//! matching with cycle consistency (spec §4.2–4.4).
+#![doc = include_str!("../README.md")]
+//!
+//! # Layering and conventions
 //!
 //! Layering rule: rgm-match builds on rgm-nn (its `Scalar` element type, matrix products through
 //! ndarray) and knows nothing of networks' other layers, data sets or the pipeline above it.
