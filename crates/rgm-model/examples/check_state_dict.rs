@@ -44,13 +44,12 @@ fn main() -> ExitCode {
             y.nrows(),
             start.elapsed().as_secs_f64() * 1e3
         );
-        let worst = cache
-            .c_soft()
-            .iter()
-            .zip(expected.iter())
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0f32, f32::max);
-        Ok(worst)
+        let c_soft = cache.c_soft(); // (N, M)
+        if c_soft.dim() != expected.dim() {
+            let (got, want) = (c_soft.dim(), expected.dim());
+            return Err(format!("C̃ is {got:?}, PyTorch's is {want:?}").into());
+        }
+        Ok((&c_soft - &expected).fold(0.0f32, |worst, d| worst.max(d.abs())))
     };
     match run() {
         Ok(worst) => {
