@@ -1,9 +1,10 @@
 //! `cargo xtask <chore>`: the runner of benchmarks and reproductions.
 //!
-//! Layering rule: xtask drives the other crates through cargo and the `rgm` command; it holds no
-//! algorithm of its own.
+//! Layering rule: xtask drives the other crates through cargo and their libraries (rgm-model's
+//! methods, evaluation and figures; rgm-data's pairs); it holds no algorithm of its own.
 
 mod bench;
+mod tables;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -22,11 +23,14 @@ struct Cli {
 enum Command {
     /// Run every criterion bench and write docs/bench.md and docs/bench.json.
     Bench(bench::Args),
+    /// Reproduce the paper's Tables 1–5 on ModelNet40: docs/results.md, per-pair JSON, figures.
+    ReproduceTables(tables::Args),
 }
 
 fn main() -> ExitCode {
     let outcome = match Cli::parse().command {
         Command::Bench(args) => bench::run(args),
+        Command::ReproduceTables(args) => tables::run(args),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

@@ -43,6 +43,8 @@ enum Command {
     /// Writes checkpoints, best.safetensors and log.jsonl (one JSON line per checkpoint and per
     /// validation) into the run folder.
     Train(commands::train::Args),
+    /// Draw SRC and TGT before and after a registration (PNG): a given transform or a method's.
+    Render(commands::render::Args),
 }
 
 /// Registration methods selectable from the command line.
@@ -165,6 +167,7 @@ fn main() -> ExitCode {
         Command::Pairs(args) => commands::pairs::run(args),
         Command::Score(args) => commands::score::run(args),
         Command::Train(args) => commands::train::run(args),
+        Command::Render(args) => commands::render::run(args),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

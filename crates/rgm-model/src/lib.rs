@@ -9,6 +9,7 @@ pub mod evaluate;
 pub mod method;
 pub mod network;
 pub mod pipeline;
+pub mod render;
 pub mod train;
 
 pub use evaluate::{PairRecord, Summary};

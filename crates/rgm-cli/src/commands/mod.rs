@@ -3,5 +3,6 @@
 pub mod eval;
 pub mod pairs;
 pub mod register;
+pub mod render;
 pub mod score;
 pub mod train;

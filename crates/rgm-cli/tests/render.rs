@@ -1,0 +1,155 @@
+//! `rgm render`: the picture of a registration, from a transform file or a method.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use rgm_data::{read_point_cloud, write_point_cloud};
+use rgm_geom::euler::rotation_xyz_intrinsic;
+use rgm_geom::{RigidTransform, Vector3};
+
+use rgm_model::render::{registration_figure, PANEL_SIZE as PANEL, WHITE};
+
+fn rgm(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_rgm"))
+        .args(args)
+        .output()
+        .expect("the rgm binary runs")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("rgm-render-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A test shape as source and the same shape moved by a known pose as target.
+fn clouds(dir: &Path) -> (String, String, RigidTransform) {
+    let data = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data/modelnet40_npy1024/airplane/test/airplane_0627.npy");
+    let source = read_point_cloud(data).unwrap();
+    let pose = RigidTransform::new(
+        rotation_xyz_intrinsic(0.4, 0.1, 0.5),
+        Vector3::new(0.2, -0.1, 0.3),
+    );
+    let (src, tgt) = (dir.join("src.ply"), dir.join("tgt.ply"));
+    write_point_cloud(&src, &source).unwrap();
+    write_point_cloud(&tgt, &source.transformed(&pose)).unwrap();
+    let path = |p: PathBuf| p.to_str().unwrap().to_string();
+    (path(src), path(tgt), pose)
+}
+
+/// Writes `t` as `rgm register` prints it.
+fn write_transform(path: &Path, t: &RigidTransform) {
+    let mut text = String::from("# transform target ← source\n");
+    for row in t.to_rows() {
+        text += &format!("{} {} {} {}\n", row[0], row[1], row[2], row[3]);
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+/// The picture's size and its pixels (row-major RGB).
+fn decode(path: &Path) -> (usize, usize, Vec<[u8; 3]>) {
+    let decoder = png::Decoder::new(std::fs::File::open(path).unwrap());
+    let mut reader = decoder.read_info().unwrap();
+    let mut data = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut data).unwrap();
+    let pixels = data.chunks(3).map(|p| [p[0], p[1], p[2]]).collect();
+    (info.width as usize, info.height as usize, pixels)
+}
+
+/// Pixels drawn on (not background) in the right-hand (after) panel, separator excluded.
+fn drawn_after(pixels: &[[u8; 3]], width: usize) -> usize {
+    pixels
+        .iter()
+        .enumerate()
+        .filter(|(k, p)| k % width > PANEL && **p != WHITE)
+        .count()
+}
+
+fn render(src: &str, tgt: &str, transform: &Path, out: &Path) -> (usize, usize, Vec<[u8; 3]>) {
+    let output = rgm(&[
+        "render",
+        src,
+        tgt,
+        "--transform",
+        transform.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    decode(out)
+}
+
+#[test]
+fn the_true_transform_puts_the_source_on_the_target() {
+    let dir = scratch("true");
+    let (src, tgt, pose) = clouds(&dir);
+    let (right, wrong) = (dir.join("right.txt"), dir.join("identity.txt"));
+    write_transform(&right, &pose);
+    write_transform(&wrong, &RigidTransform::identity());
+    let (width, height, aligned) = render(&src, &tgt, &right, &dir.join("right.png"));
+    assert_eq!((width, height), (2 * PANEL, PANEL));
+    // The command draws exactly the library's figure of the clouds it read.
+    let (source, target) = (
+        read_point_cloud(&src).unwrap(),
+        read_point_cloud(&tgt).unwrap(),
+    );
+    let expected = registration_figure(&source, &target, &pose).unwrap();
+    for (k, p) in aligned.iter().enumerate() {
+        assert_eq!(Some(*p), expected.pixel(k % width, k / width), "pixel {k}");
+    }
+    // After the true transform the source covers the target's own footprint; after the
+    // identity the two clouds lie apart and cover much more.
+    let (_, _, apart) = render(&src, &tgt, &wrong, &dir.join("identity.png"));
+    let (on, off) = (drawn_after(&aligned, width), drawn_after(&apart, width));
+    assert!(on > 2000, "{on}");
+    assert!(5 * on < 4 * off, "{on} pixels aligned vs {off} apart");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn renders_what_register_json_found() {
+    let dir = scratch("json");
+    let (src, tgt, pose) = clouds(&dir);
+    let out = rgm(&["register", &src, &tgt, "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json = dir.join("found.json");
+    std::fs::write(&json, &out.stdout).unwrap();
+    let (width, _, found) = render(&src, &tgt, &json, &dir.join("found.png"));
+    let right = dir.join("right.txt");
+    write_transform(&right, &pose);
+    let (_, _, truth) = render(&src, &tgt, &right, &dir.join("right.png"));
+    // FGR's transform on a clean pair is the true one up to ~1e-4: the same footprint.
+    let (a, b) = (drawn_after(&found, width), drawn_after(&truth, width));
+    assert!(a.abs_diff(b) * 50 < b, "{a} vs {b} pixels");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_transform_file_with_missing_numbers_is_refused_clearly() {
+    let dir = scratch("bad");
+    let (src, tgt, _) = clouds(&dir);
+    let bad = dir.join("bad.txt");
+    std::fs::write(&bad, "1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0\n").unwrap();
+    let out = rgm(&[
+        "render",
+        &src,
+        &tgt,
+        "--transform",
+        bad.to_str().unwrap(),
+        "--out",
+        dir.join("x.png").to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("15 numbers"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
