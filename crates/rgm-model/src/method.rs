@@ -1,6 +1,6 @@
 //! The registration methods rgm can run, behind one interface.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use rgm_geom::fgr::{self, FgrConfig};
@@ -26,6 +26,16 @@ pub enum MethodError {
     /// No correspondence survived inlier selection (and cycle consistency).
     #[error("rgm: no correspondences found in pass {pass} (no row and column of C̃ above the inlier threshold agree)")]
     NoCorrespondences { pass: usize },
+    /// A cloud too small for the network's neighbour graph.
+    #[error("rgm: the {cloud} cloud has {points} points to match; the network needs at least {needed} (K + 1)")]
+    TooFewPoints {
+        cloud: &'static str,
+        points: usize,
+        needed: usize,
+    },
+    /// A weights manifest could not be read or is not valid.
+    #[error("weights manifest {path}: {why}")]
+    Manifest { path: PathBuf, why: String },
 }
 
 /// A registration method with its configuration.

@@ -8,8 +8,11 @@
 use std::path::PathBuf;
 
 use ndarray::Array2;
-use rgm_geom::{Point3, PointCloud};
-use rgm_model::network::{Config, Mode, Rgm, RgmCache};
+use rgm_geom::icp::{self, IcpConfig};
+use rgm_geom::{Point3, PointCloud, RigidTransform, Vector3};
+use rgm_match::{hard_match, MatchConfig};
+use rgm_model::network::{Config, FeaturerCache, Mode, Rgm, RgmCache};
+use rgm_model::pipeline::Normalisation;
 use rgm_model::{Method, MethodError, PipelineConfig, RgmRegistrar};
 
 fn fixture() -> PathBuf {
@@ -99,4 +102,226 @@ fn rgm_weights_of_the_wrong_size_are_a_named_error() {
         text.contains("pointfeaturer.conv1.weight") || text.contains("expected"),
         "{text}"
     );
+}
+
+fn fixture_pair() -> (PointCloud, PointCloud) {
+    (cloud(&tensor("input.x")), cloud(&tensor("input.y")))
+}
+
+fn assert_same_transform(a: &RigidTransform, b: &RigidTransform, tol: f64) {
+    let (dr, dt) = (
+        (a.rotation - b.rotation).abs().max(),
+        (a.translation - b.translation).abs().max(),
+    );
+    assert!(dr < tol && dt < tol, "ΔR {dr}, Δt {dt}");
+}
+
+#[test]
+fn features_computed_once_give_bit_identical_c_soft_both_ways() {
+    let mut network = Rgm::<f32>::load(Config::tiny(), &fixture()).unwrap();
+    let (x, y) = (tensor("input.x"), tensor("input.y"));
+    let (mut fx, mut fy) = (FeaturerCache::default(), FeaturerCache::default());
+    network.features(x.view(), &mut fx).unwrap();
+    network.features(y.view(), &mut fy).unwrap();
+    for (a, b, fa, fb) in [
+        (&x, &y, &fx.features, &fy.features),
+        (&y, &x, &fy.features, &fx.features),
+    ] {
+        let (mut plain, mut reused) = (RgmCache::default(), RgmCache::default());
+        network
+            .forward(a.view(), b.view(), Mode::Eval, &mut plain)
+            .unwrap();
+        network
+            .forward_from_features(fa.view(), fb.view(), &mut reused)
+            .unwrap();
+        assert_eq!(plain.c_soft().dim(), (48, 48));
+        assert_eq!(plain.c_soft(), reused.c_soft());
+    }
+}
+
+#[test]
+fn no_backward_follows_a_pass_from_given_features() {
+    let mut network = Rgm::<f32>::load(Config::tiny(), &fixture()).unwrap();
+    let x = tensor("input.x");
+    let mut fx = FeaturerCache::default();
+    network.features(x.view(), &mut fx).unwrap();
+    let mut cache = RgmCache::default();
+    network
+        .forward_from_features(fx.features.view(), fx.features.view(), &mut cache)
+        .unwrap();
+    let dc = Array2::<f32>::ones((48, 48));
+    let err = network.backward(dc.view(), &mut cache).unwrap_err();
+    assert!(err.to_string().contains("forward_from_features"), "{err}");
+    let narrow = Array2::<f32>::zeros((48, 3));
+    let err = network
+        .forward_from_features(narrow.view(), fx.features.view(), &mut cache)
+        .unwrap_err();
+    assert!(err.to_string().contains("[48, 3]"), "{err}");
+}
+
+#[test]
+fn the_pipeline_reports_the_correspondences_the_plain_network_finds() {
+    // One pass, cycle consistent: the registrar (features reused) must find exactly the pairs
+    // of the plain forward in both directions.
+    let mut network = Rgm::<f32>::load(Config::tiny(), &fixture()).unwrap();
+    let (x, y) = (tensor("input.x"), tensor("input.y"));
+    let matching = MatchConfig {
+        inlier_threshold: 0.5,
+    };
+    let (mut xy, mut yx) = (RgmCache::default(), RgmCache::default());
+    network
+        .forward(x.view(), y.view(), Mode::Eval, &mut xy)
+        .unwrap();
+    network
+        .forward(y.view(), x.view(), Mode::Eval, &mut yx)
+        .unwrap();
+    let expected = hard_match(xy.c_soft(), &matching)
+        .unwrap()
+        .cycle_consistent(&hard_match(yx.c_soft(), &matching).unwrap())
+        .unwrap();
+    let (source, target) = fixture_pair();
+    let config = PipelineConfig {
+        passes: 1,
+        ..Default::default()
+    };
+    let mut registrar = RgmRegistrar::new(network, config);
+    let result = registrar.register(&source, &target).unwrap();
+    assert!(!expected.pairs().is_empty());
+    assert_eq!(registrar.correspondences(), expected.pairs());
+    assert_eq!(result.inlier_count, expected.pairs().len());
+}
+
+#[test]
+fn benchmark_pairs_are_used_as_they_are() {
+    let data =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/modelnet40_npy1024");
+    let dataset = rgm_data::ModelNet40::open(&data).unwrap();
+    let shapes = dataset.split(rgm_data::Split::Test, false);
+    for setting in [
+        rgm_data::Setting::Clean,
+        rgm_data::Setting::Noise,
+        rgm_data::Setting::Partial,
+    ] {
+        let generator = rgm_data::PairGenerator::new(setting);
+        for i in (0..shapes.len()).step_by(7) {
+            let pair = generator.test_pair(&shapes, i).unwrap();
+            let frame = Normalisation::of_pair(&pair.source, &pair.target);
+            assert!(frame.is_identity(), "{setting:?} pair {i}: {frame:?}");
+        }
+    }
+}
+
+/// The fixture pair, enlarged 40× and moved far from the origin, each cloud differently.
+fn far_and_large(source: &PointCloud, target: &PointCloud) -> (PointCloud, PointCloud) {
+    let warp = |c: &PointCloud, shift: Vector3<f64>| {
+        PointCloud::new(c.points.iter().map(|p| p * 40.0 + shift).collect())
+    };
+    (
+        warp(source, Vector3::new(100.0, -20.0, 3.0)),
+        warp(target, Vector3::new(-7.0, 55.0, 12.0)),
+    )
+}
+
+#[test]
+fn normalisation_is_undone_on_the_transform() {
+    // Exact correspondences solved in the network's frame give the caller's transform.
+    let (source, _) = fixture_pair();
+    let truth = RigidTransform::new(
+        rgm_geom::euler::rotation_xyz_intrinsic(0.3, -0.2, 0.5),
+        Vector3::new(4.0, -1.0, 2.5),
+    );
+    let target = source.transformed(&truth);
+    let (big_source, big_target) = far_and_large(&source, &target);
+    // In the caller's frame: big_target = R big_source + t_big.
+    let t_big = rgm_geom::kabsch(
+        &big_source.points,
+        &big_target.points,
+        &vec![1.0; source.len()],
+    )
+    .unwrap();
+    let frame = Normalisation::of_pair(&big_source, &big_target);
+    assert!(!frame.is_identity());
+    let (ns, nt) = (frame.source(&big_source), frame.target(&big_target));
+    let farthest = ns.points.iter().chain(&nt.points).map(|p| p.coords.norm());
+    assert!((farthest.fold(0.0, f64::max) - 1.0).abs() < 1e-12);
+    let in_frame = rgm_geom::kabsch(&ns.points, &nt.points, &vec![1.0; source.len()]).unwrap();
+    assert_same_transform(&frame.undo(&in_frame), &t_big, 1e-9);
+}
+
+#[test]
+fn far_large_clouds_register_as_their_normalised_copies() {
+    let network = Rgm::<f32>::load(Config::tiny(), &fixture()).unwrap();
+    let (source, target) = far_and_large(&fixture_pair().0, &fixture_pair().1);
+    let frame = Normalisation::of_pair(&source, &target);
+    let (ns, nt) = (frame.source(&source), frame.target(&target));
+    assert!(Normalisation::of_pair(&ns, &nt).is_identity());
+    let config = PipelineConfig {
+        passes: 1,
+        cycle_consistency: false,
+        ..Default::default()
+    };
+    let mut a = RgmRegistrar::new(network.clone(), config.clone());
+    let mut b = RgmRegistrar::new(network, config);
+    let (big, small) = (
+        a.register(&source, &target).unwrap(),
+        b.register(&ns, &nt).unwrap(),
+    );
+    assert_eq!(a.correspondences(), b.correspondences());
+    assert!(!a.correspondences().is_empty());
+    assert_same_transform(
+        &big.t_target_source,
+        &frame.undo(&small.t_target_source),
+        1e-9,
+    );
+}
+
+#[test]
+fn refinement_is_icp_from_rgms_transform() {
+    let network = Rgm::<f32>::load(Config::tiny(), &fixture()).unwrap();
+    let (source, target) = fixture_pair();
+    let plain = PipelineConfig {
+        passes: 1,
+        cycle_consistency: false,
+        ..Default::default()
+    };
+    let refined = PipelineConfig {
+        refine: Some(IcpConfig::default()),
+        ..plain.clone()
+    };
+    let rgm = RgmRegistrar::new(network.clone(), plain)
+        .register(&source, &target)
+        .unwrap();
+    let mut registrar = RgmRegistrar::new(network, refined);
+    let both = registrar.register(&source, &target).unwrap();
+    let icp_config = IcpConfig {
+        initial: rgm.t_target_source,
+        ..IcpConfig::default()
+    };
+    let expected = icp::register(&source, &target, &icp_config).unwrap();
+    assert_same_transform(&both.t_target_source, &expected.t_target_source, 1e-12);
+    assert_eq!(both.iterations, 1 + expected.iterations);
+    assert_eq!(both.inlier_count, rgm.inlier_count);
+}
+
+#[test]
+fn clouds_smaller_than_the_neighbourhood_are_a_clear_error() {
+    let network = Rgm::<f32>::load(Config::tiny(), &fixture()).unwrap();
+    let (source, target) = fixture_pair();
+    let small = source.select(&[0, 1, 2, 3]); // K = 4 points, the network needs 5
+    let mut registrar = RgmRegistrar::new(network, PipelineConfig::default());
+    let err = registrar.register(&source, &small).unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "rgm: the target cloud has 4 points to match; the network needs at least 5 (K + 1)"
+    );
+    registrar.config.match_points = Some(3);
+    let err = registrar.register(&source, &target).unwrap_err();
+    assert!(matches!(
+        err,
+        MethodError::TooFewPoints {
+            cloud: "source",
+            points: 3,
+            needed: 5
+        }
+    ));
 }

@@ -105,16 +105,24 @@ fn to_array<T: Scalar>(path: &Path, name: &str, view: &TensorView<'_>) -> Result
 /// Reads every tensor of a safetensors file (all must be F32 or F64; converted to `T`) and
 /// its metadata.
 pub fn read_tensors<T: Scalar>(path: &Path) -> Result<(Tensors<T>, HashMap<String, String>)> {
-    let buffer = read_bytes(path)?;
+    read_tensors_from_bytes(&read_bytes(path)?, path)
+}
+
+/// [`read_tensors`] on the bytes of a safetensors file already in memory (weights embedded in
+/// a binary); `origin` names them in errors.
+pub fn read_tensors_from_bytes<T: Scalar>(
+    buffer: &[u8],
+    origin: &Path,
+) -> Result<(Tensors<T>, HashMap<String, String>)> {
     let (_, header) =
-        SafeTensors::read_metadata(&buffer).map_err(|source| NnError::Safetensors {
-            path: path.to_path_buf(),
+        SafeTensors::read_metadata(buffer).map_err(|source| NnError::Safetensors {
+            path: origin.to_path_buf(),
             source,
         })?;
     let metadata = header.metadata().clone().unwrap_or_default();
     let mut tensors = HashMap::new();
-    for (name, view) in parse(path, &buffer)?.tensors() {
-        let array = to_array(path, &name, &view)?;
+    for (name, view) in parse(origin, buffer)?.tensors() {
+        let array = to_array(origin, &name, &view)?;
         tensors.insert(name, array);
     }
     Ok((tensors, metadata))
@@ -273,6 +281,25 @@ mod tests {
             conv.weight.value,
             ndarray::array![[0.0, 1.0, 2.0], [3.0, 4.0, 5.0]]
         );
+        std::fs::remove_file(&path).unwrap();
+    }
+
+    #[test]
+    fn bytes_in_memory_read_as_the_file_does() {
+        let path = temp("bytes");
+        let mut bn = BatchNorm::<f32>::new(2);
+        bn.running_mean = ndarray::array![0.5f32, -1.0];
+        save_params(&path, &mut bn).unwrap();
+        let (from_file, _) = read_tensors::<f32>(&path).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let (from_bytes, _) = read_tensors_from_bytes::<f32>(&bytes, Path::new("memory")).unwrap();
+        assert_eq!(from_file, from_bytes);
+        assert_eq!(
+            from_bytes["running_mean"].as_slice().unwrap(),
+            &[0.5f32, -1.0]
+        );
+        let err = read_tensors_from_bytes::<f32>(b"garbage", Path::new("builtin:x")).unwrap_err();
+        assert!(err.to_string().starts_with("builtin:x: "), "{err}");
         std::fs::remove_file(&path).unwrap();
     }
 

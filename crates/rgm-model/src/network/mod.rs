@@ -78,6 +78,9 @@ pub struct RgmCache<T> {
     blocks: Vec<BlockCache<T>>,
     dfeat: Vec<(Array2<T>, Array2<T>)>, // per block: gradient of its inputs, (N, C_b), (M, C_b)
     dc_soft: Array2<T>,                 // (N, M) loss gradient of C̃
+    /// The blocks ran on features given by the caller ([`Rgm::forward_from_features`]): `fx`
+    /// and `fy` are not this pass's, so there is no backward.
+    from_features: bool,
 }
 
 impl<T> RgmCache<T> {
@@ -173,21 +176,73 @@ impl<T: Element> Rgm<T> {
     ) -> Result<()> {
         check_cloud("x", x)?;
         check_cloud("y", y)?;
-        let (n, m) = (x.nrows(), y.nrows());
-        if cache.blocks.len() != self.blocks.len()
-            || cache.blocks.first().map(|b| b.dims()) != Some((n, m))
-        {
-            cache.blocks = (0..self.blocks.len())
+        self.featurer.forward(x, mode, &mut cache.fx)?;
+        self.featurer.forward(y, mode, &mut cache.fy)?;
+        cache.from_features = false;
+        self.forward_blocks(
+            cache.fx.features.view(),
+            cache.fy.features.view(),
+            &mut cache.blocks,
+        )
+    }
+
+    /// The local features (N, ΣC + E) of one cloud `points` (N, 3) at test time, into
+    /// `cache.features`. In evaluation mode they depend on this cloud alone, so a cloud that
+    /// meets several partners (the target over every pass, both clouds in the reverse pass) is
+    /// run once; [`Rgm::forward_from_features`] then gives the same C̃ as [`Rgm::forward`].
+    pub fn features(
+        &mut self,
+        points: ArrayView2<'_, T>,
+        cache: &mut FeaturerCache<T>,
+    ) -> Result<()> {
+        check_cloud("points", points)?;
+        self.featurer.forward(points, Mode::Eval, cache)
+    }
+
+    /// The blocks of an evaluation-mode forward on the local features `fx` (N, ΣC + E) and
+    /// `fy` (M, ΣC + E) made by [`Rgm::features`]; C̃ is then [`RgmCache::c_soft`]. No backward
+    /// follows such a pass.
+    pub fn forward_from_features(
+        &self,
+        fx: ArrayView2<'_, T>,
+        fy: ArrayView2<'_, T>,
+        cache: &mut RgmCache<T>,
+    ) -> Result<()> {
+        let width = self.config.block_width(0);
+        for (what, f) in [("fx", fx.view()), ("fy", fy.view())] {
+            if f.ncols() != width {
+                return Err(rgm_nn::NnError::Shape {
+                    op: "rgm forward_from_features",
+                    what,
+                    expected: vec![f.nrows(), width],
+                    got: f.shape().to_vec(),
+                }
+                .into());
+            }
+        }
+        cache.from_features = true;
+        self.forward_blocks(fx, fy, &mut cache.blocks)
+    }
+
+    /// The L blocks on the local features `fx` (N, C), `fy` (M, C), into `blocks` (rebuilt when
+    /// N or M change).
+    fn forward_blocks(
+        &self,
+        fx: ArrayView2<'_, T>,
+        fy: ArrayView2<'_, T>,
+        blocks: &mut Vec<BlockCache<T>>,
+    ) -> Result<()> {
+        let (n, m) = (fx.nrows(), fy.nrows());
+        if blocks.len() != self.blocks.len() || blocks.first().map(|b| b.dims()) != Some((n, m)) {
+            *blocks = (0..self.blocks.len())
                 .map(|b| BlockCache::new(&self.config, b, n, m))
                 .collect();
         }
-        self.featurer.forward(x, mode, &mut cache.fx)?;
-        self.featurer.forward(y, mode, &mut cache.fy)?;
         for (b, block) in self.blocks.iter().enumerate() {
-            let (done, rest) = cache.blocks.split_at_mut(b);
+            let (done, rest) = blocks.split_at_mut(b);
             let (fx, fy) = match done.last() {
                 Some(prev) => prev.outputs(self.blocks[b - 1].cross.is_some()),
-                None => (cache.fx.features.view(), cache.fy.features.view()),
+                None => (fx.view(), fy.view()),
             };
             block.forward(fx, fy, &mut rest[0])?;
         }
@@ -199,6 +254,13 @@ impl<T: Element> Rgm<T> {
     /// then the feature extractor for Y and for X.
     pub fn backward(&mut self, dc_soft: ArrayView2<'_, T>, cache: &mut RgmCache<T>) -> Result<()> {
         let blocks = self.blocks.len();
+        if cache.from_features {
+            return Err(NetworkError::Backward {
+                why: "the cached pass ran from given features (forward_from_features); \
+                      a backward needs Rgm::forward"
+                    .to_string(),
+            });
+        }
         if cache.blocks.len() != blocks || dc_soft.dim() != cache.c_soft().dim() {
             return Err(NetworkError::Backward {
                 why: format!(
