@@ -20,6 +20,7 @@
 
 use std::fs;
 use std::io::Write;
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -434,8 +435,14 @@ impl Trainer {
     }
 
     /// Trains until the configured number of epochs is done, validating after each epoch and
-    /// checkpointing as it goes. `dataset` must be the one the run started on.
-    pub fn run(&mut self, dataset: &ModelNet40, on_event: &mut dyn FnMut(Event)) -> Result<()> {
+    /// checkpointing as it goes. `dataset` must be the one the run started on. When `on_event`
+    /// answers `Break` to a batch, the run saves a checkpoint there and returns (a later
+    /// [`Trainer::open`] + `run` goes on from it exactly as if never stopped).
+    pub fn run(
+        &mut self,
+        dataset: &ModelNet40,
+        on_event: &mut dyn FnMut(Event) -> ControlFlow<()>,
+    ) -> Result<()> {
         let setting = self.config.pair_setting()?;
         let generator = PairGenerator::new(setting);
         let mut train = dataset.split(Split::Train, self.config.unseen);
@@ -481,15 +488,15 @@ impl Trainer {
                 self.state.steps += 1;
                 self.state.pairs_seen += chunk.len() as u64;
                 since_log = (since_log.0 + loss, since_log.1 + 1);
-                on_event(Event::Batch {
+                let stop = on_event(Event::Batch {
                     epoch,
                     batch: b + 1,
                     batches,
                     loss,
-                });
-                if self.state.batch % self.config.checkpoint_every == 0
-                    || self.state.batch == batches
-                {
+                })
+                .is_break();
+                let due = self.state.batch % self.config.checkpoint_every == 0;
+                if due || stop || self.state.batch == batches {
                     self.state.seconds += clock.elapsed().as_secs_f64();
                     clock = Instant::now();
                     let record = LogRecord::Train {
@@ -503,16 +510,19 @@ impl Trainer {
                     };
                     since_log = (0.0, 0);
                     self.log(&record)?;
-                    on_event(Event::Logged(record));
+                    let _ = on_event(Event::Logged(record));
                     self.checkpoint()?;
                 }
+                if stop {
+                    return Ok(());
+                }
             }
-            on_event(Event::Validating {
+            let _ = on_event(Event::Validating {
                 done: 0,
                 total: val.len(),
             });
             let result = pool.install(|| self.validate(&generator, &val, epoch))?;
-            on_event(Event::Validating {
+            let _ = on_event(Event::Validating {
                 done: val.len(),
                 total: val.len(),
             });
@@ -532,7 +542,7 @@ impl Trainer {
             };
             self.log(&record)?;
             self.checkpoint()?;
-            on_event(Event::Logged(record));
+            let _ = on_event(Event::Logged(record));
         }
         Ok(())
     }

@@ -1,5 +1,6 @@
 //! `rgm train`: train the RGM network on ModelNet40 pairs, resumable.
 
+use std::ops::ControlFlow;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
@@ -132,7 +133,26 @@ pub fn run(args: Args) -> Result<()> {
     }
     let mut bar: Option<indicatif::ProgressBar> = None;
     let epochs = trainer.config().epochs;
-    trainer.run(&dataset, &mut |event| match event {
+    trainer.run(&dataset, &mut |event| {
+        report(&event, &mut bar, epochs);
+        ControlFlow::Continue(())
+    })?;
+    if let Some(bar) = bar.take() {
+        bar.finish_and_clear();
+    }
+    let best = trainer.state().best;
+    eprintln!(
+        "done: {} epochs; best weights {} (recall {:.1}%)",
+        trainer.state().epoch,
+        args.out.join("best.safetensors").display(),
+        100.0 * best.map_or(0.0, |b| b.recall)
+    );
+    Ok(())
+}
+
+/// Shows `event` on stderr: a progress bar per epoch, a line per validation.
+fn report(event: &Event, bar: &mut Option<indicatif::ProgressBar>, epochs: usize) {
+    match *event {
         Event::Batch {
             epoch,
             batch,
@@ -155,7 +175,7 @@ pub fn run(args: Args) -> Result<()> {
                 eprintln!("epoch done; validating on {total} pairs");
             }
         }
-        Event::Logged(LogRecord::Validation { result, .. }) => eprintln!(
+        Event::Logged(LogRecord::Validation { ref result, .. }) => eprintln!(
             "epoch {}: validation loss {:.4}, matching accuracy {:.1}%, MIE(R) {:.2}°, \
              MIE(t) {:.4}, recall {:.1}%",
             result.epoch + 1,
@@ -166,16 +186,5 @@ pub fn run(args: Args) -> Result<()> {
             100.0 * result.recall
         ),
         Event::Logged(LogRecord::Train { .. }) => {}
-    })?;
-    if let Some(bar) = bar.take() {
-        bar.finish_and_clear();
     }
-    let best = trainer.state().best;
-    eprintln!(
-        "done: {} epochs; best weights {} (recall {:.1}%)",
-        trainer.state().epoch,
-        args.out.join("best.safetensors").display(),
-        100.0 * best.map_or(0.0, |b| b.recall)
-    );
-    Ok(())
 }
