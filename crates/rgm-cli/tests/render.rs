@@ -115,7 +115,7 @@ fn the_true_transform_puts_the_source_on_the_target() {
 fn renders_what_register_json_found() {
     let dir = scratch("json");
     let (src, tgt, pose) = clouds(&dir);
-    let out = rgm(&["register", &src, &tgt, "--json"]);
+    let out = rgm(&["register", &src, &tgt, "--method", "fgr", "--json"]);
     assert!(
         out.status.success(),
         "{}",
@@ -151,5 +151,34 @@ fn a_transform_file_with_missing_numbers_is_refused_clearly() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("15 numbers"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn the_matrix_needs_rgm_and_says_so() {
+    let dir = scratch("matrix");
+    let (src, tgt, pose) = clouds(&dir);
+    let truth = dir.join("truth.txt");
+    write_transform(&truth, &pose);
+    let path = |name: &str| dir.join(name).to_str().unwrap().to_string();
+    let out = rgm(&[
+        "render",
+        &src,
+        &tgt,
+        "--method",
+        "fgr",
+        "--out",
+        &path("clouds.png"),
+        "--matrix",
+        &path("matrix.png"),
+        "--truth",
+        truth.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--method rgm"), "{err}");
+    // The clouds were still drawn, with FGR's transform; no matrix was.
+    assert!(dir.join("clouds.png").exists());
+    assert!(!dir.join("matrix.png").exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }

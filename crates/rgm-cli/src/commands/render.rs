@@ -1,13 +1,18 @@
-//! `rgm render SRC TGT --out fig.png`: a picture of a registration, the clouds before and after.
+//! `rgm render SRC TGT --out fig.png`: a picture of a registration, the clouds before and after;
+//! with `--matrix` and `--truth`, also RGM's hard correspondences coloured correct or wrong.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use rgm_data::read_point_cloud;
+use rgm_data::{read_point_cloud, Correspondence};
 use rgm_geom::{Matrix4, RigidTransform};
-use rgm_model::render::registration_figure;
+use rgm_model::render::{correct_fraction, correspondence_figure, registration_figure};
+use rgm_model::Method;
 
 use crate::MethodArgs;
+
+/// Blocks per side of the correspondence picture (the paper's Figure 5 uses 36).
+const MATRIX_BLOCKS: usize = 36;
 
 /// Options of `rgm render`.
 #[derive(clap::Args, Debug)]
@@ -25,14 +30,23 @@ pub struct Args {
     /// The PNG to write: source orange, target blue; before (left) and after (right).
     #[arg(long, value_name = "FILE")]
     out: PathBuf,
+    /// Also write RGM's hard correspondence matrix as a PNG (as the paper's Figure 5: black
+    /// correct, red wrong, grey missed), judged against --truth. Needs --method rgm.
+    #[arg(long, value_name = "FILE", requires = "truth")]
+    matrix: Option<PathBuf>,
+    /// The true transform target ← source (formats as --transform): the correct
+    /// correspondences are rebuilt from it as the benchmark does (spec §1).
+    #[arg(long, value_name = "FILE")]
+    truth: Option<PathBuf>,
 }
 
 pub fn run(args: Args) -> Result<()> {
     let source = read_point_cloud(&args.source)?;
     let target = read_point_cloud(&args.target)?;
-    let transform = match &args.transform {
-        Some(path) => read_transform(path)?,
-        None => {
+    let given = args.transform.as_deref().map(read_transform).transpose()?;
+    let found = match (&given, &args.matrix) {
+        (Some(_), None) => None, // nothing to find
+        _ => {
             let mut method = args.method.build()?;
             let registration = method.register(&source, &target).with_context(|| {
                 format!(
@@ -42,11 +56,32 @@ pub fn run(args: Args) -> Result<()> {
                     args.target.display()
                 )
             })?;
-            registration.result.t_target_source
+            Some((method, registration.result.t_target_source))
         }
     };
+    let transform = given
+        .or(found.as_ref().map(|(_, t)| *t))
+        .context("no transform given or found")?;
     registration_figure(&source, &target, &transform)?.write_png(&args.out)?;
     println!("wrote {}", args.out.display());
+    if let (Some(path), Some(truth), Some((method, _))) = (&args.matrix, &args.truth, &found) {
+        let Method::Rgm(registrar) = method else {
+            bail!(
+                "--matrix shows RGM's correspondences; {} has none (use --method rgm)",
+                method.name()
+            );
+        };
+        let moved = source.transformed(&read_transform(truth)?);
+        let correct = Correspondence::rebuild(&moved.points, &target.points);
+        let pairs = registrar.correspondences();
+        correspondence_figure(&correct, pairs, MATRIX_BLOCKS)?.write_png(path)?;
+        println!(
+            "wrote {}: {} correspondences, {:.1} % correct",
+            path.display(),
+            pairs.len(),
+            100.0 * correct_fraction(&correct, pairs)
+        );
+    }
     Ok(())
 }
 
