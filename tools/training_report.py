@@ -1,0 +1,100 @@
+#!/usr/bin/env python3
+"""Copies a training run's record (config.json, state.json, log.jsonl) into docs/training/NAME/
+and writes its learning curve there as curve.svg plus a Markdown summary (printed).
+
+    python3 tools/training_report.py runs/partial-fast partial-fast > docs/training/partial-fast/README.md
+
+Standard library only. The numbers are the run's own log lines, unchanged.
+"""
+
+import json
+import shutil
+import sys
+from pathlib import Path
+
+
+def load(run: Path):
+    config = json.loads((run / "config.json").read_text())
+    state = json.loads((run / "state.json").read_text())
+    log = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines() if line]
+    return config, state, log
+
+
+def svg_curve(train, val, width=640, height=300, pad=48):
+    """Training loss per checkpoint and validation loss per epoch against pairs seen."""
+    points = [(r["pairs_seen"], r["loss"]) for r in train] + [(r["pairs_seen"], r["loss"]) for r in val]
+    xmax = max(p[0] for p in points)
+    lo, hi = min(p[1] for p in points), max(p[1] for p in points)
+    span = (hi - lo) or 1.0
+
+    def xy(p):
+        x = pad + (width - 2 * pad) * p[0] / xmax
+        y = height - pad - (height - 2 * pad) * (p[1] - lo) / span
+        return f"{x:.1f},{y:.1f}"
+
+    out = [
+        f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
+        f'font-family="sans-serif" font-size="12">',
+        f'<rect width="{width}" height="{height}" fill="white"/>',
+        f'<line x1="{pad}" y1="{height - pad}" x2="{width - pad}" y2="{height - pad}" stroke="black"/>',
+        f'<line x1="{pad}" y1="{pad}" x2="{pad}" y2="{height - pad}" stroke="black"/>',
+        f'<text x="{width / 2}" y="{height - 12}" text-anchor="middle">training pairs seen (max {xmax})</text>',
+        f'<text x="8" y="{pad - 12}">BCE loss per pair ({lo:.3f} – {hi:.3f})</text>',
+        f'<text x="{pad - 4}" y="{height - pad}" text-anchor="end">{lo:.2f}</text>',
+        f'<text x="{pad - 4}" y="{pad + 4}" text-anchor="end">{hi:.2f}</text>',
+        '<polyline fill="none" stroke="#1f77b4" stroke-width="1.5" points="'
+        + " ".join(xy((r["pairs_seen"], r["loss"])) for r in train)
+        + '"/>',
+    ]
+    for r in val:
+        x, y = xy((r["pairs_seen"], r["loss"])).split(",")
+        out.append(f'<circle cx="{x}" cy="{y}" r="4" fill="#d62728"/>')
+    out.append(f'<text x="{width - pad}" y="{pad}" text-anchor="end" fill="#1f77b4">training (mean since last checkpoint)</text>')
+    out.append(f'<text x="{width - pad}" y="{pad + 16}" text-anchor="end" fill="#d62728">validation (after each epoch)</text>')
+    out.append("</svg>")
+    return "\n".join(out) + "\n"
+
+
+def main():
+    run, name = Path(sys.argv[1]), sys.argv[2]
+    config, state, log = load(run)
+    dest = Path(__file__).resolve().parent.parent / "docs" / "training" / name
+    dest.mkdir(parents=True, exist_ok=True)
+    for f in ["config.json", "state.json", "log.jsonl"]:
+        shutil.copyfile(run / f, dest / f)
+    train = [r for r in log if r["kind"] == "train"]
+    val = [r for r in log if r["kind"] == "validation"]
+    (dest / "curve.svg").write_text(svg_curve(train, val))
+    net = config["network"]
+    print(f"# Training run `{name}`\n")
+    print(f"Setting **{config['setting']}**{' (unseen categories)' if config['unseen'] else ''}, network "
+          f"DGCNN {'-'.join(map(str, net['dgcnn']))}, edge {net['edge']}, Q {net['q']}, FF {net['ff']}, "
+          f"K {net['k']}, L {net['blocks']}; matching on {config['match_points'] or 'all'} points per cloud; "
+          f"{config['optimizer']} lr {config['lr']} (×{config['gamma']} at epochs {config['milestones']}), "
+          f"batch {config['batch']}, {config['workers']} workers. Full configuration: `config.json`.\n")
+    print(f"State when this page was written: epoch {state['epoch'] + 1} of {config['epochs']}, batch "
+          f"{state['batch']}, {state['pairs_seen']} training pairs seen in {state['seconds'] / 3600:.2f} h of "
+          f"training and validation (`state.json`).\n")
+    print("![learning curve](curve.svg)\n")
+    print("## Validation after each epoch\n")
+    if val:
+        print("| epoch | pairs seen | pairs | loss | matching accuracy | MIE(R) ° | MIE(t) | recall |")
+        print("|---|---|---|---|---|---|---|---|")
+        for r in val:
+            print(f"| {r['epoch'] + 1} | {r['pairs_seen']} | {r['pairs']} | {r['loss']:.4f} | "
+                  f"{100 * r['match_accuracy']:.2f} % | {r['mie_r_deg']:.2f} | {r['mie_t']:.4f} | "
+                  f"{100 * r['recall']:.2f} % |")
+    else:
+        print("No epoch finished yet.")
+    print("\n## Training loss (mean over the batches since the previous checkpoint)\n")
+    print("| epoch | batch | pairs seen | lr | loss | hours |")
+    print("|---|---|---|---|---|---|")
+    step = max(1, len(train) // 25)
+    for r in train[::step] + ([train[-1]] if train and (len(train) - 1) % step else []):
+        print(f"| {r['epoch'] + 1} | {r['batch']}/{r['batches']} | {r['pairs_seen']} | {r['lr']:g} | "
+              f"{r['loss']:.4f} | {r['seconds'] / 3600:.2f} |")
+    print(f"\nEvery line is in `log.jsonl`. Produced by `python3 tools/training_report.py {run} {name}`.")
+
+
+if __name__ == "__main__":
+    main()
