@@ -9,6 +9,8 @@
 //! once and reused: the target's for every pass, both clouds' for the reverse (Y, X) pass
 //! (3 feature passes for the paper's 2 passes instead of 8).
 
+use std::time::Instant;
+
 use ndarray::Array2;
 use rand::{rngs::StdRng, SeedableRng};
 use rgm_geom::icp::{self, IcpConfig};
@@ -151,6 +153,36 @@ fn subsample(len: usize, count: Option<usize>, seed: u64) -> Vec<usize> {
     }
 }
 
+/// Wall time of each stage of one registration, in seconds (summed over passes).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StageTimes {
+    /// Normalisation, subsampling and conversion of the clouds.
+    pub prepare: f64,
+    /// The local feature extractor (the target once, the moved source every pass).
+    pub features: f64,
+    /// The matching blocks (transformer edges, graph convolutions, affinity, Sinkhorn, cross
+    /// convolution), forward and reverse.
+    pub blocks: f64,
+    /// Inlier selection, linear assignment and cycle consistency.
+    pub matching: f64,
+    /// Weighted Kabsch.
+    pub kabsch: f64,
+    /// ICP refinement.
+    pub refine: f64,
+}
+
+impl StageTimes {
+    /// The whole registration.
+    pub fn total(&self) -> f64 {
+        self.prepare + self.features + self.blocks + self.matching + self.kabsch + self.refine
+    }
+}
+
+/// Seconds since `start`, added to `stage`.
+fn add_since(stage: &mut f64, start: Instant) {
+    *stage += start.elapsed().as_secs_f64();
+}
+
 /// The RGM network (f32) with its test-time settings and reusable buffers.
 #[derive(Clone, Debug)]
 pub struct RgmRegistrar {
@@ -163,6 +195,7 @@ pub struct RgmRegistrar {
     forward: RgmCache<f32>,              // (X, Y) pass
     reverse: RgmCache<f32>,              // (Y, X) pass
     pairs: Vec<(usize, usize)>,          // the last pass's correspondences, caller's indices
+    times: StageTimes,                   // of the last registration
 }
 
 /// A cloud as the network's (N, 3) f32 input.
@@ -181,6 +214,7 @@ impl RgmRegistrar {
             forward: RgmCache::default(),
             reverse: RgmCache::default(),
             pairs: Vec::new(),
+            times: StageTimes::default(),
         }
     }
 
@@ -191,25 +225,38 @@ impl RgmRegistrar {
         &self.pairs
     }
 
+    /// Where the time of the last registration went.
+    pub fn stage_times(&self) -> StageTimes {
+        self.times
+    }
+
     /// The hard correspondences of one pass on the moved source `x` (N, 3) and the target
     /// whose features are in `target_features`.
     fn match_pass(&mut self, x: &Array2<f32>) -> Result<Correspondences, MethodError> {
         let matching = MatchConfig {
             inlier_threshold: self.config.inlier_threshold,
         };
+        let start = Instant::now();
         self.network.features(x.view(), &mut self.source_features)?;
+        add_since(&mut self.times.features, start);
         let fx = self.source_features.features.view(); // (N, C)
         let fy = self.target_features.features.view(); // (M, C)
+        let start = Instant::now();
         self.network
             .forward_from_features(fx, fy, &mut self.forward)?;
-        let found = hard_match(self.forward.c_soft(), &matching)?;
-        if !self.config.cycle_consistency {
-            return Ok(found);
+        if self.config.cycle_consistency {
+            self.network
+                .forward_from_features(fy, fx, &mut self.reverse)?;
         }
-        self.network
-            .forward_from_features(fy, fx, &mut self.reverse)?;
-        let reverse = hard_match(self.reverse.c_soft(), &matching)?;
-        Ok(found.cycle_consistent(&reverse)?)
+        add_since(&mut self.times.blocks, start);
+        let start = Instant::now();
+        let mut found = hard_match(self.forward.c_soft(), &matching)?;
+        if self.config.cycle_consistency {
+            let reverse = hard_match(self.reverse.c_soft(), &matching)?;
+            found = found.cycle_consistent(&reverse)?;
+        }
+        add_since(&mut self.times.matching, start);
+        Ok(found)
     }
 
     /// The transform that maps `source` onto `target`: the composition of every pass's
@@ -224,6 +271,8 @@ impl RgmRegistrar {
         target: &PointCloud,
     ) -> Result<RegistrationResult, MethodError> {
         self.pairs.clear();
+        self.times = StageTimes::default();
+        let start = Instant::now();
         let frame = Normalisation::of_pair(source, target);
         let (source_n, target_n) = (frame.source(source), frame.target(target));
         let source_idx = subsample(source.len(), self.config.match_points, SOURCE_SEED);
@@ -239,8 +288,12 @@ impl RgmRegistrar {
                 });
             }
         }
+        let y_rows = as_rows(&y); // (M, 3)
+        add_since(&mut self.times.prepare, start);
+        let start = Instant::now();
         self.network
-            .features(as_rows(&y).view(), &mut self.target_features)?;
+            .features(y_rows.view(), &mut self.target_features)?;
+        add_since(&mut self.times.features, start);
         let mut total = RigidTransform::identity();
         let mut used: Vec<(usize, usize)> = Vec::new();
         for pass in 0..self.config.passes {
@@ -255,7 +308,9 @@ impl RgmRegistrar {
                 .map(|&(i, _)| moved.points[i])
                 .collect();
             let tgt: Vec<Point3<f64>> = found.pairs().iter().map(|&(_, j)| y.points[j]).collect();
+            let start = Instant::now();
             let step = kabsch(&src, &tgt, &vec![1.0; src.len()])?;
+            add_since(&mut self.times.kabsch, start);
             total = step.compose(&total);
             used = found.pairs().to_vec();
         }
@@ -265,7 +320,9 @@ impl RgmRegistrar {
                 initial: total,
                 ..*refine
             };
+            let start = Instant::now();
             let refined = icp::register(&source_n, &target_n, &icp_config)?;
+            add_since(&mut self.times.refine, start);
             total = refined.t_target_source;
             iterations += refined.iterations;
         }
