@@ -26,6 +26,7 @@ struct Cli {
 enum Command {
     /// Find the rigid transform that maps SRC onto TGT and print it as a 4×4 matrix.
     ///
+    /// Uses RGM with the model built into rgm unless told otherwise (--method, --weights).
     /// Reads PLY (ascii or binary), OFF, XYZ/CSV text and .npy files.
     Register(commands::register::Args),
     /// Run a method over the ModelNet40 test pairs and print the paper's metrics.
@@ -54,39 +55,67 @@ pub enum MethodArg {
     Icp,
     /// Fast Global Registration on FPFH features.
     Fgr,
-    /// The RGM network (needs --weights until a trained model ships with rgm).
+    /// The RGM network: the model built into rgm, or --weights.
     Rgm,
 }
 
-/// The method and, for RGM, its weights.
+/// The method and, for RGM, its weights and test-time options.
 #[derive(clap::Args, Debug, Clone)]
 pub struct MethodArgs {
     /// The registration method.
-    #[arg(long, value_enum, default_value = "fgr")]
+    #[arg(long, value_enum, default_value = "rgm")]
     method: MethodArg,
     /// RGM weights: a safetensors file with the authors' parameter names
-    /// (`tools/reference/rgm_reference.py` documents them).
-    #[arg(long, value_name = "FILE", required_if_eq("method", "rgm"))]
+    /// (`tools/reference/rgm_reference.py` documents them). Without it, RGM uses the model
+    /// built into rgm (crates/rgm-model/weights/manifest.json describes it).
+    #[arg(long, value_name = "FILE")]
     weights: Option<PathBuf>,
-    /// The RGM network sizes the weights were trained with: paper, small, fast or tiny.
-    #[arg(long, default_value = "paper", value_name = "NAME")]
-    preset: String,
+    /// The network sizes --weights were trained with: paper, small, fast or tiny.
+    #[arg(long, value_name = "NAME", requires = "weights")]
+    preset: Option<String>,
+    /// RGM matches on at most N randomly drawn points of each cloud (fixed seed) and applies
+    /// the transform to the full clouds [default: the built-in model's training size, 384;
+    /// every point with --weights].
+    #[arg(long, value_name = "N")]
+    match_points: Option<usize>,
+    /// Refine RGM's transform with point-to-point ICP on the full clouds.
+    #[arg(long)]
+    refine: bool,
 }
 
 impl MethodArgs {
     /// The method these options select, with its weights loaded.
     fn build(&self) -> anyhow::Result<Method> {
+        let rgm_only = self.weights.is_some() || self.match_points.is_some() || self.refine;
+        if self.method != MethodArg::Rgm && rgm_only {
+            anyhow::bail!(
+                "--weights, --preset, --match-points and --refine apply to --method rgm only"
+            );
+        }
         Ok(match self.method {
             MethodArg::Icp => Method::icp(),
             MethodArg::Fgr => Method::fgr(),
             MethodArg::Rgm => {
-                let weights = self
-                    .weights
-                    .as_ref()
-                    .expect("clap requires --weights with rgm");
-                let config = rgm_model::network::Config::preset(&self.preset)?;
-                Method::rgm(config, weights)
-                    .with_context(|| format!("loading RGM weights from {}", weights.display()))?
+                let mut method = match &self.weights {
+                    Some(weights) => {
+                        let preset = self.preset.as_deref().unwrap_or("paper");
+                        let config = rgm_model::network::Config::preset(preset)?;
+                        Method::rgm(config, weights).with_context(|| {
+                            format!("loading RGM weights from {}", weights.display())
+                        })?
+                    }
+                    None => rgm_model::weights::builtin_method()
+                        .context("loading the built-in RGM model")?,
+                };
+                if let Method::Rgm(registrar) = &mut method {
+                    if self.match_points.is_some() {
+                        registrar.config.match_points = self.match_points;
+                    }
+                    if self.refine {
+                        registrar.config.refine = Some(rgm_geom::icp::IcpConfig::default());
+                    }
+                }
+                method
             }
         })
     }

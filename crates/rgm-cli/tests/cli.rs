@@ -220,3 +220,73 @@ fn eval_without_data_says_how_to_give_it() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--data"));
 }
+
+/// The airplane and its copy at `known_pose`, as files in `dir`.
+fn known_pair(dir: &Path) -> (PathBuf, PathBuf) {
+    let source = read_point_cloud(airplane()).unwrap();
+    let (src, tgt) = (dir.join("src.npy"), dir.join("tgt.npy"));
+    write_point_cloud(&src, &source).unwrap();
+    write_point_cloud(&tgt, &source.transformed(&known_pose())).unwrap();
+    (src, tgt)
+}
+
+#[test]
+fn register_defaults_to_rgm_with_the_built_in_model() {
+    let dir = scratch("builtin");
+    let (src, tgt) = known_pair(&dir);
+    let (src, tgt) = (src.to_str().unwrap(), tgt.to_str().unwrap());
+    let plain: serde_json::Value =
+        serde_json::from_str(&stdout(&rgm(&["register", src, tgt, "--json"]))).unwrap();
+    assert_eq!(plain["method"], "rgm");
+    assert_eq!(plain["refined"], false);
+    // Matched on 384 of the 1,024 points: at most 384 one-to-one correspondences.
+    let used = plain["correspondences"].as_u64().unwrap();
+    assert!((3..=384).contains(&used), "{plain}");
+    let refined: serde_json::Value =
+        serde_json::from_str(&stdout(&rgm(&["register", src, tgt, "--json", "--refine"]))).unwrap();
+    assert_eq!(refined["refined"], true);
+    assert_eq!(refined["correspondences"], plain["correspondences"]);
+    let residual = known_pose().inverse().compose(&parse_transform(&refined));
+    assert!(
+        residual.rotation_angle_deg() < 1.0 && residual.translation.norm() < 0.01,
+        "refined: {}° and {}",
+        residual.rotation_angle_deg(),
+        residual.translation.norm()
+    );
+}
+
+#[test]
+fn rgm_options_with_another_method_are_refused() {
+    let dir = scratch("options");
+    let (src, tgt) = known_pair(&dir);
+    let out = rgm(&[
+        "register",
+        src.to_str().unwrap(),
+        tgt.to_str().unwrap(),
+        "--method",
+        "fgr",
+        "--refine",
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("apply to --method rgm only"), "{err}");
+}
+
+#[test]
+fn eval_of_rgm_without_weights_uses_the_built_in_model() {
+    let text = stdout(&rgm(&[
+        "eval",
+        "--method",
+        "rgm",
+        "--limit",
+        "2",
+        "--data",
+        data_dir().to_str().unwrap(),
+    ]));
+    let row = text
+        .lines()
+        .find(|l| l.starts_with("| rgm"))
+        .expect("a row for rgm");
+    let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+    assert_eq!((cells[2], cells[3]), ("partial", "2"), "{row}");
+}

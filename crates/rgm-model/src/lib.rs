@@ -11,7 +11,8 @@ pub mod network;
 pub mod pipeline;
 pub mod render;
 pub mod train;
+pub mod weights;
 
 pub use evaluate::{PairRecord, Summary};
 pub use method::{Method, MethodError, Registration};
-pub use pipeline::{PipelineConfig, RgmRegistrar};
+pub use pipeline::{Normalisation, PipelineConfig, RgmRegistrar, StageTimes};

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use rgm_data::{read_point_cloud, write_point_cloud};
+use rgm_model::Method;
 
 use crate::MethodArgs;
 
@@ -37,6 +38,9 @@ pub fn run(args: Args) -> Result<()> {
         )
     })?;
     let result = &registration.result;
+    // RGM's correspondences are the network's matches of the last pass; ICP refinement may
+    // have moved the transform after them.
+    let refined = matches!(&method, Method::Rgm(r) if r.config.refine.is_some());
     if let Some(out) = &args.out {
         write_point_cloud(out, &source.transformed(&result.t_target_source))?;
     }
@@ -49,6 +53,7 @@ pub fn run(args: Args) -> Result<()> {
             "iterations": result.iterations,
             "converged": result.converged,
             "correspondences": result.inlier_count,
+            "refined": refined,
             "fitness": result.fitness,
             "inlier_rmse": result.inlier_rmse,
             "source_points": source.len(),
@@ -68,11 +73,12 @@ pub fn run(args: Args) -> Result<()> {
         );
     }
     println!(
-        "# fitness {:.4}, inlier RMSE {:.6}, correspondences {}, iterations {}{}, time {:.1} ms",
+        "# fitness {:.4}, inlier RMSE {:.6}, correspondences {}, iterations {}{}{}, time {:.1} ms",
         result.fitness,
         result.inlier_rmse,
         result.inlier_count,
         result.iterations,
+        if refined { " (refined with ICP)" } else { "" },
         if result.converged {
             ""
         } else {

@@ -1,0 +1,246 @@
+//! Trained weights that ship with rgm: `weights/manifest.json` lists each model (what it was
+//! trained on, its sizes, its file); the one marked `builtin` is embedded in the binary, so
+//! `rgm register` works without a weight file.
+//!
+//! ```json
+//! {"models": [{"name": "partial-fast", "setting": "partial", "unseen": false,
+//!   "variant": "rgm", "preset": "fast", "match_points": 384,
+//!   "file": "partial-fast.safetensors", "builtin": true,
+//!   "trained_with": "rgm train --setting partial --preset fast --out runs/partial-fast",
+//!   "epochs": 0.5, "pairs_seen": 4000, "note": "..."}]}
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::method::{Method, MethodError};
+use crate::network::{Config, Edges, Rgm, Scoring};
+use crate::pipeline::{PipelineConfig, RgmRegistrar};
+
+/// The manifest embedded at build time.
+const BUILTIN_MANIFEST: &str = include_str!("../weights/manifest.json");
+
+/// The weight file embedded at build time: the manifest's `builtin` entry names this file (a
+/// test checks it).
+const BUILTIN_FILE: &str = "partial-fast.safetensors";
+static BUILTIN_WEIGHTS: &[u8] = include_bytes!("../weights/partial-fast.safetensors");
+
+/// The folder of the shipped weight files in the source tree.
+pub fn weights_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("weights")
+}
+
+/// The network's structure: the full model or one of the ablations of spec §2.7.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Variant {
+    /// AIS scoring and transformer edges.
+    Rgm,
+    /// Var1: distance scoring instead of AIS.
+    Var1,
+    /// Var2: full connection instead of transformer edges.
+    Var2,
+}
+
+/// One trained model of the manifest.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ModelEntry {
+    /// Short name (`partial-fast`).
+    pub name: String,
+    /// The test protocol it was trained for: clean, noise or partial.
+    pub setting: String,
+    /// Trained on categories 0–19 only (the unseen-categories protocol).
+    pub unseen: bool,
+    /// Full model or ablation.
+    pub variant: Variant,
+    /// The network sizes ([`Config::preset`]).
+    pub preset: String,
+    /// Clouds are randomly subsampled to this many points for matching, as in training;
+    /// `None` matches on the full clouds.
+    pub match_points: Option<usize>,
+    /// The safetensors file, relative to the manifest's folder.
+    pub file: String,
+    /// Whether this is the model embedded in the binary (exactly one is).
+    pub builtin: bool,
+    /// The command that trained it.
+    pub trained_with: String,
+    /// Epochs of training (fractional when cut short).
+    pub epochs: f64,
+    /// Training pairs seen.
+    pub pairs_seen: u64,
+    /// Anything else worth knowing.
+    #[serde(default)]
+    pub note: String,
+}
+
+/// The list of trained models.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    pub models: Vec<ModelEntry>,
+}
+
+impl Manifest {
+    /// Reads a manifest file.
+    pub fn load(path: &Path) -> Result<Self, MethodError> {
+        let text = std::fs::read_to_string(path).map_err(|e| MethodError::Manifest {
+            path: path.to_path_buf(),
+            why: e.to_string(),
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// The manifest embedded in the binary.
+    pub fn builtin() -> Self {
+        Self::parse(BUILTIN_MANIFEST, &weights_dir().join("manifest.json"))
+            .expect("the embedded manifest parses (tested)")
+    }
+
+    fn parse(text: &str, path: &Path) -> Result<Self, MethodError> {
+        serde_json::from_str(text).map_err(|e| MethodError::Manifest {
+            path: path.to_path_buf(),
+            why: e.to_string(),
+        })
+    }
+
+    /// The model called `name`.
+    pub fn get(&self, name: &str) -> Option<&ModelEntry> {
+        self.models.iter().find(|m| m.name == name)
+    }
+
+    /// The entry marked `builtin`.
+    pub fn builtin_entry(&self) -> Option<&ModelEntry> {
+        self.models.iter().find(|m| m.builtin)
+    }
+}
+
+/// The bytes of the built-in model's safetensors file.
+pub fn builtin_weights() -> &'static [u8] {
+    BUILTIN_WEIGHTS
+}
+
+impl ModelEntry {
+    /// The network configuration: the preset's sizes with the variant's scoring and edges.
+    pub fn config(&self) -> Result<Config, MethodError> {
+        let mut config = Config::preset(&self.preset)?;
+        match self.variant {
+            Variant::Rgm => {}
+            Variant::Var1 => config.scoring = Scoring::Var1,
+            Variant::Var2 => config.edges = Edges::Full,
+        }
+        Ok(config)
+    }
+
+    /// The paper's test-time settings, matching on as many points as in training.
+    pub fn pipeline_config(&self) -> PipelineConfig {
+        PipelineConfig {
+            match_points: self.match_points,
+            ..PipelineConfig::default()
+        }
+    }
+
+    /// RGM with this model's weights, read from `dir` (the manifest's folder).
+    pub fn method(&self, dir: &Path) -> Result<Method, MethodError> {
+        let network = Rgm::load(self.config()?, &dir.join(&self.file))?;
+        Ok(self.registrar(network))
+    }
+
+    fn registrar(&self, network: Rgm<f32>) -> Method {
+        Method::Rgm(Box::new(RgmRegistrar::new(network, self.pipeline_config())))
+    }
+}
+
+/// RGM with the built-in model (weights embedded in the binary) and its test-time settings.
+pub fn builtin_method() -> Result<Method, MethodError> {
+    let manifest = Manifest::builtin();
+    let entry = manifest
+        .builtin_entry()
+        .ok_or_else(|| MethodError::Manifest {
+            path: weights_dir().join("manifest.json"),
+            why: "no model is marked builtin".to_string(),
+        })?;
+    let origin = Path::new("builtin:").join(BUILTIN_FILE);
+    let (tensors, _) = rgm_nn::io::read_tensors_from_bytes::<f32>(builtin_weights(), &origin)
+        .map_err(crate::network::NetworkError::from)?;
+    let mut network = Rgm::new(entry.config()?, 0)?;
+    network.load_tensors(&tensors)?;
+    Ok(entry.registrar(network))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_embedded_manifest_names_the_embedded_file_once() {
+        let manifest = Manifest::builtin();
+        let builtin: Vec<_> = manifest.models.iter().filter(|m| m.builtin).collect();
+        assert_eq!(builtin.len(), 1, "{manifest:?}");
+        assert_eq!(builtin[0].file, BUILTIN_FILE);
+        // The file on disk is the one embedded.
+        let on_disk = std::fs::read(weights_dir().join(BUILTIN_FILE)).unwrap();
+        assert!(on_disk == builtin_weights());
+    }
+
+    #[test]
+    fn variants_select_the_ablations_and_match_points_carry_over() {
+        let mut entry = Manifest::builtin().builtin_entry().unwrap().clone();
+        entry.preset = "tiny".into();
+        entry.match_points = Some(100);
+        let base = entry.config().unwrap();
+        assert_eq!(base, Config::tiny());
+        entry.variant = Variant::Var1;
+        assert_eq!(entry.config().unwrap().scoring, Scoring::Var1);
+        entry.variant = Variant::Var2;
+        assert_eq!(entry.config().unwrap().edges, Edges::Full);
+        assert_eq!(entry.pipeline_config().match_points, Some(100));
+        assert_eq!(entry.pipeline_config().passes, 2);
+    }
+
+    #[test]
+    fn an_entry_loads_its_file_and_the_builtin_model_its_embedded_bytes() {
+        let mut entry = Manifest::builtin().builtin_entry().unwrap().clone();
+        (entry.preset, entry.file) = ("tiny".into(), "rgm_tiny_state_dict.safetensors".into());
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
+        let Method::Rgm(registrar) = entry.method(&dir).unwrap() else {
+            panic!("an RGM method")
+        };
+        let on_disk = Rgm::<f32>::load(Config::tiny(), &dir.join(&entry.file)).unwrap();
+        assert_eq!(
+            registrar.network.blocks[1].u_fc.weight.value,
+            on_disk.blocks[1].u_fc.weight.value
+        );
+        assert_eq!(registrar.config.match_points, entry.match_points);
+        // The built-in model: the embedded bytes, the manifest's sizes and matching size.
+        let builtin = Manifest::builtin().builtin_entry().unwrap().clone();
+        let Method::Rgm(registrar) = builtin_method().unwrap() else {
+            panic!("an RGM method")
+        };
+        let on_disk = builtin.method(&weights_dir()).unwrap();
+        let Method::Rgm(expected) = on_disk else {
+            panic!("an RGM method")
+        };
+        assert_eq!(registrar.network.config(), &builtin.config().unwrap());
+        assert_eq!(registrar.config, expected.config);
+        assert_eq!(
+            registrar.network.featurer.convs[0].weight.value,
+            expected.network.featurer.convs[0].weight.value
+        );
+    }
+
+    #[test]
+    fn a_bad_manifest_names_the_file_and_the_fault() {
+        let dir = std::env::temp_dir().join(format!("rgm-manifest-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("manifest.json");
+        let err = Manifest::load(&path).unwrap_err().to_string();
+        assert!(
+            err.starts_with(&format!("weights manifest {}: ", path.display())),
+            "{err}"
+        );
+        std::fs::write(&path, r#"{"models": [{"name": "x", "variant": "var3"}]}"#).unwrap();
+        let err = Manifest::load(&path).unwrap_err().to_string();
+        assert!(err.contains("unknown variant `var3`"), "{err}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
