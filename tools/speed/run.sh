@@ -21,11 +21,13 @@ done
 OUT="${OUT:-target/speed.jsonl}"
 cargo build --release -q -p rgm-benches --example speed
 BIN="${CARGO_TARGET_DIR:-target}/release/examples/speed"
-if [[ -n "$PAUSE" ]]; then
+if [[ -n "$PAUSE" ]] && kill -0 "$(cat "$PAUSE")" 2>/dev/null; then
   PID="$(cat "$PAUSE")"
   trap 'kill -CONT "$PID" 2>/dev/null || true' EXIT INT TERM
   kill -STOP "$PID"
+  echo "paused $PID" >&2
 fi
+uptime >&2
 : > "$OUT"
 for what in forward train procedure; do
   for preset in paper fast; do
@@ -34,4 +36,4 @@ for what in forward train procedure; do
   done
 done
 # As rgm ships: the built-in fast model matching on 384 points.
-"$BIN" --preset fast --what procedure --match-points 384 --weights crates/rgm-model/weights/partial-fast.safetensors --reps "$REPS" | tee -a "$OUT"
+"$BIN" --preset fast --what procedure --match-points 384 --weights "${WEIGHTS:-crates/rgm-model/weights/partial-fast.safetensors}" --reps "$REPS" | tee -a "$OUT"
