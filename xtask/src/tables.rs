@@ -17,7 +17,8 @@ use anyhow::{Context, Result};
 use rayon::prelude::*;
 use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
 use rgm_model::evaluate::{evaluate_pair, table_header, table_row};
-use rgm_model::render::{correspondence_figure, registration_figure};
+use rgm_model::render::{correct_fraction, correspondence_figure, registration_figure};
+use rgm_model::weights::{weights_dir, Manifest, ModelEntry};
 use rgm_model::{Method, PairRecord, Summary};
 
 use crate::project_root;
@@ -58,14 +59,16 @@ struct TestSet {
 }
 
 impl TestSet {
+    /// In the order they are computed: partial-to-partial first (the paper's headline and the
+    /// ablation's setting), so that a run cut short by `--minutes` has it.
     const ALL: [TestSet; 4] = [
-        TestSet::seen(Setting::Clean),
-        TestSet::seen(Setting::Noise),
         TestSet::seen(Setting::Partial),
         TestSet {
             setting: Setting::Partial,
             unseen: true,
         },
+        TestSet::seen(Setting::Clean),
+        TestSet::seen(Setting::Noise),
     ];
 
     const fn seen(setting: Setting) -> Self {
@@ -89,6 +92,9 @@ impl TestSet {
 struct Candidate {
     /// Row name: `icp`, `fgr`, or the model's manifest name.
     name: String,
+    /// Stem of its per-pair file and figures: the name, and for a model also the training
+    /// pairs its weights have seen, so that retrained weights are evaluated afresh.
+    stem: String,
     /// The RGM variant (`rgm`, `var1`, `var2`) of a trained model; `None` for ICP and FGR.
     variant: Option<String>,
     method: Method,
@@ -97,10 +103,15 @@ struct Candidate {
 /// One row of a table: a method's records on a test set of `total` pairs.
 struct Row {
     name: String,
+    /// As [`Candidate::stem`].
+    stem: String,
     /// As [`Candidate::variant`].
     variant: Option<String>,
     records: Vec<PairRecord>,
     total: usize,
+    /// For an RGM model: the share of correct hard correspondences on each drawn pair, by
+    /// pair index.
+    matched: BTreeMap<usize, f64>,
 }
 
 /// The rows of every test set, by its key.
@@ -141,19 +152,25 @@ pub fn run(args: Args) -> Result<()> {
     let load_before = load_average();
     let dataset = ModelNet40::open(&data)
         .with_context(|| format!("opening ModelNet40 at {}", data.display()))?;
+    let manifest_path = weights_dir().join("manifest.json");
+    let manifest = Manifest::load(&manifest_path)?;
+    // Each worker runs one network: OpenBLAS must not start threads of its own under them.
+    rgm_nn::threads::set_blas_threads(1);
     let mut results = Results::new();
     for set in TestSet::ALL {
         let shapes = test_shapes(&dataset, set, run.limit);
         let generator = PairGenerator::new(set.setting);
         let mut rows = Vec::new();
-        for candidate in candidates(set) {
+        for candidate in candidates(set, &manifest)? {
             let records = run.evaluate(set, &candidate, &shapes, &generator)?;
-            run.draw(set, &candidate, &records, &shapes, &generator, args.figures)?;
+            let matched = run.draw(set, &candidate, &records, &shapes, &generator, args.figures)?;
             rows.push(Row {
                 name: candidate.name,
+                stem: candidate.stem,
                 variant: candidate.variant,
                 records,
                 total: shapes.len(),
+                matched,
             });
         }
         results.insert(set.key(), rows);
@@ -163,6 +180,7 @@ pub fn run(args: Args) -> Result<()> {
         threads,
         load: [load_before, load_average()],
         figures: args.figures,
+        models: manifest.models,
     };
     let path = run.out.join("results.md");
     fs::write(&path, report.markdown(&results, &run.out))
@@ -179,29 +197,58 @@ fn test_shapes(dataset: &ModelNet40, set: TestSet, limit: Option<usize>) -> Vec<
 }
 
 /// The methods of the tables of `set`: ICP and FGR (identity initialisation, Open3D's
-/// settings; spec §6).
-fn candidates(_set: TestSet) -> Vec<Candidate> {
-    vec![
+/// settings; spec §6), then every model of the manifest trained for `set`.
+fn candidates(set: TestSet, manifest: &Manifest) -> Result<Vec<Candidate>> {
+    let mut list = vec![
         Candidate {
             name: "icp".into(),
+            stem: "icp".into(),
             variant: None,
             method: Method::icp(),
         },
         Candidate {
             name: "fgr".into(),
+            stem: "fgr".into(),
             variant: None,
             method: Method::fgr(),
         },
-    ]
+    ];
+    for entry in models_for(manifest, set) {
+        list.push(Candidate {
+            name: entry.name.clone(),
+            stem: format!("{}-{}pairs", entry.name, entry.pairs_seen),
+            variant: Some(variant_name(entry)),
+            method: entry
+                .method(&weights_dir())
+                .with_context(|| format!("loading the model {}", entry.name))?,
+        });
+    }
+    Ok(list)
+}
+
+/// The manifest's models trained for `set`'s setting and categories.
+fn models_for(manifest: &Manifest, set: TestSet) -> impl Iterator<Item = &ModelEntry> {
+    manifest
+        .models
+        .iter()
+        .filter(move |m| m.setting == set.setting.name() && m.unseen == set.unseen)
+}
+
+/// `rgm`, `var1` or `var2`, as the manifest spells it.
+fn variant_name(entry: &ModelEntry) -> String {
+    serde_json::to_value(entry.variant)
+        .ok()
+        .and_then(|v| v.as_str().map(String::from))
+        .unwrap_or_default()
 }
 
 impl Run {
     /// The per-pair file of one method on one test set.
-    fn records_path(&self, set: TestSet, name: &str) -> PathBuf {
+    fn records_path(&self, set: TestSet, stem: &str) -> PathBuf {
         self.out
             .join("results")
             .join(set.key())
-            .join(format!("{name}.jsonl"))
+            .join(format!("{stem}.jsonl"))
     }
 
     /// Every pair of `shapes` evaluated with `candidate`, by pair index: those already in the
@@ -214,7 +261,7 @@ impl Run {
         shapes: &[&Shape],
         generator: &PairGenerator,
     ) -> Result<Vec<PairRecord>> {
-        let path = self.records_path(set, &candidate.name);
+        let path = self.records_path(set, &candidate.stem);
         let mut records = read_records(&path)?;
         records.retain(|r| r.index < shapes.len());
         let done: std::collections::HashSet<usize> = records.iter().map(|r| r.index).collect();
@@ -265,8 +312,11 @@ impl Run {
         Ok(records)
     }
 
-    /// For the first `count` pairs: the clouds before and after `candidate`'s transform, and
-    /// the pair's ground-truth correspondence matrix. Existing pictures are kept.
+    /// For the first `count` pairs: the clouds before and after `candidate`'s transform, the
+    /// pair's ground-truth correspondence matrix and, for an RGM model, its hard
+    /// correspondences (the pair is registered again for them). Existing cloud and
+    /// ground-truth pictures are kept. Returns the share of correct hard correspondences of
+    /// each pair drawn for an RGM model.
     fn draw(
         &self,
         set: TestSet,
@@ -275,13 +325,14 @@ impl Run {
         shapes: &[&Shape],
         generator: &PairGenerator,
         count: usize,
-    ) -> Result<()> {
+    ) -> Result<BTreeMap<usize, f64>> {
         let dir = self.out.join("figures").join(set.key());
         fs::create_dir_all(&dir)?;
+        let mut matched = BTreeMap::new();
         for record in records.iter().take(count) {
             let i = record.index;
             let pair = generator.test_pair(shapes, i)?;
-            let clouds = dir.join(format!("{}-pair{i}.png", candidate.name));
+            let clouds = dir.join(format!("{}-pair{i}.png", candidate.stem));
             if !clouds.exists() {
                 registration_figure(&pair.source, &pair.target, &record.transform)?
                     .write_png(&clouds)?;
@@ -291,8 +342,17 @@ impl Run {
                 correspondence_figure(&pair.correspondence, &pair.correspondence.pairs, 36)?
                     .write_png(&truth)?;
             }
+            if let Method::Rgm(registrar) = &candidate.method {
+                let mut registrar = registrar.clone();
+                // A failure leaves no correspondences: an empty matrix, 0 % correct.
+                let _ = registrar.register(&pair.source, &pair.target);
+                let found = registrar.correspondences();
+                correspondence_figure(&pair.correspondence, found, 36)?
+                    .write_png(dir.join(format!("{}-matrix-pair{i}.png", candidate.stem)))?;
+                matched.insert(i, correct_fraction(&pair.correspondence, found));
+            }
         }
-        Ok(())
+        Ok(matched)
     }
 }
 
@@ -393,6 +453,8 @@ struct Report {
     /// The 1-minute load average when the run started and when it ended.
     load: [Option<f64>; 2],
     figures: usize,
+    /// The weights manifest's models.
+    models: Vec<ModelEntry>,
 }
 
 /// A table of the paper: its number, its caption, its test set and whether it is the ablation
@@ -462,15 +524,46 @@ impl Report {
             load(self.load[0]),
             load(self.load[1])
         );
-        md += "- **Per-pair records**: `results/<setting>/<method>.jsonl`, one JSON object per \
-               pair (the fields of `rgm eval --json`). A later run computes only the pairs \
+        md += "- **Per-pair records**: `results/<setting>/<method>.jsonl` (for a trained model \
+               `<name>-<training pairs seen>pairs.jsonl`), one JSON object per pair (the fields \
+               of `rgm eval --json`). A later run computes only the pairs \
                missing there; delete a file to recompute it.\n\n";
+        md += &self.models_markdown();
         for table in &TABLES {
             md += &format!("## Table {}: {}\n\n", table.number, table.caption);
             md += &table_markdown(table, &results[table.key]);
         }
         md += &self.figures_markdown(results, out);
         md
+    }
+
+    /// The trained models the tables use, with how each was trained.
+    fn models_markdown(&self) -> String {
+        let mut md = String::from(
+            "## Trained models\n\nFrom `crates/rgm-model/weights/manifest.json`; each RGM row \
+             below is one of these, named as here.\n\n",
+        );
+        if self.models.is_empty() {
+            return md + "None yet.\n\n";
+        }
+        md += "| name | setting | unseen | variant | preset | match points | epochs | pairs seen \
+               | trained with | note |\n|---|---|---|---|---|---:|---:|---:|---|---|\n";
+        for m in &self.models {
+            md += &format!(
+                "| {} | {} | {} | {} | {} | {} | {} | {} | `{}` | {} |\n",
+                m.name,
+                m.setting,
+                if m.unseen { "yes" } else { "no" },
+                variant_name(m),
+                m.preset,
+                m.match_points.map_or("all".into(), |n| n.to_string()),
+                m.epochs,
+                m.pairs_seen,
+                m.trained_with,
+                m.note
+            );
+        }
+        md + "\n"
     }
 
     fn figures_markdown(&self, results: &Results, out: &Path) -> String {
@@ -490,21 +583,27 @@ impl Report {
                     continue;
                 }
                 md += &format!(
-                    "Pair {i}:\n\n| method | clouds | MIE(R) ° | recall |\n|---|---|---:|---|\n"
+                    "Pair {i}:\n\n| method | clouds: before, after | hard correspondences | \
+                     MIE(R) ° | recall |\n|---|---|---|---:|---|\n"
                 );
-                for Row { name, records, .. } in rows {
-                    let Some(r) = records.iter().find(|r| r.index == i) else {
+                for row in rows {
+                    let Some(r) = row.records.iter().find(|r| r.index == i) else {
                         continue;
                     };
+                    let (name, stem) = (&row.name, &row.stem);
+                    let matrix = row.matched.get(&i).map_or(String::new(), |share| {
+                        format!(
+                            "![{name}: correspondences of pair {i}](figures/{key}/{stem}-matrix-pair{i}.png) ({:.1} % correct)",
+                            100.0 * share
+                        )
+                    });
                     md += &format!(
-                        "| {name} | ![{name} on pair {i}](figures/{key}/{name}-pair{i}.png) | {:.2} | {} |\n",
+                        "| {name} | ![{name} on pair {i}](figures/{key}/{stem}-pair{i}.png) | {matrix} | {:.2} | {} |\n",
                         r.metrics.mie_r_deg,
                         if r.metrics.recall { "yes" } else { "no" }
                     );
                 }
-                md += &format!(
-                    "\nGround-truth correspondences of pair {i}: ![ground truth]({truth})\n\n"
-                );
+                md += &format!("| ground truth | | ![ground truth of pair {i}]({truth}) | | |\n\n");
             }
         }
         md
@@ -544,12 +643,10 @@ fn table_markdown(table: &Table, rows: &[Row]) -> String {
     if models == 0 {
         notes += "\nRGM: no trained weights for this setting (yet).\n";
     }
-    let table = if lines.is_empty() {
-        String::new()
-    } else {
-        table_header() + "\n" + &lines
-    };
-    table + &notes + "\n"
+    if lines.is_empty() {
+        return notes.trim_start().to_string() + "\n";
+    }
+    table_header() + "\n" + &lines + &notes + "\n"
 }
 
 /// The notes on data, pairs and metrics that every results file carries.
@@ -598,9 +695,11 @@ mod tests {
     fn row(name: &str, variant: Option<&str>, records: Vec<PairRecord>, total: usize) -> Row {
         Row {
             name: name.into(),
+            stem: name.into(),
             variant: variant.map(String::from),
             records,
             total,
+            matched: BTreeMap::new(),
         }
     }
 
@@ -638,6 +737,31 @@ mod tests {
         assert!(md.contains("| partial-var1 (var1) "), "{md}");
         assert!(!md.contains("| icp"), "{md}");
         assert!(!md.contains("no trained weights"), "{md}");
+    }
+
+    #[test]
+    fn each_test_set_gets_the_models_trained_for_it() {
+        let entry = |name: &str, setting: &str, unseen: bool, variant: &str| {
+            serde_json::json!({"name": name, "setting": setting, "unseen": unseen,
+                "variant": variant, "preset": "tiny", "match_points": null, "file": "x",
+                "builtin": false, "trained_with": "rgm train", "epochs": 1.0, "pairs_seen": 8})
+        };
+        let manifest: Manifest = serde_json::from_value(serde_json::json!({"models": [
+            entry("a", "partial", false, "rgm"),
+            entry("b", "partial", true, "rgm"),
+            entry("c", "partial", false, "var1"),
+            entry("d", "clean", false, "var2"),
+        ]}))
+        .unwrap();
+        let names = |set: TestSet| {
+            models_for(&manifest, set)
+                .map(|m| format!("{}:{}", m.name, variant_name(m)))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(names(TestSet::ALL[0]), ["a:rgm", "c:var1"]);
+        assert_eq!(names(TestSet::ALL[1]), ["b:rgm"]);
+        assert_eq!(names(TestSet::ALL[2]), ["d:var2"]);
+        assert!(names(TestSet::ALL[3]).is_empty());
     }
 
     #[test]
