@@ -38,7 +38,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::evaluate::{evaluate_pair, PairRecord, Summary};
 use crate::method::Method;
-use crate::network::{Config, Mode, NetworkError, Rgm, RgmCache};
+use crate::network::{Config, Mode, NetworkError, Rgm, RgmCache, TestStatistics};
 use crate::pipeline::{PipelineConfig, RgmRegistrar};
 
 /// Why training could not start or go on.
@@ -114,6 +114,11 @@ pub struct TrainConfig {
     pub checkpoint_every: usize,
     /// Seed of the initial weights and of the shape order of every epoch.
     pub seed: u64,
+    /// Batch-norm statistics of the network at validation. Training normalises each cloud with
+    /// its own statistics, so `Cloud` validates the network as it was trained; `Running` is
+    /// PyTorch's `eval()` (spec §3). Only validation depends on it: it may change on resume.
+    #[serde(default)]
+    pub test_statistics: TestStatistics,
 }
 
 impl TrainConfig {
@@ -138,6 +143,7 @@ impl TrainConfig {
             workers: 2,
             checkpoint_every: 50,
             seed: 0,
+            test_statistics: TestStatistics::Running,
         }
     }
 
@@ -168,10 +174,11 @@ impl TrainConfig {
     }
 
     /// Whether a run saved with `saved` can go on under `self`: everything equal but the
-    /// number of epochs (a run may be extended).
+    /// number of epochs (a run may be extended) and the validation's batch-norm statistics.
     fn same_run(&self, saved: &Self) -> bool {
         Self {
             epochs: saved.epochs,
+            test_statistics: saved.test_statistics,
             ..self.clone()
         } == *saved
     }
@@ -645,11 +652,13 @@ impl Trainer {
         let total = shapes.len();
         let workers = self.workers.len();
         let match_points = self.config.match_points;
+        let test_statistics = self.config.test_statistics;
         let per_worker: Vec<Result<Vec<(PairRecord, f64, usize, usize)>>> = self
             .workers
             .par_iter_mut()
             .enumerate()
             .map(|(w, worker)| {
+                worker.network.featurer.test_statistics = test_statistics;
                 let mut method = Method::Rgm(Box::new(RgmRegistrar::new(
                     worker.network.clone(),
                     PipelineConfig::default(),

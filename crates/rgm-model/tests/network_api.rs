@@ -2,7 +2,9 @@
 
 use ndarray::{Array2, ArrayD, IxDyn};
 use rand::{rngs::StdRng, Rng, SeedableRng};
-use rgm_model::network::{Config, Edges, Mode, NetworkError, Rgm, RgmCache, Scoring};
+use rgm_model::network::{
+    Config, Edges, Mode, NetworkError, Rgm, RgmCache, Scoring, TestStatistics,
+};
 use rgm_nn::Parameters;
 use std::collections::HashMap;
 
@@ -165,4 +167,49 @@ fn cache_is_reused_across_pair_sizes() {
         assert_eq!(shared.c_soft().dim(), (n, m));
         assert_eq!(shared.c_soft(), fresh.c_soft());
     }
+}
+
+#[test]
+fn cloud_test_statistics_normalise_like_training_and_keep_the_running_ones() {
+    let (x, y) = (cloud(24, 1), cloud(20, 2));
+    let mut trained = Rgm::<f64>::new(Config::tiny(), 3).unwrap();
+    let mut cache = RgmCache::default();
+    // Two training passes so the running statistics are no longer the initial 0 / 1.
+    for _ in 0..2 {
+        trained
+            .forward(x.view(), y.view(), Mode::Train, &mut cache)
+            .unwrap();
+    }
+    let buffers = |rgm: &mut Rgm<f64>| {
+        let mut all = Vec::new();
+        rgm.visit_buffers("", &mut |_, b| all.extend(b.iter().copied()));
+        all
+    };
+    let mut cloud_stats = trained.clone();
+    cloud_stats.featurer.test_statistics = TestStatistics::Cloud;
+    let before = buffers(&mut cloud_stats);
+    cloud_stats
+        .forward(x.view(), y.view(), Mode::Eval, &mut cache)
+        .unwrap();
+    let c_cloud = cache.c_soft().to_owned();
+    assert_eq!(
+        buffers(&mut cloud_stats),
+        before,
+        "running statistics untouched"
+    );
+    // The same C̃ as a training-mode pass (which also normalises each cloud on its own).
+    trained
+        .clone()
+        .forward(x.view(), y.view(), Mode::Train, &mut cache)
+        .unwrap();
+    assert_eq!(cache.c_soft(), c_cloud);
+    // And not the C̃ of the running statistics.
+    trained
+        .forward(x.view(), y.view(), Mode::Eval, &mut cache)
+        .unwrap();
+    let gap = (&cache.c_soft() - &c_cloud).fold(0.0f64, |m, v| m.max(v.abs()));
+    assert!(
+        gap > 1e-3,
+        "running and cloud statistics give different C̃ ({gap})"
+    );
 }

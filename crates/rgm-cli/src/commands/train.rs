@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use rgm_data::ModelNet40;
-use rgm_model::network::Config;
+use rgm_model::network::{Config, TestStatistics};
 use rgm_model::train::{Event, LogRecord, OptimizerKind, TrainConfig, Trainer};
 
 use crate::{progress, SettingArg};
@@ -77,6 +77,16 @@ pub struct Args {
     /// Seed of the initial weights and of the shape order.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Batch-norm statistics at validation: cloud (each cloud's own, as rgm trains) or running
+    /// (the running averages, PyTorch's eval()). May change when resuming.
+    #[arg(long, value_enum, default_value = "cloud")]
+    test_statistics: StatisticsArg,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum StatisticsArg {
+    Cloud,
+    Running,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -112,6 +122,10 @@ impl Args {
             workers,
             checkpoint_every: self.checkpoint_every,
             seed: self.seed,
+            test_statistics: match self.test_statistics {
+                StatisticsArg::Cloud => TestStatistics::Cloud,
+                StatisticsArg::Running => TestStatistics::Running,
+            },
         })
     }
 }

@@ -12,6 +12,20 @@ use rgm_nn::{
     edge_features_forward, max_k_backward, max_k_forward, relu_backward, relu_forward, BatchNorm,
     BatchNormCache, Linear, MaxKCache, Parameters,
 };
+use serde::{Deserialize, Serialize};
+
+/// Which statistics batch norm normalises with at test time ([`Mode::Eval`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TestStatistics {
+    /// The running statistics gathered in training (spec §3, PyTorch's `eval()`).
+    #[default]
+    Running,
+    /// Each cloud's own statistics, as in training, leaving the running ones untouched. rgm
+    /// trains one cloud per batch-norm batch, so a network trained that way sees at test time
+    /// exactly what it saw in training (measured in docs/training.md).
+    Cloud,
+}
 
 /// `pointfeaturer.conv{1..5}` (no bias) and `pointfeaturer.bn{1..5}`.
 #[derive(Clone, Debug)]
@@ -19,6 +33,8 @@ pub struct PointFeaturer<T: Element> {
     pub k: usize,
     pub convs: Vec<Linear<T>>, // 5: (C_1, 6), (C_2, C_1), (C_3, C_2), (C_4, C_3), (E, ΣC)
     pub bns: Vec<BatchNorm<T>>, // 5: C_1 .. C_4, E
+    /// Batch-norm statistics in [`Mode::Eval`].
+    pub test_statistics: TestStatistics,
 }
 
 /// One cloud's pass through the extractor: what the backward needs, and its scratch.
@@ -51,6 +67,7 @@ impl<T: Element> PointFeaturer<T> {
                 .map(|(&i, o)| Linear::new(i, o, false, rng))
                 .collect(),
             bns: outs.iter().map(|&o| BatchNorm::new(o)).collect(),
+            test_statistics: TestStatistics::Running,
         }
     }
 
@@ -60,7 +77,8 @@ impl<T: Element> PointFeaturer<T> {
     }
 
     /// Runs one cloud `points` (N, 3) into `cache.features` (N, ΣC + E). Training mode
-    /// normalises with this cloud's statistics and updates the running ones.
+    /// normalises with this cloud's statistics and updates the running ones; evaluation mode
+    /// uses [`PointFeaturer::test_statistics`].
     pub fn forward(
         &mut self,
         points: ArrayView2<'_, T>,
@@ -69,6 +87,7 @@ impl<T: Element> PointFeaturer<T> {
     ) -> Result<()> {
         let (n, k, node) = (points.nrows(), self.k, self.node_width());
         let training = mode == Mode::Train;
+        let cloud_statistics = training || self.test_statistics == TestStatistics::Cloud;
         let cloud: Vec<Point3<f64>> = points
             .rows()
             .into_iter()
@@ -98,12 +117,20 @@ impl<T: Element> PointFeaturer<T> {
                 cache.features.slice(s![.., ..node])
             };
             self.convs[i].forward(cache.pre[i].view_mut(), inp)?;
-            self.bns[i].forward(
+            // Cloud statistics at test time: a training-mode pass with momentum 0, which leaves
+            // the running statistics exactly as they are.
+            let momentum = self.bns[i].momentum;
+            if !training {
+                self.bns[i].momentum = T::zero();
+            }
+            let normed = self.bns[i].forward(
                 cache.normed[i].view_mut(),
                 cache.pre[i].view(),
-                training,
+                cloud_statistics,
                 &mut cache.bn[i],
-            )?;
+            );
+            self.bns[i].momentum = momentum;
+            normed?;
             if i < 4 {
                 let act = &mut rest[0];
                 zeroed(act, (n * k, widths[i]));

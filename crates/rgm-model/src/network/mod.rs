@@ -27,7 +27,7 @@ mod transformer;
 pub use block::{Block, BlockCache, Scorer};
 pub use config::{Config, Edges, Scoring};
 pub use error::{NetworkError, Result};
-pub use featurer::{FeaturerCache, PointFeaturer};
+pub use featurer::{FeaturerCache, PointFeaturer, TestStatistics};
 pub use transformer::{EdgeTransformer, EdgeTransformerCache, Stack, StackCache};
 
 use ndarray::{Array2, ArrayD, ArrayView2, ArrayViewMutD};
