@@ -182,3 +182,41 @@ fn the_matrix_needs_rgm_and_says_so() {
     assert!(!dir.join("matrix.png").exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn the_matrix_of_the_built_in_model_is_drawn_in_blocks() {
+    let dir = scratch("rgm-matrix");
+    let (src, tgt, pose) = clouds(&dir);
+    let truth = dir.join("truth.txt");
+    write_transform(&truth, &pose);
+    let path = |name: &str| dir.join(name).to_str().unwrap().to_string();
+    let out = rgm(&[
+        "render",
+        &src,
+        &tgt,
+        "--method",
+        "rgm",
+        "--out",
+        &path("clouds.png"),
+        "--matrix",
+        &path("matrix.png"),
+        "--truth",
+        truth.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(String::from_utf8_lossy(&out.stdout).contains("% correct"));
+    // 1,024 × 1,024 in blocks of 29 rows and columns: 36 blocks of 10 pixels a side.
+    let (width, height, pixels) = decode(&dir.join("matrix.png"));
+    assert_eq!((width, height), (360, 360));
+    // The clean pair's ground truth is a full permutation: every diagonal block holds some
+    // of it, so none is white, whatever the model found.
+    for b in 0..36 {
+        let centre = b * 10 + 5;
+        assert_ne!(pixels[centre * width + centre], WHITE, "diagonal block {b}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
