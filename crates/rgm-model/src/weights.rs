@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::method::{Method, MethodError};
-use crate::network::{Config, Edges, Rgm, Scoring};
+use crate::network::{Config, Edges, Rgm, Scoring, TestStatistics};
 use crate::pipeline::{PipelineConfig, RgmRegistrar};
 
 /// The manifest embedded at build time.
@@ -69,6 +69,11 @@ pub struct ModelEntry {
     pub epochs: f64,
     /// Training pairs seen.
     pub pairs_seen: u64,
+    /// Batch-norm statistics at test time: `cloud` for models trained by `rgm train` (each
+    /// cloud normalised on its own, as in its training), `running` (the default) for
+    /// PyTorch-trained ones.
+    #[serde(default)]
+    pub test_statistics: TestStatistics,
     /// Anything else worth knowing.
     #[serde(default)]
     pub note: String,
@@ -145,7 +150,8 @@ impl ModelEntry {
         Ok(self.registrar(network))
     }
 
-    fn registrar(&self, network: Rgm<f32>) -> Method {
+    fn registrar(&self, mut network: Rgm<f32>) -> Method {
+        network.featurer.test_statistics = self.test_statistics;
         Method::Rgm(Box::new(RgmRegistrar::new(network, self.pipeline_config())))
     }
 }
