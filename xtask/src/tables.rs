@@ -149,7 +149,7 @@ pub fn run(args: Args) -> Result<()> {
             .num_threads(threads)
             .build()?,
     };
-    let load_before = load_average();
+    let (load_before, commit_before) = (load_average(), commit());
     let dataset = ModelNet40::open(&data)
         .with_context(|| format!("opening ModelNet40 at {}", data.display()))?;
     let manifest_path = weights_dir().join("manifest.json");
@@ -177,6 +177,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     let report = Report {
         command: command_line(&args),
+        commit: commit_before,
         threads,
         load: [load_before, load_average()],
         figures: args.figures,
@@ -449,6 +450,8 @@ fn commit() -> String {
 /// What the results file says about the run that wrote it.
 struct Report {
     command: String,
+    /// The commit when the run started (the models were loaded then).
+    commit: String,
     threads: usize,
     /// The 1-minute load average when the run started and when it ended.
     load: [Option<f64>; 2],
@@ -505,11 +508,12 @@ impl Report {
         let load = |l: Option<f64>| l.map_or("unknown".into(), |l| format!("{l:.2}"));
         let mut md = String::from("# Results\n\n");
         md += &format!(
-            "Produced by `{}` at commit {} on {} ({} worker threads). \
+            "Produced by `{}` at commit {} on {} ({} worker threads); pairs already in the \
+             per-pair files were read back from earlier invocations, not recomputed. \
              Hand-measured comparisons — Open3D on the same pairs, timings on an idle machine, \
              the network against the PyTorch reference — are in [baselines.md](baselines.md).\n\n",
             self.command,
-            commit(),
+            self.commit,
             crate::bench::machine_description(),
             self.threads
         );
