@@ -231,19 +231,29 @@ fn known_pair(dir: &Path) -> (PathBuf, PathBuf) {
 }
 
 #[test]
-fn register_defaults_to_rgm_with_the_built_in_model() {
+fn register_runs_rgm_with_the_built_in_model() {
     let dir = scratch("builtin");
     let (src, tgt) = known_pair(&dir);
     let (src, tgt) = (src.to_str().unwrap(), tgt.to_str().unwrap());
-    let plain: serde_json::Value =
+    let default: serde_json::Value =
         serde_json::from_str(&stdout(&rgm(&["register", src, tgt, "--json"]))).unwrap();
+    assert_eq!(
+        default["method"], "fgr",
+        "FGR until the built-in model beats it"
+    );
+    let plain: serde_json::Value = serde_json::from_str(&stdout(&rgm(&[
+        "register", src, tgt, "--json", "--method", "rgm",
+    ])))
+    .unwrap();
     assert_eq!(plain["method"], "rgm");
     assert_eq!(plain["refined"], false);
     // Matched on 384 of the 1,024 points: at most 384 one-to-one correspondences.
     let used = plain["correspondences"].as_u64().unwrap();
     assert!((3..=384).contains(&used), "{plain}");
-    let refined: serde_json::Value =
-        serde_json::from_str(&stdout(&rgm(&["register", src, tgt, "--json", "--refine"]))).unwrap();
+    let refined: serde_json::Value = serde_json::from_str(&stdout(&rgm(&[
+        "register", src, tgt, "--json", "--method", "rgm", "--refine",
+    ])))
+    .unwrap();
     assert_eq!(refined["refined"], true);
     assert_eq!(refined["correspondences"], plain["correspondences"]);
     let residual = known_pose().inverse().compose(&parse_transform(&refined));
