@@ -332,6 +332,16 @@ fn ground_truth(pair: &Pair) -> Result<Correspondences> {
     )?)
 }
 
+/// One worker's share of a validation: its pairs' records, summed loss, and the ground-truth
+/// matches of its pairs (`matched`) of which C̃'s row maximum found the partner (`hits`).
+#[derive(Default)]
+struct ValidationPart {
+    records: Vec<PairRecord>,
+    loss_sum: f64,
+    hits: usize,
+    matched: usize,
+}
+
 /// A training run bound to its folder.
 pub struct Trainer {
     config: TrainConfig,
@@ -653,7 +663,7 @@ impl Trainer {
         let workers = self.workers.len();
         let match_points = self.config.match_points;
         let test_statistics = self.config.test_statistics;
-        let per_worker: Vec<Result<Vec<(PairRecord, f64, usize, usize)>>> = self
+        let parts: Vec<Result<ValidationPart>> = self
             .workers
             .par_iter_mut()
             .enumerate()
@@ -663,7 +673,7 @@ impl Trainer {
                     worker.network.clone(),
                     PipelineConfig::default(),
                 )));
-                let mut out = Vec::new();
+                let mut part = ValidationPart::default();
                 for i in (w..total).step_by(workers) {
                     let mut pair = generator.test_pair(shapes, i)?;
                     if let Some(points) = match_points {
@@ -675,8 +685,8 @@ impl Trainer {
                         .network
                         .forward(x.view(), y.view(), Mode::Eval, &mut worker.cache)?;
                     let c = worker.cache.c_soft();
-                    let loss = bce_forward(c, &gt)?.to_f64();
-                    let hits = gt
+                    part.loss_sum += bce_forward(c, &gt)?.to_f64();
+                    part.hits += gt
                         .pairs()
                         .iter()
                         .filter(|&&(i, j)| {
@@ -688,20 +698,22 @@ impl Trainer {
                             best.0 == j
                         })
                         .count();
-                    let record = evaluate_pair(&mut method, i, &pair)?;
-                    out.push((record, loss, hits, gt.pairs().len()));
+                    part.matched += gt.pairs().len();
+                    part.records.push(evaluate_pair(&mut method, i, &pair)?);
                 }
-                Ok(out)
+                Ok(part)
             })
             .collect();
-        let mut rows_out = Vec::with_capacity(total);
-        for part in per_worker {
-            rows_out.extend(part?);
+        let mut all = ValidationPart::default();
+        for part in parts {
+            let part = part?;
+            all.records.extend(part.records);
+            all.loss_sum += part.loss_sum;
+            all.hits += part.hits;
+            all.matched += part.matched;
         }
-        let records: Vec<PairRecord> = rows_out.iter().map(|r| r.0.clone()).collect();
-        let summary = Summary::from_records(&records)?;
-        let loss = rows_out.iter().map(|r| r.1).sum::<f64>() / total as f64;
-        let (hits, matched) = rows_out.iter().fold((0, 0), |(h, m), r| (h + r.2, m + r.3));
+        let summary = Summary::from_records(&all.records)?;
+        let (loss, hits, matched) = (all.loss_sum / total as f64, all.hits, all.matched);
         let m = summary.metrics;
         Ok(Validation {
             epoch,
