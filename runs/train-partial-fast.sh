@@ -13,6 +13,6 @@ mkdir -p runs/partial-fast
 nohup runs/rgm-train train --data "${RGM_DATA:-../shared/data/modelnet40_npy1024}" \
   --out runs/partial-fast --setting partial --preset fast --match-points 384 \
   --optimizer adam --lr 3e-4 --epochs 100 --milestones 60,80 --val-shapes 300 \
-  --checkpoint-every 50 --workers 2 >> runs/partial-fast/train.out 2>&1 &
+  --checkpoint-every 50 --workers 2 --test-statistics cloud >> runs/partial-fast/train.out 2>&1 &
 echo $! > runs/partial-fast/train.pid
 echo "training in the background, pid $(cat runs/partial-fast/train.pid)"

@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
-"""Copies a training run's record (config.json, state.json, log.jsonl) into docs/training/NAME/
-and writes its learning curve there as curve.svg plus a Markdown summary (printed).
+"""Writes a training run's learning curve to docs/training/NAME/curve.svg and prints a Markdown
+summary of the run folder's record (config.json, state.json, log.jsonl; the run folder is
+committed under runs/ and is the one copy of those files).
 
     python3 tools/training_report.py runs/partial-fast partial-fast > docs/training/partial-fast/README.md
 
@@ -8,7 +9,6 @@ Standard library only. The numbers are the run's own log lines, unchanged.
 """
 
 import json
-import shutil
 import sys
 from pathlib import Path
 
@@ -60,8 +60,6 @@ def main():
     config, state, log = load(run)
     dest = Path(__file__).resolve().parent.parent / "docs" / "training" / name
     dest.mkdir(parents=True, exist_ok=True)
-    for f in ["config.json", "state.json", "log.jsonl"]:
-        shutil.copyfile(run / f, dest / f)
     train = [r for r in log if r["kind"] == "train"]
     val = [r for r in log if r["kind"] == "validation"]
     (dest / "curve.svg").write_text(svg_curve(train, val))
@@ -71,10 +69,10 @@ def main():
           f"DGCNN {'-'.join(map(str, net['dgcnn']))}, edge {net['edge']}, Q {net['q']}, FF {net['ff']}, "
           f"K {net['k']}, L {net['blocks']}; matching on {config['match_points'] or 'all'} points per cloud; "
           f"{config['optimizer']} lr {config['lr']} (×{config['gamma']} at epochs {config['milestones']}), "
-          f"batch {config['batch']}, {config['workers']} workers. Full configuration: `config.json`.\n")
+          f"batch {config['batch']}, {config['workers']} workers. Full configuration: `{run}/config.json`.\n")
     print(f"State when this page was written: epoch {state['epoch'] + 1} of {config['epochs']}, batch "
           f"{state['batch']}, {state['pairs_seen']} training pairs seen in {state['seconds'] / 3600:.2f} h of "
-          f"training and validation (`state.json`).\n")
+          f"training and validation (`{run}/state.json`).\n")
     print("![learning curve](curve.svg)\n")
     print("## Validation after each epoch\n")
     if val:
@@ -93,7 +91,7 @@ def main():
     for r in train[::step] + ([train[-1]] if train and (len(train) - 1) % step else []):
         print(f"| {r['epoch'] + 1} | {r['batch']}/{r['batches']} | {r['pairs_seen']} | {r['lr']:g} | "
               f"{r['loss']:.4f} | {r['seconds'] / 3600:.2f} |")
-    print(f"\nEvery line is in `log.jsonl`. Produced by `python3 tools/training_report.py {run} {name}`.")
+    print(f"\nEvery line is in `{run}/log.jsonl`. Produced by `python3 tools/training_report.py {run} {name}`.")
 
 
 if __name__ == "__main__":
