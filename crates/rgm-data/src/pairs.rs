@@ -361,8 +361,16 @@ mod tests {
         assert_eq!(cut.t_target_source, pair.t_target_source);
         // Every kept point is one of the pair's points, and every rebuilt correspondence joins
         // points that the true pose puts within the rescue radius.
-        assert!(cut.source.points.iter().all(|p| pair.source.points.contains(p)));
-        assert!(cut.target.points.iter().all(|p| pair.target.points.contains(p)));
+        assert!(cut
+            .source
+            .points
+            .iter()
+            .all(|p| pair.source.points.contains(p)));
+        assert!(cut
+            .target
+            .points
+            .iter()
+            .all(|p| pair.target.points.contains(p)));
         let moved = cut.source.transformed(&cut.t_target_source);
         assert!(!cut.correspondence.pairs.is_empty());
         for &(i, j) in &cut.correspondence.pairs {
