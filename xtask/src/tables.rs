@@ -521,8 +521,8 @@ impl Report {
         md += &format!(
             "- **Time per pair** is the method's own wall time on one worker thread. This run \
              used {} worker threads on the machine above with a 1-minute load average of {} at \
-             its start and {} at its end: other work (the RGM training run) shared the cores, \
-             so the times are **under contention** and only comparable within one table. Pairs \
+             its start and {} at its end; with a load above the worker count other work shared \
+             the cores, so times are comparable only within one table. Pairs \
              read back from an earlier run keep that run's times.\n",
             self.threads,
             load(self.load[0]),
