@@ -199,7 +199,7 @@ pub struct RgmRegistrar {
 }
 
 /// A cloud as the network's (N, 3) f32 input.
-fn as_rows(cloud: &PointCloud) -> Array2<f32> {
+pub(crate) fn as_rows(cloud: &PointCloud) -> Array2<f32> {
     Array2::from_shape_fn((cloud.len(), 3), |(i, c)| cloud.points[i][c] as f32) // (N, 3)
 }
 

@@ -24,7 +24,6 @@ use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use ndarray::Array2;
 use rand::rngs::StdRng;
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
@@ -39,7 +38,7 @@ use serde::{Deserialize, Serialize};
 use crate::evaluate::{evaluate_pair, PairRecord, Summary};
 use crate::method::Method;
 use crate::network::{Config, Mode, NetworkError, Rgm, RgmCache, TestStatistics};
-use crate::pipeline::{PipelineConfig, RgmRegistrar};
+use crate::pipeline::{as_rows, PipelineConfig, RgmRegistrar};
 
 /// Why training could not start or go on.
 #[derive(Debug, thiserror::Error)]
@@ -318,11 +317,6 @@ struct Worker {
     cache: RgmCache<f32>,
 }
 
-/// A cloud as the network's (N, 3) f32 input.
-fn rows(cloud: &rgm_geom::PointCloud) -> Array2<f32> {
-    Array2::from_shape_fn((cloud.len(), 3), |(i, c)| cloud.points[i][c] as f32) // (N, 3)
-}
-
 fn ground_truth(pair: &Pair) -> Result<Correspondences> {
     let c = &pair.correspondence;
     Ok(Correspondences::new(
@@ -588,7 +582,7 @@ impl Trainer {
                         pair = pair.subsampled(points, &mut StdRng::seed_from_u64(seed));
                     }
                     let gt = ground_truth(&pair)?;
-                    let (x, y) = (rows(&pair.source), rows(&pair.target));
+                    let (x, y) = (as_rows(&pair.source), as_rows(&pair.target));
                     let loss = worker.network.forward_backward(
                         x.view(),
                         y.view(),
@@ -680,7 +674,7 @@ impl Trainer {
                         pair = pair.subsampled(points, &mut StdRng::seed_from_u64(!(i as u64)));
                     }
                     let gt = ground_truth(&pair)?;
-                    let (x, y) = (rows(&pair.source), rows(&pair.target));
+                    let (x, y) = (as_rows(&pair.source), as_rows(&pair.target));
                     worker
                         .network
                         .forward(x.view(), y.view(), Mode::Eval, &mut worker.cache)?;
