@@ -124,6 +124,23 @@ impl MethodArgs {
     }
 }
 
+/// Runs `method` on the clouds read from `source_path` and `target_path`, naming both files and
+/// the method when it fails.
+pub fn register_files(
+    method: &mut Method,
+    (source, target): (&rgm_geom::PointCloud, &rgm_geom::PointCloud),
+    (source_path, target_path): (&std::path::Path, &std::path::Path),
+) -> anyhow::Result<rgm_model::Registration> {
+    method.register(source, target).with_context(|| {
+        format!(
+            "{} failed on {} → {}",
+            method.name(),
+            source_path.display(),
+            target_path.display()
+        )
+    })
+}
+
 /// The test-pair protocols of the paper (spec §1).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum SettingArg {

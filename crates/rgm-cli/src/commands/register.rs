@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use rgm_data::{read_point_cloud, write_point_cloud};
 use rgm_model::Method;
 
@@ -29,14 +29,11 @@ pub fn run(args: Args) -> Result<()> {
     let source = read_point_cloud(&args.source)?;
     let target = read_point_cloud(&args.target)?;
     let mut method = args.method.build()?;
-    let registration = method.register(&source, &target).with_context(|| {
-        format!(
-            "{} failed on {} → {}",
-            method.name(),
-            args.source.display(),
-            args.target.display()
-        )
-    })?;
+    let registration = crate::register_files(
+        &mut method,
+        (&source, &target),
+        (&args.source, &args.target),
+    )?;
     let result = &registration.result;
     // RGM's correspondences are the network's matches of the last pass; ICP refinement may
     // have moved the transform after them.

@@ -48,14 +48,11 @@ pub fn run(args: Args) -> Result<()> {
         (Some(_), None) => None, // nothing to find
         _ => {
             let mut method = args.method.build()?;
-            let registration = method.register(&source, &target).with_context(|| {
-                format!(
-                    "{} failed on {} → {}",
-                    method.name(),
-                    args.source.display(),
-                    args.target.display()
-                )
-            })?;
+            let registration = crate::register_files(
+                &mut method,
+                (&source, &target),
+                (&args.source, &args.target),
+            )?;
             Some((method, registration.result.t_target_source))
         }
     };
