@@ -81,7 +81,8 @@ pub struct MethodArgs {
     /// every point with --weights].
     #[arg(long, value_name = "N")]
     match_points: Option<usize>,
-    /// Refine RGM's transform with point-to-point ICP on the full clouds.
+    /// Refine the transform of RGM or FGR with point-to-point ICP on the full clouds
+    /// (correspondences closer than 0.1 in the unit-sphere frame, at most 30 iterations).
     #[arg(long)]
     refine: bool,
 }
@@ -89,13 +90,14 @@ pub struct MethodArgs {
 impl MethodArgs {
     /// The method these options select, with its weights loaded.
     fn build(&self) -> anyhow::Result<Method> {
-        let rgm_only = self.weights.is_some() || self.match_points.is_some() || self.refine;
+        let rgm_only = self.weights.is_some() || self.match_points.is_some();
         if self.method != MethodArg::Rgm && rgm_only {
-            anyhow::bail!(
-                "--weights, --preset, --match-points and --refine apply to --method rgm only"
-            );
+            anyhow::bail!("--weights, --preset and --match-points apply to --method rgm only");
         }
-        Ok(match self.method {
+        if self.method == MethodArg::Icp && self.refine {
+            anyhow::bail!("--refine adds ICP after RGM or FGR; --method icp is ICP already");
+        }
+        let method = match self.method {
             MethodArg::Icp => Method::icp(),
             MethodArg::Fgr => Method::fgr(),
             MethodArg::Rgm => {
@@ -110,16 +112,16 @@ impl MethodArgs {
                     None => rgm_model::weights::builtin_method()
                         .context("loading the built-in RGM model")?,
                 };
-                if let Method::Rgm(registrar) = &mut method {
-                    if self.match_points.is_some() {
-                        registrar.config.match_points = self.match_points;
-                    }
-                    if self.refine {
-                        registrar.config.refine = Some(rgm_geom::icp::IcpConfig::default());
-                    }
+                if let (Method::Rgm(registrar), Some(points)) = (&mut method, self.match_points) {
+                    registrar.config.match_points = Some(points);
                 }
                 method
             }
+        };
+        Ok(if self.refine {
+            method.refined(rgm_geom::icp::IcpConfig::default())
+        } else {
+            method
         })
     }
 }

@@ -269,17 +269,41 @@ fn register_runs_rgm_with_the_built_in_model() {
 fn rgm_options_with_another_method_are_refused() {
     let dir = scratch("options");
     let (src, tgt) = known_pair(&dir);
-    let out = rgm(&[
-        "register",
-        src.to_str().unwrap(),
-        tgt.to_str().unwrap(),
-        "--method",
-        "fgr",
-        "--refine",
-    ]);
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("apply to --method rgm only"), "{err}");
+    let (src, tgt) = (src.to_str().unwrap(), tgt.to_str().unwrap());
+    for (args, says) in [
+        (
+            ["--method", "fgr", "--match-points", "100"],
+            "apply to --method rgm only",
+        ),
+        (["--method", "icp", "--refine", "--json"], "ICP already"),
+    ] {
+        let out = rgm(&[&["register", src, tgt][..], &args[..]].concat());
+        assert!(!out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(says), "{err}");
+    }
+}
+
+#[test]
+fn fgr_refined_with_icp_is_named_and_recovers_the_pose() {
+    let dir = scratch("fgr-icp");
+    let (src, tgt) = known_pair(&dir);
+    let (src, tgt) = (src.to_str().unwrap(), tgt.to_str().unwrap());
+    let out: serde_json::Value = serde_json::from_str(&stdout(&rgm(&[
+        "register", src, tgt, "--json", "--method", "fgr", "--refine",
+    ])))
+    .unwrap();
+    assert_eq!(
+        (&out["method"], &out["refined"]),
+        (&"fgr+icp".into(), &true.into())
+    );
+    let residual = known_pose().inverse().compose(&parse_transform(&out));
+    assert!(
+        residual.rotation_angle_deg() < 0.1 && residual.translation.norm() < 1e-3,
+        "{}° and {}",
+        residual.rotation_angle_deg(),
+        residual.translation.norm()
+    );
 }
 
 #[test]

@@ -45,6 +45,8 @@ pub enum Method {
     Icp(IcpConfig),
     /// Fast Global Registration on FPFH features.
     Fgr(FgrConfig),
+    /// FGR, then point-to-point ICP from FGR's transform (the classical coarse-to-fine pair).
+    FgrIcp { fgr: FgrConfig, icp: IcpConfig },
     /// The RGM network and the test-time procedure of spec §4.
     Rgm(Box<RgmRegistrar>),
 }
@@ -79,11 +81,38 @@ impl Method {
         ))))
     }
 
-    /// The method's short name, as the command line and the tables spell it.
+    /// This method followed by point-to-point ICP from its transform (`icp.initial` is
+    /// replaced by it). RGM refines in its own frame, on the full clouds (so the distances of
+    /// `icp` are in unit-sphere units for any input); ICP, already its own refinement, is
+    /// returned unchanged.
+    pub fn refined(self, icp: IcpConfig) -> Self {
+        match self {
+            Self::Fgr(fgr) | Self::FgrIcp { fgr, .. } => Self::FgrIcp { fgr, icp },
+            Self::Rgm(mut registrar) => {
+                registrar.config.refine = Some(icp);
+                Self::Rgm(registrar)
+            }
+            icp_alone @ Self::Icp(_) => icp_alone,
+        }
+    }
+
+    /// Whether ICP refines the method's transform ([`Method::refined`]).
+    pub fn is_refined(&self) -> bool {
+        match self {
+            Self::Icp(_) | Self::Fgr(_) => false,
+            Self::FgrIcp { .. } => true,
+            Self::Rgm(registrar) => registrar.config.refine.is_some(),
+        }
+    }
+
+    /// The method's short name, as the command line and the tables spell it (`+icp` when
+    /// refined).
     pub fn name(&self) -> &'static str {
         match self {
             Self::Icp(_) => "icp",
             Self::Fgr(_) => "fgr",
+            Self::FgrIcp { .. } => "fgr+icp",
+            Self::Rgm(_) if self.is_refined() => "rgm+icp",
             Self::Rgm(_) => "rgm",
         }
     }
@@ -98,6 +127,18 @@ impl Method {
         let result = match self {
             Self::Icp(config) => icp::register(source, target, config)?,
             Self::Fgr(config) => fgr::register(source, target, config)?,
+            Self::FgrIcp { fgr, icp } => {
+                let coarse = fgr::register(source, target, fgr)?;
+                let config = IcpConfig {
+                    initial: coarse.t_target_source,
+                    ..*icp
+                };
+                let fine = icp::register(source, target, &config)?;
+                RegistrationResult {
+                    iterations: coarse.iterations + fine.iterations,
+                    ..fine
+                }
+            }
             Self::Rgm(registrar) => registrar.register(source, target)?,
         };
         Ok(Registration {

@@ -7,7 +7,8 @@
 //!
 //! The local features of a cloud depend on that cloud alone at test time, so each is computed
 //! once and reused: the target's for every pass, both clouds' for the reverse (Y, X) pass
-//! (3 feature passes for the paper's 2 passes instead of 8).
+//! (3 feature passes for the paper's 2 passes instead of 8). The reverse pass also reuses the
+//! forward pass's block-0 edges and graph convolutions ([`Rgm::forward_reverse`]).
 
 use std::time::Instant;
 
@@ -246,7 +247,7 @@ impl RgmRegistrar {
             .forward_from_features(fx, fy, &mut self.forward)?;
         if self.config.cycle_consistency {
             self.network
-                .forward_from_features(fy, fx, &mut self.reverse)?;
+                .forward_reverse(&self.forward, &mut self.reverse)?;
         }
         add_since(&mut self.times.blocks, start);
         let start = Instant::now();

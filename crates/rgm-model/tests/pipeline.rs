@@ -11,7 +11,7 @@ use ndarray::Array2;
 use rgm_geom::icp::{self, IcpConfig};
 use rgm_geom::{Point3, PointCloud, RigidTransform, Vector3};
 use rgm_match::{hard_match, MatchConfig};
-use rgm_model::network::{Config, FeaturerCache, Mode, Rgm, RgmCache};
+use rgm_model::network::{Config, Edges, FeaturerCache, Mode, Rgm, RgmCache, Scoring};
 use rgm_model::pipeline::Normalisation;
 use rgm_model::{Method, MethodError, PipelineConfig, RgmRegistrar};
 
@@ -137,6 +137,58 @@ fn features_computed_once_give_bit_identical_c_soft_both_ways() {
         assert_eq!(plain.c_soft().dim(), (48, 48));
         assert_eq!(plain.c_soft(), reused.c_soft());
     }
+}
+
+#[test]
+fn the_reverse_pass_reusing_block_0_is_bit_identical_to_running_it() {
+    // Trained weights (the fixture) with transformer edges, and the same network with
+    // full-connection edges (Var2) and distance scoring (Var1): the reuse must hold for each.
+    let trained = Rgm::<f32>::load(Config::tiny(), &fixture()).unwrap();
+    let variants = [
+        trained,
+        Rgm::<f32>::new(
+            Config {
+                edges: Edges::Full,
+                ..Config::tiny()
+            },
+            3,
+        )
+        .unwrap(),
+        Rgm::<f32>::new(
+            Config {
+                scoring: Scoring::Var1,
+                ..Config::tiny()
+            },
+            4,
+        )
+        .unwrap(),
+    ];
+    let (x, y) = (tensor("input.x"), tensor("input.y"));
+    // Unequal sizes, so a transposed shape cannot pass unnoticed.
+    let y = y.slice(ndarray::s![..40, ..]).to_owned();
+    for mut network in variants {
+        let (mut fx, mut fy) = (FeaturerCache::default(), FeaturerCache::default());
+        network.features(x.view(), &mut fx).unwrap();
+        network.features(y.view(), &mut fy).unwrap();
+        let (fx, fy) = (fx.features.view(), fy.features.view());
+        let (mut forward, mut plain, mut reused) = (
+            RgmCache::default(),
+            RgmCache::default(),
+            RgmCache::default(),
+        );
+        network.forward_from_features(fx, fy, &mut forward).unwrap();
+        network.forward_from_features(fy, fx, &mut plain).unwrap();
+        network.forward_reverse(&forward, &mut reused).unwrap();
+        assert_eq!(reused.c_soft().dim(), (40, 48));
+        assert_eq!(plain.c_soft(), reused.c_soft());
+        // Not merely the transpose of the forward's C̃ (Sinkhorn's rows-first order).
+        assert_ne!(forward.c_soft().t(), reused.c_soft());
+    }
+    let network = Rgm::<f32>::load(Config::tiny(), &fixture()).unwrap();
+    let err = network
+        .forward_reverse(&RgmCache::default(), &mut RgmCache::default())
+        .unwrap_err();
+    assert!(err.to_string().contains("no forward pass"), "{err}");
 }
 
 #[test]

@@ -4,7 +4,6 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use rgm_data::{read_point_cloud, write_point_cloud};
-use rgm_model::Method;
 
 use crate::MethodArgs;
 
@@ -37,7 +36,7 @@ pub fn run(args: Args) -> Result<()> {
     let result = &registration.result;
     // RGM's correspondences are the network's matches of the last pass; ICP refinement may
     // have moved the transform after them.
-    let refined = matches!(&method, Method::Rgm(r) if r.config.refine.is_some());
+    let refined = method.is_refined();
     if let Some(out) = &args.out {
         write_point_cloud(out, &source.transformed(&result.t_target_source))?;
     }

@@ -267,6 +267,43 @@ impl<T: Element> Block<T> {
         fy: ArrayView2<'_, T>,
         cache: &mut BlockCache<T>,
     ) -> Result<()> {
+        self.graph_forward(fx, fy, cache)?;
+        self.match_forward(cache)
+    }
+
+    /// The block on (Y, X) after its pass on (X, Y) in `swapped`, into `cache` (sized (M, N)):
+    /// what `forward(fy, fx, cache)` gives, bit for bit, without recomputing the edges and the
+    /// graph convolutions. They see one cloud and the other's encoding through the same
+    /// weights in both directions, so the (Y, X) pass's F'_Y, F'_X are the (X, Y) pass's; the
+    /// scoring, Sinkhorn and cross convolution run anew (Sinkhorn normalises rows first, so
+    /// its result on Sᵀ is not the transpose of its result on S). No backward follows.
+    pub fn forward_swapped(
+        &self,
+        swapped: &BlockCache<T>,
+        cache: &mut BlockCache<T>,
+    ) -> Result<()> {
+        let (n, m) = swapped.dims;
+        if cache.dims != (m, n) {
+            return Err(rgm_nn::NnError::Shape {
+                op: "rgm block forward_swapped",
+                what: "cache",
+                expected: vec![m, n],
+                got: vec![cache.dims.0, cache.dims.1],
+            }
+            .into());
+        }
+        cache.x.fp.assign(&swapped.y.fp);
+        cache.y.fp.assign(&swapped.x.fp);
+        self.match_forward(cache)
+    }
+
+    /// Edges and intra-graph convolutions: F'_X (N, Q), F'_Y (M, Q) into `cache`.
+    fn graph_forward(
+        &self,
+        fx: ArrayView2<'_, T>,
+        fy: ArrayView2<'_, T>,
+        cache: &mut BlockCache<T>,
+    ) -> Result<()> {
         let n = fx.nrows();
         let (x, y) = (&mut cache.x, &mut cache.y);
         match &self.transformer {
@@ -282,7 +319,13 @@ impl<T: Element> Block<T> {
             }
         }
         self.gconv_forward(x, fx)?;
-        self.gconv_forward(y, fy)?;
+        self.gconv_forward(y, fy)
+    }
+
+    /// Scoring of F'_X, F'_Y (AIS or Var1), Sinkhorn → C̃, and the cross-graph convolution
+    /// when the block has one, all in `cache`.
+    fn match_forward(&self, cache: &mut BlockCache<T>) -> Result<()> {
+        let (x, y) = (&mut cache.x, &mut cache.y);
         match &self.scorer {
             Scorer::Ais {
                 affinity,

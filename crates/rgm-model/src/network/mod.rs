@@ -94,6 +94,14 @@ impl<T> RgmCache<T> {
     }
 }
 
+/// What block 0 starts from.
+enum BlocksInput<'a, T> {
+    /// Local features F_X (N, C), F_Y (M, C).
+    Features(ArrayView2<'a, T>, ArrayView2<'a, T>),
+    /// Block 0 of the pass on the swapped pair, whose graph features it reuses.
+    Swapped(&'a BlockCache<T>),
+}
+
 fn check_cloud<T: Element>(what: &'static str, p: ArrayView2<'_, T>) -> Result<()> {
     if p.ncols() != 3 {
         return Err(NetworkError::InputShape {
@@ -180,8 +188,7 @@ impl<T: Element> Rgm<T> {
         self.featurer.forward(y, mode, &mut cache.fy)?;
         cache.from_features = false;
         self.forward_blocks(
-            cache.fx.features.view(),
-            cache.fy.features.view(),
+            BlocksInput::Features(cache.fx.features.view(), cache.fy.features.view()),
             &mut cache.blocks,
         )
     }
@@ -221,18 +228,34 @@ impl<T: Element> Rgm<T> {
             }
         }
         cache.from_features = true;
-        self.forward_blocks(fx, fy, &mut cache.blocks)
+        self.forward_blocks(
+            BlocksInput::Features(fx.view(), fy.view()),
+            &mut cache.blocks,
+        )
     }
 
-    /// The L blocks on the local features `fx` (N, C), `fy` (M, C), into `blocks` (rebuilt when
-    /// N or M change).
+    /// The reverse pass (Y, X) of the pass (X, Y) held in `forward`, into `reverse`: the C̃
+    /// (M, N) that [`Rgm::forward_from_features`]`(fy, fx)` gives, bit for bit, with block 0's edges and graph convolutions (its transformer, the widest layers)
+    /// taken from `forward` instead of recomputed ([`Block::forward_swapped`] says why that
+    /// is exact). No backward follows such a pass.
+    pub fn forward_reverse(&self, forward: &RgmCache<T>, reverse: &mut RgmCache<T>) -> Result<()> {
+        let Some(first) = forward.blocks.first() else {
+            return Err(NetworkError::NoForwardPass);
+        };
+        reverse.from_features = true;
+        self.forward_blocks(BlocksInput::Swapped(first), &mut reverse.blocks)
+    }
+
+    /// The L blocks on `input`, into `blocks` (rebuilt when N or M change).
     fn forward_blocks(
         &self,
-        fx: ArrayView2<'_, T>,
-        fy: ArrayView2<'_, T>,
+        input: BlocksInput<'_, T>,
         blocks: &mut Vec<BlockCache<T>>,
     ) -> Result<()> {
-        let (n, m) = (fx.nrows(), fy.nrows());
+        let (n, m) = match &input {
+            BlocksInput::Features(fx, fy) => (fx.nrows(), fy.nrows()),
+            BlocksInput::Swapped(first) => (first.dims().1, first.dims().0),
+        };
         if blocks.len() != self.blocks.len() || blocks.first().map(|b| b.dims()) != Some((n, m)) {
             *blocks = (0..self.blocks.len())
                 .map(|b| BlockCache::new(&self.config, b, n, m))
@@ -240,11 +263,18 @@ impl<T: Element> Rgm<T> {
         }
         for (b, block) in self.blocks.iter().enumerate() {
             let (done, rest) = blocks.split_at_mut(b);
-            let (fx, fy) = match done.last() {
-                Some(prev) => prev.outputs(self.blocks[b - 1].cross.is_some()),
-                None => (fx.view(), fy.view()),
-            };
-            block.forward(fx, fy, &mut rest[0])?;
+            match (done.last(), &input) {
+                (Some(prev), _) => {
+                    let (fx, fy) = prev.outputs(self.blocks[b - 1].cross.is_some());
+                    block.forward(fx, fy, &mut rest[0])?;
+                }
+                (None, BlocksInput::Features(fx, fy)) => {
+                    block.forward(fx.view(), fy.view(), &mut rest[0])?
+                }
+                (None, BlocksInput::Swapped(first)) => {
+                    block.forward_swapped(first, &mut rest[0])?
+                }
+            }
         }
         Ok(())
     }
