@@ -61,6 +61,24 @@ pub enum MethodArg {
     Rgm,
 }
 
+/// Batch-norm statistics of RGM's feature extractor at test time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum StatisticsArg {
+    /// Each cloud's own statistics, as rgm trains (one cloud per batch-norm batch).
+    Cloud,
+    /// The running averages gathered in training (PyTorch's eval(); the authors' weights).
+    Running,
+}
+
+impl From<StatisticsArg> for rgm_model::network::TestStatistics {
+    fn from(arg: StatisticsArg) -> Self {
+        match arg {
+            StatisticsArg::Cloud => Self::Cloud,
+            StatisticsArg::Running => Self::Running,
+        }
+    }
+}
+
 /// The method and, for RGM, its weights and test-time options.
 #[derive(clap::Args, Debug, Clone)]
 pub struct MethodArgs {
@@ -76,11 +94,19 @@ pub struct MethodArgs {
     /// The network sizes --weights were trained with: paper, small, fast or tiny.
     #[arg(long, value_name = "NAME", requires = "weights")]
     preset: Option<String>,
+    /// Batch-norm statistics for --weights: cloud for weights trained by `rgm train`, running
+    /// for the authors' PyTorch weights [default: running; the built-in model's own otherwise].
+    #[arg(long, value_enum, value_name = "WHICH", requires = "weights")]
+    test_statistics: Option<StatisticsArg>,
     /// RGM matches on at most N randomly drawn points of each cloud (fixed seed) and applies
     /// the transform to the full clouds [default: the built-in model's training size, 384;
     /// every point with --weights].
     #[arg(long, value_name = "N")]
     match_points: Option<usize>,
+    /// RGM's passes of network → matching → Kabsch, each on the source moved by the passes
+    /// before [default: 2, as in the paper's tables].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
+    passes: Option<u16>,
     /// Refine the transform of RGM or FGR with point-to-point ICP on the full clouds
     /// (correspondences closer than 0.1 in the unit-sphere frame, at most 30 iterations).
     #[arg(long)]
@@ -90,9 +116,12 @@ pub struct MethodArgs {
 impl MethodArgs {
     /// The method these options select, with its weights loaded.
     fn build(&self) -> anyhow::Result<Method> {
-        let rgm_only = self.weights.is_some() || self.match_points.is_some();
+        let rgm_only =
+            self.weights.is_some() || self.match_points.is_some() || self.passes.is_some();
         if self.method != MethodArg::Rgm && rgm_only {
-            anyhow::bail!("--weights, --preset and --match-points apply to --method rgm only");
+            anyhow::bail!(
+                "--weights, --preset, --match-points and --passes apply to --method rgm only"
+            );
         }
         if self.method == MethodArg::Icp && self.refine {
             anyhow::bail!("--refine adds ICP after RGM or FGR; --method icp is ICP already");
@@ -105,15 +134,26 @@ impl MethodArgs {
                     Some(weights) => {
                         let preset = self.preset.as_deref().unwrap_or("paper");
                         let config = rgm_model::network::Config::preset(preset)?;
-                        Method::rgm(config, weights).with_context(|| {
+                        let mut method = Method::rgm(config, weights).with_context(|| {
                             format!("loading RGM weights from {}", weights.display())
-                        })?
+                        })?;
+                        if let (Method::Rgm(registrar), Some(which)) =
+                            (&mut method, self.test_statistics)
+                        {
+                            registrar.network.featurer.test_statistics = which.into();
+                        }
+                        method
                     }
                     None => rgm_model::weights::builtin_method()
                         .context("loading the built-in RGM model")?,
                 };
-                if let (Method::Rgm(registrar), Some(points)) = (&mut method, self.match_points) {
-                    registrar.config.match_points = Some(points);
+                if let Method::Rgm(registrar) = &mut method {
+                    if let Some(points) = self.match_points {
+                        registrar.config.match_points = Some(points);
+                    }
+                    if let Some(passes) = self.passes {
+                        registrar.config.passes = passes.into();
+                    }
                 }
                 method
             }
@@ -166,9 +206,22 @@ pub struct DataArgs {
     /// Unseen categories: test on categories 20–39 only.
     #[arg(long)]
     unseen: bool,
-    /// Use only the first N test pairs.
+    /// Use only the first N pairs.
     #[arg(long, value_name = "N")]
     limit: Option<usize>,
+    /// The shapes the pairs are made of: the official test split, or the validation part of
+    /// the training split (for choosing settings without looking at the test pairs).
+    #[arg(long, value_enum, default_value = "test")]
+    split: SplitArg,
+}
+
+/// The dataset splits a benchmark can run on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum SplitArg {
+    /// The official test split (every table of the paper).
+    Test,
+    /// The last 20 % of the official training split, per category (what `rgm train` validates on).
+    Validation,
 }
 
 impl From<SettingArg> for Setting {
@@ -188,11 +241,31 @@ impl DataArgs {
         Ok((dataset, PairGenerator::new(self.setting.into())))
     }
 
-    /// The test shapes of the selected split, cut to `--limit`.
-    fn test_shapes<'a>(&self, dataset: &'a ModelNet40) -> Vec<&'a Shape> {
-        let mut shapes = dataset.split(Split::Test, self.unseen);
+    /// The shapes of the selected split (and categories), cut to `--limit`.
+    fn shapes<'a>(&self, dataset: &'a ModelNet40) -> Vec<&'a Shape> {
+        let split = match self.split {
+            SplitArg::Test => Split::Test,
+            SplitArg::Validation => Split::Validation,
+        };
+        let mut shapes = dataset.split(split, self.unseen);
         shapes.truncate(self.limit.unwrap_or(usize::MAX));
         shapes
+    }
+
+    /// The name of the selected pairs in tables: `partial`, `partial-unseen`, and
+    /// `(validation)` after it for the validation split.
+    fn pairs_name(&self) -> String {
+        let setting: Setting = self.setting.into();
+        format!(
+            "{}{}{}",
+            setting.name(),
+            if self.unseen { "-unseen" } else { "" },
+            if self.split == SplitArg::Validation {
+                " (validation)"
+            } else {
+                ""
+            }
+        )
     }
 }
 

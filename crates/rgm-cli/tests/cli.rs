@@ -161,6 +161,54 @@ fn eval_prints_the_metrics_table() {
 }
 
 #[test]
+fn eval_on_the_validation_split_says_so_and_differs_from_test() {
+    let row = |split: &str| {
+        let text = stdout(&rgm(&[
+            "eval",
+            "--method",
+            "icp",
+            "--limit",
+            "2",
+            "--split",
+            split,
+            "--data",
+            data_dir().to_str().unwrap(),
+        ]));
+        let row = text
+            .lines()
+            .find(|l| l.starts_with("| icp"))
+            .unwrap()
+            .to_string();
+        row.split('|')
+            .map(|c| c.trim().to_string())
+            .collect::<Vec<_>>()
+    };
+    let (val, test) = (row("validation"), row("test"));
+    assert_eq!(
+        (val[2].as_str(), test[2].as_str()),
+        ("partial (validation)", "partial")
+    );
+    // Other shapes, so other errors.
+    assert_ne!(val[4], test[4]);
+}
+
+#[test]
+fn rgm_passes_are_an_option() {
+    let dir = scratch("passes");
+    let (src, tgt) = known_pair(&dir);
+    let (src, tgt) = (src.to_str().unwrap(), tgt.to_str().unwrap());
+    for passes in ["1", "3"] {
+        let out: serde_json::Value = serde_json::from_str(&stdout(&rgm(&[
+            "register", src, tgt, "--json", "--method", "rgm", "--passes", passes,
+        ])))
+        .unwrap();
+        assert_eq!(out["iterations"].to_string(), passes, "{out}");
+    }
+    let out = rgm(&["register", src, tgt, "--method", "rgm", "--passes", "0"]);
+    assert!(!out.status.success());
+}
+
+#[test]
 fn pairs_then_score_reproduces_eval() {
     let dir = scratch("pairs");
     let data = data_dir();

@@ -21,7 +21,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> Result<()> {
     let (dataset, generator) = args.data.open()?;
-    let shapes = args.data.test_shapes(&dataset);
+    let shapes = args.data.shapes(&dataset);
     let mut method = args.method.build()?;
     let bar = progress(shapes.len(), method.name());
     let mut records = Vec::with_capacity(shapes.len());
@@ -38,11 +38,11 @@ pub fn run(args: Args) -> Result<()> {
         bar.inc(1);
     }
     bar.finish_and_clear();
-    let setting = format!(
-        "{}{}",
-        generator.setting.name(),
-        if args.data.unseen { "-unseen" } else { "" }
-    );
-    table::report(method.name(), &setting, &records, args.json.as_deref())?;
+    table::report(
+        method.name(),
+        &args.data.pairs_name(),
+        &records,
+        args.json.as_deref(),
+    )?;
     Ok(())
 }

@@ -24,7 +24,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> Result<()> {
     let (dataset, generator) = args.data.open()?;
-    let shapes = args.data.test_shapes(&dataset);
+    let shapes = args.data.shapes(&dataset);
     fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let bar = progress(shapes.len(), "pairs");
     let mut entries = Vec::with_capacity(shapes.len());

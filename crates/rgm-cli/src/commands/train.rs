@@ -5,10 +5,10 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use rgm_data::ModelNet40;
-use rgm_model::network::{Config, TestStatistics};
+use rgm_model::network::Config;
 use rgm_model::train::{Event, LogRecord, OptimizerKind, TrainConfig, Trainer};
 
-use crate::{progress, SettingArg};
+use crate::{progress, SettingArg, StatisticsArg};
 
 /// Options of `rgm train`. Defaults are the paper's schedule (spec §3) on the `fast` preset,
 /// matching on 384-point clouds.
@@ -84,12 +84,6 @@ pub struct Args {
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-enum StatisticsArg {
-    Cloud,
-    Running,
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 enum OptimizerArg {
     Sgd,
     Adam,
@@ -122,10 +116,7 @@ impl Args {
             workers,
             checkpoint_every: self.checkpoint_every,
             seed: self.seed,
-            test_statistics: match self.test_statistics {
-                StatisticsArg::Cloud => TestStatistics::Cloud,
-                StatisticsArg::Running => TestStatistics::Running,
-            },
+            test_statistics: self.test_statistics.into(),
         })
     }
 }
