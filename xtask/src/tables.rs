@@ -16,6 +16,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
+use rgm_geom::icp::IcpConfig;
 use rgm_model::evaluate::{evaluate_pair, table_header, table_row};
 use rgm_model::render::{correct_fraction, correspondence_figure, registration_figure};
 use rgm_model::weights::{weights_dir, Manifest, ModelEntry};
@@ -198,7 +199,8 @@ fn test_shapes(dataset: &ModelNet40, set: TestSet, limit: Option<usize>) -> Vec<
 }
 
 /// The methods of the tables of `set`: ICP and FGR (identity initialisation, Open3D's
-/// settings; spec §6), then every model of the manifest trained for `set`.
+/// settings; spec §6) and FGR refined by ICP, then every model of the manifest trained for
+/// `set`, alone and refined by ICP (`NAME+icp`, not part of the ablation).
 fn candidates(set: TestSet, manifest: &Manifest) -> Result<Vec<Candidate>> {
     let mut list = vec![
         Candidate {
@@ -213,15 +215,29 @@ fn candidates(set: TestSet, manifest: &Manifest) -> Result<Vec<Candidate>> {
             variant: None,
             method: Method::fgr(),
         },
+        Candidate {
+            name: "fgr+icp".into(),
+            stem: "fgr-icp".into(),
+            variant: None,
+            method: Method::fgr().refined(IcpConfig::default()),
+        },
     ];
     for entry in models_for(manifest, set) {
+        let method = entry
+            .method(&weights_dir())
+            .with_context(|| format!("loading the model {}", entry.name))?;
+        let stem = format!("{}-{}pairs", entry.name, entry.pairs_seen);
+        list.push(Candidate {
+            name: format!("{}+icp", entry.name),
+            stem: format!("{stem}-icp"),
+            variant: None,
+            method: method.clone().refined(IcpConfig::default()),
+        });
         list.push(Candidate {
             name: entry.name.clone(),
-            stem: format!("{}-{}pairs", entry.name, entry.pairs_seen),
+            stem,
             variant: Some(variant_name(entry)),
-            method: entry
-                .method(&weights_dir())
-                .with_context(|| format!("loading the model {}", entry.name))?,
+            method,
         });
     }
     Ok(list)
@@ -343,7 +359,10 @@ impl Run {
                 correspondence_figure(&pair.correspondence, &pair.correspondence.pairs, 36)?
                     .write_png(&truth)?;
             }
-            if let Method::Rgm(registrar) = &candidate.method {
+            // The network's correspondences; a refined model's are its plain twin's.
+            if let (Method::Rgm(registrar), false) =
+                (&candidate.method, candidate.method.is_refined())
+            {
                 let mut registrar = registrar.clone();
                 // A failure leaves no correspondences: an empty matrix, 0 % correct.
                 let _ = registrar.register(&pair.source, &pair.target);
