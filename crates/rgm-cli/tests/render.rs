@@ -154,9 +154,10 @@ fn a_transform_file_with_missing_numbers_is_refused_clearly() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-#[test]
-fn the_matrix_needs_rgm_and_says_so() {
-    let dir = scratch("matrix");
+/// `rgm render` of the known pair with `method`, asking for the correspondence matrix against
+/// the true pose: the scratch folder (clouds.png, matrix.png) and the command's output.
+fn render_matrix(name: &str, method: &str) -> (PathBuf, Output) {
+    let dir = scratch(name);
     let (src, tgt, pose) = clouds(&dir);
     let truth = dir.join("truth.txt");
     write_transform(&truth, &pose);
@@ -166,7 +167,7 @@ fn the_matrix_needs_rgm_and_says_so() {
         &src,
         &tgt,
         "--method",
-        "fgr",
+        method,
         "--out",
         &path("clouds.png"),
         "--matrix",
@@ -174,6 +175,12 @@ fn the_matrix_needs_rgm_and_says_so() {
         "--truth",
         truth.to_str().unwrap(),
     ]);
+    (dir, out)
+}
+
+#[test]
+fn the_matrix_needs_rgm_and_says_so() {
+    let (dir, out) = render_matrix("matrix", "fgr");
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("--method rgm"), "{err}");
@@ -185,24 +192,7 @@ fn the_matrix_needs_rgm_and_says_so() {
 
 #[test]
 fn the_matrix_of_the_built_in_model_is_drawn_in_blocks() {
-    let dir = scratch("rgm-matrix");
-    let (src, tgt, pose) = clouds(&dir);
-    let truth = dir.join("truth.txt");
-    write_transform(&truth, &pose);
-    let path = |name: &str| dir.join(name).to_str().unwrap().to_string();
-    let out = rgm(&[
-        "render",
-        &src,
-        &tgt,
-        "--method",
-        "rgm",
-        "--out",
-        &path("clouds.png"),
-        "--matrix",
-        &path("matrix.png"),
-        "--truth",
-        truth.to_str().unwrap(),
-    ]);
+    let (dir, out) = render_matrix("rgm-matrix", "rgm");
     assert!(
         out.status.success(),
         "{}",
