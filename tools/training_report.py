@@ -76,12 +76,15 @@ def main():
     print("![learning curve](curve.svg)\n")
     print("## Validation after each epoch\n")
     if val:
-        print("| epoch | pairs seen | pairs | loss | matching accuracy | MIE(R) ° | MIE(t) | recall |")
-        print("|---|---|---|---|---|---|---|---|")
+        print("| epoch | pairs seen | pairs | loss | matching accuracy | MIE(R) ° | MIE(t) | recall "
+              "| recall after ICP |")
+        print("|---|---|---|---|---|---|---|---|---|")
         for r in val:
+            # Validations logged before rgm measured the refined recall have none.
+            refined = f"{100 * r['recall_refined']:.2f} %" if "recall_refined" in r else "—"
             print(f"| {r['epoch'] + 1} | {r['pairs_seen']} | {r['pairs']} | {r['loss']:.4f} | "
                   f"{100 * r['match_accuracy']:.2f} % | {r['mie_r_deg']:.2f} | {r['mie_t']:.4f} | "
-                  f"{100 * r['recall']:.2f} % |")
+                  f"{100 * r['recall']:.2f} % | {refined} |")
     else:
         print("No epoch finished yet.")
     print("\n## Training loss (mean over the batches since the previous checkpoint)\n")
