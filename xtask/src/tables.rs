@@ -792,6 +792,24 @@ mod tests {
     }
 
     #[test]
+    fn fgr_refined_by_icp_is_a_row_of_the_partial_tables_only() {
+        let manifest: Manifest = serde_json::from_value(serde_json::json!({"models": []})).unwrap();
+        let names = |set: TestSet| {
+            let list = candidates(set, &manifest).unwrap();
+            list.iter()
+                .map(|c| (c.name.clone(), c.method.name()))
+                .collect::<Vec<_>>()
+        };
+        let partial = names(TestSet::ALL[0]);
+        assert_eq!(partial.last().unwrap(), &("fgr+icp".to_string(), "fgr+icp"));
+        assert_eq!(names(TestSet::ALL[1]), partial);
+        assert_eq!(
+            names(TestSet::ALL[2]),
+            [("icp".to_string(), "icp"), ("fgr".to_string(), "fgr")]
+        );
+    }
+
+    #[test]
     fn per_pair_files_are_read_back_line_by_line() {
         let dir = std::env::temp_dir().join(format!("xtask-tables-{}", std::process::id()));
         fs::create_dir_all(&dir).unwrap();
