@@ -107,8 +107,9 @@ pub struct MethodArgs {
     /// before [default: 2, as in the paper's tables].
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
     passes: Option<u16>,
-    /// Refine the transform of RGM or FGR with point-to-point ICP on the full clouds
-    /// (correspondences closer than 0.1 in the unit-sphere frame, at most 30 iterations).
+    /// Refine the transform of RGM or FGR with point-to-point ICP on the full clouds (pairs
+    /// closer than 0.1, at most 30 iterations; RGM measures 0.1 in its unit-sphere frame, FGR
+    /// in the clouds' own units, like its own radii, which suit unit-sized shapes).
     #[arg(long)]
     refine: bool,
 }

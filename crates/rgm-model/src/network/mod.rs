@@ -235,9 +235,10 @@ impl<T: Element> Rgm<T> {
     }
 
     /// The reverse pass (Y, X) of the pass (X, Y) held in `forward`, into `reverse`: the C̃
-    /// (M, N) that [`Rgm::forward_from_features`]`(fy, fx)` gives, bit for bit, with block 0's edges and graph convolutions (its transformer, the widest layers)
-    /// taken from `forward` instead of recomputed ([`Block::forward_swapped`] says why that
-    /// is exact). No backward follows such a pass.
+    /// (M, N) that [`Rgm::forward_from_features`]`(fy, fx)` gives, bit for bit, with block 0's
+    /// edges and graph convolutions (its transformer, the widest layers) taken from `forward`
+    /// instead of recomputed ([`Block::forward_swapped`] says why that is exact). No backward
+    /// follows such a pass.
     pub fn forward_reverse(&self, forward: &RgmCache<T>, reverse: &mut RgmCache<T>) -> Result<()> {
         let Some(first) = forward.blocks.first() else {
             return Err(NetworkError::NoForwardPass);
