@@ -16,7 +16,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
-use rgm_geom::icp::IcpConfig;
+use rgm_geom::refine::RefineConfig;
 use rgm_model::evaluate::{evaluate_pair, table_header, table_row};
 use rgm_model::render::{correct_fraction, correspondence_figure, registration_figure};
 use rgm_model::weights::{weights_dir, Manifest, ModelEntry};
@@ -223,7 +223,7 @@ fn candidates(set: TestSet, manifest: &Manifest) -> Result<Vec<Candidate>> {
             name: "fgr+icp".into(),
             stem: "fgr-icp".into(),
             variant: None,
-            method: Method::fgr().refined(IcpConfig::default()),
+            method: Method::fgr().refined(RefineConfig::default()),
         });
     }
     for entry in models_for(manifest, set) {
@@ -235,7 +235,7 @@ fn candidates(set: TestSet, manifest: &Manifest) -> Result<Vec<Candidate>> {
             name: format!("{}+icp", entry.name),
             stem: format!("{stem}-icp"),
             variant: None,
-            method: method.clone().refined(IcpConfig::default()),
+            method: method.clone().refined(RefineConfig::default()),
         });
         list.push(Candidate {
             name: entry.name.clone(),

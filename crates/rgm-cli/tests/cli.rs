@@ -68,6 +68,7 @@ fn register_recovers_a_known_pose_as_json() {
         tgt.to_str().unwrap(),
         "--method",
         "fgr",
+        "--no-refine",
         "--json",
         "--out",
         aligned.to_str().unwrap(),
@@ -199,7 +200,13 @@ fn rgm_passes_are_an_option() {
     let (src, tgt) = (src.to_str().unwrap(), tgt.to_str().unwrap());
     for passes in ["1", "3"] {
         let out: serde_json::Value = serde_json::from_str(&stdout(&rgm(&[
-            "register", src, tgt, "--json", "--method", "rgm", "--passes", passes,
+            "register",
+            src,
+            tgt,
+            "--json",
+            "--no-refine",
+            "--passes",
+            passes,
         ])))
         .unwrap();
         assert_eq!(out["iterations"].to_string(), passes, "{out}");
@@ -283,14 +290,12 @@ fn register_runs_rgm_with_the_built_in_model() {
     let dir = scratch("builtin");
     let (src, tgt) = known_pair(&dir);
     let (src, tgt) = (src.to_str().unwrap(), tgt.to_str().unwrap());
-    let default: serde_json::Value =
-        serde_json::from_str(&stdout(&rgm(&["register", src, tgt, "--json"]))).unwrap();
-    assert_eq!(
-        default["method"], "fgr",
-        "FGR until the built-in model beats it"
-    );
     let plain: serde_json::Value = serde_json::from_str(&stdout(&rgm(&[
-        "register", src, tgt, "--json", "--method", "rgm",
+        "register",
+        src,
+        tgt,
+        "--json",
+        "--no-refine",
     ])))
     .unwrap();
     assert_eq!(plain["method"], "rgm");
@@ -298,11 +303,18 @@ fn register_runs_rgm_with_the_built_in_model() {
     // Matched on 384 of the 1,024 points: at most 384 one-to-one correspondences.
     let used = plain["correspondences"].as_u64().unwrap();
     assert!((3..=384).contains(&used), "{plain}");
-    let refined: serde_json::Value = serde_json::from_str(&stdout(&rgm(&[
+    // The default: RGM refined by ICP (`--refine` says the same).
+    let refined: serde_json::Value =
+        serde_json::from_str(&stdout(&rgm(&["register", src, tgt, "--json"]))).unwrap();
+    assert_eq!(
+        (&refined["method"], &refined["refined"]),
+        (&"rgm+icp".into(), &true.into())
+    );
+    let explicit = stdout(&rgm(&[
         "register", src, tgt, "--json", "--method", "rgm", "--refine",
-    ])))
-    .unwrap();
-    assert_eq!(refined["refined"], true);
+    ]));
+    let explicit: serde_json::Value = serde_json::from_str(&explicit).unwrap();
+    assert_eq!(explicit["transform"], refined["transform"]);
     assert_eq!(refined["correspondences"], plain["correspondences"]);
     let residual = known_pose().inverse().compose(&parse_transform(&refined));
     assert!(

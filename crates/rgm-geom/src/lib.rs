@@ -21,6 +21,7 @@ pub mod kabsch;
 pub mod knn;
 pub mod metrics;
 pub mod normals;
+pub mod refine;
 pub mod registration;
 pub mod transform;
 

@@ -95,7 +95,7 @@ impl RegistrationResult {
 mod tests {
     use super::*;
     use crate::testing::airplane;
-    use crate::{fgr, icp, PointCloud, Result};
+    use crate::{fgr, icp, refine, PointCloud, Result};
     use nalgebra::{Matrix3, Vector3};
     use rand::{rngs::StdRng, SeedableRng};
     use rand_distr::{Distribution, Normal};
@@ -164,6 +164,13 @@ mod tests {
             let results = [
                 icp::register(&cloud, &cloud, &icp::IcpConfig::default()).unwrap(),
                 fgr::register(&cloud, &cloud, &fgr::FgrConfig::default()).unwrap(),
+                refine::refine(
+                    &cloud,
+                    &cloud,
+                    &RigidTransform::identity(),
+                    &refine::RefineConfig::default(),
+                )
+                .unwrap(),
             ];
             for r in results {
                 let m = r.t_target_source.to_matrix4();

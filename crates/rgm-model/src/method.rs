@@ -5,6 +5,7 @@ use std::time::Instant;
 
 use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::icp::{self, IcpConfig};
+use rgm_geom::refine::{self, RefineConfig};
 use rgm_geom::{GeomError, PointCloud, RegistrationResult};
 use rgm_match::MatchError;
 
@@ -45,8 +46,12 @@ pub enum Method {
     Icp(IcpConfig),
     /// Fast Global Registration on FPFH features.
     Fgr(FgrConfig),
-    /// FGR, then point-to-point ICP from FGR's transform (the classical coarse-to-fine pair).
-    FgrIcp { fgr: FgrConfig, icp: IcpConfig },
+    /// FGR, then the ICP refinement of [`rgm_geom::refine`] from FGR's transform (the
+    /// classical coarse-to-fine pair).
+    FgrRefined {
+        fgr: FgrConfig,
+        refine: RefineConfig,
+    },
     /// The RGM network and the test-time procedure of spec §4.
     Rgm(Box<RgmRegistrar>),
 }
@@ -81,26 +86,26 @@ impl Method {
         ))))
     }
 
-    /// This method followed by point-to-point ICP from its transform (`icp.initial` is
-    /// replaced by it). RGM refines in its own frame, on the full clouds (so the distances of
-    /// `icp` are in unit-sphere units for any input); ICP, already its own refinement, is
-    /// returned unchanged.
-    pub fn refined(self, icp: IcpConfig) -> Self {
+    /// This method followed by the ICP refinement of [`rgm_geom::refine`] (trimmed
+    /// point-to-plane, coarse to fine) from its transform. RGM refines in its own frame, on the
+    /// full clouds (so the distances of `refine` are in unit-sphere units for any input); ICP,
+    /// already its own refinement, is returned unchanged.
+    pub fn refined(self, refine: RefineConfig) -> Self {
         match self {
-            Self::Fgr(fgr) | Self::FgrIcp { fgr, .. } => Self::FgrIcp { fgr, icp },
+            Self::Fgr(fgr) | Self::FgrRefined { fgr, .. } => Self::FgrRefined { fgr, refine },
             Self::Rgm(mut registrar) => {
-                registrar.config.refine = Some(icp);
+                registrar.config.refine = Some(refine);
                 Self::Rgm(registrar)
             }
             icp_alone @ Self::Icp(_) => icp_alone,
         }
     }
 
-    /// Whether ICP refines the method's transform ([`Method::refined`]).
+    /// Whether the method's transform is refined ([`Method::refined`]).
     pub fn is_refined(&self) -> bool {
         match self {
             Self::Icp(_) | Self::Fgr(_) => false,
-            Self::FgrIcp { .. } => true,
+            Self::FgrRefined { .. } => true,
             Self::Rgm(registrar) => registrar.config.refine.is_some(),
         }
     }
@@ -111,7 +116,7 @@ impl Method {
         match self {
             Self::Icp(_) => "icp",
             Self::Fgr(_) => "fgr",
-            Self::FgrIcp { .. } => "fgr+icp",
+            Self::FgrRefined { .. } => "fgr+icp",
             Self::Rgm(_) if self.is_refined() => "rgm+icp",
             Self::Rgm(_) => "rgm",
         }
@@ -127,13 +132,9 @@ impl Method {
         let result = match self {
             Self::Icp(config) => icp::register(source, target, config)?,
             Self::Fgr(config) => fgr::register(source, target, config)?,
-            Self::FgrIcp { fgr, icp } => {
+            Self::FgrRefined { fgr, refine } => {
                 let coarse = fgr::register(source, target, fgr)?;
-                let config = IcpConfig {
-                    initial: coarse.t_target_source,
-                    ..*icp
-                };
-                let fine = icp::register(source, target, &config)?;
+                let fine = refine::refine(source, target, &coarse.t_target_source, refine)?;
                 RegistrationResult {
                     iterations: coarse.iterations + fine.iterations,
                     ..fine

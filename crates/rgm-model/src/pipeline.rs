@@ -14,8 +14,8 @@ use std::time::Instant;
 
 use ndarray::Array2;
 use rand::{rngs::StdRng, SeedableRng};
-use rgm_geom::icp::{self, IcpConfig};
 use rgm_geom::kabsch::kabsch;
+use rgm_geom::refine::{self, RefineConfig};
 use rgm_geom::{Point3, PointCloud, RegistrationResult, RigidTransform, Vector3};
 use rgm_match::{hard_match, Correspondences, MatchConfig};
 
@@ -36,10 +36,10 @@ pub struct PipelineConfig {
     /// pair always gives the same result); `None` (the paper) matches on every point. A model
     /// trained on subsampled clouds matches best on as many points as it was trained on.
     pub match_points: Option<usize>,
-    /// Refine the result with point-to-point ICP on the full clouds (in the network's frame, so
-    /// distances are in unit-sphere units); its `initial` is replaced by RGM's transform.
-    /// `None` in the paper.
-    pub refine: Option<IcpConfig>,
+    /// Refine the result with [`rgm_geom::refine`] (trimmed point-to-plane ICP) on the full
+    /// clouds, in the network's frame (so distances are in unit-sphere units). `None` in the
+    /// paper.
+    pub refine: Option<RefineConfig>,
 }
 
 impl Default for PipelineConfig {
@@ -316,13 +316,9 @@ impl RgmRegistrar {
             used = found.pairs().to_vec();
         }
         let mut iterations = self.config.passes;
-        if let Some(refine) = &self.config.refine {
-            let icp_config = IcpConfig {
-                initial: total,
-                ..*refine
-            };
+        if let Some(config) = &self.config.refine {
             let start = Instant::now();
-            let refined = icp::register(&source_n, &target_n, &icp_config)?;
+            let refined = refine::refine(&source_n, &target_n, &total, config)?;
             add_since(&mut self.times.refine, start);
             total = refined.t_target_source;
             iterations += refined.iterations;

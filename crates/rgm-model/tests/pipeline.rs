@@ -8,7 +8,7 @@
 use std::path::PathBuf;
 
 use ndarray::Array2;
-use rgm_geom::icp::{self, IcpConfig};
+use rgm_geom::refine::{refine, RefineConfig};
 use rgm_geom::{Point3, PointCloud, RigidTransform, Vector3};
 use rgm_match::{hard_match, MatchConfig};
 use rgm_model::network::{Config, Edges, FeaturerCache, Mode, Rgm, RgmCache, Scoring};
@@ -328,7 +328,7 @@ fn far_large_clouds_register_as_their_normalised_copies() {
 }
 
 #[test]
-fn refinement_is_icp_from_rgms_transform() {
+fn refinement_starts_from_rgms_transform() {
     let network = Rgm::<f32>::load(Config::tiny(), &fixture()).unwrap();
     let (source, target) = fixture_pair();
     let plain = PipelineConfig {
@@ -337,7 +337,7 @@ fn refinement_is_icp_from_rgms_transform() {
         ..Default::default()
     };
     let refined = PipelineConfig {
-        refine: Some(IcpConfig::default()),
+        refine: Some(RefineConfig::default()),
         ..plain.clone()
     };
     let rgm = RgmRegistrar::new(network.clone(), plain)
@@ -345,11 +345,13 @@ fn refinement_is_icp_from_rgms_transform() {
         .unwrap();
     let mut registrar = RgmRegistrar::new(network, refined);
     let both = registrar.register(&source, &target).unwrap();
-    let icp_config = IcpConfig {
-        initial: rgm.t_target_source,
-        ..IcpConfig::default()
-    };
-    let expected = icp::register(&source, &target, &icp_config).unwrap();
+    let expected = refine(
+        &source,
+        &target,
+        &rgm.t_target_source,
+        &RefineConfig::default(),
+    )
+    .unwrap();
     assert_same_transform(&both.t_target_source, &expected.t_target_source, 1e-12);
     assert_eq!(both.iterations, 1 + expected.iterations);
     assert_eq!(both.inlier_count, rgm.inlier_count);

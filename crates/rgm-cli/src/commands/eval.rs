@@ -22,7 +22,7 @@ pub struct Args {
 pub fn run(args: Args) -> Result<()> {
     let (dataset, generator) = args.data.open()?;
     let shapes = args.data.shapes(&dataset);
-    let mut method = args.method.build()?;
+    let mut method = args.method.build(false)?;
     let bar = progress(shapes.len(), method.name());
     let mut records = Vec::with_capacity(shapes.len());
     let mut recalled = 0usize;

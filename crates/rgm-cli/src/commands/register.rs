@@ -27,7 +27,7 @@ pub struct Args {
 pub fn run(args: Args) -> Result<()> {
     let source = read_point_cloud(&args.source)?;
     let target = read_point_cloud(&args.target)?;
-    let mut method = args.method.build()?;
+    let mut method = args.method.build(true)?;
     let registration = crate::register_files(
         &mut method,
         (&source, &target),
