@@ -77,14 +77,21 @@ def main():
     print("## Validation after each epoch\n")
     if val:
         print("| epoch | pairs seen | pairs | loss | matching accuracy | MIE(R) ° | MIE(t) | recall "
-              "| recall after ICP |")
+              "| recall after refinement |")
         print("|---|---|---|---|---|---|---|---|---|")
         for r in val:
-            # Validations logged before rgm measured the refined recall have none.
+            # Validations logged before rgm measured the refined recall have none; those logged
+            # before the refinement became trimmed point-to-plane ICP name no `refined_with`.
             refined = f"{100 * r['recall_refined']:.2f} %" if "recall_refined" in r else "—"
+            if "recall_refined" in r and r.get("refined_with", "point_to_point_icp") == "point_to_point_icp":
+                refined += " ¹"
             print(f"| {r['epoch'] + 1} | {r['pairs_seen']} | {r['pairs']} | {r['loss']:.4f} | "
                   f"{100 * r['match_accuracy']:.2f} % | {r['mie_r_deg']:.2f} | {r['mie_t']:.4f} | "
                   f"{100 * r['recall']:.2f} % | {refined} |")
+        if any("recall_refined" in r and "refined_with" not in r for r in val):
+            print("\n¹ Point-to-point ICP (pairs closer than 0.1, 30 iterations), rgm's refinement until "
+                  "2026-11-23; the others: trimmed point-to-plane ICP, coarse to fine (`rgm_geom::refine`, "
+                  "what `--refine` does).")
     else:
         print("No epoch finished yet.")
     print("\n## Training loss (mean over the batches since the previous checkpoint)\n")

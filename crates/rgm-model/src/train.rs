@@ -201,13 +201,27 @@ pub struct Validation {
     pub mae_t: f64,
     /// Fraction of pairs registered (spec §5: MAE(R) < 1° and MAE(t) < 0.1).
     pub recall: f64,
-    /// Fraction registered once [`rgm_geom::refine`] refines the procedure's transform on the
-    /// full pair (what `--refine` does); 0 in validations logged before it was measured, and
-    /// point-to-point ICP's in those logged before 2026-11-23 04:00 UTC (session 4).
+    /// Fraction registered once `refined_with` refines the procedure's transform on the full
+    /// pair (what `--refine` does); 0 in validations logged before it was measured.
     #[serde(default)]
     pub recall_refined: f64,
+    /// The refinement behind `recall_refined`.
+    #[serde(default)]
+    pub refined_with: Refinement,
     /// Pairs on which the test-time procedure found no correspondences.
     pub failures: usize,
+}
+
+/// The refinements `recall_refined` has been measured with, so that logs stay readable after
+/// `--refine` changed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Refinement {
+    /// Point-to-point ICP (0.1, 30 iterations): what logs without the field measured.
+    #[default]
+    PointToPointIcp,
+    /// [`rgm_geom::refine`]: trimmed point-to-plane ICP, coarse to fine.
+    TrimmedPointToPlane,
 }
 
 impl Validation {
@@ -749,6 +763,7 @@ impl Trainer {
             mae_t: m.mae_t,
             recall: m.recall,
             recall_refined: all.refined as f64 / total as f64,
+            refined_with: Refinement::TrimmedPointToPlane,
             failures: summary.failures,
         })
     }
@@ -786,6 +801,24 @@ mod tests {
     use rgm_data::Correspondence;
     use rgm_geom::euler::rotation_xyz_intrinsic;
     use rgm_geom::{Point3, PointCloud, Vector3};
+
+    #[test]
+    fn validations_logged_before_the_refinement_changed_read_as_point_to_point_icp() {
+        // Epoch 9 of runs/partial-fast, as its log holds it.
+        let old = r#"{"epoch":8,"pairs":300,"loss":2.48,"match_accuracy":0.25,"mie_r_deg":8.9,"mie_t":0.11,"mae_r_deg":4.5,"mae_t":0.05,"recall":0.23,"recall_refined":0.6,"failures":0}"#;
+        let old: Validation = serde_json::from_str(old).unwrap();
+        assert_eq!(old.refined_with, Refinement::PointToPointIcp);
+        let new = Validation {
+            refined_with: Refinement::TrimmedPointToPlane,
+            ..old
+        };
+        let line = serde_json::to_string(&new).unwrap();
+        assert!(
+            line.contains(r#""refined_with":"trimmed_point_to_plane""#),
+            "{line}"
+        );
+        assert_eq!(serde_json::from_str::<Validation>(&line).unwrap(), new);
+    }
 
     #[test]
     fn refined_recall_is_the_refinement_from_the_given_transform() {
