@@ -8,7 +8,7 @@ use rand::{rngs::StdRng, SeedableRng};
 use rgm_benches::{unit_ball_points, SIZES};
 use rgm_geom::fpfh::{features, FpfhConfig};
 use rgm_geom::normals::NormalsConfig;
-use rgm_geom::{fgr, icp, kabsch, knn_graph, Point3, PointCloud, RigidTransform};
+use rgm_geom::{fgr, icp, kabsch, knn_graph, refine, Point3, PointCloud, RigidTransform};
 
 const K: usize = 20;
 
@@ -65,6 +65,19 @@ fn registration(c: &mut Criterion) {
     group.sample_size(20);
     group.bench_function("icp", |b| {
         b.iter(|| icp::register(&source, &target, &icp::IcpConfig::default()).unwrap())
+    });
+    // The refinement from the identity: the same 45°-class start as ICP's, so every stage runs
+    // its full iterations (the worst case after a global method).
+    group.bench_function("refine", |b| {
+        b.iter(|| {
+            refine::refine(
+                &source,
+                &target,
+                &RigidTransform::identity(),
+                &refine::RefineConfig::default(),
+            )
+            .unwrap()
+        })
     });
     group.bench_function("normals_fpfh_one_cloud", |b| {
         b.iter(|| {
