@@ -263,9 +263,12 @@ impl RgmRegistrar {
     /// The transform that maps `source` onto `target`: the composition of every pass's
     /// Kabsch solution (then ICP's refinement, if configured), in the caller's frame.
     /// `inlier_count` is the number of correspondences of the last pass
-    /// ([`RgmRegistrar::correspondences`]), `inlier_rmse` their distance after the final
-    /// transform, `fitness` their share of the matched source points; `iterations` counts the
-    /// passes and ICP's iterations.
+    /// ([`RgmRegistrar::correspondences`]); `iterations` counts the passes and the refinement's
+    /// iterations. Unrefined, `inlier_rmse` is those correspondences' distance after the
+    /// transform and `fitness` their share of the matched source points; refined, both are the
+    /// refinement's score (the share of all source points with a target point closer than its
+    /// finest distance, and their RMS distance, in the caller's units): many of the network's
+    /// correspondences are wrong even when its transform is right, so their distances say little.
     pub fn register(
         &mut self,
         source: &PointCloud,
@@ -316,34 +319,40 @@ impl RgmRegistrar {
             used = found.pairs().to_vec();
         }
         let mut iterations = self.config.passes;
+        let mut refined_score = None;
         if let Some(config) = &self.config.refine {
             let start = Instant::now();
             let refined = refine::refine(&source_n, &target_n, &total, config)?;
             add_since(&mut self.times.refine, start);
             total = refined.t_target_source;
             iterations += refined.iterations;
+            refined_score = Some((refined.fitness, refined.inlier_rmse * frame.scale));
         }
         let total = frame.undo(&total);
         self.pairs = used
             .iter()
             .map(|&(i, j)| (source_idx[i], target_idx[j]))
             .collect();
-        let sum_d2: f64 = self
-            .pairs
-            .iter()
-            .map(|&(i, j)| (total.apply(&source.points[i]) - target.points[j]).norm_squared())
-            .sum();
+        let (fitness, inlier_rmse) = refined_score.unwrap_or_else(|| {
+            let sum_d2: f64 = self
+                .pairs
+                .iter()
+                .map(|&(i, j)| (total.apply(&source.points[i]) - target.points[j]).norm_squared())
+                .sum();
+            let rmse = if self.pairs.is_empty() {
+                0.0
+            } else {
+                (sum_d2 / self.pairs.len() as f64).sqrt()
+            };
+            (self.pairs.len() as f64 / x.len() as f64, rmse)
+        });
         Ok(RegistrationResult {
             t_target_source: total,
             iterations,
             converged: true,
             inlier_count: self.pairs.len(),
-            fitness: self.pairs.len() as f64 / x.len() as f64,
-            inlier_rmse: if self.pairs.is_empty() {
-                0.0
-            } else {
-                (sum_d2 / self.pairs.len() as f64).sqrt()
-            },
+            fitness,
+            inlier_rmse,
         })
     }
 }

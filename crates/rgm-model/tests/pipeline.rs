@@ -354,7 +354,11 @@ fn refinement_starts_from_rgms_transform() {
     .unwrap();
     assert_same_transform(&both.t_target_source, &expected.t_target_source, 1e-12);
     assert_eq!(both.iterations, 1 + expected.iterations);
+    // The network's correspondences, the refinement's score.
     assert_eq!(both.inlier_count, rgm.inlier_count);
+    assert!((both.fitness - expected.fitness).abs() < 1e-12);
+    assert!((both.inlier_rmse - expected.inlier_rmse).abs() < 1e-12);
+    assert!(both.inlier_rmse < rgm.inlier_rmse, "{both:?} {rgm:?}");
 }
 
 #[test]
