@@ -147,7 +147,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     let best = trainer.state().best;
     eprintln!(
-        "done: {} epochs; best weights {} (recall {:.1}%, after ICP {:.1}%)",
+        "done: {} epochs; best weights {} (recall {:.1}%, refined {:.1}%)",
         trainer.state().epoch,
         args.out.join("best.safetensors").display(),
         100.0 * best.map_or(0.0, |b| b.recall),
@@ -183,7 +183,7 @@ fn report(event: &Event, bar: &mut Option<indicatif::ProgressBar>, epochs: usize
         }
         Event::Logged(LogRecord::Validation { ref result, .. }) => eprintln!(
             "epoch {}: validation loss {:.4}, matching accuracy {:.1}%, MIE(R) {:.2}°, \
-             MIE(t) {:.4}, recall {:.1}% (after ICP {:.1}%)",
+             MIE(t) {:.4}, recall {:.1}% (refined {:.1}%)",
             result.epoch + 1,
             result.loss,
             100.0 * result.match_accuracy,
