@@ -123,7 +123,8 @@ pub struct MethodArgs {
 
 impl MethodArgs {
     /// The method these options select, with its weights loaded; refined when --refine is
-    /// given, or by `refine_by_default` unless --no-refine is (ICP is never refined).
+    /// given, or by `refine_by_default` unless --no-refine is (`Method::refined` leaves ICP as
+    /// it is).
     fn build(&self, refine_by_default: bool) -> anyhow::Result<Method> {
         let rgm_only =
             self.weights.is_some() || self.match_points.is_some() || self.passes.is_some();
@@ -168,7 +169,7 @@ impl MethodArgs {
             }
         };
         let refine = self.refine || (refine_by_default && !self.no_refine);
-        Ok(if refine && self.method != MethodArg::Icp {
+        Ok(if refine {
             method.refined(rgm_geom::refine::RefineConfig::default())
         } else {
             method

@@ -142,30 +142,26 @@ fn bad_input_names_the_file_and_the_line() {
     assert_eq!(err.matches("os error 2").count(), 1, "{err}");
 }
 
+/// The cells of the ICP row `rgm eval --method icp ARGS --data …` prints.
+fn icp_eval_row(args: &[&str]) -> Vec<String> {
+    let data = data_dir();
+    let command = [
+        &["eval", "--method", "icp"][..],
+        args,
+        &["--data", data.to_str().unwrap()],
+    ];
+    let text = stdout(&rgm(&command.concat()));
+    let row = text
+        .lines()
+        .find(|l| l.starts_with("| icp"))
+        .expect("a row for icp");
+    row.split('|').map(|c| c.trim().to_string()).collect()
+}
+
 #[test]
 fn eval_prints_the_metrics_table_whatever_the_workers() {
-    let cells = |workers: &str| {
-        let text = stdout(&rgm(&[
-            "eval",
-            "--method",
-            "icp",
-            "--setting",
-            "clean",
-            "--limit",
-            "5",
-            "--workers",
-            workers,
-            "--data",
-            data_dir().to_str().unwrap(),
-        ]));
-        let row = text
-            .lines()
-            .find(|l| l.starts_with("| icp"))
-            .expect("a row for icp");
-        row.split('|')
-            .map(|c| c.trim().to_string())
-            .collect::<Vec<_>>()
-    };
+    let cells =
+        |workers: &str| icp_eval_row(&["--setting", "clean", "--limit", "5", "--workers", workers]);
     let (one, three) = (cells("1"), cells("3"));
     assert_eq!((one[2].as_str(), one[3].as_str()), ("clean", "5"));
     // Every metric the same; only the time column (the last) may differ.
@@ -174,27 +170,7 @@ fn eval_prints_the_metrics_table_whatever_the_workers() {
 
 #[test]
 fn eval_on_the_validation_split_says_so_and_differs_from_test() {
-    let row = |split: &str| {
-        let text = stdout(&rgm(&[
-            "eval",
-            "--method",
-            "icp",
-            "--limit",
-            "2",
-            "--split",
-            split,
-            "--data",
-            data_dir().to_str().unwrap(),
-        ]));
-        let row = text
-            .lines()
-            .find(|l| l.starts_with("| icp"))
-            .unwrap()
-            .to_string();
-        row.split('|')
-            .map(|c| c.trim().to_string())
-            .collect::<Vec<_>>()
-    };
+    let row = |split: &str| icp_eval_row(&["--limit", "2", "--split", split]);
     let (val, test) = (row("validation"), row("test"));
     assert_eq!(
         (val[2].as_str(), test[2].as_str()),

@@ -85,18 +85,22 @@ pub fn refine(
     let index = KnnIndex::new(&target.points);
     let normals = estimate_normals(&target.points, &index, &config.normals); // (M,)
     let mut transform = *initial;
+    let mut moved: Vec<Point3<f64>> = Vec::with_capacity(source.len()); // (N,) source under `transform`
     let mut pairs: Vec<(usize, usize, f64)> = Vec::with_capacity(source.len()); // (P,) i, j, distance
     let mut iterations = 0;
     let mut converged = false; // whether the last stage ended on a negligible step
     'stages: for &max_d in &config.distances {
         converged = false;
         for _ in 0..config.iterations {
+            moved.clear();
+            moved.extend(source.points.iter().map(|p| transform.apply(p)));
             pairs.clear();
-            pairs.extend(source.points.iter().enumerate().filter_map(|(i, p)| {
-                index
-                    .nearest_within(&transform.apply(p), max_d)
-                    .map(|(j, d)| (i, j, d))
-            }));
+            pairs.extend(
+                moved
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, p)| index.nearest_within(p, max_d).map(|(j, d)| (i, j, d))),
+            );
             let keep = ((pairs.len() as f64 * config.trim).ceil() as usize).min(pairs.len());
             if keep < 6 {
                 break 'stages;
@@ -105,7 +109,7 @@ pub fn refine(
                 pairs.select_nth_unstable_by(keep - 1, |a, b| a.2.total_cmp(&b.2));
                 pairs.truncate(keep);
             }
-            let step = point_to_plane_step(source, target, &normals, &transform, &pairs);
+            let step = point_to_plane_step(&moved, target, &normals, &pairs);
             transform = step.compose(&transform);
             iterations += 1;
             if step_is_negligible(&step) {
@@ -130,20 +134,19 @@ pub fn refine(
 }
 
 /// The rigid step minimising the linearised point-to-plane residuals of `pairs`
-/// (source index, target index, distance) at `transform`. The normal equations are damped by
-/// 1e-9 of their mean diagonal, so that directions the pairs do not constrain (a plane slides
-/// in itself) get no motion instead of a singular solve.
+/// (moved source index, target index, distance). The normal equations are damped by 1e-9 of
+/// their mean diagonal, so that directions the pairs do not constrain (a plane slides in itself)
+/// get no motion instead of a singular solve.
 fn point_to_plane_step(
-    source: &PointCloud,
+    moved: &[Point3<f64>],
     target: &PointCloud,
     normals: &[Vector3<f64>],
-    transform: &RigidTransform,
     pairs: &[(usize, usize, f64)],
 ) -> RigidTransform {
     let mut ata = Matrix6::<f64>::zeros();
     let mut atb = Vector6::<f64>::zeros();
     for &(i, j, _) in pairs {
-        let p: Point3<f64> = transform.apply(&source.points[i]);
+        let p = moved[i];
         let n = normals[j];
         let c = p.coords.cross(&n);
         let row = Vector6::new(c.x, c.y, c.z, n.x, n.y, n.z);

@@ -261,7 +261,7 @@ impl RgmRegistrar {
     }
 
     /// The transform that maps `source` onto `target`: the composition of every pass's
-    /// Kabsch solution (then ICP's refinement, if configured), in the caller's frame.
+    /// Kabsch solution (then the refinement, if configured), in the caller's frame.
     /// `inlier_count` is the number of correspondences of the last pass
     /// ([`RgmRegistrar::correspondences`]); `iterations` counts the passes and the refinement's
     /// iterations. Unrefined, `inlier_rmse` is those correspondences' distance after the
