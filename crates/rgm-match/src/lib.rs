@@ -33,4 +33,4 @@ pub use loss::{bce_backward, bce_forward};
 pub use sinkhorn::{
     sinkhorn_backward, sinkhorn_forward, SinkhornCache, SinkhornConfig, SinkhornForm,
 };
-pub use var1::{var1_backward, var1_forward, Var1Cache, Var1Config};
+pub use var1::{var1_backward, var1_forward, Var1Config};

@@ -5,6 +5,7 @@
 //! Layering rule: rgm-model builds on rgm-geom, rgm-nn, rgm-match and rgm-data, and nothing
 //! builds on it but the `rgm` command and xtask. It owns no geometry or tensor op of its own.
 
+pub mod error;
 pub mod evaluate;
 pub mod method;
 pub mod network;
@@ -13,6 +14,7 @@ pub mod render;
 pub mod train;
 pub mod weights;
 
+pub use error::MethodError;
 pub use evaluate::{PairRecord, Summary};
-pub use method::{Method, MethodError, Registration};
+pub use method::{Method, Registration};
 pub use pipeline::{Normalisation, PipelineConfig, RgmRegistrar, StageTimes};

@@ -1,43 +1,16 @@
 //! The registration methods rgm can run, behind one interface.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::icp::{self, IcpConfig};
 use rgm_geom::refine::{self, RefineConfig};
-use rgm_geom::{GeomError, PointCloud, RegistrationResult};
-use rgm_match::MatchError;
+use rgm_geom::{PointCloud, RegistrationResult};
 
-use crate::network::{Config, NetworkError, Rgm};
+use crate::error::MethodError;
+use crate::network::{Config, Rgm};
 use crate::pipeline::{PipelineConfig, RgmRegistrar};
-
-/// Why a method found no transform.
-#[derive(Debug, thiserror::Error)]
-pub enum MethodError {
-    /// A geometric step failed (too few points, degenerate Kabsch, ...).
-    #[error(transparent)]
-    Geom(#[from] GeomError),
-    /// The network could not be built, loaded or run.
-    #[error(transparent)]
-    Network(#[from] NetworkError),
-    /// Matching failed.
-    #[error(transparent)]
-    Match(#[from] MatchError),
-    /// No correspondence survived inlier selection (and cycle consistency).
-    #[error("rgm: no correspondences found in pass {pass} (no row and column of C̃ above the inlier threshold agree)")]
-    NoCorrespondences { pass: usize },
-    /// A cloud too small for the network's neighbour graph.
-    #[error("rgm: the {cloud} cloud has {points} points to match; the network needs at least {needed} (K + 1)")]
-    TooFewPoints {
-        cloud: &'static str,
-        points: usize,
-        needed: usize,
-    },
-    /// A weights manifest could not be read or is not valid.
-    #[error("weights manifest {path}: {why}")]
-    Manifest { path: PathBuf, why: String },
-}
 
 /// A registration method with its configuration.
 #[derive(Clone, Debug)]

@@ -1,14 +1,18 @@
-//! RGM at test time (spec §4): the network's soft correspondences, inlier selection, linear
-//! assignment, cycle consistency and weighted Kabsch, iterated on the moved source.
+//! RGM at test time, the reference code's procedure (spec §4): two *chains* of passes — the
+//! source moved toward the target, and the target moved toward the source — each pass the
+//! network's soft correspondences, inlier selection, linear assignment and a weighted Kabsch
+//! that moves the chain's cloud; then cycle consistency between the two chains' last hard
+//! correspondences, and ONE weighted Kabsch of the original clouds with what survives.
 //!
 //! Around it, what real inputs need: the clouds are brought into the frame the network was
 //! trained in ([`Normalisation`]), large clouds are subsampled for matching (the transform
-//! found applies to the full clouds), and ICP may refine the result on the full clouds.
+//! found applies to the full clouds), and a refinement may follow on the full clouds.
 //!
 //! The local features of a cloud depend on that cloud alone at test time, so each is computed
-//! once and reused: the target's for every pass, both clouds' for the reverse (Y, X) pass
-//! (3 feature passes for the paper's 2 passes instead of 8). The reverse pass also reuses the
-//! forward pass's block-0 edges and graph convolutions ([`Rgm::forward_reverse`]).
+//! once per distinct cloud: X and Y once each, and each moved copy once (2 + 2(P − 1) feature
+//! passes for P passes instead of 4P). The reverse chain's first pass (Y, X) reuses the forward
+//! chain's first pass (X, Y) for block 0's edges and graph convolutions
+//! ([`Rgm::forward_reverse`]).
 
 use std::time::Instant;
 
@@ -19,16 +23,17 @@ use rgm_geom::refine::{self, RefineConfig};
 use rgm_geom::{Point3, PointCloud, RegistrationResult, RigidTransform, Vector3};
 use rgm_match::{hard_match, Correspondences, MatchConfig};
 
-use crate::method::MethodError;
+use crate::error::MethodError;
 use crate::network::{FeaturerCache, Rgm, RgmCache};
 
 /// Test-time settings; the defaults are the paper's.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PipelineConfig {
-    /// Passes of network → matching → Kabsch, each on the source moved by the passes before
-    /// (2 in the paper's tables).
+    /// Passes of network → matching → Kabsch in each chain, each on the chain's cloud moved by
+    /// the passes before (2 in the paper's tables).
     pub passes: usize,
-    /// Keep only correspondences found both from (X, Y) and from (Y, X) (on in the reference).
+    /// Run the reverse chain too and keep only the correspondences both chains end with (on in
+    /// the reference); off, the forward chain's last correspondences are used alone.
     pub cycle_consistency: bool,
     /// Rows and columns of C̃ whose sums exceed this are inliers (0.5).
     pub inlier_threshold: f64,
@@ -159,7 +164,7 @@ fn subsample(len: usize, count: Option<usize>, seed: u64) -> Vec<usize> {
 pub struct StageTimes {
     /// Normalisation, subsampling and conversion of the clouds.
     pub prepare: f64,
-    /// The local feature extractor (the target once, the moved source every pass).
+    /// The local feature extractor (each cloud once, and each chain's moved cloud).
     pub features: f64,
     /// The matching blocks (transformer edges, graph convolutions, affinity, Sinkhorn, cross
     /// convolution), forward and reverse.
@@ -191,17 +196,36 @@ pub struct RgmRegistrar {
     pub network: Rgm<f32>,
     /// Passes, cycle consistency, inlier threshold, subsampling, refinement.
     pub config: PipelineConfig,
-    source_features: FeaturerCache<f32>, // the moved matched source's features (N, C)
-    target_features: FeaturerCache<f32>, // the matched target's features (M, C), once per pair
-    forward: RgmCache<f32>,              // (X, Y) pass
-    reverse: RgmCache<f32>,              // (Y, X) pass
-    pairs: Vec<(usize, usize)>,          // the last pass's correspondences, caller's indices
+    source_features: FeaturerCache<f32>, // the matched source X's features (N, C), once per pair
+    target_features: FeaturerCache<f32>, // the matched target Y's features (M, C), once per pair
+    moved_features: FeaturerCache<f32>,  // a chain's moved cloud's features (N or M, C)
+    forward: RgmCache<f32>,              // the forward chain's pass (X', Y)
+    reverse: RgmCache<f32>,              // the reverse chain's pass (Y', X)
+    pairs: Vec<(usize, usize)>,          // the final correspondences, caller's indices
     times: StageTimes,                   // of the last registration
 }
 
 /// A cloud as the network's (N, 3) f32 input.
 pub(crate) fn as_rows(cloud: &PointCloud) -> Array2<f32> {
     Array2::from_shape_fn((cloud.len(), 3), |(i, c)| cloud.points[i][c] as f32) // (N, 3)
+}
+
+/// The two chains of spec §4.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Chain {
+    /// A copy of the source X moved toward the target Y.
+    Forward,
+    /// A copy of the target Y moved toward the source X.
+    Reverse,
+}
+
+impl Chain {
+    fn describe(self) -> &'static str {
+        match self {
+            Chain::Forward => "the forward chain (source toward target)",
+            Chain::Reverse => "the reverse chain (target toward source)",
+        }
+    }
 }
 
 impl RgmRegistrar {
@@ -212,6 +236,7 @@ impl RgmRegistrar {
             config,
             source_features: FeaturerCache::default(),
             target_features: FeaturerCache::default(),
+            moved_features: FeaturerCache::default(),
             forward: RgmCache::default(),
             reverse: RgmCache::default(),
             pairs: Vec::new(),
@@ -219,8 +244,9 @@ impl RgmRegistrar {
         }
     }
 
-    /// The hard correspondences (source index, target index) of the last registration's last
-    /// pass, as indices into the clouds given to [`RgmRegistrar::register`]. Empty before any
+    /// The final hard correspondences (source index, target index) of the last registration —
+    /// those both chains ended with (or the forward chain's, without cycle consistency) — as
+    /// indices into the clouds given to [`RgmRegistrar::register`]. Empty before any
     /// registration and after a failed one.
     pub fn correspondences(&self) -> &[(usize, usize)] {
         &self.pairs
@@ -231,44 +257,89 @@ impl RgmRegistrar {
         self.times
     }
 
-    /// The hard correspondences of one pass on the moved source `x` (N, 3) and the target
-    /// whose features are in `target_features`.
-    fn match_pass(&mut self, x: &Array2<f32>) -> Result<Correspondences, MethodError> {
+    /// Pass `pass` (from 0) of `chain` on the chain's cloud `moved` (its own cloud after the
+    /// passes before; the partner stays where it is): C̃ of (moved, partner), then its hard
+    /// correspondences (rows of `moved`, columns of the partner). Pass 0 of the reverse chain
+    /// is taken from pass 0 of the forward chain, which must be the last forward pass run.
+    fn chain_pass(
+        &mut self,
+        chain: Chain,
+        pass: usize,
+        moved: &PointCloud,
+    ) -> Result<Correspondences, MethodError> {
+        if pass > 0 {
+            let start = Instant::now();
+            self.network
+                .features(as_rows(moved).view(), &mut self.moved_features)?;
+            add_since(&mut self.times.features, start);
+        }
+        let start = Instant::now();
+        let (own, partner) = match chain {
+            Chain::Forward => (&self.source_features, &self.target_features),
+            Chain::Reverse => (&self.target_features, &self.source_features),
+        };
+        let own = if pass > 0 { &self.moved_features } else { own };
+        let (fo, fp) = (own.features.view(), partner.features.view()); // (N', C), (M', C)
+        let cache = match (chain, pass) {
+            (Chain::Forward, _) => {
+                self.network
+                    .forward_from_features(fo, fp, &mut self.forward)?;
+                &self.forward
+            }
+            (Chain::Reverse, 0) => {
+                self.network
+                    .forward_reverse(&self.forward, &mut self.reverse)?;
+                &self.reverse
+            }
+            (Chain::Reverse, _) => {
+                self.network
+                    .forward_from_features(fo, fp, &mut self.reverse)?;
+                &self.reverse
+            }
+        };
+        add_since(&mut self.times.blocks, start);
+        let start = Instant::now();
         let matching = MatchConfig {
             inlier_threshold: self.config.inlier_threshold,
         };
-        let start = Instant::now();
-        self.network.features(x.view(), &mut self.source_features)?;
-        add_since(&mut self.times.features, start);
-        let fx = self.source_features.features.view(); // (N, C)
-        let fy = self.target_features.features.view(); // (M, C)
-        let start = Instant::now();
-        self.network
-            .forward_from_features(fx, fy, &mut self.forward)?;
-        if self.config.cycle_consistency {
-            self.network
-                .forward_reverse(&self.forward, &mut self.reverse)?;
-        }
-        add_since(&mut self.times.blocks, start);
-        let start = Instant::now();
-        let mut found = hard_match(self.forward.c_soft(), &matching)?;
-        if self.config.cycle_consistency {
-            let reverse = hard_match(self.reverse.c_soft(), &matching)?;
-            found = found.cycle_consistent(&reverse)?;
-        }
+        let found = hard_match(cache.c_soft(), &matching)?;
         add_since(&mut self.times.matching, start);
+        if found.pairs().is_empty() {
+            return Err(MethodError::NoCorrespondences {
+                stage: format!("pass {} of {}", pass + 1, chain.describe()),
+            });
+        }
         Ok(found)
     }
 
-    /// The transform that maps `source` onto `target`: the composition of every pass's
-    /// Kabsch solution (then the refinement, if configured), in the caller's frame.
-    /// `inlier_count` is the number of correspondences of the last pass
-    /// ([`RgmRegistrar::correspondences`]); `iterations` counts the passes and the refinement's
-    /// iterations. Unrefined, `inlier_rmse` is those correspondences' distance after the
-    /// transform and `fitness` their share of the matched source points; refined, both are the
-    /// refinement's score (the share of all source points with a target point closer than its
-    /// finest distance, and their RMS distance, in the caller's units): many of the network's
-    /// correspondences are wrong even when its transform is right, so their distances say little.
+    /// The weighted Kabsch of spec §4 that maps `a[i]` onto `b[j]` for each pair (i, j) (the
+    /// weights, H's row sums, are one per pair).
+    fn kabsch_of(
+        &mut self,
+        a: &PointCloud,
+        b: &PointCloud,
+        pairs: &[(usize, usize)],
+    ) -> Result<RigidTransform, MethodError> {
+        let start = Instant::now();
+        let (from, to): (Vec<Point3<f64>>, Vec<Point3<f64>>) = pairs
+            .iter()
+            .map(|&(i, j)| (a.points[i], b.points[j]))
+            .unzip();
+        let solved = kabsch(&from, &to, &vec![1.0; from.len()])?;
+        add_since(&mut self.times.kabsch, start);
+        Ok(solved)
+    }
+
+    /// The transform that maps `source` onto `target` (spec §4): the weighted Kabsch of the
+    /// matched clouds with the correspondences both chains end with, then the refinement, if
+    /// configured, in the caller's frame. `inlier_count` is the number of those
+    /// correspondences ([`RgmRegistrar::correspondences`]); `iterations` counts the passes of a
+    /// chain and the refinement's iterations. Unrefined, `inlier_rmse` is those
+    /// correspondences' distance after the transform and `fitness` their share of the matched
+    /// source points; refined, both are the refinement's score (the share of all source points
+    /// with a target point closer than its finest distance, and their RMS distance, in the
+    /// caller's units): many of the network's correspondences are wrong even when its transform
+    /// is right, so their distances say little.
     pub fn register(
         &mut self,
         source: &PointCloud,
@@ -276,6 +347,11 @@ impl RgmRegistrar {
     ) -> Result<RegistrationResult, MethodError> {
         self.pairs.clear();
         self.times = StageTimes::default();
+        if self.config.passes == 0 {
+            return Err(MethodError::InvalidConfig {
+                why: "passes must be at least 1".into(),
+            });
+        }
         let start = Instant::now();
         let frame = Normalisation::of_pair(source, target);
         let (source_n, target_n) = (frame.source(source), frame.target(target));
@@ -292,32 +368,66 @@ impl RgmRegistrar {
                 });
             }
         }
-        let y_rows = as_rows(&y); // (M, 3)
+        let estimate = estimated_peak_bytes(
+            self.network.config(),
+            x.len(),
+            y.len(),
+            self.config.cycle_consistency,
+        );
+        if estimate > 1 << 30 {
+            if let Some(available) = available_memory().filter(|&a| estimate > a) {
+                return Err(MethodError::TooMuchMemory {
+                    points: (x.len(), y.len()),
+                    estimate,
+                    available,
+                });
+            }
+        }
+        let (x_rows, y_rows) = (as_rows(&x), as_rows(&y)); // (N, 3), (M, 3)
         add_since(&mut self.times.prepare, start);
         let start = Instant::now();
         self.network
+            .features(x_rows.view(), &mut self.source_features)?;
+        self.network
             .features(y_rows.view(), &mut self.target_features)?;
         add_since(&mut self.times.features, start);
-        let mut total = RigidTransform::identity();
-        let mut used: Vec<(usize, usize)> = Vec::new();
+        // The chains advance side by side: pass 0 of the reverse chain reuses pass 0 of the
+        // forward chain. Only the last pass's correspondences leave a chain.
+        let (mut moved_x, mut moved_y) = (x.clone(), y.clone());
+        let mut ends = (None, None); // (forward chain's H (N, M), reverse chain's H (M, N))
         for pass in 0..self.config.passes {
-            let moved = x.transformed(&total);
-            let found = self.match_pass(&as_rows(&moved))?;
-            if found.pairs().is_empty() {
-                return Err(MethodError::NoCorrespondences { pass: pass + 1 });
+            let last = pass + 1 == self.config.passes;
+            let found = self.chain_pass(Chain::Forward, pass, &moved_x)?;
+            if !last {
+                let step = self.kabsch_of(&moved_x, &y, found.pairs())?;
+                moved_x = moved_x.transformed(&step);
             }
-            let src: Vec<Point3<f64>> = found
-                .pairs()
-                .iter()
-                .map(|&(i, _)| moved.points[i])
-                .collect();
-            let tgt: Vec<Point3<f64>> = found.pairs().iter().map(|&(_, j)| y.points[j]).collect();
-            let start = Instant::now();
-            let step = kabsch(&src, &tgt, &vec![1.0; src.len()])?;
-            add_since(&mut self.times.kabsch, start);
-            total = step.compose(&total);
-            used = found.pairs().to_vec();
+            ends.0 = Some(found);
+            if self.config.cycle_consistency {
+                let found = self.chain_pass(Chain::Reverse, pass, &moved_y)?;
+                if !last {
+                    let step = self.kabsch_of(&moved_y, &x, found.pairs())?;
+                    moved_y = moved_y.transformed(&step);
+                }
+                ends.1 = Some(found);
+            }
         }
+        let found = match ends {
+            (Some(forward), Some(reverse)) => {
+                let start = Instant::now();
+                let kept = forward.cycle_consistent(&reverse)?;
+                add_since(&mut self.times.matching, start);
+                kept
+            }
+            (Some(forward), None) => forward,
+            (None, _) => unreachable!("passes ≥ 1 was checked"),
+        };
+        if found.pairs().is_empty() {
+            return Err(MethodError::NoCorrespondences {
+                stage: "cycle consistency (the two chains end with no common pair)".into(),
+            });
+        }
+        let mut total = self.kabsch_of(&x, &y, found.pairs())?;
         let mut iterations = self.config.passes;
         let mut refined_score = None;
         if let Some(config) = &self.config.refine {
@@ -329,7 +439,8 @@ impl RgmRegistrar {
             refined_score = Some((refined.fitness, refined.inlier_rmse * frame.scale));
         }
         let total = frame.undo(&total);
-        self.pairs = used
+        self.pairs = found
+            .pairs()
             .iter()
             .map(|&(i, j)| (source_idx[i], target_idx[j]))
             .collect();
@@ -339,11 +450,7 @@ impl RgmRegistrar {
                 .iter()
                 .map(|&(i, j)| (total.apply(&source.points[i]) - target.points[j]).norm_squared())
                 .sum();
-            let rmse = if self.pairs.is_empty() {
-                0.0
-            } else {
-                (sum_d2 / self.pairs.len() as f64).sqrt()
-            };
+            let rmse = (sum_d2 / self.pairs.len() as f64).sqrt();
             (self.pairs.len() as f64 / x.len() as f64, rmse)
         });
         Ok(RegistrationResult {

@@ -482,7 +482,8 @@ impl Trainer {
 
     /// Trains until the configured number of epochs is done, validating after each epoch and
     /// checkpointing as it goes. `dataset` must be the one the run started on. When `on_event`
-    /// answers `Break` to a batch, the run saves a checkpoint there and returns (a later
+    /// answers `Break` to a batch, the run saves a checkpoint there and returns; to an epoch's
+    /// validation record, it returns after that epoch's checkpoint (either way a later
     /// [`Trainer::open`] + `run` goes on from it exactly as if never stopped).
     pub fn run(
         &mut self,
@@ -588,7 +589,9 @@ impl Trainer {
             };
             self.log(&record)?;
             self.checkpoint()?;
-            let _ = on_event(Event::Logged(record));
+            if on_event(Event::Logged(record)).is_break() {
+                return Ok(());
+            }
         }
         Ok(())
     }

@@ -14,7 +14,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::method::{Method, MethodError};
+use crate::error::MethodError;
+use crate::method::Method;
 use crate::network::{Config, Edges, Rgm, Scoring, TestStatistics};
 use crate::pipeline::{PipelineConfig, RgmRegistrar};
 
@@ -41,6 +42,18 @@ pub enum Variant {
     Var1,
     /// Var2: full connection instead of transformer edges.
     Var2,
+}
+
+impl Variant {
+    /// `config` with this variant's scoring and edges (spec §2.7).
+    pub fn apply(self, mut config: Config) -> Config {
+        match self {
+            Variant::Rgm => {}
+            Variant::Var1 => config.scoring = Scoring::Var1,
+            Variant::Var2 => config.edges = Edges::Full,
+        }
+        config
+    }
 }
 
 /// One trained model of the manifest.
@@ -127,13 +140,7 @@ pub fn builtin_weights() -> &'static [u8] {
 impl ModelEntry {
     /// The network configuration: the preset's sizes with the variant's scoring and edges.
     pub fn config(&self) -> Result<Config, MethodError> {
-        let mut config = Config::preset(&self.preset)?;
-        match self.variant {
-            Variant::Rgm => {}
-            Variant::Var1 => config.scoring = Scoring::Var1,
-            Variant::Var2 => config.edges = Edges::Full,
-        }
-        Ok(config)
+        Ok(self.variant.apply(Config::preset(&self.preset)?))
     }
 
     /// The paper's test-time settings, matching on as many points as in training.

@@ -7,6 +7,7 @@ use anyhow::{Context, Result};
 use rgm_data::ModelNet40;
 use rgm_model::network::Config;
 use rgm_model::train::{Event, LogRecord, OptimizerKind, TrainConfig, Trainer};
+use rgm_model::weights::Variant;
 
 use crate::{progress, SettingArg, StatisticsArg};
 
@@ -30,12 +31,22 @@ pub struct Args {
     /// Network sizes: paper, small, fast or tiny.
     #[arg(long, default_value = "fast", value_name = "NAME")]
     preset: String,
+    /// The network: rgm, or one of the paper's ablations (spec §2.7): var1 scores pairs by
+    /// feature distance (no affinity matrix, no instance norm), var2 connects every point to
+    /// every other (no transformer edges).
+    #[arg(long, value_enum, default_value = "rgm")]
+    variant: VariantArg,
     /// Cut each cloud of a pair to at most N points for matching (0: the whole clouds).
     #[arg(long, default_value_t = 384, value_name = "N")]
     match_points: usize,
     /// Epochs in all.
     #[arg(long, default_value_t = 200)]
     epochs: usize,
+    /// Stop once epoch N is validated and saved, leaving the run's schedule (--epochs,
+    /// --milestones) as it is; running again with a larger N goes on. The training queue
+    /// (runs/train.sh) uses it to share the cores between runs.
+    #[arg(long, value_name = "N")]
+    until_epoch: Option<usize>,
     /// Pairs per optimiser step.
     #[arg(long, default_value_t = 4)]
     batch: usize,
@@ -84,6 +95,23 @@ pub struct Args {
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum VariantArg {
+    Rgm,
+    Var1,
+    Var2,
+}
+
+impl From<VariantArg> for Variant {
+    fn from(arg: VariantArg) -> Self {
+        match arg {
+            VariantArg::Rgm => Variant::Rgm,
+            VariantArg::Var1 => Variant::Var1,
+            VariantArg::Var2 => Variant::Var2,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 enum OptimizerArg {
     Sgd,
     Adam,
@@ -91,7 +119,7 @@ enum OptimizerArg {
 
 impl Args {
     fn config(&self) -> Result<TrainConfig> {
-        let network = Config::preset(&self.preset)?;
+        let network = Variant::from(self.variant).apply(Config::preset(&self.preset)?);
         let workers = self
             .workers
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
@@ -138,10 +166,20 @@ pub fn run(args: Args) -> Result<()> {
     }
     let mut bar: Option<indicatif::ProgressBar> = None;
     let epochs = trainer.config().epochs;
-    trainer.run(&dataset, &mut |event| {
-        report(&event, &mut bar, epochs);
-        ControlFlow::Continue(())
-    })?;
+    let until = args.until_epoch.unwrap_or(epochs);
+    if trainer.state().epoch < until {
+        trainer.run(&dataset, &mut |event| {
+            report(&event, &mut bar, epochs);
+            match event {
+                Event::Logged(LogRecord::Validation { ref result, .. })
+                    if result.epoch + 1 >= until =>
+                {
+                    ControlFlow::Break(())
+                }
+                _ => ControlFlow::Continue(()),
+            }
+        })?;
+    }
     if let Some(bar) = bar.take() {
         bar.finish_and_clear();
     }

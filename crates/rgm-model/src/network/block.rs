@@ -10,7 +10,7 @@ use rand::Rng;
 use rgm_match::{
     sinkhorn_backward, sinkhorn_forward, var1_backward, var1_forward, Affinity, AffinityCache,
     AffinityConfig, InstNorm, InstNormCache, InstNormConfig, SinkhornCache, SinkhornConfig,
-    Var1Cache, Var1Config,
+    Var1Config,
 };
 use rgm_nn::param::{join_name, ParamViewMut};
 use rgm_nn::{
@@ -103,11 +103,10 @@ pub struct BlockCache<T> {
     transformer: EdgeTransformerCache<T>,
     x: Side<T>,
     y: Side<T>,
-    s: Array2<T>,      // (N, M) affinity (AIS) or exp(0.5 − D) (Var1)
-    s_norm: Array2<T>, // (N, M) instance-normalised affinity (AIS)
+    s: Array2<T>,      // (N, M) affinity (AIS)
+    s_norm: Array2<T>, // (N, M) Sinkhorn's log-domain input: instance-normalised affinity (AIS) or 0.5 − D² (Var1)
     affinity: AffinityCache<T>,
     inst_norm: InstNormCache<T>,
-    var1: Var1Cache<T>,
     sinkhorn: SinkhornCache<T>,
     /// (N, M) the block's soft correspondence C̃.
     pub c_soft: Array2<T>,
@@ -130,7 +129,6 @@ impl<T: Element> BlockCache<T> {
             s_norm: Array2::zeros((n, m)),
             affinity: AffinityCache::new(n, q),
             inst_norm: InstNormCache::default(),
-            var1: Var1Cache::new(n, m),
             sinkhorn: SinkhornCache::new(n, m, &sinkhorn),
             c_soft: Array2::zeros((n, m)),
             dc: Array2::zeros((n, m)),
@@ -153,6 +151,14 @@ impl<T: Element> BlockCache<T> {
             (self.x.fp.view(), self.y.fp.view())
         }
     }
+}
+
+/// Var2's adjacency (spec §2.7): the fully connected graph without self-loops, A = 1 − I, its
+/// columns normalised: 1/(R − 1) off the diagonal, 0 on it. `adj` is (R, R), R > 1.
+fn full_adjacency<T: Element>(adj: &mut Array2<T>) {
+    let r = adj.nrows();
+    adj.fill(T::one() / T::from_f64((r - 1) as f64));
+    adj.diag_mut().fill(T::zero());
 }
 
 fn sinkhorn_config(config: &Config) -> SinkhornConfig {
@@ -304,7 +310,6 @@ impl<T: Element> Block<T> {
         fy: ArrayView2<'_, T>,
         cache: &mut BlockCache<T>,
     ) -> Result<()> {
-        let n = fx.nrows();
         let (x, y) = (&mut cache.x, &mut cache.y);
         match &self.transformer {
             Some(tf) => {
@@ -313,9 +318,8 @@ impl<T: Element> Block<T> {
                 edges_forward(y, cache.transformer.ty().view())?;
             }
             None => {
-                // All-ones adjacency, columns normalised: 1/R everywhere.
-                x.adj_norm.fill(T::one() / T::from_f64(n as f64));
-                y.adj_norm.fill(T::one() / T::from_f64(fy.nrows() as f64));
+                full_adjacency(&mut x.adj_norm);
+                full_adjacency(&mut y.adj_norm);
             }
         }
         self.gconv_forward(x, fx)?;
@@ -348,7 +352,6 @@ impl<T: Element> Block<T> {
                 x.fp.view(),
                 y.fp.view(),
                 &Var1Config::default(),
-                &mut cache.var1,
             )?,
         }
         sinkhorn_forward(
@@ -462,8 +465,6 @@ impl<T: Element> Block<T> {
                 cache.ds_norm.view(),
                 x.fp.view(),
                 y.fp.view(),
-                cache.s_norm.view(),
-                &cache.var1,
             )?,
         }
         self.gconv_backward(dfy.view_mut(), y, fy)?;

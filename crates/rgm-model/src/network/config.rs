@@ -8,8 +8,8 @@ use serde::{Deserialize, Serialize};
 pub enum Scoring {
     /// AIS: S = F'_X ((W + Wᵀ)/2) F'_Yᵀ, instance norm, Sinkhorn (spec §2.4).
     Ais,
-    /// "Var1": S_ij = exp(−(‖F'_Xi − F'_Yj‖ − 0.5)), then the same Sinkhorn; no affinity matrix
-    /// and no instance norm (spec §2.7).
+    /// "Var1": the Sinkhorn's log-domain input is −(‖F'_Xi − F'_Yj‖² − 0.5) (squared distance);
+    /// no affinity matrix and no instance norm (spec §2.7).
     Var1,
 }
 
@@ -18,8 +18,8 @@ pub enum Scoring {
 pub enum Edges {
     /// The transformer edge generator: E = softmax_rows(T Tᵀ / √C) (spec §2.2).
     Transformer,
-    /// "Var2": full connection, an all-ones adjacency (1/N per entry once its columns are
-    /// normalised); no transformer parameters (spec §2.7).
+    /// "Var2": full connection without self-loops, A = 1 − I (1/(N − 1) off the diagonal once
+    /// its columns are normalised); no transformer parameters (spec §2.7).
     Full,
 }
 
