@@ -210,6 +210,38 @@ pub(crate) fn as_rows(cloud: &PointCloud) -> Array2<f32> {
     Array2::from_shape_fn((cloud.len(), 3), |(i, c)| cloud.points[i][c] as f32) // (N, 3)
 }
 
+/// The peak memory, in bytes, of registering N source and M target matched points with a
+/// network of `config` (both chains when `cycle_consistency`).
+///
+/// Counted from the buffers a pass keeps (f32): per block, each side's six R×R adjacency
+/// buffers, the attention weights of the edge transformer (H·(2N² + 2M² + 2NM)) and seven N×M
+/// matrices of scoring and Sinkhorn; one such pass cache per chain. The local features add
+/// 12 bytes per point, neighbour and channel of the feature extractor; the rest (weights,
+/// code) is a constant 100 MiB. Checked against measured peaks in docs/speed.md.
+pub fn estimated_peak_bytes(
+    config: &crate::network::Config,
+    n: usize,
+    m: usize,
+    cycle_consistency: bool,
+) -> u64 {
+    let (n, m) = (n as u64, m as u64);
+    let (h, blocks) = (config.heads as u64, config.blocks as u64);
+    let squares = n * n + m * m;
+    let per_pass = 4 * blocks * ((6 + 2 * h) * squares + (7 + 2 * h) * n * m);
+    let chains = if cycle_consistency { 2 } else { 1 };
+    let widths: u64 = config.dgcnn.iter().map(|&c| c as u64).sum::<u64>() + config.edge as u64;
+    let features = 12 * (n + m) * (config.k as u64) * widths;
+    chains * per_pass + features + (100 << 20)
+}
+
+/// The memory the system can give this process now (Linux's MemAvailable), if known.
+fn available_memory() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
 /// The two chains of spec §4.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Chain {
