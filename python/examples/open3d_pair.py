@@ -21,12 +21,17 @@ except ImportError:
 
 
 def made_up_pair():
-    """An asymmetric shape (a box with a cone on one corner) and a copy moved by a known pose."""
-    box = o3d.geometry.TriangleMesh.create_box(0.8, 0.4, 0.2)
-    cone = o3d.geometry.TriangleMesh.create_cone(radius=0.15, height=0.5)
-    cone.translate((0.65, 0.3, 0.2))
-    shape = (box + cone).translate((-0.4, -0.2, -0.2))
-    source = shape.sample_points_poisson_disk(1024, seed=1)
+    """An asymmetric shape (points on the faces of three boxes of different sizes) as an Open3D
+    cloud, and a copy moved by a known pose."""
+    rng = np.random.default_rng(1)
+    parts = []
+    for size, centre in [((0.8, 0.4, 0.2), (0, 0, 0)), ((0.2, 0.2, 0.5), (0.3, 0.1, 0.35)),
+                         ((0.3, 0.1, 0.1), (-0.35, -0.25, 0.0))]:
+        points = rng.uniform(-0.5, 0.5, (400, 3))
+        axis = rng.integers(0, 3, 400)
+        points[np.arange(400), axis] = rng.choice([-0.5, 0.5], 400)  # onto a face
+        parts.append(points * size + centre)
+    source = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.concatenate(parts)))
     pose = np.eye(4)
     pose[:3, :3] = o3d.geometry.get_rotation_matrix_from_xyz(np.radians([20, -10, 30]))
     pose[:3, 3] = (0.2, -0.1, 0.3)

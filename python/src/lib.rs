@@ -1,8 +1,7 @@
 //! `rgm._rgm`: the rgm crates behind NumPy arrays, for the Python package `rgm` (`rgm/` beside
 //! this crate), which checks and documents every argument before it reaches here: arrays come
-//! in as float64 of shape (N, 3), (4, 4) or (K, 2).
-//!
-//! Strings arrive as `String`: the limited API of Python 3.9 cannot lend `&str`.
+//! in as float64 (N, 3) clouds and (4, 4) transforms, strings as `String` (the limited API of
+//! Python 3.9 cannot lend a `&str`).
 //!
 //! The GIL is released while Rust works ([`Python::detach`]), so Python threads register pairs
 //! in parallel. Each call runs with denormals flushed on its thread (the network's Sinkhorn
