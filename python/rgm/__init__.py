@@ -94,7 +94,7 @@ def _homogeneous(rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
     return matrix
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # arrays have no single truth value to compare by
 class RegistrationResult:
     """The outcome of registering a source cloud onto a target cloud.
 
@@ -377,7 +377,7 @@ def metrics(
     return Metrics(**values)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class BenchmarkPair:
     """One ModelNet40 benchmark pair with its ground truth, as ``rgm eval`` registers it.
 
