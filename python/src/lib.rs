@@ -124,6 +124,7 @@ impl Registrar {
     /// default) and loads its weights.
     #[new]
     #[pyo3(signature = (method, refine, weights, preset, test_statistics, match_points, passes))]
+    #[allow(clippy::too_many_arguments)] // one per option of `rgm.Registrar`
     fn new(
         py: Python<'_>,
         method: String,
