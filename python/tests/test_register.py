@@ -6,6 +6,8 @@ import json
 import multiprocessing
 import pickle
 import subprocess
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -162,6 +164,29 @@ def test_threads_give_the_serial_results(data, registrar):
     for result, (_, _, truth) in zip(serial, pairs):
         angle, shift = errors(result.transformation, truth)
         assert angle < 1.0 and shift < 0.01, (angle, shift)
+
+
+def test_python_runs_while_rust_registers(airplane, registrar):
+    # Held, the GIL would keep this thread from running any Python while the other thread is
+    # in Rust: it could only run in the few milliseconds before the call enters Rust. Released,
+    # this thread keeps running throughout, also in the middle half of the call.
+    target = moved(airplane, KNOWN)
+    call = {}
+
+    def work():
+        call["start"] = time.perf_counter()
+        registrar.register(airplane, target)
+        call["end"] = time.perf_counter()
+
+    worker = threading.Thread(target=work)
+    ticks = []
+    worker.start()
+    while worker.is_alive():
+        ticks.append(time.perf_counter())
+    worker.join()
+    quarter = (call["end"] - call["start"]) / 4
+    middle = [t for t in ticks if call["start"] + quarter < t < call["end"] - quarter]
+    assert middle, f"no Python ran during the middle half of a {4 * quarter:.3f} s registration"
 
 
 def test_a_registrar_pickles_as_its_settings_for_process_pools(data):
