@@ -17,5 +17,5 @@ if [ -x target/debug/rgm ]; then
 fi
 # pytest itself (not `python -m pytest`, which would put the working folder on the path): the
 # tests import the installed package, never the source folder python/rgm.
+# pytest's summary stays the last line CI prints.
 "$venv/bin/pytest" python/tests -q
-echo "test-python: done in $((SECONDS - start)) s"
