@@ -320,7 +320,7 @@ fn rgm_options_with_another_method_are_refused() {
     for (args, says) in [
         (
             ["--method", "fgr", "--match-points", "100"],
-            "apply to --method rgm only",
+            "apply to the rgm method only",
         ),
         (["--method", "icp", "--refine", "--json"], "ICP already"),
     ] {
