@@ -6,7 +6,7 @@
 mod commands;
 mod table;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
@@ -218,8 +218,8 @@ pub struct DataArgs {
     #[arg(long)]
     unseen: bool,
     /// Use only the first N pairs.
-    #[arg(long, value_name = "N")]
-    limit: Option<usize>,
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    limit: Option<u64>,
     /// The shapes the pairs are made of: the official test split, or the validation part of
     /// the training split (for choosing settings without looking at the test pairs).
     #[arg(long, value_enum, default_value = "test")]
@@ -259,7 +259,7 @@ impl DataArgs {
             SplitArg::Validation => Split::Validation,
         };
         let mut shapes = dataset.split(split, self.unseen);
-        shapes.truncate(self.limit.unwrap_or(usize::MAX));
+        shapes.truncate(self.limit.map_or(usize::MAX, |n| n as usize));
         shapes
     }
 
@@ -294,7 +294,36 @@ pub fn progress(len: usize, what: &str) -> indicatif::ProgressBar {
     bar
 }
 
+/// Fails now, before the work, when `path` cannot be written (its folder is missing, it is a
+/// folder, permission is denied), so a long command does not lose its result at the end. The
+/// file is left as it was: opened without truncation, removed again if this created it.
+pub fn check_writable(path: &Path) -> anyhow::Result<()> {
+    let existed = path.exists();
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(path)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    if !existed {
+        std::fs::remove_file(path).with_context(|| format!("removing {}", path.display()))?;
+    }
+    Ok(())
+}
+
+/// Gives SIGPIPE its default action back (Rust ignores it, so `println!` to a closed pipe
+/// panics): `rgm register a.ply b.ply | head -1` ends rgm quietly once `head` has its line,
+/// with the status of any Unix tool stopped that way (141 in the shell), never a panic.
+fn end_quietly_on_closed_pipes() {
+    #[cfg(unix)]
+    // SAFETY: sets one signal's disposition, before any other thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 fn main() -> ExitCode {
+    end_quietly_on_closed_pipes();
     let cli = Cli::parse();
     set_up_compute_threads();
     let outcome = match cli.command {
