@@ -178,20 +178,28 @@ impl MethodArgs {
 }
 
 /// Runs `method` on the clouds read from `source_path` and `target_path`, naming both files and
-/// the method when it fails.
+/// the method when it fails. FGR's steps show as a bar (in percent) on a terminal.
 pub fn register_files(
     method: &mut Method,
     (source, target): (&rgm_geom::PointCloud, &rgm_geom::PointCloud),
     (source_path, target_path): (&std::path::Path, &std::path::Path),
 ) -> anyhow::Result<rgm_model::Registration> {
-    method.register(source, target).with_context(|| {
-        format!(
-            "{} failed on {} → {}",
-            method.name(),
-            source_path.display(),
-            target_path.display()
-        )
-    })
+    let bar = progress(100, method.name());
+    let registration = method
+        .register_with_progress(source, target, &mut |p| {
+            bar.set_position((100.0 * p.done) as u64);
+            bar.set_message(p.step);
+        })
+        .with_context(|| {
+            format!(
+                "{} failed on {} → {}",
+                method.name(),
+                source_path.display(),
+                target_path.display()
+            )
+        });
+    bar.finish_and_clear();
+    registration
 }
 
 /// The test-pair protocols of the paper (spec §1).
