@@ -100,7 +100,8 @@ impl Default for FgrConfig {
 /// Where [`register_with_progress`] is: a step and the fraction of the work done.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Progress {
-    /// `downsampling`, `features`, `matching` or `optimising`.
+    /// `downsampling`, `features`, `matching`, `optimising` or `scoring` (on the full clouds,
+    /// after a downsampling), then `done`.
     pub step: &'static str,
     /// From 0 to 1.
     pub done: f64,
@@ -127,18 +128,20 @@ pub fn register_with_progress(
     report("downsampling", 0.0);
     let small_source = downsampled(source, config.max_points);
     let small_target = downsampled(target, config.max_points);
-    report("features", 0.05);
+    // The fractions are rough shares of the time on a million points.
+    report("features", 0.15);
     let source_features = features(&small_source.points, &config.normals, &config.fpfh);
     report("features", 0.2);
     let target_features = features(&small_target.points, &config.normals, &config.fpfh);
-    report("matching", 0.35);
+    report("matching", 0.25);
     let matches = mutual_matches_reporting(&source_features, &target_features, &mut |rows| {
-        report("matching", 0.35 + 0.55 * rows)
+        report("matching", 0.25 + 0.3 * rows)
     });
-    report("optimising", 0.9);
+    report("optimising", 0.55);
     let mut result = register_matches(&small_source, &small_target, matches, config)?;
     if small_source.len() < source.len() || small_target.len() < target.len() {
         // The transform is for the full clouds; so is its score.
+        report("scoring", 0.6);
         let index = KnnIndex::new(&target.points);
         let s = score(
             &source.points,
@@ -154,7 +157,7 @@ pub fn register_with_progress(
             s,
         );
     }
-    report("optimising", 1.0);
+    report("done", 1.0);
     Ok(result)
 }
 
