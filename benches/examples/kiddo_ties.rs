@@ -48,5 +48,9 @@ fn main() {
     dup.extend((0..3000).map(|i| [0.25, i as f64 * 1e-3, (i % 7) as f64]));
     let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&dup);
     let n = tree.nearest_n::<SquaredEuclidean>(&[0.5, 0.5, 0.5], NonZero::new(20).unwrap());
-    println!("duplicates: {} neighbours at distance {}", n.len(), n[19].distance);
+    println!(
+        "duplicates: {} neighbours at distance {}",
+        n.len(),
+        n[19].distance
+    );
 }

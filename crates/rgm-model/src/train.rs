@@ -692,7 +692,7 @@ impl Trainer {
                 total: val.len(),
             });
             self.state.seconds += clock.elapsed().as_secs_f64();
-            let new_best = self.state.best.map_or(true, |best| result.beats(&best));
+            let new_best = self.state.best.is_none_or(|best| result.beats(&best));
             if new_best {
                 self.state.best = Some(result);
             }

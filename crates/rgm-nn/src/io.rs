@@ -431,7 +431,11 @@ mod tests {
         bn.weight.value = ndarray::array![1.0f32 + 2f32.powi(-8), -3.0, 0.1];
         bn.running_var = ndarray::array![0.1f32, 2.0, 3.0];
         let rounded = bn.weight.value.mapv(|v| bf16_to_f32(f32_to_bf16(v)));
-        assert_eq!(rounded, ndarray::array![1.0f32, -3.0, 0.10009765625]);
+        // 0.1 rounds up to 0x3DCD, 0.10009765625.
+        assert_eq!(
+            rounded,
+            ndarray::array![1.0f32, -3.0, f32::from_bits(0x3DCD_0000)]
+        );
         save_params(&path, &mut bn).unwrap();
         let bf16_path = temp("bf16-rewritten");
         rewrite_with_bf16(&path, &bf16_path, &|name| name == "weight").unwrap();
