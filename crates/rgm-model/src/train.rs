@@ -18,7 +18,8 @@
 //! `checkpoint/`; its files are then moved over the run's own. [`Trainer::open`] finishes a
 //! commit that a kill interrupted, drops an uncommitted one, and cuts `log.jsonl` back to the
 //! length the state records, so a run killed at any moment resumes exactly where its last
-//! commit left it, with the log it had then.
+//! commit left it, with the log it had then. The checkpoint's files are flushed to the disk
+//! before the commit, so it also survives a power cut.
 //!
 //! Pairs are made on the fly ([`PairGenerator::train_pair`], a new random pose, crop and noise
 //! every epoch), optionally cut to [`TrainConfig::match_points`] points per cloud. A batch is
@@ -453,6 +454,13 @@ fn lock_run(dir: &Path) -> Result<fs::File> {
     file.set_len(0).map_err(io_err(&path))?;
     writeln!(file, "{}", std::process::id()).map_err(io_err(&path))?;
     Ok(file)
+}
+
+/// Flushes the file or folder at `path` to the disk.
+fn sync(path: &Path) -> Result<()> {
+    fs::File::open(path)
+        .and_then(|f| f.sync_all())
+        .map_err(io_err(path))
 }
 
 /// Moves the files of a committed checkpoint (`dir/checkpoint/`) over the run's own, then
@@ -923,10 +931,19 @@ impl Trainer {
         }
         self.file_operation()?;
         write_json(&staging.join("state.json"), &self.state)?;
+        // On disk before the commit, so that it holds after a power cut too, not only a kill.
+        for name in CHECKPOINT_FILES {
+            let path = staging.join(name);
+            if path.exists() {
+                sync(&path)?;
+            }
+        }
+        sync(&staging)?;
         // The commit.
         self.file_operation()?;
         let committed = self.dir.join(COMMITTED);
         fs::rename(&staging, &committed).map_err(io_err(&committed))?;
+        sync(&self.dir)?;
         let dir = self.dir.clone();
         finish_commit(&dir, &mut || self.file_operation())
     }
