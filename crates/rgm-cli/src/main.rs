@@ -6,7 +6,7 @@
 mod commands;
 mod table;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
@@ -152,20 +152,28 @@ impl MethodArgs {
 }
 
 /// Runs `method` on the clouds read from `source_path` and `target_path`, naming both files and
-/// the method when it fails.
+/// the method when it fails. FGR's steps show as a bar (in percent) on a terminal.
 pub fn register_files(
     method: &mut Method,
     (source, target): (&rgm_geom::PointCloud, &rgm_geom::PointCloud),
     (source_path, target_path): (&std::path::Path, &std::path::Path),
 ) -> anyhow::Result<rgm_model::Registration> {
-    method.register(source, target).with_context(|| {
-        format!(
-            "{} failed on {} → {}",
-            method.name(),
-            source_path.display(),
-            target_path.display()
-        )
-    })
+    let bar = progress(100, method.name());
+    let registration = method
+        .register_with_progress(source, target, &mut |p| {
+            bar.set_position((100.0 * p.done) as u64);
+            bar.set_message(p.step);
+        })
+        .with_context(|| {
+            format!(
+                "{} failed on {} → {}",
+                method.name(),
+                source_path.display(),
+                target_path.display()
+            )
+        });
+    bar.finish_and_clear();
+    registration
 }
 
 /// The test-pair protocols of the paper (spec §1).
@@ -192,8 +200,8 @@ pub struct DataArgs {
     #[arg(long)]
     unseen: bool,
     /// Use only the first N pairs.
-    #[arg(long, value_name = "N")]
-    limit: Option<usize>,
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    limit: Option<u64>,
     /// The shapes the pairs are made of: the official test split, or the validation part of
     /// the training split (for choosing settings without looking at the test pairs).
     #[arg(long, value_enum, default_value = "test")]
@@ -233,7 +241,7 @@ impl DataArgs {
             SplitArg::Validation => Split::Validation,
         };
         let mut shapes = dataset.split(split, self.unseen);
-        shapes.truncate(self.limit.unwrap_or(usize::MAX));
+        shapes.truncate(self.limit.map_or(usize::MAX, |n| n as usize));
         shapes
     }
 
@@ -268,7 +276,36 @@ pub fn progress(len: usize, what: &str) -> indicatif::ProgressBar {
     bar
 }
 
+/// Fails now, before the work, when `path` cannot be written (its folder is missing, it is a
+/// folder, permission is denied), so a long command does not lose its result at the end. The
+/// file is left as it was: opened without truncation, removed again if this created it.
+pub fn check_writable(path: &Path) -> anyhow::Result<()> {
+    let existed = path.exists();
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(path)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    if !existed {
+        std::fs::remove_file(path).with_context(|| format!("removing {}", path.display()))?;
+    }
+    Ok(())
+}
+
+/// Gives SIGPIPE its default action back (Rust ignores it, so `println!` to a closed pipe
+/// panics): `rgm register a.ply b.ply | head -1` ends rgm quietly once `head` has its line,
+/// with the status of any Unix tool stopped that way (141 in the shell), never a panic.
+fn end_quietly_on_closed_pipes() {
+    #[cfg(unix)]
+    // SAFETY: sets one signal's disposition, before any other thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 fn main() -> ExitCode {
+    end_quietly_on_closed_pipes();
     let cli = Cli::parse();
     set_up_compute_threads();
     let outcome = match cli.command {

@@ -102,12 +102,23 @@ impl Method {
         source: &PointCloud,
         target: &PointCloud,
     ) -> Result<Registration, MethodError> {
+        self.register_with_progress(source, target, &mut |_| {})
+    }
+
+    /// [`Method::register`], telling `progress` where FGR is (for a bar on large clouds; the
+    /// other methods report nothing).
+    pub fn register_with_progress(
+        &mut self,
+        source: &PointCloud,
+        target: &PointCloud,
+        progress: &mut dyn FnMut(fgr::Progress),
+    ) -> Result<Registration, MethodError> {
         let start = Instant::now();
         let result = match self {
             Self::Icp(config) => icp::register(source, target, config)?,
-            Self::Fgr(config) => fgr::register(source, target, config)?,
+            Self::Fgr(config) => fgr::register_with_progress(source, target, config, progress)?,
             Self::FgrRefined { fgr, refine } => {
-                let coarse = fgr::register(source, target, fgr)?;
+                let coarse = fgr::register_with_progress(source, target, fgr, progress)?;
                 let fine = refine::refine(source, target, &coarse.t_target_source, refine)?;
                 RegistrationResult {
                     iterations: coarse.iterations + fine.iterations,
