@@ -1,5 +1,7 @@
 //! Helpers for the cross-crate tests.
 
+pub mod mutation;
+
 use std::path::PathBuf;
 
 use rgm_data::ModelNet40;

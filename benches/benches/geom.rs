@@ -49,6 +49,54 @@ fn knn(c: &mut Criterion) {
     group.finish();
 }
 
+/// The kNN graph of `knn_graph` on kiddo 5's `ImmutableKdTree`. kiddo orders neighbours by
+/// distance only, so ties at the k-th distance could keep any of the tied points; `knn_graph`
+/// keeps the lowest indices. So: the k + 1 nearest, and when the (k + 1)-th is as near as the
+/// k-th, every point within that distance (`within`, inclusive); then sorted by distance and
+/// index.
+fn kiddo_knn_graph(points: &[Point3<f64>], k: usize) -> Vec<usize> {
+    use kiddo::{ImmutableKdTree, SquaredEuclidean};
+    let rows: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
+    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&rows);
+    let mut graph = Vec::with_capacity(points.len() * k);
+    let qty = std::num::NonZero::new(k + 1).unwrap();
+    for (i, q) in rows.iter().enumerate() {
+        let mut row: Vec<(f64, u64)> = tree
+            .nearest_n::<SquaredEuclidean>(q, qty)
+            .into_iter()
+            .map(|n| (n.distance, n.item))
+            .collect();
+        if row.len() == k + 1 && row[k].0 == row[k - 1].0 {
+            row = tree
+                .within::<SquaredEuclidean>(q, row[k].0)
+                .into_iter()
+                .map(|n| (n.distance, n.item))
+                .collect();
+        }
+        row.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        graph.push(i);
+        graph.extend(
+            row.iter()
+                .map(|n| n.1 as usize)
+                .filter(|&j| j != i)
+                .take(k - 1),
+        );
+    }
+    graph
+}
+
+fn knn_kiddo(c: &mut Criterion) {
+    let mut group = c.benchmark_group("knn_graph_k20_kiddo5");
+    for n in SIZES {
+        let points = unit_ball_points(n, 1);
+        assert_eq!(kiddo_knn_graph(&points, K), knn_graph(&points, K).unwrap());
+        group.bench_function(BenchmarkId::from_parameter(n), |b| {
+            b.iter(|| kiddo_knn_graph(&points, K))
+        });
+    }
+    group.finish();
+}
+
 fn kabsch_717(c: &mut Criterion) {
     let source = unit_ball_points(717, 2);
     let pose = RigidTransform::random(&mut StdRng::seed_from_u64(4), 45.0, 0.5);
@@ -94,5 +142,5 @@ fn registration(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, knn, kabsch_717, registration);
+criterion_group!(benches, knn, knn_kiddo, kabsch_717, registration);
 criterion_main!(benches);

@@ -6,13 +6,13 @@
 mod commands;
 mod table;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
 use clap::{Parser, Subcommand, ValueEnum};
 use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
-use rgm_model::Method;
+use rgm_model::{Method, MethodName, MethodOptions};
 
 /// Robust point-cloud registration (RGM, CVPR 2021) and classical baselines.
 #[derive(Parser, Debug)]
@@ -81,17 +81,13 @@ impl From<StatisticsArg> for rgm_model::network::TestStatistics {
     }
 }
 
-/// Points matched per cloud with --weights unless --match-points says otherwise: the paper
-/// trains on 1,024-point clouds, and memory stays bounded on large inputs.
-const WEIGHTS_MATCH_POINTS: usize = 1024;
-
 /// The method and, for RGM, its weights and test-time options.
 #[derive(clap::Args, Debug, Clone)]
 pub struct MethodArgs {
-    /// The registration method: the RGM network with the model built into rgm unless
-    /// --weights names another.
-    #[arg(long, value_enum, default_value = "rgm")]
-    method: MethodArg,
+    /// The registration method [default: rgm, the RGM network with the model built into rgm
+    /// unless --weights names another].
+    #[arg(long, value_enum)]
+    method: Option<MethodArg>,
     /// RGM weights: a safetensors file with the authors' parameter names
     /// (`tools/reference/rgm_reference.py` documents them). Without it, RGM uses the model
     /// built into rgm (crates/rgm-model/weights/manifest.json describes it).
@@ -129,78 +125,55 @@ pub struct MethodArgs {
 
 impl MethodArgs {
     /// The method these options select, with its weights loaded; refined when --refine is
-    /// given, or by `refine_by_default` unless --no-refine is (`Method::refined` leaves ICP as
-    /// it is).
+    /// given, or by `refine_by_default` unless --no-refine is (ICP is its own refinement).
+    /// `rgm_model::MethodOptions` builds it, as it does for the Python package.
     fn build(&self, refine_by_default: bool) -> anyhow::Result<Method> {
-        let rgm_only =
-            self.weights.is_some() || self.match_points.is_some() || self.passes.is_some();
-        if self.method != MethodArg::Rgm && rgm_only {
-            anyhow::bail!(
-                "--weights, --preset, --match-points and --passes apply to --method rgm only"
-            );
-        }
-        if self.method == MethodArg::Icp && self.refine {
+        let method = match self.method {
+            None => MethodOptions::default().method,
+            Some(MethodArg::Icp) => MethodName::Icp,
+            Some(MethodArg::Fgr) => MethodName::Fgr,
+            Some(MethodArg::Rgm) => MethodName::Rgm,
+        };
+        if method == MethodName::Icp && self.refine {
             anyhow::bail!("--refine adds ICP after RGM or FGR; --method icp is ICP already");
         }
-        let method = match self.method {
-            MethodArg::Icp => Method::icp(),
-            MethodArg::Fgr => Method::fgr(),
-            MethodArg::Rgm => {
-                let mut method = match &self.weights {
-                    Some(weights) => {
-                        let preset = self.preset.as_deref().unwrap_or("paper");
-                        let config = rgm_model::network::Config::preset(preset)?;
-                        let mut method = Method::rgm(config, weights).with_context(|| {
-                            format!("loading RGM weights from {}", weights.display())
-                        })?;
-                        if let (Method::Rgm(registrar), Some(which)) =
-                            (&mut method, self.test_statistics)
-                        {
-                            registrar.network.featurer.test_statistics = which.into();
-                        }
-                        method
-                    }
-                    None => rgm_model::weights::builtin_method()
-                        .context("loading the built-in RGM model")?,
-                };
-                if let Method::Rgm(registrar) = &mut method {
-                    if self.weights.is_some() {
-                        registrar.config.match_points = Some(WEIGHTS_MATCH_POINTS);
-                    }
-                    if let Some(points) = self.match_points {
-                        registrar.config.match_points = (points > 0).then_some(points);
-                    }
-                    if let Some(passes) = self.passes {
-                        registrar.config.passes = passes.into();
-                    }
-                }
-                method
-            }
-        };
         let refine = self.refine || (refine_by_default && !self.no_refine);
-        Ok(if refine {
-            method.refined(rgm_geom::refine::RefineConfig::default())
-        } else {
-            method
-        })
+        let options = MethodOptions {
+            method,
+            weights: self.weights.clone(),
+            preset: self.preset.clone(),
+            test_statistics: self.test_statistics.map(Into::into),
+            match_points: self.match_points,
+            passes: self.passes.map(usize::from),
+            refine,
+        };
+        Ok(options.build()?)
     }
 }
 
 /// Runs `method` on the clouds read from `source_path` and `target_path`, naming both files and
-/// the method when it fails.
+/// the method when it fails. FGR's steps show as a bar (in percent) on a terminal.
 pub fn register_files(
     method: &mut Method,
     (source, target): (&rgm_geom::PointCloud, &rgm_geom::PointCloud),
     (source_path, target_path): (&std::path::Path, &std::path::Path),
 ) -> anyhow::Result<rgm_model::Registration> {
-    method.register(source, target).with_context(|| {
-        format!(
-            "{} failed on {} → {}",
-            method.name(),
-            source_path.display(),
-            target_path.display()
-        )
-    })
+    let bar = progress(100, method.name());
+    let registration = method
+        .register_with_progress(source, target, &mut |p| {
+            bar.set_position((100.0 * p.done) as u64);
+            bar.set_message(p.step);
+        })
+        .with_context(|| {
+            format!(
+                "{} failed on {} → {}",
+                method.name(),
+                source_path.display(),
+                target_path.display()
+            )
+        });
+    bar.finish_and_clear();
+    registration
 }
 
 /// The test-pair protocols of the paper (spec §1).
@@ -227,8 +200,8 @@ pub struct DataArgs {
     #[arg(long)]
     unseen: bool,
     /// Use only the first N pairs.
-    #[arg(long, value_name = "N")]
-    limit: Option<usize>,
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    limit: Option<u64>,
     /// The shapes the pairs are made of: the official test split, or the validation part of
     /// the training split (for choosing settings without looking at the test pairs).
     #[arg(long, value_enum, default_value = "test")]
@@ -268,7 +241,7 @@ impl DataArgs {
             SplitArg::Validation => Split::Validation,
         };
         let mut shapes = dataset.split(split, self.unseen);
-        shapes.truncate(self.limit.unwrap_or(usize::MAX));
+        shapes.truncate(self.limit.map_or(usize::MAX, |n| n as usize));
         shapes
     }
 
@@ -303,7 +276,36 @@ pub fn progress(len: usize, what: &str) -> indicatif::ProgressBar {
     bar
 }
 
+/// Fails now, before the work, when `path` cannot be written (its folder is missing, it is a
+/// folder, permission is denied), so a long command does not lose its result at the end. The
+/// file is left as it was: opened without truncation, removed again if this created it.
+pub fn check_writable(path: &Path) -> anyhow::Result<()> {
+    let existed = path.exists();
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(path)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    if !existed {
+        std::fs::remove_file(path).with_context(|| format!("removing {}", path.display()))?;
+    }
+    Ok(())
+}
+
+/// Gives SIGPIPE its default action back (Rust ignores it, so `println!` to a closed pipe
+/// panics): `rgm register a.ply b.ply | head -1` ends rgm quietly once `head` has its line,
+/// with the status of any Unix tool stopped that way (141 in the shell), never a panic.
+fn end_quietly_on_closed_pipes() {
+    #[cfg(unix)]
+    // SAFETY: sets one signal's disposition, before any other thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 fn main() -> ExitCode {
+    end_quietly_on_closed_pipes();
     let cli = Cli::parse();
     set_up_compute_threads();
     let outcome = match cli.command {

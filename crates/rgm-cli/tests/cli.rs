@@ -250,6 +250,38 @@ fn pairs_then_score_reproduces_eval() {
         "MIE(R) of the truth: {row}"
     );
     assert_eq!(cells[9], "100.00%");
+    // Issue 14, case 7: a pair left out, or scored twice, is an error, not a better score.
+    for (name, entries) in [
+        ("missing", vec![truth[0].clone(), truth[2].clone()]),
+        (
+            "twice",
+            vec![
+                truth[0].clone(),
+                truth[1].clone(),
+                truth[1].clone(),
+                truth[2].clone(),
+                truth[3].clone(),
+            ],
+        ),
+    ] {
+        let file = dir.join(format!("{name}.json"));
+        let json = serde_json::json!({"method": name, "pairs": entries});
+        std::fs::write(&file, json.to_string()).unwrap();
+        let out = rgm(&[
+            "score",
+            file.to_str().unwrap(),
+            "--pairs",
+            dir.to_str().unwrap(),
+        ]);
+        assert!(!out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr).into_owned();
+        let expected = if name == "missing" {
+            "2 of the 4 pairs of"
+        } else {
+            "pair 1 has more than one transform"
+        };
+        assert!(err.contains(expected), "{err}");
+    }
 }
 
 #[test]
@@ -320,7 +352,7 @@ fn rgm_options_with_another_method_are_refused() {
     for (args, says) in [
         (
             ["--method", "fgr", "--match-points", "100"],
-            "apply to --method rgm only",
+            "apply to the rgm method only",
         ),
         (["--method", "icp", "--refine", "--json"], "ICP already"),
     ] {

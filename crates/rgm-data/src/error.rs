@@ -11,6 +11,9 @@ pub enum DataError {
         path: PathBuf,
         source: std::io::Error,
     },
+    /// The path names a folder, device, FIFO or socket (`/dev/zero` would never end).
+    #[error("{}: is {kind}, not a file", path.display())]
+    NotAFile { path: PathBuf, kind: &'static str },
     /// A line of a text file (XYZ/CSV, OFF, ASCII PLY) could not be read.
     #[error("{}:{line}: {why}: `{text}`", path.display())]
     Line {

@@ -13,6 +13,6 @@ pub mod pairs;
 
 pub use correspondence::Correspondence;
 pub use error::{DataError, Result};
-pub use io::{read_point_cloud, write_point_cloud};
+pub use io::{read_point_cloud, read_regular_file, write_point_cloud};
 pub use modelnet::{ModelNet40, Shape, Split};
 pub use pairs::{Pair, PairConfig, PairGenerator, Setting};

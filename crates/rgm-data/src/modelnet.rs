@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 
-use crate::io::{checked_cloud, npy};
+use crate::io::{checked_cloud, npy, read_regular_file};
 use crate::{DataError, Result};
 
 /// One shape of the dataset.
@@ -211,10 +211,7 @@ impl ModelNet40 {
 
 /// One `.npy` shape file, checked (finite, non-empty).
 fn load_npy_shape(path: &Path, label: usize) -> Result<Shape> {
-    let bytes = std::fs::read(path).map_err(|source| DataError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = read_regular_file(path)?;
     let cloud = checked_cloud(npy::parse(&bytes, path)?, path)?;
     let name = path
         .file_stem()

@@ -62,6 +62,27 @@ impl PointCloud {
     pub fn select(&self, order: &[usize]) -> Self {
         Self::new(order.iter().map(|&i| self.points[i]).collect())
     }
+
+    /// One point per occupied cube of side `voxel` (cubes aligned on the origin): the mean of
+    /// the cube's points, as Open3D's `voxel_down_sample`; in the order the cubes are first met.
+    pub fn voxel_downsampled(&self, voxel: f64) -> Self {
+        let mut index = std::collections::HashMap::new();
+        let mut sums: Vec<(Vector3<f64>, usize)> = Vec::new(); // (V,) sum and count per voxel
+        for p in &self.points {
+            let key = p.coords.map(|v| (v / voxel).floor() as i64);
+            let slot = *index.entry((key.x, key.y, key.z)).or_insert_with(|| {
+                sums.push((Vector3::zeros(), 0));
+                sums.len() - 1
+            });
+            sums[slot].0 += p.coords;
+            sums[slot].1 += 1;
+        }
+        Self::new(
+            sums.into_iter()
+                .map(|(sum, n)| Point3::from(sum / n as f64))
+                .collect(),
+        )
+    }
 }
 
 impl From<Vec<Point3<f64>>> for PointCloud {
@@ -73,6 +94,22 @@ impl From<Vec<Point3<f64>>> for PointCloud {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn voxel_downsampling_keeps_one_mean_per_cube() {
+        let c = PointCloud::new(vec![
+            Point3::new(0.1, 0.1, 0.1),
+            Point3::new(0.3, 0.3, 0.1),
+            Point3::new(1.2, 0.0, 0.0),
+            Point3::new(-0.2, 0.0, 0.0),
+            Point3::new(0.2, 0.2, 0.4),
+        ]);
+        let d = c.voxel_downsampled(0.5);
+        assert_eq!(d.len(), 3);
+        assert!((d.points[0] - Point3::new(0.2, 0.2, 0.2)).norm() < 1e-15);
+        assert_eq!(d.points[1], Point3::new(1.2, 0.0, 0.0));
+        assert_eq!(d.points[2], Point3::new(-0.2, 0.0, 0.0));
+    }
 
     #[test]
     fn centroid_is_the_mean() {

@@ -4,7 +4,7 @@
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum GeomError {
     /// An operation needs at least `needed` points and got `got`.
-    #[error("{op}: needs at least {needed} points, got {got}")]
+    #[error("{op}: needs at least {needed} point{}, got {got}", if *needed == 1 { "" } else { "s" })]
     TooFewPoints {
         op: &'static str,
         needed: usize,
@@ -30,3 +30,19 @@ pub enum GeomError {
 
 /// Result alias of rgm-geom.
 pub type Result<T> = std::result::Result<T, GeomError>;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn one_point_is_singular() {
+        let err = |needed| GeomError::TooFewPoints {
+            op: "kabsch",
+            needed,
+            got: 0,
+        };
+        assert_eq!(err(1).to_string(), "kabsch: needs at least 1 point, got 0");
+        assert_eq!(err(3).to_string(), "kabsch: needs at least 3 points, got 0");
+    }
+}

@@ -42,6 +42,9 @@ pub enum MethodError {
         estimate: u64,
         available: u64,
     },
+    /// Options that do not fit the method ([`crate::options::MethodOptions`]).
+    #[error("{0}")]
+    InvalidOptions(String),
     /// A test-time setting that cannot run.
     #[error("rgm: invalid settings: {why}")]
     InvalidConfig { why: String },

@@ -1,14 +1,17 @@
 //! rgm-model — RGM put together from the layers below, and every registration method behind one
 //! interface: [`method::Method`] runs ICP, FGR or the RGM network ([`pipeline`], spec §4) on a
-//! pair of clouds; [`evaluate`] runs a method over the benchmark's test pairs and scores it.
+//! pair of clouds; [`options`] builds one from a name and options, with `rgm register`'s
+//! defaults; [`evaluate`] runs a method over the benchmark's test pairs and scores it.
 //!
 //! Layering rule: rgm-model builds on rgm-geom, rgm-nn, rgm-match and rgm-data, and nothing
-//! builds on it but the `rgm` command and xtask. It owns no geometry or tensor op of its own.
+//! builds on it but the `rgm` command, xtask and the Python package (`python/`). It owns no
+//! geometry or tensor op of its own.
 
 pub mod error;
 pub mod evaluate;
 pub mod method;
 pub mod network;
+pub mod options;
 pub mod pipeline;
 pub mod render;
 pub mod train;
@@ -17,4 +20,5 @@ pub mod weights;
 pub use error::MethodError;
 pub use evaluate::{PairRecord, Summary};
 pub use method::{Method, Registration};
+pub use options::{MethodName, MethodOptions};
 pub use pipeline::{Normalisation, PipelineConfig, RgmRegistrar, StageTimes};

@@ -6,7 +6,8 @@ use std::time::Instant;
 use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::icp::{self, IcpConfig};
 use rgm_geom::refine::{self, RefineConfig};
-use rgm_geom::{PointCloud, RegistrationResult};
+use rgm_geom::registration::score;
+use rgm_geom::{KnnIndex, PointCloud, RegistrationResult};
 
 use crate::error::MethodError;
 use crate::network::{Config, Rgm};
@@ -101,12 +102,23 @@ impl Method {
         source: &PointCloud,
         target: &PointCloud,
     ) -> Result<Registration, MethodError> {
+        self.register_with_progress(source, target, &mut |_| {})
+    }
+
+    /// [`Method::register`], telling `progress` where FGR is (for a bar on large clouds; the
+    /// other methods report nothing).
+    pub fn register_with_progress(
+        &mut self,
+        source: &PointCloud,
+        target: &PointCloud,
+        progress: &mut dyn FnMut(fgr::Progress),
+    ) -> Result<Registration, MethodError> {
         let start = Instant::now();
         let result = match self {
             Self::Icp(config) => icp::register(source, target, config)?,
-            Self::Fgr(config) => fgr::register(source, target, config)?,
+            Self::Fgr(config) => fgr::register_with_progress(source, target, config, progress)?,
             Self::FgrRefined { fgr, refine } => {
-                let coarse = fgr::register(source, target, fgr)?;
+                let coarse = fgr::register_with_progress(source, target, fgr, progress)?;
                 let fine = refine::refine(source, target, &coarse.t_target_source, refine)?;
                 RegistrationResult {
                     iterations: coarse.iterations + fine.iterations,
@@ -119,5 +131,77 @@ impl Method {
             result,
             time_ms: start.elapsed().as_secs_f64() * 1e3,
         })
+    }
+
+    /// The (source index, target index) pairs behind `result.inlier_count`, for `result` found
+    /// by [`Method::register`] on `source` and `target` just before: RGM's hard matches of its
+    /// last pass; for the others, the source points that `result`'s transform brings within the
+    /// method's scoring distance of their nearest target point (Open3D's correspondence set).
+    pub fn correspondences(
+        &self,
+        source: &PointCloud,
+        target: &PointCloud,
+        result: &RegistrationResult,
+    ) -> Vec<(usize, usize)> {
+        let max_distance = match self {
+            Self::Rgm(registrar) => return registrar.correspondences().to_vec(),
+            Self::Icp(config) => config.max_correspondence_distance,
+            Self::Fgr(config) => config.maximum_correspondence_distance,
+            Self::FgrRefined { refine, .. } => refine.distances.last().copied().unwrap_or(0.0),
+        };
+        let mut pairs = Vec::new();
+        score(
+            &source.points,
+            &KnnIndex::new(&target.points),
+            &result.t_target_source,
+            max_distance,
+            Some(&mut pairs),
+        );
+        pairs
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rgm_geom::{Point3, RigidTransform};
+
+    #[test]
+    fn correspondences_are_the_pairs_behind_the_inlier_count() {
+        // 200 points on a twisted curve, and the same points moved by 5° and 0.02.
+        let source = PointCloud::new(
+            (0..200)
+                .map(|i| {
+                    let s = i as f64 / 200.0;
+                    Point3::new((7.0 * s).cos(), (5.0 * s).sin(), s * s)
+                })
+                .collect(),
+        );
+        let pose = RigidTransform::new(
+            rgm_geom::euler::rotation_xyz_intrinsic(0.0, 0.0, 5f64.to_radians()),
+            rgm_geom::Vector3::new(0.02, 0.0, 0.0),
+        );
+        let target = source.transformed(&pose);
+        let refine = RefineConfig::default();
+        for (mut method, max_distance) in [
+            (
+                Method::icp(),
+                IcpConfig::default().max_correspondence_distance,
+            ),
+            (
+                Method::fgr(),
+                FgrConfig::default().maximum_correspondence_distance,
+            ),
+            (Method::fgr().refined(refine.clone()), refine.distances[2]),
+        ] {
+            let result = method.register(&source, &target).unwrap().result;
+            let pairs = method.correspondences(&source, &target, &result);
+            assert_eq!(pairs.len(), result.inlier_count, "{}", method.name());
+            assert!(pairs.len() > 100, "{}: {}", method.name(), pairs.len());
+            for &(i, j) in &pairs {
+                let d = (result.t_target_source.apply(&source.points[i]) - target.points[j]).norm();
+                assert!(d < max_distance, "{}: {d}", method.name());
+            }
+        }
     }
 }

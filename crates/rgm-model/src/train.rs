@@ -9,7 +9,17 @@
 //!   [`TrainConfig::checkpoint_every`] batches and at the end of every epoch;
 //! - `best.safetensors` — the weights with the best validation result so far;
 //! - `log.jsonl` — one JSON object per line: `"kind": "train"` (mean loss of the batches since
-//!   the previous line) and `"kind": "validation"` (after every epoch), see [`LogRecord`].
+//!   the previous line) and `"kind": "validation"` (after every epoch), see [`LogRecord`];
+//! - `lock` — the process id of the trainer that holds the folder (an exclusive `flock`, which
+//!   the system releases when that process ends, however it ends).
+//!
+//! A checkpoint is one atomic commit: its files (state, weights, optimiser, best weights when
+//! they changed) are written into `checkpoint.tmp/`, which one rename turns into
+//! `checkpoint/`; its files are then moved over the run's own. [`Trainer::open`] finishes a
+//! commit that a kill interrupted, drops an uncommitted one, and cuts `log.jsonl` back to the
+//! length the state records, so a run killed at any moment resumes exactly where its last
+//! commit left it, with the log it had then. The checkpoint's files are flushed to the disk
+//! before the commit, so it also survives a power cut.
 //!
 //! Pairs are made on the fly ([`PairGenerator::train_pair`], a new random pose, crop and noise
 //! every epoch), optionally cut to [`TrainConfig::match_points`] points per cloud. A batch is
@@ -58,6 +68,12 @@ pub enum TrainError {
     },
     #[error("training configuration: {why}")]
     Config { why: String },
+    #[error(
+        "{}: the run folder is in use by another `rgm train` (process {pid}); wait for it to \
+         end, stop it, or train into another --out folder",
+        dir.display()
+    )]
+    Busy { dir: PathBuf, pid: String },
     #[error(transparent)]
     Network(#[from] NetworkError),
     #[error(transparent)]
@@ -159,7 +175,9 @@ impl TrainConfig {
     fn validate(&self) -> Result<()> {
         self.pair_setting()?;
         self.network.validate()?;
-        let why = if self.batch == 0 {
+        let why = if self.epochs == 0 {
+            "epochs must be positive"
+        } else if self.batch == 0 {
             "batch must be positive"
         } else if self.workers == 0 {
             "workers must be positive"
@@ -248,6 +266,11 @@ pub struct TrainState {
     pub seconds: f64,
     /// The best validation so far (its weights are `best.safetensors`).
     pub best: Option<Validation>,
+    /// The length of `log.jsonl` at this checkpoint: lines after it were written by a run
+    /// killed before its next checkpoint, and are cut on resume (None in runs saved before
+    /// the field existed).
+    #[serde(default)]
+    pub log_bytes: Option<u64>,
 }
 
 /// One line of `log.jsonl`.
@@ -379,6 +402,12 @@ pub struct Trainer {
     optimizer: Optimizer,
     state: TrainState,
     workers: Vec<Worker>,
+    /// The run folder's lock, held as long as the trainer lives.
+    _lock: fs::File,
+    /// File operations of checkpoints so far, and the one to fail (see
+    /// [`Trainer::fail_at_file_operation`]).
+    file_operations: usize,
+    fail_at: Option<usize>,
 }
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> TrainError + '_ {
@@ -386,6 +415,102 @@ fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> TrainError + '_ {
         path: path.to_path_buf(),
         source,
     }
+}
+
+/// The folder a checkpoint is written into, and its name once committed.
+const STAGING: &str = "checkpoint.tmp";
+const COMMITTED: &str = "checkpoint";
+/// The files of a checkpoint, moved over the run's own in this order once committed.
+const CHECKPOINT_FILES: [&str; 4] = [
+    "last.safetensors",
+    "last.optim.safetensors",
+    "best.safetensors",
+    "state.json",
+];
+
+/// Takes the exclusive lock of the run folder `dir` (created if missing) and writes this
+/// process's id into it; fails naming the process that holds it.
+fn lock_run(dir: &Path) -> Result<fs::File> {
+    fs::create_dir_all(dir).map_err(io_err(dir))?;
+    let path = dir.join("lock");
+    let mut file = fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(&path)
+        .map_err(io_err(&path))?;
+    match file.try_lock() {
+        Ok(()) => {}
+        Err(fs::TryLockError::WouldBlock) => {
+            let pid = fs::read_to_string(&path).unwrap_or_default();
+            return Err(TrainError::Busy {
+                dir: dir.to_path_buf(),
+                pid: pid.trim().to_string(),
+            });
+        }
+        Err(fs::TryLockError::Error(e)) => return Err(io_err(&path)(e)),
+    }
+    file.set_len(0).map_err(io_err(&path))?;
+    writeln!(file, "{}", std::process::id()).map_err(io_err(&path))?;
+    Ok(file)
+}
+
+/// Flushes the file or folder at `path` to the disk.
+fn sync(path: &Path) -> Result<()> {
+    fs::File::open(path)
+        .and_then(|f| f.sync_all())
+        .map_err(io_err(path))
+}
+
+/// Moves the files of a committed checkpoint (`dir/checkpoint/`) over the run's own, then
+/// removes the folder; does nothing when there is none. Safe to repeat after an interruption:
+/// the files already moved are no longer in the folder. `step` comes before every operation.
+fn finish_commit(dir: &Path, step: &mut dyn FnMut() -> Result<()>) -> Result<()> {
+    let committed = dir.join(COMMITTED);
+    if !committed.exists() {
+        return Ok(());
+    }
+    for name in CHECKPOINT_FILES {
+        let from = committed.join(name);
+        if from.exists() {
+            step()?;
+            fs::rename(&from, dir.join(name)).map_err(io_err(&from))?;
+        }
+    }
+    step()?;
+    fs::remove_dir_all(&committed).map_err(io_err(&committed))
+}
+
+/// Brings the run folder `dir` to its last commit: finishes a commit a kill interrupted,
+/// drops an uncommitted checkpoint, and cuts the log's lines written after the commit.
+/// Returns the committed state (None for a new run).
+fn recover(dir: &Path) -> Result<Option<TrainState>> {
+    finish_commit(dir, &mut || Ok(()))?;
+    let staging = dir.join(STAGING);
+    if staging.exists() {
+        fs::remove_dir_all(&staging).map_err(io_err(&staging))?;
+    }
+    let state_path = dir.join("state.json");
+    let log = dir.join("log.jsonl");
+    if !state_path.exists() {
+        // No commit yet: the log's lines, if any, are of a run killed before its first.
+        if log.exists() {
+            fs::write(&log, "").map_err(io_err(&log))?;
+        }
+        return Ok(None);
+    }
+    let state: TrainState = read_json(&state_path)?;
+    if let Some(len) = state.log_bytes {
+        let file = fs::OpenOptions::new()
+            .write(true)
+            .open(&log)
+            .map_err(io_err(&log))?;
+        if file.metadata().map_err(io_err(&log))?.len() > len {
+            file.set_len(len).map_err(io_err(&log))?;
+        }
+    }
+    Ok(Some(state))
 }
 
 /// Writes `path` through a temporary file and a rename, so an interruption never
@@ -419,8 +544,8 @@ impl Trainer {
     /// configuration must equal `config` except for the number of epochs), a new run otherwise.
     pub fn open(config: TrainConfig, dir: &Path) -> Result<Self> {
         config.validate()?;
-        let state_path = dir.join("state.json");
-        let (network, optimizer, state) = if state_path.exists() {
+        let lock = lock_run(dir)?;
+        let (network, optimizer, state) = if let Some(state) = recover(dir)? {
             let saved: TrainConfig = read_json(&dir.join("config.json"))?;
             if !config.same_run(&saved) {
                 return Err(TrainError::Config {
@@ -434,9 +559,8 @@ impl Trainer {
             }
             let network = Rgm::load(config.network.clone(), &dir.join("last.safetensors"))?;
             let optimizer = Optimizer::load(config.optimizer, &dir.join("last.optim.safetensors"))?;
-            (network, optimizer, read_json(&state_path)?)
+            (network, optimizer, state)
         } else {
-            fs::create_dir_all(dir).map_err(io_err(dir))?;
             let network = Rgm::new(config.network.clone(), config.seed)?;
             (network, Optimizer::new(&config), TrainState::default())
         };
@@ -454,6 +578,9 @@ impl Trainer {
             optimizer,
             state,
             workers,
+            _lock: lock,
+            file_operations: 0,
+            fail_at: None,
         })
     }
 
@@ -558,7 +685,7 @@ impl Trainer {
                     since_log = (0.0, 0);
                     self.log(&record)?;
                     let _ = on_event(Event::Logged(record));
-                    self.checkpoint()?;
+                    self.checkpoint(false)?;
                 }
                 if stop {
                     return Ok(());
@@ -574,10 +701,8 @@ impl Trainer {
                 total: val.len(),
             });
             self.state.seconds += clock.elapsed().as_secs_f64();
-            if self.state.best.map_or(true, |best| result.beats(&best)) {
-                write_atomic(&self.dir.join("best.safetensors"), |tmp| {
-                    Ok(rgm_nn::io::save_params(tmp, &mut self.network)?)
-                })?;
+            let new_best = self.state.best.is_none_or(|best| result.beats(&best));
+            if new_best {
                 self.state.best = Some(result);
             }
             self.state.epoch += 1;
@@ -588,7 +713,7 @@ impl Trainer {
                 seconds: self.state.seconds,
             };
             self.log(&record)?;
-            self.checkpoint()?;
+            self.checkpoint(new_best)?;
             if on_event(Event::Logged(record)).is_break() {
                 return Ok(());
             }
@@ -771,12 +896,14 @@ impl Trainer {
         })
     }
 
-    fn log(&self, record: &LogRecord) -> Result<()> {
+    /// Appends `record` to `log.jsonl` (one file operation).
+    fn log(&mut self, record: &LogRecord) -> Result<()> {
         let path = self.dir.join("log.jsonl");
         let line = serde_json::to_string(record).map_err(|source| TrainError::Json {
             path: path.clone(),
             source,
         })?;
+        self.file_operation()?;
         let mut file = fs::OpenOptions::new()
             .create(true)
             .append(true)
@@ -785,16 +912,74 @@ impl Trainer {
         writeln!(file, "{line}").map_err(io_err(&path))
     }
 
-    /// Writes `last.safetensors`, `last.optim.safetensors` and `state.json` (in that order:
-    /// the state names a position only once its weights are on disk).
-    fn checkpoint(&mut self) -> Result<()> {
-        write_atomic(&self.dir.join("last.safetensors"), |tmp| {
-            Ok(rgm_nn::io::save_params(tmp, &mut self.network)?)
-        })?;
-        write_atomic(&self.dir.join("last.optim.safetensors"), |tmp| {
-            self.optimizer.save(tmp)
-        })?;
-        write_json(&self.dir.join("state.json"), &self.state)
+    /// Saves the run as one commit (see the module's documentation): weights, optimiser and
+    /// state, and the weights as `best.safetensors` when `new_best`.
+    fn checkpoint(&mut self, new_best: bool) -> Result<()> {
+        let log = self.dir.join("log.jsonl");
+        self.state.log_bytes = Some(fs::metadata(&log).map_err(io_err(&log))?.len());
+        let staging = self.dir.join(STAGING);
+        self.file_operation()?;
+        if staging.exists() {
+            fs::remove_dir_all(&staging).map_err(io_err(&staging))?;
+        }
+        fs::create_dir(&staging).map_err(io_err(&staging))?;
+        self.file_operation()?;
+        rgm_nn::io::save_params(&staging.join("last.safetensors"), &mut self.network)?;
+        self.file_operation()?;
+        self.optimizer
+            .save(&staging.join("last.optim.safetensors"))?;
+        if new_best {
+            self.file_operation()?;
+            rgm_nn::io::save_params(&staging.join("best.safetensors"), &mut self.network)?;
+        }
+        self.file_operation()?;
+        write_json(&staging.join("state.json"), &self.state)?;
+        // On disk before the commit, so that it holds after a power cut too, not only a kill.
+        for name in CHECKPOINT_FILES {
+            let path = staging.join(name);
+            if path.exists() {
+                sync(&path)?;
+            }
+        }
+        sync(&staging)?;
+        // The commit.
+        self.file_operation()?;
+        let committed = self.dir.join(COMMITTED);
+        fs::rename(&staging, &committed).map_err(io_err(&committed))?;
+        sync(&self.dir)?;
+        let dir = self.dir.clone();
+        finish_commit(&dir, &mut || self.file_operation())
+    }
+
+    /// Counts one file operation of a checkpoint, failing it when it is the one chosen by
+    /// [`Trainer::fail_at_file_operation`].
+    fn file_operation(&mut self) -> Result<()> {
+        self.file_operations += 1;
+        if self.fail_at == Some(self.file_operations) {
+            return Err(TrainError::Io {
+                path: self.dir.clone(),
+                source: std::io::Error::other(format!(
+                    "failure injected at file operation {}",
+                    self.file_operations
+                )),
+            });
+        }
+        Ok(())
+    }
+
+    /// Makes the `n`-th file operation (from 1) of this trainer's checkpoints and log fail as
+    /// if the process had been killed just before it, for the tests that interrupt a run at
+    /// every step of its checkpoints in turn.
+    #[doc(hidden)]
+    pub fn fail_at_file_operation(&mut self, n: usize) {
+        self.fail_at = Some(n);
+    }
+
+    /// The file operations of checkpoints and log so far (what
+    /// [`Trainer::fail_at_file_operation`] counts).
+    #[doc(hidden)]
+    pub fn file_operations(&self) -> usize {
+        self.file_operations
     }
 }
 

@@ -1,6 +1,7 @@
 //! Training on a small hand-made dataset: resuming is exact, runs refuse other settings, and the
 //! loss goes down.
 
+use std::collections::BTreeMap;
 use std::fs;
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
@@ -10,7 +11,7 @@ use rand::{Rng, SeedableRng};
 use rgm_data::{ModelNet40, Shape};
 use rgm_model::network::Config;
 use rgm_model::train::{
-    Event, LogRecord, OptimizerKind, TrainConfig, TrainError, Trainer, Validation,
+    Event, LogRecord, OptimizerKind, TrainConfig, TrainError, TrainState, Trainer, Validation,
 };
 
 /// Two categories of ten 64-point shapes: noisy spheres and noisy boxes (8 train + 2
@@ -96,10 +97,11 @@ fn an_interrupted_run_resumes_to_the_same_weights() {
     assert_eq!(whole.state().steps, 12); // 2 epochs × ⌈16 train shapes / 3⌉
     let broken = run_dir("broken");
     // Stopped inside epoch 0, then inside epoch 1, then run to the end.
-    let first = train(config(), &broken, Some((0, 2)));
-    assert_eq!((first.state().epoch, first.state().batch), (0, 2));
-    let second = train(config(), &broken, Some((1, 1)));
-    assert_eq!((second.state().epoch, second.state().batch), (1, 1));
+    // Each trainer holds the folder until dropped.
+    let first = train(config(), &broken, Some((0, 2))).state().clone();
+    assert_eq!((first.epoch, first.batch), (0, 2));
+    let second = train(config(), &broken, Some((1, 1))).state().clone();
+    assert_eq!((second.epoch, second.batch), (1, 1));
     let done = train(config(), &broken, None);
     assert_eq!(done.state().steps, whole.state().steps);
     assert_eq!(done.state().pairs_seen, whole.state().pairs_seen);
@@ -181,4 +183,187 @@ fn training_lowers_the_validation_loss() {
         .unwrap();
     assert_eq!(best, expected);
     assert!(dir.join("best.safetensors").exists());
+}
+
+/// Every tensor of the safetensors file `name` in `dir`, as bits.
+fn tensor_bits(dir: &Path, name: &str) -> BTreeMap<String, Vec<u32>> {
+    let (tensors, _) = rgm_nn::io::read_tensors::<f32>(&dir.join(name)).unwrap();
+    tensors
+        .into_iter()
+        .map(|(n, t)| (n, t.iter().map(|v| v.to_bits()).collect()))
+        .collect()
+}
+
+/// The log's records and the state without their wall-clock fields (seconds, and the log's
+/// length in bytes, which holds them).
+fn log_and_state(dir: &Path) -> (Vec<serde_json::Value>, TrainState) {
+    let log = fs::read_to_string(dir.join("log.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|line| {
+            let mut record: serde_json::Value = serde_json::from_str(line).unwrap();
+            record.as_object_mut().unwrap().remove("seconds");
+            record
+        })
+        .collect();
+    let state = fs::read_to_string(dir.join("state.json")).unwrap();
+    let state = TrainState {
+        seconds: 0.0,
+        log_bytes: None,
+        ..serde_json::from_str(&state).unwrap()
+    };
+    (log, state)
+}
+
+/// Issue 14, case 3: a checkpoint was three renames, and a kill between them left the weights
+/// ahead of the state (the resumed run replayed batches on weights that held them, and logged
+/// them twice). Here the run fails at each file operation of its checkpoints and log in turn,
+/// as if killed there, and is resumed: weights, optimiser, best weights, log and state end
+/// bit-identical to those of a run never interrupted.
+#[test]
+fn a_run_killed_at_any_file_operation_resumes_exactly() {
+    let config = TrainConfig {
+        epochs: 1,
+        checkpoint_every: 2,
+        ..config()
+    };
+    let straight = run_dir("kill-straight");
+    let operations = train(config.clone(), &straight, None).file_operations();
+    // 3 checkpoints in the epoch and 1 after validation, each a log line and a commit.
+    assert!(operations >= 4 * 8, "{operations} file operations");
+    for n in 1..=operations {
+        let dir = run_dir(&format!("kill-{n}"));
+        let mut trainer = Trainer::open(config.clone(), &dir).unwrap();
+        trainer.fail_at_file_operation(n);
+        let err = trainer
+            .run(&dataset(), &mut |_| ControlFlow::Continue(()))
+            .unwrap_err();
+        assert!(err.to_string().contains("failure injected"), "{err}");
+        drop(trainer);
+        train(config.clone(), &dir, None);
+        for file in [
+            "last.safetensors",
+            "last.optim.safetensors",
+            "best.safetensors",
+        ] {
+            assert!(
+                tensor_bits(&straight, file) == tensor_bits(&dir, file),
+                "{file} differs after a kill at file operation {n}"
+            );
+        }
+        assert_eq!(
+            log_and_state(&straight),
+            log_and_state(&dir),
+            "killed at {n}"
+        );
+        assert!(!dir.join("checkpoint").exists() && !dir.join("checkpoint.tmp").exists());
+        fs::remove_dir_all(&dir).unwrap();
+    }
+}
+
+/// Issue 14, case 4: two trainers on one folder shared temporary names and mixed their logs.
+#[test]
+fn a_run_folder_is_held_by_one_trainer_at_a_time() {
+    let dir = run_dir("lock");
+    let first = Trainer::open(config(), &dir).unwrap();
+    let err = Trainer::open(config(), &dir)
+        .err()
+        .expect("the folder is held");
+    assert!(matches!(err, TrainError::Busy { .. }), "{err}");
+    let message = err.to_string();
+    assert!(
+        message.contains(&format!(
+            "in use by another `rgm train` (process {})",
+            std::process::id()
+        )),
+        "{message}"
+    );
+    drop(first);
+    // The lock goes with its holder; the file it leaves (as a killed process does) holds
+    // nobody back.
+    assert!(dir.join("lock").exists());
+    drop(Trainer::open(config(), &dir).unwrap());
+}
+
+/// Runs committed before checkpoints were commits (no `log_bytes` in the state, no
+/// `checkpoint/` folder) resume, and take the new layout at their first checkpoint; weights and
+/// Adam moments stored as bf16 (snapshots kept small in git) load too.
+#[test]
+fn a_run_saved_in_the_old_layout_resumes_and_so_does_a_bf16_snapshot() {
+    let committed = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../runs/partial-fast");
+    let dir = run_dir("legacy");
+    fs::create_dir_all(&dir).unwrap();
+    for name in [
+        "config.json",
+        "state.json",
+        "last.safetensors",
+        "last.optim.safetensors",
+        "best.safetensors",
+        "log.jsonl",
+    ] {
+        fs::copy(committed.join(name), dir.join(name)).unwrap();
+    }
+    let config: TrainConfig =
+        serde_json::from_str(&fs::read_to_string(dir.join("config.json")).unwrap()).unwrap();
+    // The state as the old code wrote it, whatever the snapshot's age.
+    let mut state: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(dir.join("state.json")).unwrap()).unwrap();
+    state.as_object_mut().unwrap().remove("log_bytes");
+    fs::write(dir.join("state.json"), state.to_string()).unwrap();
+    let saved: TrainState = serde_json::from_value(state).unwrap();
+    assert_eq!(saved.log_bytes, None);
+    let log_before = fs::read(dir.join("log.jsonl")).unwrap();
+    // The small dataset: the run goes on from its saved position (past this dataset's
+    // batches, so to its validation), then stops after the next epoch's first batch.
+    let mut trainer = Trainer::open(config.clone(), &dir).unwrap();
+    assert_eq!(trainer.state(), &saved);
+    trainer
+        .run(&dataset(), &mut |event| match event {
+            Event::Batch { .. } => ControlFlow::Break(()),
+            _ => ControlFlow::Continue(()),
+        })
+        .unwrap();
+    let state = trainer.state().clone();
+    drop(trainer);
+    assert_eq!((state.epoch, state.batch), (saved.epoch + 1, 1));
+    let log = fs::read(dir.join("log.jsonl")).unwrap();
+    assert_eq!(state.log_bytes, Some(log.len() as u64));
+    assert!(log.starts_with(&log_before));
+    assert_eq!(
+        String::from_utf8_lossy(&log[log_before.len()..])
+            .lines()
+            .count(),
+        2
+    );
+    // The Adam moments as bf16, the weights as they were: the run resumes from them.
+    let optim = dir.join("last.optim.safetensors");
+    let bf16 = dir.join("bf16.safetensors");
+    rgm_nn::io::rewrite_with_bf16(&optim, &bf16, &|n| {
+        n.starts_with("m.") || n.starts_with("v.")
+    })
+    .unwrap();
+    // Two moments per weight, half the bytes each: about the size of the weights.
+    let weights = fs::metadata(dir.join("last.safetensors")).unwrap().len();
+    assert!(fs::metadata(&bf16).unwrap().len() < weights * 11 / 10);
+    fs::rename(&bf16, &optim).unwrap();
+    let resumed = Trainer::open(config, &dir).unwrap();
+    assert_eq!(resumed.state(), &state);
+    fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_run_of_no_epoch_is_refused() {
+    let err = Trainer::open(
+        TrainConfig {
+            epochs: 0,
+            ..config()
+        },
+        &run_dir("none"),
+    )
+    .err()
+    .expect("refused");
+    assert_eq!(
+        err.to_string(),
+        "training configuration: epochs must be positive"
+    );
 }

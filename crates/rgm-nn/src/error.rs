@@ -34,14 +34,21 @@ pub enum NnError {
         expected: Vec<usize>,
         got: Vec<usize>,
     },
-    /// A tensor in a weight file has an element type other than f32 or f64.
-    #[error("{path}: tensor {name:?} has dtype {dtype}, expected F32 or F64")]
+    /// A tensor in a weight file has an element type other than f32, f64 or bf16.
+    #[error("{path}: tensor {name:?} has dtype {dtype}, expected F32, F64 or BF16")]
     TensorDtype {
         path: PathBuf,
         name: String,
         dtype: String,
     },
-    /// A weight file is not valid safetensors.
+    /// A file read as weights is not safetensors (or is damaged); `why` says what is wrong in
+    /// words, not in the library's variant names.
+    #[error("{path}: not a safetensors weight file: {why}")]
+    NotSafetensors { path: PathBuf, why: String },
+    /// The path names a folder, device, FIFO or socket.
+    #[error("{path}: is {kind}, not a file")]
+    NotAFile { path: PathBuf, kind: &'static str },
+    /// Writing a safetensors file failed.
     #[error("{path}: {source}")]
     Safetensors {
         path: PathBuf,

@@ -4,6 +4,7 @@
 use crate::{NnError, Parameters, Result, Scalar};
 use ndarray::{ArrayD, ArrayViewD, IxDyn};
 use safetensors::tensor::{Dtype, TensorView};
+use safetensors::SafeTensorError;
 use safetensors::SafeTensors;
 use std::any::TypeId;
 use std::collections::HashMap;
@@ -23,35 +24,83 @@ fn dtype_of<T: Scalar>() -> Dtype {
     }
 }
 
-fn le_bytes<T: Scalar>(t: &ArrayViewD<'_, T>) -> Vec<u8> {
-    let mut out = Vec::with_capacity(t.len() * std::mem::size_of::<T>());
+/// `x` rounded to the nearest bfloat16 (ties to even), as its bits: the upper half of the f32
+/// bits after rounding. NaN stays a (quiet) NaN; values beyond bf16's range round to ±inf.
+pub fn f32_to_bf16(x: f32) -> u16 {
+    let bits = x.to_bits();
+    if x.is_nan() {
+        return (bits >> 16) as u16 | 0x0040;
+    }
+    // Adding 0x7FFF, plus 1 when the kept part is odd, carries into bit 16 exactly when the
+    // dropped half is above one half, or one half and the kept part odd.
+    let rounded = bits.wrapping_add(0x7FFF + ((bits >> 16) & 1));
+    (rounded >> 16) as u16
+}
+
+/// The f32 whose upper half is the bfloat16 `bits` (exact).
+pub fn bf16_to_f32(bits: u16) -> f32 {
+    f32::from_bits(u32::from(bits) << 16)
+}
+
+/// The little-endian bytes of `t` stored as `dtype` (F32, F64 or BF16).
+fn le_bytes<T: Scalar>(t: &ArrayViewD<'_, T>, dtype: Dtype) -> Vec<u8> {
+    let mut out = Vec::with_capacity(t.len() * dtype.size());
     for &v in t.iter() {
-        match dtype_of::<T>() {
-            Dtype::F32 => out.extend_from_slice(&(Scalar::to_f64(v) as f32).to_le_bytes()),
-            _ => out.extend_from_slice(&Scalar::to_f64(v).to_le_bytes()),
+        let v = Scalar::to_f64(v);
+        match dtype {
+            Dtype::F64 => out.extend_from_slice(&v.to_le_bytes()),
+            Dtype::BF16 => out.extend_from_slice(&f32_to_bf16(v as f32).to_le_bytes()),
+            _ => out.extend_from_slice(&(v as f32).to_le_bytes()),
         }
     }
     out
 }
 
-/// Writes `tensors` (name, value) and string `metadata` to a safetensors file at `path`.
+/// Writes `tensors` (name, value) and string `metadata` to a safetensors file at `path`, in the
+/// element type of `T`.
 pub fn write_tensors<T: Scalar>(
     path: &Path,
     tensors: &[(String, ArrayViewD<'_, T>)],
     metadata: HashMap<String, String>,
 ) -> Result<()> {
-    let bytes: Vec<Vec<u8>> = tensors.iter().map(|(_, t)| le_bytes(t)).collect();
+    write_tensors_with_bf16(path, tensors, metadata, &|_| false)
+}
+
+/// [`write_tensors`], storing the tensors whose name `bf16` accepts as bfloat16 (rounded to
+/// nearest, ties to even; F64 values through f32): half the bytes, 8 significant bits. For
+/// snapshots where that precision is enough (an optimiser's moments); the readers upcast.
+pub fn write_tensors_with_bf16<T: Scalar>(
+    path: &Path,
+    tensors: &[(String, ArrayViewD<'_, T>)],
+    metadata: HashMap<String, String>,
+    bf16: &dyn Fn(&str) -> bool,
+) -> Result<()> {
+    let dtypes: Vec<Dtype> = tensors
+        .iter()
+        .map(|(name, _)| {
+            if bf16(name) {
+                Dtype::BF16
+            } else {
+                dtype_of::<T>()
+            }
+        })
+        .collect();
+    let bytes: Vec<Vec<u8>> = tensors
+        .iter()
+        .zip(&dtypes)
+        .map(|((_, t), &dtype)| le_bytes(t, dtype))
+        .collect();
     let views = tensors
         .iter()
+        .zip(&dtypes)
         .zip(&bytes)
-        .map(|((name, t), b)| {
-            let view =
-                TensorView::new(dtype_of::<T>(), t.shape().to_vec(), b).map_err(|source| {
-                    NnError::Safetensors {
-                        path: path.to_path_buf(),
-                        source,
-                    }
-                })?;
+        .map(|(((name, t), &dtype), b)| {
+            let view = TensorView::new(dtype, t.shape().to_vec(), b).map_err(|source| {
+                NnError::Safetensors {
+                    path: path.to_path_buf(),
+                    source,
+                }
+            })?;
             Ok((name.clone(), view))
         })
         .collect::<Result<Vec<_>>>()?;
@@ -63,21 +112,73 @@ pub fn write_tensors<T: Scalar>(
     })
 }
 
+/// Rewrites the safetensors file `from` as `to` with the tensors whose name `bf16` accepts
+/// stored as bfloat16 (the others as f32), metadata kept: e.g. a run's Adam moments for a
+/// snapshot in git (`|name| name.starts_with("m.") || name.starts_with("v.")`).
+pub fn rewrite_with_bf16(from: &Path, to: &Path, bf16: &dyn Fn(&str) -> bool) -> Result<()> {
+    let (tensors, metadata) = read_tensors::<f32>(from)?;
+    let mut named: Vec<_> = tensors.iter().map(|(n, t)| (n.clone(), t.view())).collect();
+    named.sort_by(|a, b| a.0.cmp(&b.0));
+    write_tensors_with_bf16(to, &named, metadata, bf16)
+}
+
+/// The bytes of the regular file at `path`; folders, devices, FIFOs and sockets are refused
+/// before they are opened (`/dev/zero` would never end).
 fn read_bytes(path: &Path) -> Result<Vec<u8>> {
-    std::fs::read(path).map_err(|source| NnError::Io {
+    let io_error = |source| NnError::Io {
         path: path.to_path_buf(),
         source,
-    })
+    };
+    let kind = std::fs::metadata(path).map_err(io_error)?.file_type();
+    if !kind.is_file() {
+        let kind = if kind.is_dir() {
+            "a folder"
+        } else {
+            "a device, FIFO or socket"
+        };
+        return Err(NnError::NotAFile {
+            path: path.to_path_buf(),
+            kind,
+        });
+    }
+    std::fs::read(path).map_err(io_error)
+}
+
+/// What is wrong with a file safetensors refused, in words.
+fn not_safetensors(path: &Path, source: SafeTensorError) -> NnError {
+    let why = match source {
+        SafeTensorError::HeaderTooSmall => {
+            "it is shorter than the 8 bytes that give the header's length".to_string()
+        }
+        SafeTensorError::HeaderTooLarge | SafeTensorError::InvalidHeaderLength => {
+            "its first 8 bytes do not give a header length that fits in the file".to_string()
+        }
+        SafeTensorError::InvalidHeader
+        | SafeTensorError::InvalidHeaderStart
+        | SafeTensorError::InvalidHeaderDeserialization
+        | SafeTensorError::JsonError(_) => {
+            "its header is not the JSON table of tensors a safetensors file starts with".to_string()
+        }
+        SafeTensorError::MetadataIncompleteBuffer
+        | SafeTensorError::InvalidOffset(_)
+        | SafeTensorError::TensorInvalidInfo
+        | SafeTensorError::ValidationOverflow => {
+            "the tensors its header lists do not fit its size (a truncated or damaged file)"
+                .to_string()
+        }
+        other => other.to_string(),
+    };
+    NnError::NotSafetensors {
+        path: path.to_path_buf(),
+        why,
+    }
 }
 
 fn parse<'b>(path: &Path, buffer: &'b [u8]) -> Result<SafeTensors<'b>> {
-    SafeTensors::deserialize(buffer).map_err(|source| NnError::Safetensors {
-        path: path.to_path_buf(),
-        source,
-    })
+    SafeTensors::deserialize(buffer).map_err(|source| not_safetensors(path, source))
 }
 
-/// The values of one F32 or F64 tensor, converted to `T`, in the file's shape.
+/// The values of one F32, F64 or BF16 tensor, converted to `T`, in the file's shape.
 fn to_array<T: Scalar>(path: &Path, name: &str, view: &TensorView<'_>) -> Result<ArrayD<T>> {
     let values: Vec<T> = match view.dtype() {
         Dtype::F32 => view
@@ -89,6 +190,11 @@ fn to_array<T: Scalar>(path: &Path, name: &str, view: &TensorView<'_>) -> Result
             .data()
             .chunks_exact(8)
             .map(|b| T::from_f64(f64::from_le_bytes(b.try_into().unwrap())))
+            .collect(),
+        Dtype::BF16 => view
+            .data()
+            .chunks_exact(2)
+            .map(|b| T::from_f64(bf16_to_f32(u16::from_le_bytes([b[0], b[1]])) as f64))
             .collect(),
         other => {
             return Err(NnError::TensorDtype {
@@ -102,8 +208,8 @@ fn to_array<T: Scalar>(path: &Path, name: &str, view: &TensorView<'_>) -> Result
         .expect("safetensors checked the byte length"))
 }
 
-/// Reads every tensor of a safetensors file (all must be F32 or F64; converted to `T`) and
-/// its metadata.
+/// Reads every tensor of a safetensors file (all must be F32, F64 or BF16; converted to `T`)
+/// and its metadata.
 pub fn read_tensors<T: Scalar>(path: &Path) -> Result<(Tensors<T>, HashMap<String, String>)> {
     read_tensors_from_bytes(&read_bytes(path)?, path)
 }
@@ -115,10 +221,7 @@ pub fn read_tensors_from_bytes<T: Scalar>(
     origin: &Path,
 ) -> Result<(Tensors<T>, HashMap<String, String>)> {
     let (_, header) =
-        SafeTensors::read_metadata(buffer).map_err(|source| NnError::Safetensors {
-            path: origin.to_path_buf(),
-            source,
-        })?;
+        SafeTensors::read_metadata(buffer).map_err(|source| not_safetensors(origin, source))?;
     let metadata = header.metadata().clone().unwrap_or_default();
     let mut tensors = HashMap::new();
     for (name, view) in parse(origin, buffer)?.tensors() {
@@ -304,13 +407,81 @@ mod tests {
     }
 
     #[test]
+    fn bf16_rounds_to_nearest_even() {
+        let one = 1.0f32;
+        let ulp = 2f32.powi(-7); // bf16's spacing at 1
+        assert_eq!(f32_to_bf16(one), 0x3F80);
+        assert_eq!(f32_to_bf16(-2.5), 0xC020);
+        // Halfway between 1 and 1 + ulp: to the even 1; between 1 + ulp and 1 + 2 ulp: up.
+        assert_eq!(f32_to_bf16(one + ulp / 2.0), 0x3F80);
+        assert_eq!(f32_to_bf16(one + 1.5 * ulp), 0x3F82);
+        // Just above half: up.
+        assert_eq!(f32_to_bf16(one + ulp / 2.0 + 2f32.powi(-20)), 0x3F81);
+        assert_eq!(f32_to_bf16(f32::MAX), 0x7F80); // rounds to +inf
+        assert_eq!(f32_to_bf16(f32::NEG_INFINITY), 0xFF80);
+        assert!(bf16_to_f32(f32_to_bf16(f32::NAN)).is_nan());
+        assert_eq!(bf16_to_f32(f32_to_bf16(1e-45)), 0.0);
+        assert_eq!(bf16_to_f32(0x3F81), one + ulp);
+    }
+
+    #[test]
+    fn chosen_tensors_are_written_as_bf16_and_read_back_upcast() {
+        let path = temp("bf16");
+        let mut bn = BatchNorm::<f32>::new(3);
+        bn.weight.value = ndarray::array![1.0f32 + 2f32.powi(-8), -3.0, 0.1];
+        bn.running_var = ndarray::array![0.1f32, 2.0, 3.0];
+        let rounded = bn.weight.value.mapv(|v| bf16_to_f32(f32_to_bf16(v)));
+        // 0.1 rounds up to 0x3DCD, 0.10009765625.
+        assert_eq!(
+            rounded,
+            ndarray::array![1.0f32, -3.0, f32::from_bits(0x3DCD_0000)]
+        );
+        save_params(&path, &mut bn).unwrap();
+        let bf16_path = temp("bf16-rewritten");
+        rewrite_with_bf16(&path, &bf16_path, &|name| name == "weight").unwrap();
+        let bytes = std::fs::read(&bf16_path).unwrap();
+        let file = SafeTensors::deserialize(&bytes).unwrap();
+        assert_eq!(file.tensor("weight").unwrap().dtype(), Dtype::BF16);
+        assert_eq!(file.tensor("running_var").unwrap().dtype(), Dtype::F32);
+        let mut back = BatchNorm::<f32>::new(3);
+        load_params(&bf16_path, &mut back).unwrap();
+        assert_eq!(back.weight.value, rounded);
+        assert_eq!(back.running_var, bn.running_var);
+        let (as_f64, _) = read_tensors::<f64>(&bf16_path).unwrap();
+        assert_eq!(as_f64["weight"][[2]], 0.10009765625);
+        std::fs::remove_file(&path).unwrap();
+        std::fs::remove_file(&bf16_path).unwrap();
+    }
+
+    #[test]
     fn a_file_that_is_not_safetensors_is_an_error() {
         let path = temp("garbage");
         std::fs::write(&path, b"not a weight file").unwrap();
         assert!(matches!(
             load_params(&path, &mut BatchNorm::<f32>::new(2)),
-            Err(NnError::Safetensors { .. })
+            Err(NnError::NotSafetensors { .. })
         ));
+        let err = load_params(&path, &mut BatchNorm::<f32>::new(2)).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            format!(
+                "{}: not a safetensors weight file: its first 8 bytes do not give a header \
+                 length that fits in the file",
+                path.display()
+            )
+        );
+        // Cut short: the header promises more data than the file holds.
+        let mut bn = BatchNorm::<f32>::new(2);
+        save_params(&path, &mut bn).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::write(&path, &bytes[..bytes.len() - 3]).unwrap();
+        let err = load_params(&path, &mut bn).unwrap_err().to_string();
+        assert!(err.ends_with("(a truncated or damaged file)"), "{err}");
+        let err = load_params(Path::new("/dev/zero"), &mut bn).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "/dev/zero: is a device, FIFO or socket, not a file"
+        );
         std::fs::remove_file(&path).unwrap();
     }
 }

@@ -378,6 +378,40 @@ mod tests {
         );
     }
 
+    /// A snapshot whose moments were stored as bf16 loads with every moment upcast from its
+    /// rounded value, hyper-parameters and step count kept, and goes on stepping.
+    #[test]
+    fn adam_loads_moments_stored_as_bf16() {
+        let dir = std::env::temp_dir().join(format!("rgm-nn-adam-bf16-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut lin = Linear::<f32>::new(3, 2, true, &mut StdRng::seed_from_u64(5));
+        let mut adam = Adam::new(0.01, 0.0);
+        for t in 0..2 {
+            lin.weight.grad = lin.weight.value.mapv(|w| 0.37 * w + t as f32);
+            lin.bias.as_mut().unwrap().grad.fill(0.3);
+            adam.step(&mut lin).unwrap();
+        }
+        let (f32_path, bf16_path) = (
+            dir.join("adam.safetensors"),
+            dir.join("adam-bf16.safetensors"),
+        );
+        adam.save(&f32_path).unwrap();
+        crate::io::rewrite_with_bf16(&f32_path, &bf16_path, &|n| {
+            n.starts_with("m.") || n.starts_with("v.")
+        })
+        .unwrap();
+        let loaded = Adam::<f32>::load(&bf16_path).unwrap();
+        assert_eq!((loaded.step, loaded.lr, loaded.beta2), (2, 0.01, 0.999));
+        let (exact, _) = read_tensors::<f32>(&f32_path).unwrap();
+        let round = |t: &ArrayD<f32>| t.mapv(|v| crate::io::bf16_to_f32(crate::io::f32_to_bf16(v)));
+        let m = &loaded.moments.tensors[0][0];
+        assert_eq!(m, &round(&exact["m.weight"]));
+        assert_ne!(m, &exact["m.weight"], "0.37 w is not a bf16 value");
+        let mut loaded = loaded;
+        loaded.step(&mut lin).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     #[test]
     fn state_of_another_model_is_refused() {
         let mut sgd = Sgd::new(0.1, 0.9, 0.0);

@@ -41,6 +41,35 @@ pub fn flush_denormals_to_zero() -> bool {
     }
 }
 
+/// Runs `work` with denormals flushed on the calling thread ([`flush_denormals_to_zero`]) and
+/// puts the thread's floating-point flags back as they were afterwards: for threads that are
+/// not ours, such as a Python interpreter's, whose own arithmetic must keep denormals.
+pub fn with_denormals_flushed<T>(work: impl FnOnce() -> T) -> T {
+    #[cfg(target_arch = "x86_64")]
+    {
+        /// Restores the saved control word on drop, so a panic in `work` restores it too.
+        struct Restore(u32);
+        impl Drop for Restore {
+            fn drop(&mut self) {
+                #[allow(deprecated)]
+                // SAFETY: writes back the control word read from this thread before.
+                unsafe {
+                    std::arch::x86_64::_mm_setcsr(self.0)
+                };
+            }
+        }
+        #[allow(deprecated)]
+        // SAFETY: reading MXCSR has no effect.
+        let _restore = Restore(unsafe { std::arch::x86_64::_mm_getcsr() });
+        flush_denormals_to_zero();
+        work()
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        work()
+    }
+}
+
 /// Flushes denormals on every thread that computes: the calling thread, OpenBLAS's workers (they
 /// load the calling thread's SSE control word with each job, so they follow it — checked by
 /// `tests/denormals.rs`) and rayon's global pool, built here with the flag set in each worker.
@@ -77,6 +106,24 @@ mod tests {
             assert!((tiny / 4.0) > 0.0, "denormal kept before the call");
             assert!(flush_denormals_to_zero());
             assert_eq!(std::hint::black_box(tiny) / 4.0, 0.0);
+        })
+        .join()
+        .unwrap();
+    }
+
+    #[test]
+    fn denormals_flush_inside_the_scope_only() {
+        std::thread::spawn(|| {
+            let tiny = std::hint::black_box(f32::MIN_POSITIVE);
+            let inside = with_denormals_flushed(|| std::hint::black_box(tiny) / 4.0);
+            #[cfg(target_arch = "x86_64")]
+            assert_eq!(inside, 0.0);
+            #[cfg(not(target_arch = "x86_64"))]
+            let _ = inside;
+            assert!(
+                std::hint::black_box(tiny) / 4.0 > 0.0,
+                "denormals kept after the scope"
+            );
         })
         .join()
         .unwrap();

@@ -27,6 +27,9 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    if let Some(json) = &args.json {
+        crate::check_writable(json)?;
+    }
     let (dataset, generator) = args.data.open()?;
     let shapes = args.data.shapes(&dataset);
     let method = args.method.build(false)?;

@@ -25,6 +25,10 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    if let Some(out) = &args.out {
+        rgm_data::io::Format::from_path(out)?;
+        crate::check_writable(out)?;
+    }
     let source = read_point_cloud(&args.source)?;
     let target = read_point_cloud(&args.target)?;
     let mut method = args.method.build(true)?;

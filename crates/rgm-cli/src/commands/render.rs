@@ -40,7 +40,25 @@ pub struct Args {
     truth: Option<PathBuf>,
 }
 
+/// Refuses `path` unless it is a writable `.png` file, before any work.
+fn check_png(path: &Path, option: &str) -> Result<()> {
+    let png = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"));
+    if !png {
+        bail!(
+            "{option} {}: rgm render writes PNG images; give the file a .png name",
+            path.display()
+        );
+    }
+    crate::check_writable(path)
+}
+
 pub fn run(args: Args) -> Result<()> {
+    check_png(&args.out, "--out")?;
+    if let Some(matrix) = &args.matrix {
+        check_png(matrix, "--matrix")?;
+    }
     let source = read_point_cloud(&args.source)?;
     let target = read_point_cloud(&args.target)?;
     let given = args.transform.as_deref().map(read_transform).transpose()?;
@@ -82,12 +100,18 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
-/// A 4×4 rigid transform from `rgm register`'s text or JSON output.
+/// A 4×4 rigid transform from a file of `rgm register`'s text or JSON output.
 fn read_transform(path: &Path) -> Result<RigidTransform> {
+    parse_transform(&rgm_data::read_regular_file(path)?, path)
+}
+
+/// A 4×4 rigid transform from the bytes of `rgm register`'s text or JSON output; `path` names
+/// them in errors.
+fn parse_transform(bytes: &[u8], path: &Path) -> Result<RigidTransform> {
     let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        std::str::from_utf8(bytes).with_context(|| format!("{} is not text", path.display()))?;
     let numbers: Vec<f64> = if text.trim_start().starts_with('{') {
-        let value: serde_json::Value = serde_json::from_str(&text)
+        let value: serde_json::Value = serde_json::from_str(text)
             .with_context(|| format!("{} is not JSON", path.display()))?;
         value["transform"]
             .as_array()
@@ -116,4 +140,24 @@ fn read_transform(path: &Path) -> Result<RigidTransform> {
     let m = Matrix4::from_row_slice(&numbers);
     RigidTransform::from_matrix4(&m, 1e-4)
         .with_context(|| format!("{} is not a rigid transform", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rgm_tests::mutation::{corpus, Fuzz};
+
+    #[test]
+    fn both_transform_formats_read_and_survive_fuzzing() {
+        let seeds = corpus(&["transform.txt", "register.json"]);
+        assert_eq!(seeds.len(), 2);
+        for seed in &seeds {
+            let t = parse_transform(seed, Path::new("seed")).unwrap();
+            assert!((t.translation.z - 0.3).abs() < 1e-12, "{t:?}");
+        }
+        // Memory is not counted here (the allocator is the system's): no panic, no hang.
+        Fuzz::default().run("transform", &seeds, |b| {
+            let _ = parse_transform(b, Path::new("f.txt"));
+        });
+    }
 }

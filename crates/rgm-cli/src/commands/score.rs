@@ -4,7 +4,7 @@
 //! The transforms file: `{"method": NAME, "pairs": [{"index": i, "transform": 4×4 rows,
 //! "time_ms": t}, …]}`.
 
-use std::fs;
+use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
@@ -58,9 +58,49 @@ struct Entry {
 }
 
 fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T> {
-    let text = fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    serde_json::from_str(&text)
+    let bytes = rgm_data::read_regular_file(path)?;
+    serde_json::from_slice(&bytes)
         .with_context(|| format!("{} is not the expected JSON", path.display()))
+}
+
+/// Checks that `found` holds exactly one transform per pair of the manifest: a tool that
+/// skipped hard pairs, or scored one twice, would otherwise score better than it is.
+fn check_one_per_pair(found: &Transforms, manifest: &Manifest, args: &Args) -> Result<()> {
+    let (file, pairs_json) = (args.transforms.display(), args.pairs.join("pairs.json"));
+    let mut seen = BTreeSet::new();
+    for f in &found.pairs {
+        if !manifest.pairs.iter().any(|e| e.index == f.index) {
+            bail!(
+                "{file}: pair {} is not in {}",
+                f.index,
+                pairs_json.display()
+            );
+        }
+        if !seen.insert(f.index) {
+            bail!("{file}: pair {} has more than one transform", f.index);
+        }
+    }
+    let missing: Vec<String> = manifest
+        .pairs
+        .iter()
+        .filter(|e| !seen.contains(&e.index))
+        .map(|e| e.index.to_string())
+        .collect();
+    if !missing.is_empty() {
+        let shown = if missing.len() > 10 {
+            format!("{}, …", missing[..10].join(", "))
+        } else {
+            missing.join(", ")
+        };
+        bail!(
+            "{file}: {} of the {} pairs of {} have no transform (pairs {shown}); a method is \
+             scored on every pair",
+            missing.len(),
+            manifest.pairs.len(),
+            pairs_json.display()
+        );
+    }
+    Ok(())
 }
 
 fn rigid(rows: &[[f64; 4]; 4], what: &str) -> Result<RigidTransform> {
@@ -69,18 +109,19 @@ fn rigid(rows: &[[f64; 4]; 4], what: &str) -> Result<RigidTransform> {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    if let Some(json) = &args.json {
+        crate::check_writable(json)?;
+    }
     let found: Transforms = read_json(&args.transforms)?;
     let manifest: Manifest = read_json(&args.pairs.join("pairs.json"))?;
+    check_one_per_pair(&found, &manifest, &args)?;
     let mut records = Vec::with_capacity(found.pairs.len());
     for f in &found.pairs {
-        let Some(entry) = manifest.pairs.iter().find(|e| e.index == f.index) else {
-            bail!(
-                "{}: pair {} is not in {}",
-                args.transforms.display(),
-                f.index,
-                args.pairs.join("pairs.json").display()
-            );
-        };
+        let entry = manifest
+            .pairs
+            .iter()
+            .find(|e| e.index == f.index)
+            .expect("checked above");
         let source = read_point_cloud(args.pairs.join(&entry.source))?;
         let target = read_point_cloud(args.pairs.join(&entry.target))?;
         let pair = Pair {
@@ -117,4 +158,29 @@ pub fn run(args: Args) -> Result<()> {
     );
     table::report(&found.method, &setting, &records, args.json.as_deref())?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rgm_tests::mutation::{corpus, Fuzz};
+
+    /// The transforms file as `run` reads it: JSON, then every transform checked as rigid.
+    fn read_transforms(bytes: &[u8]) -> Result<Vec<RigidTransform>> {
+        let found: Transforms = serde_json::from_slice(bytes)?;
+        found
+            .pairs
+            .iter()
+            .map(|f| rigid(&f.transform, "fuzz"))
+            .collect()
+    }
+
+    #[test]
+    fn the_transforms_file_reads_and_survives_fuzzing() {
+        let seeds = corpus(&["transforms.json"]);
+        assert_eq!(read_transforms(&seeds[0]).unwrap().len(), 2);
+        Fuzz::default().run("score", &seeds, |b| {
+            let _ = read_transforms(b);
+        });
+    }
 }

@@ -9,7 +9,7 @@ pub mod off;
 pub mod ply;
 pub mod xyz;
 
-use std::io::Write;
+use std::io::{Read, Write};
 use std::path::Path;
 
 use rgm_geom::{Point3, PointCloud};
@@ -55,10 +55,7 @@ impl Format {
 pub fn read_point_cloud(path: impl AsRef<Path>) -> Result<PointCloud> {
     let path = path.as_ref();
     let format = Format::from_path(path)?;
-    let bytes = std::fs::read(path).map_err(|source| DataError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = read_regular_file(path)?;
     let points = match format {
         Format::Ply => ply::parse(&bytes, path)?,
         Format::Off => off::parse(&bytes, path)?,
@@ -66,6 +63,32 @@ pub fn read_point_cloud(path: impl AsRef<Path>) -> Result<PointCloud> {
         Format::Npy => npy::parse(&bytes, path)?,
     };
     checked_cloud(points, path)
+}
+
+/// The bytes of the regular file at `path`, read up to the size it had when opened. Folders,
+/// devices, FIFOs and sockets are refused before they are opened: an endless stream such as
+/// `/dev/zero` would otherwise be read until memory runs out, and a FIFO would block.
+pub fn read_regular_file(path: &Path) -> Result<Vec<u8>> {
+    let io_error = |source| DataError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let kind = std::fs::metadata(path).map_err(io_error)?.file_type();
+    if !kind.is_file() {
+        return Err(DataError::NotAFile {
+            path: path.to_path_buf(),
+            kind: if kind.is_dir() {
+                "a folder"
+            } else {
+                "a device, FIFO or socket"
+            },
+        });
+    }
+    let file = std::fs::File::open(path).map_err(io_error)?;
+    let len = file.metadata().map_err(io_error)?.len();
+    let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0));
+    file.take(len).read_to_end(&mut bytes).map_err(io_error)?;
+    Ok(bytes)
 }
 
 /// Writes a point cloud, choosing the format by extension: PLY binary little-endian float32,
@@ -230,6 +253,31 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("does_not_exist.ply"), "{err}");
+    }
+
+    #[test]
+    fn folders_and_endless_devices_are_refused_before_reading() {
+        let err = read_point_cloud("/dev/zero").unwrap_err();
+        assert!(matches!(err, DataError::UnknownExtension { .. }), "{err}");
+        // A `.ply` name for /dev/zero, as a user could make one.
+        let link = scratch_path("zero.ply");
+        let _ = std::fs::remove_file(&link);
+        std::os::unix::fs::symlink("/dev/zero", &link).unwrap();
+        let err = read_point_cloud(&link).unwrap_err().to_string();
+        assert_eq!(
+            err,
+            format!(
+                "{}: is a device, FIFO or socket, not a file",
+                link.display()
+            )
+        );
+        let folder = scratch_path("folder.xyz");
+        std::fs::create_dir_all(&folder).unwrap();
+        let err = read_point_cloud(&folder).unwrap_err().to_string();
+        assert_eq!(
+            err,
+            format!("{}: is a folder, not a file", folder.display())
+        );
     }
 
     #[test]

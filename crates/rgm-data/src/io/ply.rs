@@ -222,13 +222,60 @@ fn parse_header(bytes: &[u8], path: &Path) -> Result<Header> {
     ))
 }
 
-/// The body as a stream of values.
-trait Values {
-    /// The next value, read as `ty`; `Ok(None)` at the end of the data.
-    fn next(&mut self, ty: Scalar) -> Result<Option<f64>>;
+impl Element {
+    /// The fewest bytes one row takes in `encoding`: every scalar and list length, lists empty.
+    /// An ASCII value is at least one character and one separator.
+    fn min_row_bytes(&self, encoding: Encoding) -> usize {
+        self.properties
+            .iter()
+            .map(|p| match (encoding, p) {
+                (Encoding::Ascii, _) => 2,
+                (_, Property::Scalar { ty, .. }) => ty.size(),
+                (_, Property::List { count, .. }) => count.size(),
+            })
+            .sum()
+    }
 }
 
-/// An ASCII body: whitespace-separated tokens, with their line numbers for errors.
+/// Checks, before any row is read, that the rows `elements` declare fit in `body_len` bytes,
+/// so a huge count in a small file is an error and not a long loop or a huge allocation.
+fn check_counts(
+    elements: &[Element],
+    encoding: Encoding,
+    body_len: usize,
+    path: &Path,
+) -> Result<()> {
+    let mut needed = 0usize;
+    for element in elements {
+        let bytes = element
+            .count
+            .saturating_mul(element.min_row_bytes(encoding));
+        needed = needed.saturating_add(bytes);
+        // The last ASCII value may end the file without a separator.
+        let room = body_len + usize::from(encoding == Encoding::Ascii);
+        if needed > room {
+            let why = format!(
+                "element `{}` declares {} rows of at least {} bytes, more than the {body_len} \
+                 bytes of data the file holds",
+                element.name,
+                element.count,
+                element.min_row_bytes(encoding)
+            );
+            return Err(format_error(path, FORMAT, why));
+        }
+    }
+    Ok(())
+}
+
+/// The body as a stream of rows of values.
+trait Values {
+    /// The next value of the current row, read as `ty`; `Ok(None)` at the end of the data.
+    fn next(&mut self, ty: Scalar) -> Result<Option<f64>>;
+    /// Ends the current row of `element`: an ASCII row must hold exactly its values.
+    fn end_row(&mut self, element: &Element) -> Result<()>;
+}
+
+/// An ASCII body: one row per line (blank lines skipped), whitespace-separated values.
 struct AsciiValues<'a> {
     path: &'a Path,
     lines: std::str::Lines<'a>,
@@ -236,25 +283,67 @@ struct AsciiValues<'a> {
     line_no: usize,
     line: &'a str,
     tokens: std::str::SplitWhitespace<'a>,
+    /// Whether a row has begun on `line`.
+    in_row: bool,
+    /// Values read from the current row.
+    read: usize,
+}
+
+impl<'a> AsciiValues<'a> {
+    fn new(path: &'a Path, text: &'a str, header_lines: usize) -> Self {
+        Self {
+            path,
+            lines: text.lines(),
+            line_no: header_lines,
+            line: "",
+            tokens: "".split_whitespace(),
+            in_row: false,
+            read: 0,
+        }
+    }
 }
 
 impl Values for AsciiValues<'_> {
     fn next(&mut self, _ty: Scalar) -> Result<Option<f64>> {
-        loop {
-            if let Some(token) = self.tokens.next() {
-                let why = || format!("`{token}` is not a number");
-                let value = token
-                    .parse()
-                    .map_err(|_| line_error(self.path, self.line_no, self.line, why()))?;
-                return Ok(Some(value));
-            }
+        while !self.in_row {
             let Some(line) = self.lines.next() else {
                 return Ok(None);
             };
             self.line_no += 1;
             self.line = line;
             self.tokens = line.split_whitespace();
+            self.in_row = !line.trim().is_empty();
+            self.read = 0;
         }
+        let Some(token) = self.tokens.next() else {
+            let why = format!(
+                "the row ends after {} values; the header declares more",
+                self.read
+            );
+            return Err(line_error(self.path, self.line_no, self.line, why));
+        };
+        let value = token.parse().map_err(|_| {
+            line_error(
+                self.path,
+                self.line_no,
+                self.line,
+                format!("`{token}` is not a number"),
+            )
+        })?;
+        self.read += 1;
+        Ok(Some(value))
+    }
+
+    fn end_row(&mut self, element: &Element) -> Result<()> {
+        if self.in_row && self.tokens.next().is_some() {
+            let why = format!(
+                "the row holds more than the {} values of a `{}` row",
+                self.read, element.name
+            );
+            return Err(line_error(self.path, self.line_no, self.line, why));
+        }
+        self.in_row = false;
+        Ok(())
     }
 }
 
@@ -272,6 +361,10 @@ impl Values for BinaryValues<'_> {
         let (value, rest) = self.bytes.split_at(ty.size());
         self.bytes = rest;
         Ok(Some(ty.decode(value, self.big_endian)))
+    }
+
+    fn end_row(&mut self, _element: &Element) -> Result<()> {
+        Ok(())
     }
 }
 
@@ -306,36 +399,28 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Vec<Point3<f64>>> {
         };
     }
     let body = &bytes[header.body_start..];
+    let elements = &header.elements[..=vertex_index];
+    check_counts(elements, header.encoding, body.len(), path)?;
     match header.encoding {
         Encoding::Ascii => {
             let text = std::str::from_utf8(body)
                 .map_err(|_| format_error(path, FORMAT, "the ASCII body is not text"))?;
-            let values = AsciiValues {
-                path,
-                lines: text.lines(),
-                line_no: header.lines,
-                line: "",
-                tokens: "".split_whitespace(),
-            };
-            read_vertices(&header.elements[..=vertex_index], &axes, values, path)
+            let values = AsciiValues::new(path, text, header.lines);
+            read_vertices(elements, &axes, values, path)
         }
         Encoding::BinaryLittleEndian | Encoding::BinaryBigEndian => {
             let big_endian = header.encoding == Encoding::BinaryBigEndian;
-            read_vertices(
-                &header.elements[..=vertex_index],
-                &axes,
-                BinaryValues {
-                    bytes: body,
-                    big_endian,
-                },
-                path,
-            )
+            let values = BinaryValues {
+                bytes: body,
+                big_endian,
+            };
+            read_vertices(elements, &axes, values, path)
         }
     }
 }
 
 /// Skips every element but the last of `elements`, then reads the last (the vertices), keeping
-/// the properties at `axes`.
+/// the properties at `axes`. [`check_counts`] has bounded the counts by the file's size.
 fn read_vertices(
     elements: &[Element],
     axes: &[usize; 3],
@@ -346,12 +431,13 @@ fn read_vertices(
         .split_last()
         .expect("the vertex element is included");
     let mut row = Vec::with_capacity(vertex.properties.len());
-    for element in before {
+    // An element without properties takes no bytes: nothing to skip.
+    for element in before.iter().filter(|e| !e.properties.is_empty()) {
         for r in 0..element.count {
             read_row(element, r, &mut values, &mut row, path)?;
         }
     }
-    let mut points = Vec::with_capacity(vertex.count.min(1 << 24));
+    let mut points = Vec::with_capacity(vertex.count);
     for r in 0..vertex.count {
         read_row(vertex, r, &mut values, &mut row, path)?;
         points.push(Point3::new(row[axes[0]], row[axes[1]], row[axes[2]]));
@@ -402,7 +488,7 @@ fn read_row(
             }
         }
     }
-    Ok(())
+    values.end_row(element)
 }
 
 /// Writes a binary little-endian PLY with float32 x, y, z.
@@ -546,7 +632,14 @@ mod tests {
         let short = format!("{header}0 0 0\n1 1 1\n");
         assert_eq!(
             err(short.as_bytes()),
-            "s.ply: PLY: the data ends in element `vertex` at row 2 of 3"
+            "s.ply: PLY: element `vertex` declares 3 rows of at least 6 bytes, more than the 12 \
+             bytes of data the file holds"
+        );
+        let short_list = "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n\
+                          property float z\nproperty list uchar int i\nend_header\n0 0 0 3 1 2 3\n1 1 1 2 5\n";
+        assert_eq!(
+            err(short_list.as_bytes()),
+            "s.ply:10: the row ends after 5 values; the header declares more: `1 1 1 2 5`"
         );
         let bad_number = format!("{header}0 0 0\n1 one 1\n2 2 2\n");
         assert_eq!(
@@ -562,8 +655,60 @@ mod tests {
         binary.truncate(binary.len() - 5);
         assert_eq!(
             err(&binary),
-            "s.ply: PLY: the data ends in element `vertex` at row 3 of 4"
+            "s.ply: PLY: element `vertex` declares 4 rows of at least 12 bytes, more than the 43 \
+             bytes of data the file holds"
         );
+        let mut faces = b"ply\nformat binary_little_endian 1.0\nelement face 1\n\
+                          property list uchar int i\nelement vertex 0\nproperty float x\n\
+                          property float y\nproperty float z\nend_header\n"
+            .to_vec();
+        faces.extend([200, 0, 0, 0, 0]);
+        assert_eq!(
+            err(&faces),
+            "s.ply: PLY: the data ends in element `face` at row 0 of 1"
+        );
+    }
+
+    /// Issue 14, case 6: a row with more or fewer values than the vertex has properties was
+    /// read across rows (90 rows of 2 values as 60 points).
+    #[test]
+    fn an_ascii_row_must_hold_exactly_its_values() {
+        let header = "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
+        let long = format!("{header}0 0 0 7\n1 1 1\n");
+        assert_eq!(
+            err(long.as_bytes()),
+            "s.ply:8: the row holds more than the 3 values of a `vertex` row: `0 0 0 7`"
+        );
+        let pairs = format!("{header}0 0\n1 1\n2 2\n");
+        assert_eq!(
+            err(pairs.as_bytes()),
+            "s.ply:8: the row ends after 2 values; the header declares more: `0 0`"
+        );
+        // Blank lines between rows are allowed.
+        let blank = format!("{header}0 0 0\n\n1 1 1\n");
+        assert_eq!(parse_bytes(blank.as_bytes()).unwrap().len(), 2);
+    }
+
+    /// Issue 14, case 1: an element without properties and a huge count before `vertex` was
+    /// looped through (10^18 rows), and counts the file cannot hold were believed.
+    #[test]
+    fn counts_are_checked_against_the_file_before_any_loop() {
+        let junk = "ply\nformat ascii 1.0\nelement junk 1000000000000000000\nelement vertex 3\n\
+                    property float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n1 0 0\n0 1 0\n";
+        assert_eq!(parse_bytes(junk.as_bytes()).unwrap().len(), 3);
+        for encoding in ["ascii", "binary_little_endian", "binary_big_endian"] {
+            let huge = format!(
+                "ply\nformat {encoding} 1.0\nelement face 1000000000000000000\nproperty uchar n\n\
+                 element vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n"
+            );
+            let e = err(huge.as_bytes());
+            assert!(
+                e.starts_with("s.ply: PLY: element `face` declares 1000000000000000000 rows"),
+                "{e}"
+            );
+            let max = huge.replace("1000000000000000000", &usize::MAX.to_string());
+            assert!(err(max.as_bytes()).contains("element `face` declares"));
+        }
     }
 
     #[test]

@@ -1,0 +1,174 @@
+//! Issue 14's command-line cases: a closed stdout, outputs that cannot be written, options that
+//! select nothing. Each ends with a clear error (or quietly, for a closed pipe), never a panic.
+
+use std::os::unix::process::ExitStatusExt;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+
+fn rgm(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_rgm"))
+        .args(args)
+        .output()
+        .expect("the rgm binary runs")
+}
+
+/// A fresh folder for one test's files.
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("rgm-hostile-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn data_dir() -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data/modelnet40_npy1024")
+        .to_string_lossy()
+        .into_owned()
+}
+
+/// Two small clouds as `.xyz` files in `dir`: a grid and the same grid moved by 0.01.
+fn clouds(dir: &Path) -> (String, String) {
+    let grid: Vec<[f64; 3]> = (0..125)
+        .map(|i| [(i % 5) as f64, (i / 5 % 5) as f64, (i / 25) as f64 * 1.3])
+        .collect();
+    let write = |name: &str, shift: f64| {
+        let path = dir.join(name);
+        let text: String = grid
+            .iter()
+            .map(|p| format!("{} {} {}\n", p[0] + shift, p[1], p[2]))
+            .collect();
+        std::fs::write(&path, text).unwrap();
+        path.to_string_lossy().into_owned()
+    };
+    (write("a.xyz", 0.0), write("b.xyz", 0.01))
+}
+
+/// Runs rgm with its stdout a pipe closed before rgm writes: the output and stderr.
+fn with_closed_stdout(args: &[&str]) -> Output {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_rgm"))
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    child.wait_with_output().unwrap()
+}
+
+/// Issue 14, case 5: `rgm register a b | head -1` and `rgm eval … | true` panicked (exit 101).
+#[test]
+fn a_closed_stdout_ends_rgm_quietly() {
+    let dir = scratch("pipe");
+    let (a, b) = clouds(&dir);
+    let register = with_closed_stdout(&["register", &a, &b, "--method", "icp"]);
+    let data = data_dir();
+    let eval = with_closed_stdout(&["eval", "--method", "icp", "--limit", "2", "--data", &data]);
+    for out in [register, eval] {
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.signal(), Some(13), "SIGPIPE: {stderr}");
+        assert!(stderr.is_empty(), "{stderr}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Issue 14, case 9: an output that cannot be written was found only after the work (an
+/// evaluation printed its table, then failed); `render --out x.jpg` wrote PNG bytes.
+#[test]
+fn outputs_are_checked_before_the_work() {
+    let dir = scratch("out");
+    let (a, b) = clouds(&dir);
+    let data = data_dir();
+    let nowhere = dir.join("missing/folder/pairs.json");
+    let out = rgm(&[
+        "eval",
+        "--method",
+        "icp",
+        "--limit",
+        "1",
+        "--data",
+        &data,
+        "--json",
+        nowhere.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    assert!(out.stdout.is_empty(), "the work ran first");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.starts_with(&format!("rgm: error: cannot write {}: ", nowhere.display())),
+        "{err}"
+    );
+    let out = rgm(&["register", &a, &b, "--method", "icp", "--out", "moved.obj"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("moved.obj: unknown point-cloud extension"),
+        "{err}"
+    );
+    let jpg = dir.join("x.jpg");
+    let out = rgm(&[
+        "render",
+        &a,
+        &b,
+        "--method",
+        "icp",
+        "--out",
+        jpg.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("writes PNG images; give the file a .png name"),
+        "{err}"
+    );
+    assert!(!jpg.exists());
+    // The check leaves no file behind.
+    let png = dir.join("x.png");
+    let out = rgm(&[
+        "render",
+        &a,
+        &b,
+        "--method",
+        "icp",
+        "--out",
+        png.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(png.exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Issue 14, case 9: `eval --limit 0` printed an internal message ("needs at least 1 points").
+#[test]
+fn a_limit_of_zero_pairs_is_refused_by_name() {
+    let out = rgm(&[
+        "eval",
+        "--method",
+        "icp",
+        "--limit",
+        "0",
+        "--data",
+        &data_dir(),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("'0' for '--limit <N>'"), "{err}");
+}
+
+/// Issue 14, case 2: a `.ply` name for `/dev/zero` was read until memory ran out.
+#[test]
+fn an_endless_device_is_refused() {
+    let dir = scratch("zero");
+    let link = dir.join("zero.ply");
+    std::os::unix::fs::symlink("/dev/zero", &link).unwrap();
+    let link = link.to_str().unwrap();
+    let out = rgm(&["register", link, link]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(
+        err.trim_end(),
+        format!("rgm: error: {link}: is a device, FIFO or socket, not a file")
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

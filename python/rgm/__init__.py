@@ -1,0 +1,493 @@
+"""rgm: robust point-cloud registration (RGM, CVPR 2021), with NumPy arrays in and out.
+
+Register two clouds (float32 or float64 arrays of shape (N, 3))::
+
+    import rgm
+    result = rgm.register(source, target)
+    result.transformation        # (4, 4) float64, maps the source onto the target
+
+``rgm.register`` runs what the ``rgm register`` command runs, with the same defaults: the RGM
+network with the model built into rgm, refined by ICP on the full clouds. ``rgm.Registrar``
+loads a method once for many pairs; ``rgm.metrics`` and ``rgm.modelnet_pairs`` give the
+paper's metrics and the benchmark's pairs, to evaluate any method on exactly rgm's pairs.
+
+The work runs in Rust with the GIL released: Python threads register pairs in parallel, and a
+``Registrar`` pickles (as its settings) for process pools.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Iterator, Optional, Union, overload
+
+import numpy as np
+
+from . import _rgm
+
+__all__ = [
+    "BenchmarkPair",
+    "DEFAULT_METHOD",
+    "METHODS",
+    "Metrics",
+    "ModelNetPairs",
+    "Registrar",
+    "RegistrationResult",
+    "metrics",
+    "modelnet_pairs",
+    "register",
+]
+
+__version__ = "0.1.0"
+
+#: The method ``rgm register`` and ``rgm.register`` run when none is named.
+DEFAULT_METHOD: str = _rgm.DEFAULT_METHOD
+#: The names ``method`` accepts.
+METHODS: tuple = tuple(_rgm.METHODS)
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+
+def _points(name: str, value: object) -> np.ndarray:
+    """``value`` as a C-contiguous float64 (N, 3) array, or a ValueError naming ``name``."""
+    if not isinstance(value, np.ndarray):
+        raise ValueError(
+            f"{name} must be a NumPy array of shape (N, 3) and dtype float32 or float64, "
+            f"got {type(value).__name__}"
+        )
+    if value.dtype not in (np.float32, np.float64) or value.ndim != 2 or value.shape[1] != 3:
+        raise ValueError(
+            f"{name} must have shape (N, 3) and dtype float32 or float64, "
+            f"got shape {value.shape} and dtype {value.dtype}"
+        )
+    if value.shape[0] == 0:
+        raise ValueError(f"{name} has no point (shape {value.shape}, dtype {value.dtype})")
+    finite = np.isfinite(value).all(axis=1)
+    if not finite.all():
+        row = int(np.argmin(finite))
+        raise ValueError(
+            f"{name} (shape {value.shape}, dtype {value.dtype}) has a NaN or infinite "
+            f"coordinate in row {row}: {value[row].tolist()}"
+        )
+    return np.ascontiguousarray(value, dtype=np.float64)
+
+
+def _matrix(name: str, value: object, shape: tuple) -> np.ndarray:
+    """``value`` as a C-contiguous finite float64 array of ``shape``, or a ValueError."""
+    array = np.asarray(value)
+    if array.dtype.kind not in "fiu" or array.shape != shape:
+        raise ValueError(
+            f"{name} must be a numeric array of shape {shape}, "
+            f"got shape {array.shape} and dtype {array.dtype}"
+        )
+    if not np.isfinite(array).all():
+        raise ValueError(f"{name} (shape {array.shape}) has a NaN or infinite entry")
+    return np.ascontiguousarray(array, dtype=np.float64)
+
+
+def _homogeneous(rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
+    matrix = np.eye(4)
+    matrix[:3, :3] = rotation
+    matrix[:3, 3] = translation
+    return matrix
+
+
+@dataclass(frozen=True, eq=False)  # arrays have no single truth value to compare by
+class RegistrationResult:
+    """The outcome of registering a source cloud onto a target cloud.
+
+    Attributes:
+        transformation: (4, 4) float64 homogeneous matrix that maps source coordinates into
+            the target's frame (target ← source), ``y = R x + t``, as Open3D's
+            ``registration_*`` results.
+        fitness: share of source points the method's score counts as inliers (for a refined
+            result: source points with a target point within the finest ICP distance).
+        inlier_rmse: root mean square distance of those inliers, in the clouds' units.
+        correspondences: (K, 2) int64 (source index, target index) pairs behind the result:
+            RGM's matches of its last pass, or for FGR and ICP the source points that the
+            transform brings within the method's scoring distance of their nearest target point.
+        time_ms: the method's own time in milliseconds (no conversion, no file reading).
+        method: the method run, as ``rgm register`` names it (``rgm+icp`` when refined).
+        iterations: RGM's passes plus ICP iterations, or the method's iterations.
+        converged: whether the method's convergence test stopped it.
+    """
+
+    transformation: np.ndarray
+    fitness: float
+    inlier_rmse: float
+    correspondences: np.ndarray
+    time_ms: float
+    method: str
+    iterations: int
+    converged: bool
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """The (3, 3) rotation R of ``transformation``."""
+        return self.transformation[:3, :3]
+
+    @property
+    def translation(self) -> np.ndarray:
+        """The (3,) translation t of ``transformation``."""
+        return self.transformation[:3, 3]
+
+
+class Registrar:
+    """A registration method loaded once, to register many pairs.
+
+    Building one loads the method's network (for RGM); ``register`` then runs it on any
+    number of pairs, from any number of threads at once (the GIL is released while it works,
+    and each thread gets its own copy of the network's buffers). A Registrar pickles as its
+    settings: unpickled in another process, it loads its network there, once per process.
+
+    Args:
+        method: ``"rgm"`` (the RGM network), ``"fgr"`` (Fast Global Registration on FPFH
+            features) or ``"icp"`` (point-to-point ICP from the identity). Default: the
+            method of ``rgm register`` (``rgm.DEFAULT_METHOD``).
+        refine: refine the transform of RGM or FGR with trimmed point-to-plane ICP on the full
+            clouds (pairs closer than 0.2, then 0.1, then 0.05; RGM measures them in its
+            unit-sphere frame, FGR in the clouds' units). On by default, as in
+            ``rgm register``; ``False`` gives the method's own transform, as the paper's tables
+            do. ICP is its own refinement and ignores it.
+        weights: RGM only: a safetensors file of weights with the authors' parameter names
+            (made by ``rgm train``, or converted from the authors' PyTorch model). Default: the
+            model built into rgm.
+        preset: RGM with ``weights`` only: the network sizes they were trained with,
+            ``"paper"`` (default), ``"small"``, ``"fast"`` or ``"tiny"``.
+        test_statistics: RGM with ``weights`` only: the batch-norm statistics at test time,
+            ``"cloud"`` for weights trained by ``rgm train`` or ``"running"`` (default) for the
+            authors' weights.
+        match_points: RGM only: match on at most this many randomly drawn points of each cloud
+            (a fixed seed, so a pair always gives the same result) and apply the transform to
+            the full clouds; 0 matches on every point (memory grows with the square of the
+            points; a request beyond the machine's free memory raises). Default: the built-in
+            model's training size, 384; 1,024 with ``weights``.
+        passes: RGM only: passes of network, matching and Kabsch, each on the source moved by
+            the passes before. Default: 2, as in the paper.
+
+    Raises:
+        ValueError: an unknown method, preset or test_statistics; an RGM option with another
+            method; a weight file that cannot be read or does not fit the preset (the message
+            names the file).
+    """
+
+    def __init__(
+        self,
+        method: str = DEFAULT_METHOD,
+        refine: bool = _rgm.DEFAULT_REFINE,
+        weights: Optional[PathLike] = None,
+        preset: Optional[str] = None,
+        test_statistics: Optional[str] = None,
+        match_points: Optional[int] = None,
+        passes: Optional[int] = None,
+    ) -> None:
+        self._settings = (
+            str(method),
+            bool(refine),
+            None if weights is None else os.fspath(weights),
+            preset,
+            test_statistics,
+            None if match_points is None else int(match_points),
+            None if passes is None else int(passes),
+        )
+        if match_points is not None and int(match_points) < 0:
+            raise ValueError(f"match_points must be at least 0, got {match_points}")
+        if passes is not None and int(passes) < 1:
+            raise ValueError(f"passes must be at least 1, got {passes}")
+        self._native = _rgm.Registrar(*self._settings)
+
+    @property
+    def name(self) -> str:
+        """The method's name as ``rgm register`` prints it (``rgm+icp`` when refined)."""
+        return self._native.name
+
+    def register(self, source: np.ndarray, target: np.ndarray) -> RegistrationResult:
+        """The rigid transform that maps ``source`` onto ``target``.
+
+        Args:
+            source: the cloud to move, a float32 or float64 NumPy array of shape (N, 3).
+            target: the cloud to move it onto, float32 or float64, shape (M, 3). Clouds of
+                any size and scale work: RGM moves both into its unit-sphere frame with one
+                common scale, and reports the transform in the clouds' own units.
+
+        Returns:
+            A RegistrationResult; ``transformation`` is target ← source.
+
+        Raises:
+            ValueError: an argument that is not a float32/float64 array of shape (N, 3), or
+                that holds NaN or infinity (the message names it, its shape and dtype).
+            RuntimeError: the method found no transform (e.g. too few points for RGM's
+                neighbour graph, or no correspondence survived).
+        """
+        source = _points("source", source)
+        target = _points("target", target)
+        transformation, fitness, rmse, pairs, time_ms, iterations, converged = (
+            self._native.register(source, target)
+        )
+        return RegistrationResult(
+            transformation=transformation,
+            fitness=fitness,
+            inlier_rmse=rmse,
+            correspondences=pairs,
+            time_ms=time_ms,
+            method=self._native.name,
+            iterations=iterations,
+            converged=converged,
+        )
+
+    def __reduce__(self):
+        # Unpickled through the cache of rgm.register: a process pool's worker loads the
+        # network once, however many tasks carry the Registrar.
+        return (_registrar, self._settings)
+
+    def __repr__(self) -> str:
+        names = ("method", "refine", "weights", "preset", "test_statistics", "match_points", "passes")
+        given = ", ".join(f"{n}={v!r}" for n, v in zip(names, self._settings) if v is not None)
+        return f"rgm.Registrar({given})"
+
+
+@functools.lru_cache(maxsize=8)
+def _registrar(*settings) -> Registrar:
+    """The Registrar of ``settings``, built once per distinct settings."""
+    return Registrar(*settings)
+
+
+def register(
+    source: np.ndarray,
+    target: np.ndarray,
+    method: str = DEFAULT_METHOD,
+    refine: bool = _rgm.DEFAULT_REFINE,
+    weights: Optional[PathLike] = None,
+    preset: Optional[str] = None,
+    test_statistics: Optional[str] = None,
+    match_points: Optional[int] = None,
+    passes: Optional[int] = None,
+) -> RegistrationResult:
+    """The rigid transform that maps ``source`` onto ``target``, as ``rgm register`` finds it.
+
+    With no option this runs exactly what ``rgm register SRC TGT`` runs (both take their
+    defaults from one place in rgm): today the RGM network with the model built into rgm,
+    refined by ICP on the full clouds. The method is loaded once per distinct set of options
+    and reused by later calls; ``rgm.Registrar`` does the same explicitly.
+
+    Args:
+        source: the cloud to move, a float32 or float64 NumPy array of shape (N, 3),
+            C-contiguous or not.
+        target: the cloud to move it onto, float32 or float64, shape (M, 3). Clouds of any
+            size and scale work: RGM moves both into its unit-sphere frame with one common
+            scale, and reports the transform in the clouds' own units.
+        method: ``"rgm"`` (the RGM network), ``"fgr"`` (Fast Global Registration on FPFH
+            features) or ``"icp"`` (point-to-point ICP from the identity). Default: the
+            method of ``rgm register`` (``rgm.DEFAULT_METHOD``).
+        refine: refine the transform of RGM or FGR with trimmed point-to-plane ICP on the full
+            clouds (``rgm register``'s default); ``False`` gives the method's own transform,
+            as the paper's tables do. ICP ignores it.
+        weights: RGM only: a safetensors weight file (``rgm train`` makes them; the authors'
+            PyTorch weights convert to one). Default: the model built into rgm.
+        preset: RGM with ``weights`` only: their network sizes, ``"paper"`` (default),
+            ``"small"``, ``"fast"`` or ``"tiny"``.
+        test_statistics: RGM with ``weights`` only: batch-norm statistics at test time,
+            ``"cloud"`` for weights from ``rgm train``, ``"running"`` (default) for the
+            authors' weights.
+        match_points: RGM only: match on at most this many random points of each cloud
+            (fixed seed); 0: every point. Default: 384 for the built-in model, 1,024 with
+            ``weights``.
+        passes: RGM only: passes of network, matching and Kabsch. Default: 2.
+
+    Returns:
+        A RegistrationResult: ``transformation`` ((4, 4) float64, target ← source),
+        ``fitness``, ``inlier_rmse``, ``correspondences`` ((K, 2) int64), ``time_ms``.
+
+    Raises:
+        ValueError: a cloud that is not a float32/float64 (N, 3) array or holds NaN or
+            infinity (the message names the argument, its shape and dtype); an option that
+            does not fit the method, or weights that cannot be loaded.
+        RuntimeError: the method found no transform for this pair.
+
+    Example::
+
+        >>> result = rgm.register(source, target)
+        >>> aligned = source @ result.rotation.T + result.translation
+    """
+    registrar = _registrar(
+        method,
+        refine,
+        None if weights is None else os.fspath(weights),
+        preset,
+        test_statistics,
+        match_points,
+        passes,
+    )
+    return registrar.register(source, target)
+
+
+@dataclass(frozen=True)
+class Metrics:
+    """The paper's metrics of one registered pair (spec §5 of rgm).
+
+    Attributes:
+        mae_r_deg: mean absolute error of the xyz Euler angles, degrees (anisotropic, DCP's,
+            with no wrap-around).
+        mae_t: mean absolute error of the translation over the 3 axes.
+        mie_r_deg: angle of R_gtᵀ R_pred, degrees (isotropic, RPM-Net's).
+        mie_t: ‖t_pred − t_gt‖.
+        ccd: clipped Chamfer distance as RGM's code computes it (distances clipped at 0.1,
+            source moved by the prediction, mean both ways).
+        chamfer: mean squared nearest distances both ways, unclipped.
+        recall: MAE(R) < 1° and MAE(t) < 0.1.
+    """
+
+    mae_r_deg: float
+    mae_t: float
+    mie_r_deg: float
+    mie_t: float
+    ccd: float
+    chamfer: float
+    recall: bool
+
+
+def metrics(
+    R_pred: np.ndarray,
+    t_pred: np.ndarray,
+    R_gt: np.ndarray,
+    t_gt: np.ndarray,
+    source: np.ndarray,
+    target: np.ndarray,
+) -> Metrics:
+    """The paper's metrics of a predicted transform against the truth, as ``rgm eval`` scores.
+
+    Args:
+        R_pred: (3, 3) predicted rotation, target ← source (orthonormal within 1e-4).
+        t_pred: (3,) predicted translation.
+        R_gt: (3, 3) true rotation (``BenchmarkPair.rotation``).
+        t_gt: (3,) true translation (``BenchmarkPair.translation``).
+        source: the source cloud as given to the method, (N, 3) float32 or float64.
+        target: the target cloud, (M, 3) float32 or float64.
+
+    Returns:
+        Metrics: MAE and MIE of rotation and translation, CCD, Chamfer distance, recall.
+
+    Raises:
+        ValueError: a wrongly shaped or non-finite argument, or a rotation that is not one.
+    """
+    pred = _homogeneous(
+        _matrix("R_pred", R_pred, (3, 3)), _matrix("t_pred", np.ravel(t_pred), (3,))
+    )
+    truth = _homogeneous(_matrix("R_gt", R_gt, (3, 3)), _matrix("t_gt", np.ravel(t_gt), (3,)))
+    values = _rgm.metrics(pred, truth, _points("source", source), _points("target", target))
+    return Metrics(**values)
+
+
+@dataclass(frozen=True, eq=False)
+class BenchmarkPair:
+    """One ModelNet40 benchmark pair with its ground truth, as ``rgm eval`` registers it.
+
+    Attributes:
+        index: the pair's index in its split (also its random seed).
+        source: (N, 3) float64, the moved (and for noise/partial, cropped and jittered) source.
+        target: (M, 3) float64 target.
+        transformation: (4, 4) float64 true transform target ← source.
+        correspondences: (K, 2) int64 true (source index, target index) pairs (exact for
+            clean; rebuilt from distances for noise and partial).
+        label: category label (0–39).
+        category: category name (``airplane``).
+        shape: the shape's name (``airplane_0627``).
+    """
+
+    index: int
+    source: np.ndarray
+    target: np.ndarray
+    transformation: np.ndarray
+    correspondences: np.ndarray
+    label: int
+    category: str
+    shape: str
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """The (3, 3) true rotation."""
+        return self.transformation[:3, :3]
+
+    @property
+    def translation(self) -> np.ndarray:
+        """The (3,) true translation."""
+        return self.transformation[:3, 3]
+
+
+class ModelNetPairs(Sequence):
+    """The benchmark's pairs of one setting and split: a sequence of BenchmarkPair.
+
+    Made by ``rgm.modelnet_pairs``. ``len()`` gives the number of pairs; indexing and
+    iteration make each pair on demand (the same pair for the same index, every time).
+    """
+
+    def __init__(self, native: "_rgm.ModelNetPairs") -> None:
+        self._native = native
+
+    def __len__(self) -> int:
+        return len(self._native)
+
+    @overload
+    def __getitem__(self, index: int) -> BenchmarkPair: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> list: ...
+
+    def __getitem__(self, index):
+        if isinstance(index, slice):
+            return [self[i] for i in range(*index.indices(len(self)))]
+        index = int(index)
+        if index < 0:
+            index += len(self)
+        if not 0 <= index < len(self):
+            raise IndexError(f"pair index out of range for {len(self)} pairs")
+        source, target, truth, pairs, label, category, shape = self._native.pair(index)
+        return BenchmarkPair(index, source, target, truth, pairs, label, category, shape)
+
+    def __iter__(self) -> Iterator[BenchmarkPair]:
+        for index in range(len(self)):
+            yield self[index]
+
+
+def modelnet_pairs(
+    data_dir: PathLike,
+    setting: str = "partial",
+    split: str = "test",
+    limit: Optional[int] = None,
+    unseen: bool = False,
+) -> ModelNetPairs:
+    """The ModelNet40 benchmark pairs that ``rgm eval`` and ``rgm pairs`` use.
+
+    Pair ``i`` is made from the split's shape ``i`` with a random generator seeded by ``i``
+    (the paper's protocol, spec §1 of rgm), so every method, run and tool sees the same
+    pairs: register them with any method and score it with ``rgm.metrics``.
+
+    Args:
+        data_dir: the ModelNet40 ``.npy`` tree (with ``modelnet40_shape_names.txt``) or the
+            HDF5 release ``modelnet40_ply_hdf5_2048``.
+        setting: ``"clean"`` (same points, random pose), ``"noise"`` (Gaussian jitter) or
+            ``"partial"`` (each cloud cropped to 70 % by a random plane, then jittered).
+        split: ``"test"`` (the official test split, every table of the paper) or
+            ``"validation"`` (the last 20 % of the training split, per category).
+        limit: use only the first ``limit`` pairs.
+        unseen: test on the unseen categories (labels 20–39) only.
+
+    Returns:
+        ModelNetPairs, a sequence of BenchmarkPair (loading the dataset takes a few seconds).
+
+    Raises:
+        OSError: the folder or a file cannot be read.
+        ValueError: an unknown setting or split, or a folder that is not ModelNet40.
+    """
+    if limit is not None and int(limit) < 0:
+        raise ValueError(f"limit must be at least 0, got {limit}")
+    native = _rgm.ModelNetPairs(
+        os.fspath(data_dir),
+        setting,
+        split,
+        bool(unseen),
+        None if limit is None else int(limit),
+    )
+    return ModelNetPairs(native)

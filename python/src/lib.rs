@@ -1,0 +1,324 @@
+//! `rgm._rgm`: the rgm crates behind NumPy arrays, for the Python package `rgm` (`rgm/` beside
+//! this crate), which checks and documents every argument before it reaches here: arrays come
+//! in as float64 (N, 3) clouds and (4, 4) transforms, strings as `String` (the limited API of
+//! Python 3.9 cannot lend a `&str`).
+//!
+//! The GIL is released while Rust works ([`Python::detach`]), so Python threads register pairs
+//! in parallel. Each call runs with denormals flushed on its thread (the network's Sinkhorn
+//! underflows) and the thread's flags restored afterwards; OpenBLAS runs single-threaded unless
+//! `OPENBLAS_NUM_THREADS` asks for more, as in the `rgm` command.
+
+use std::path::PathBuf;
+use std::sync::{Mutex, MutexGuard};
+
+use numpy::ndarray::Array2;
+use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
+use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use rgm_data::{DataError, ModelNet40, PairGenerator, Setting, Shape, Split};
+use rgm_geom::{Matrix4, PairMetrics, Point3, PointCloud, RigidTransform};
+use rgm_model::network::TestStatistics;
+use rgm_model::{Method, MethodError, MethodName, MethodOptions};
+use rgm_nn::threads::with_denormals_flushed;
+
+/// How far from rigid a given 4×4 transform may be (as `rgm score` reads outside transforms).
+const RIGID_TOLERANCE: f64 = 1e-4;
+
+fn value_error(err: impl std::fmt::Display) -> PyErr {
+    PyValueError::new_err(err.to_string())
+}
+
+/// A dataset error: `OSError` when the system refused a read, `ValueError` otherwise.
+fn data_error(err: DataError) -> PyErr {
+    match err {
+        DataError::Io { .. } => PyOSError::new_err(err.to_string()),
+        other => value_error(other),
+    }
+}
+
+/// The (N, 3) rows of `points` as a cloud.
+fn cloud(points: &PyReadonlyArray2<'_, f64>, name: &str) -> PyResult<PointCloud> {
+    let rows = points.as_array(); // (N, 3)
+    if rows.ncols() != 3 {
+        return Err(value_error(format!(
+            "{name} must have shape (N, 3), got {:?}",
+            rows.shape()
+        )));
+    }
+    Ok(PointCloud::new(
+        rows.rows()
+            .into_iter()
+            .map(|r| Point3::new(r[0], r[1], r[2]))
+            .collect(),
+    ))
+}
+
+/// A cloud as an (N, 3) array.
+fn points_array<'py>(py: Python<'py>, cloud: &PointCloud) -> Bound<'py, PyArray2<f64>> {
+    Array2::from_shape_fn((cloud.len(), 3), |(i, c)| cloud.points[i][c]).into_pyarray(py)
+}
+
+/// A transform as its homogeneous (4, 4) matrix.
+fn matrix_array<'py>(py: Python<'py>, t: &RigidTransform) -> Bound<'py, PyArray2<f64>> {
+    let m = t.to_matrix4();
+    Array2::from_shape_fn((4, 4), |(r, c)| m[(r, c)]).into_pyarray(py)
+}
+
+/// Index pairs as a (K, 2) int64 array.
+fn pairs_array<'py>(py: Python<'py>, pairs: &[(usize, usize)]) -> Bound<'py, PyArray2<i64>> {
+    Array2::from_shape_fn((pairs.len(), 2), |(k, c)| {
+        let (i, j) = pairs[k];
+        (if c == 0 { i } else { j }) as i64
+    })
+    .into_pyarray(py)
+}
+
+/// A (4, 4) matrix as a rigid transform, checked.
+fn transform(matrix: &PyReadonlyArray2<'_, f64>, name: &str) -> PyResult<RigidTransform> {
+    let m = matrix.as_array();
+    if m.shape() != [4, 4] {
+        return Err(value_error(format!(
+            "{name} must have shape (4, 4), got {:?}",
+            m.shape()
+        )));
+    }
+    let m = Matrix4::from_fn(|r, c| m[(r, c)]);
+    RigidTransform::from_matrix4(&m, RIGID_TOLERANCE)
+        .map_err(|e| value_error(format!("{name}: {e}")))
+}
+
+/// A registration method loaded once, for any number of pairs from any number of threads.
+#[pyclass(frozen, module = "rgm._rgm")]
+struct Registrar {
+    /// Copied for a call that finds no idle copy.
+    prototype: Method,
+    /// Copies not in use, their buffers kept: one per thread that registered at the same time.
+    idle: Mutex<Vec<Method>>,
+}
+
+impl Registrar {
+    /// The idle copies (a panic while one was held leaves the list valid, so poisoning is
+    /// ignored).
+    fn idle(&self) -> MutexGuard<'_, Vec<Method>> {
+        self.idle
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+}
+
+/// Result fields of one registration, in the order `rgm/__init__.py` reads them.
+type Outcome<'py> = (
+    Bound<'py, PyArray2<f64>>, // (4, 4) transformation, target ← source
+    f64,                       // fitness
+    f64,                       // inlier RMSE
+    Bound<'py, PyArray2<i64>>, // (K, 2) correspondences
+    f64,                       // time in milliseconds
+    usize,                     // iterations
+    bool,                      // converged
+);
+
+#[pymethods]
+impl Registrar {
+    /// Builds the method of `rgm_model::MethodOptions` from these options (`None`: its
+    /// default) and loads its weights.
+    #[new]
+    #[pyo3(signature = (method, refine, weights, preset, test_statistics, match_points, passes))]
+    #[allow(clippy::too_many_arguments)] // one per option of `rgm.Registrar`
+    fn new(
+        py: Python<'_>,
+        method: String,
+        refine: bool,
+        weights: Option<PathBuf>,
+        preset: Option<String>,
+        test_statistics: Option<String>,
+        match_points: Option<usize>,
+        passes: Option<usize>,
+    ) -> PyResult<Self> {
+        let test_statistics = match test_statistics.as_deref() {
+            None => None,
+            Some("cloud") => Some(TestStatistics::Cloud),
+            Some("running") => Some(TestStatistics::Running),
+            Some(other) => {
+                return Err(value_error(format!(
+                    "unknown test_statistics {other:?} (expected \"cloud\" or \"running\")"
+                )))
+            }
+        };
+        let options = MethodOptions {
+            method: method.parse().map_err(value_error)?,
+            weights,
+            preset,
+            test_statistics,
+            match_points,
+            passes,
+            refine,
+        };
+        let prototype = py.detach(|| options.build()).map_err(value_error)?;
+        Ok(Self {
+            prototype,
+            idle: Mutex::new(Vec::new()),
+        })
+    }
+
+    /// The method's name as `rgm register` prints it (`rgm+icp` when refined).
+    #[getter]
+    fn name(&self) -> &'static str {
+        self.prototype.name()
+    }
+
+    /// Registers `source` onto `target` (float64, (N, 3) and (M, 3)).
+    fn register<'py>(
+        &self,
+        py: Python<'py>,
+        source: PyReadonlyArray2<'py, f64>,
+        target: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<Outcome<'py>> {
+        let (source, target) = (cloud(&source, "source")?, cloud(&target, "target")?);
+        let popped = self.idle().pop();
+        let mut method = popped.unwrap_or_else(|| self.prototype.clone());
+        let outcome = py.detach(|| {
+            with_denormals_flushed(|| -> Result<_, MethodError> {
+                let registration = method.register(&source, &target)?;
+                let pairs = method.correspondences(&source, &target, &registration.result);
+                Ok((registration, pairs))
+            })
+        });
+        self.idle().push(method);
+        let (registration, pairs) = outcome.map_err(|e| {
+            PyRuntimeError::new_err(format!("{} failed: {e}", self.prototype.name()))
+        })?;
+        let result = registration.result;
+        Ok((
+            matrix_array(py, &result.t_target_source),
+            result.fitness,
+            result.inlier_rmse,
+            pairs_array(py, &pairs),
+            registration.time_ms,
+            result.iterations,
+            result.converged,
+        ))
+    }
+}
+
+/// The paper's metrics (spec §5) of the predicted transform `pred` against `truth` (both (4, 4))
+/// for the clouds `source` and `target`, as a dict of `rgm_geom::PairMetrics`'s fields.
+#[pyfunction]
+fn metrics<'py>(
+    py: Python<'py>,
+    pred: PyReadonlyArray2<'py, f64>,
+    truth: PyReadonlyArray2<'py, f64>,
+    source: PyReadonlyArray2<'py, f64>,
+    target: PyReadonlyArray2<'py, f64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (pred, truth) = (transform(&pred, "pred")?, transform(&truth, "truth")?);
+    let (source, target) = (cloud(&source, "source")?, cloud(&target, "target")?);
+    let m = py
+        .detach(|| PairMetrics::compute(&pred, &truth, &source, &target))
+        .map_err(value_error)?;
+    let dict = PyDict::new(py);
+    dict.set_item("mae_r_deg", m.mae_r_deg)?;
+    dict.set_item("mae_t", m.mae_t)?;
+    dict.set_item("mie_r_deg", m.mie_r_deg)?;
+    dict.set_item("mie_t", m.mie_t)?;
+    dict.set_item("ccd", m.ccd)?;
+    dict.set_item("chamfer", m.chamfer)?;
+    dict.set_item("recall", m.recall)?;
+    Ok(dict)
+}
+
+/// One benchmark pair's fields, in the order `rgm/__init__.py` reads them.
+type PairFields<'py> = (
+    Bound<'py, PyArray2<f64>>, // (N, 3) source
+    Bound<'py, PyArray2<f64>>, // (M, 3) target
+    Bound<'py, PyArray2<f64>>, // (4, 4) true transformation, target ← source
+    Bound<'py, PyArray2<i64>>, // (K, 2) true correspondences
+    usize,                     // category label
+    String,                    // category name
+    String,                    // shape name
+);
+
+/// The benchmark's pairs of one setting and split, as `rgm eval` makes them.
+#[pyclass(frozen, module = "rgm._rgm")]
+struct ModelNetPairs {
+    /// Category names in label order. // (40,)
+    categories: Vec<String>,
+    /// The split's shapes in order, cut to the limit. // (P,)
+    shapes: Vec<Shape>,
+    generator: PairGenerator,
+}
+
+#[pymethods]
+impl ModelNetPairs {
+    #[new]
+    #[pyo3(signature = (data_dir, setting, split, unseen, limit))]
+    fn new(
+        py: Python<'_>,
+        data_dir: PathBuf,
+        setting: String,
+        split: String,
+        unseen: bool,
+        limit: Option<usize>,
+    ) -> PyResult<Self> {
+        let setting: Setting = setting.parse().map_err(value_error)?;
+        let split = match split.as_str() {
+            "test" => Split::Test,
+            "validation" => Split::Validation,
+            other => {
+                return Err(value_error(format!(
+                    "unknown split {other:?} (expected \"test\" or \"validation\")"
+                )))
+            }
+        };
+        let dataset = py
+            .detach(|| ModelNet40::open(&data_dir))
+            .map_err(data_error)?;
+        let mut shapes: Vec<Shape> = dataset.split(split, unseen).into_iter().cloned().collect();
+        shapes.truncate(limit.unwrap_or(usize::MAX));
+        Ok(Self {
+            categories: dataset.categories,
+            shapes,
+            generator: PairGenerator::new(setting),
+        })
+    }
+
+    fn __len__(&self) -> usize {
+        self.shapes.len()
+    }
+
+    /// Pair `index` (its RNG seed, as in `rgm eval` and `rgm pairs`).
+    fn pair<'py>(&self, py: Python<'py>, index: usize) -> PyResult<PairFields<'py>> {
+        let shapes: Vec<&Shape> = self.shapes.iter().collect();
+        let pair = py
+            .detach(|| self.generator.test_pair(&shapes, index))
+            .map_err(data_error)?;
+        let shape = shapes[index];
+        Ok((
+            points_array(py, &pair.source),
+            points_array(py, &pair.target),
+            matrix_array(py, &pair.t_target_source),
+            pairs_array(py, &pair.correspondence.pairs),
+            pair.label,
+            self.categories.get(pair.label).cloned().unwrap_or_default(),
+            shape.name.clone(),
+        ))
+    }
+}
+
+#[pymodule]
+fn _rgm(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    if std::env::var_os("OPENBLAS_NUM_THREADS").is_none() {
+        rgm_nn::threads::set_blas_threads(1);
+    }
+    let defaults = MethodOptions::default();
+    m.add("DEFAULT_METHOD", defaults.method.name())?;
+    m.add("DEFAULT_REFINE", defaults.refine)?;
+    m.add(
+        "METHODS",
+        MethodName::ALL.iter().map(|n| n.name()).collect::<Vec<_>>(),
+    )?;
+    m.add_class::<Registrar>()?;
+    m.add_class::<ModelNetPairs>()?;
+    m.add_function(wrap_pyfunction!(metrics, m)?)?;
+    Ok(())
+}

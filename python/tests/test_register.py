@@ -1,0 +1,221 @@
+"""rgm.register and rgm.Registrar: known poses recovered, inputs checked, threads and processes
+agreeing with serial calls, and the same transform as the `rgm register` command."""
+
+import concurrent.futures
+import json
+import multiprocessing
+import pickle
+import subprocess
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import rgm
+from conftest import errors, moved, pose, shape
+
+# A pose within the benchmark's range (at most 45° per axis, 0.5 per axis).
+KNOWN = pose((20, 10, 30), (0.2, -0.1, 0.3))
+
+
+@pytest.fixture(scope="module")
+def airplane(data):
+    return shape(data, "airplane", 627)
+
+
+@pytest.fixture(scope="module")
+def registrar():
+    return rgm.Registrar()
+
+
+def test_the_default_recovers_a_known_pose(airplane, registrar):
+    target = moved(airplane, KNOWN)
+    result = rgm.register(airplane, target)
+    assert result.method == "rgm+icp" == registrar.name
+    assert result.transformation.shape == (4, 4) and result.transformation.dtype == np.float64
+    angle, shift = errors(result.transformation, KNOWN)
+    assert angle < 1.0 and shift < 0.01, (angle, shift)
+    np.testing.assert_array_equal(result.rotation, result.transformation[:3, :3])
+    np.testing.assert_array_equal(result.translation, result.transformation[:3, 3])
+    # The same pair through a Registrar, and in float32: the same numbers up to the rounding
+    # of the target to float32.
+    again = registrar.register(airplane, target)
+    np.testing.assert_array_equal(again.transformation, result.transformation)
+    single = registrar.register(airplane, target.astype(np.float32))
+    np.testing.assert_allclose(single.transformation, result.transformation, atol=1e-4)
+    # Refined: the fitness is the refinement's (source points within 0.05 of the target).
+    assert 0.9 < result.fitness <= 1.0 and 0 < result.inlier_rmse < 0.05
+    assert result.time_ms > 0 and result.iterations > 2 and result.converged
+    # RGM's matches of its last pass, on 384 of the 1,024 points each.
+    pairs = result.correspondences
+    assert pairs.dtype == np.int64 and pairs.ndim == 2 and pairs.shape[1] == 2
+    assert 3 <= len(pairs) <= 384
+    assert pairs.min() >= 0 and pairs.max() < 1024
+    assert len(np.unique(pairs[:, 0])) == len(pairs) == len(np.unique(pairs[:, 1]))
+
+
+def test_strided_and_fortran_arrays_give_the_same_result(airplane, registrar):
+    target = moved(airplane, KNOWN)
+    expected = registrar.register(airplane, target).transformation
+    wide = np.zeros((len(airplane), 6))
+    wide[:, ::2] = airplane  # a view with a stride of 2 columns
+    for source in (wide[:, ::2], np.asfortranarray(airplane)):
+        assert not source.flags.c_contiguous
+        found = registrar.register(source, np.asfortranarray(target)).transformation
+        np.testing.assert_array_equal(found, expected)
+
+
+def test_classical_methods_and_options(airplane):
+    target = moved(airplane, KNOWN)
+    fgr = rgm.register(airplane, target, method="fgr", refine=False)
+    assert fgr.method == "fgr"
+    angle, shift = errors(fgr.transformation, KNOWN)
+    assert angle < 0.1 and shift < 1e-3, (angle, shift)
+    # FGR's correspondences: the source points within its scoring distance (0.025) after the
+    # transform; on this exact copy, nearly all of them.
+    distances = np.linalg.norm(
+        moved(airplane[fgr.correspondences[:, 0]], fgr.transformation)
+        - target[fgr.correspondences[:, 1]],
+        axis=1,
+    )
+    assert distances.max() < 0.025 and len(distances) == round(fgr.fitness * len(airplane))
+    # ICP ignores refinement; one pass of RGM on 200 points is still RGM.
+    assert rgm.register(airplane, target, method="icp").method == "icp"
+    small = rgm.register(airplane, target, passes=1, match_points=200, refine=False)
+    assert small.method == "rgm" and small.iterations == 1
+    assert len(small.correspondences) <= 200
+
+
+@pytest.mark.parametrize(
+    "bad, says",
+    [
+        ([[0.0, 0.0, 0.0]] * 30, "got list"),
+        (np.zeros((30, 2)), "shape (30, 2) and dtype float64"),
+        (np.zeros((30, 3, 1)), "shape (30, 3, 1) and dtype float64"),
+        (np.zeros(90), "shape (90,) and dtype float64"),
+        (np.zeros((30, 3), dtype=np.int64), "shape (30, 3) and dtype int64"),
+        (np.zeros((30, 3), dtype=np.float16), "shape (30, 3) and dtype float16"),
+        (np.zeros((0, 3)), "has no point (shape (0, 3), dtype float64)"),
+    ],
+)
+@pytest.mark.parametrize("argument", ["source", "target"])
+def test_bad_clouds_are_value_errors_naming_the_argument(airplane, bad, says, argument):
+    clouds = {"source": airplane, "target": airplane}
+    clouds[argument] = bad
+    with pytest.raises(ValueError) as err:
+        rgm.register(clouds["source"], clouds["target"])
+    assert str(err.value).startswith(argument) and says in str(err.value), err.value
+
+
+@pytest.mark.parametrize("value", [np.nan, np.inf, -np.inf])
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_non_finite_coordinates_are_value_errors(airplane, value, dtype):
+    target = airplane.astype(dtype)
+    target[17, 1] = value
+    with pytest.raises(ValueError) as err:
+        rgm.register(airplane, target)
+    message = str(err.value)
+    assert message.startswith("target (shape (1024, 3), dtype ") and str(np.dtype(dtype)) in message
+    assert "row 17" in message, message
+
+
+def test_options_that_do_not_fit_are_value_errors(tmp_path):
+    for kwargs, says in [
+        ({"method": "gicp"}, 'unknown method "gicp" (expected one of icp, fgr, rgm)'),
+        ({"method": "fgr", "passes": 1}, "apply to the rgm method only"),
+        ({"preset": "tiny"}, "the built-in model has its own"),
+        ({"passes": 0}, "passes must be at least 1, got 0"),
+        ({"match_points": -5}, "match_points must be at least 0, got -5"),
+        ({"test_statistics": "batch", "weights": "w"}, 'unknown test_statistics "batch"'),
+        ({"weights": tmp_path / "missing.safetensors"}, str(tmp_path / "missing.safetensors")),
+    ]:
+        with pytest.raises(ValueError) as err:
+            rgm.Registrar(**kwargs)
+        assert says in str(err.value), (kwargs, err.value)
+
+
+def test_too_few_points_is_a_runtime_error_that_says_why(airplane, registrar):
+    with pytest.raises(RuntimeError, match="rgm\\+icp failed: .*needs at least"):
+        registrar.register(airplane[:5], airplane[:5])
+
+
+def _pairs(data, count):
+    """`count` different (source, target, truth) pairs: test shapes under different poses."""
+    pairs = []
+    for k, (category, number) in enumerate([("airplane", 627), ("chair", 890), ("car", 198), ("lamp", 125)][:count]):
+        points = shape(data, category, number)
+        truth = pose((10 * k - 15, 25 - 5 * k, 5 * k), (0.1 * k, -0.2, 0.05 * k))
+        pairs.append((points, moved(points, truth), truth))
+    return pairs
+
+
+def test_threads_give_the_serial_results(data, registrar):
+    pairs = _pairs(data, 4)
+    serial = [registrar.register(s, t) for s, t, _ in pairs]
+    with concurrent.futures.ThreadPoolExecutor(max_workers=4) as pool:
+        # Each pair twice, all at once, on the one Registrar.
+        threaded = list(pool.map(lambda p: registrar.register(p[0], p[1]), pairs + pairs))
+    for one, other in zip(serial + serial, threaded):
+        np.testing.assert_array_equal(one.transformation, other.transformation)
+        np.testing.assert_array_equal(one.correspondences, other.correspondences)
+        assert (one.fitness, one.inlier_rmse) == (other.fitness, other.inlier_rmse)
+    # The serial results are right, so the threads' are too.
+    for result, (_, _, truth) in zip(serial, pairs):
+        angle, shift = errors(result.transformation, truth)
+        assert angle < 1.0 and shift < 0.01, (angle, shift)
+
+
+def test_python_runs_while_rust_registers(airplane, registrar):
+    # Held, the GIL would keep this thread from running any Python while the other thread is
+    # in Rust: it could only run in the few milliseconds before the call enters Rust. Released,
+    # this thread keeps running throughout, also in the middle half of the call.
+    target = moved(airplane, KNOWN)
+    call = {}
+
+    def work():
+        call["start"] = time.perf_counter()
+        registrar.register(airplane, target)
+        call["end"] = time.perf_counter()
+
+    worker = threading.Thread(target=work)
+    ticks = []
+    worker.start()
+    while worker.is_alive():
+        ticks.append(time.perf_counter())
+    worker.join()
+    quarter = (call["end"] - call["start"]) / 4
+    middle = [t for t in ticks if call["start"] + quarter < t < call["end"] - quarter]
+    assert middle, f"no Python ran during the middle half of a {4 * quarter:.3f} s registration"
+
+
+def test_a_registrar_pickles_as_its_settings_for_process_pools(data):
+    registrar = rgm.Registrar(method="fgr", refine=False)
+    copy = pickle.loads(pickle.dumps(registrar))
+    assert copy.name == "fgr" and repr(copy) == repr(registrar) == "rgm.Registrar(method='fgr', refine=False)"
+    pairs = _pairs(data, 2)
+    serial = [registrar.register(s, t).transformation for s, t, _ in pairs]
+    context = multiprocessing.get_context("spawn")
+    with concurrent.futures.ProcessPoolExecutor(max_workers=2, mp_context=context) as pool:
+        found = list(pool.map(registrar.register, [p[0] for p in pairs], [p[1] for p in pairs]))
+    for expected, result in zip(serial, found):
+        np.testing.assert_array_equal(result.transformation, expected)
+
+
+def test_the_same_transform_as_the_rgm_command(airplane, rgm_command, tmp_path):
+    target = moved(airplane, KNOWN)
+    np.save(tmp_path / "source.npy", airplane)
+    np.save(tmp_path / "target.npy", target)
+    for args, kwargs in [([], {}), (["--method", "fgr"], {"method": "fgr"})]:
+        out = subprocess.run(
+            rgm_command + ["register", str(tmp_path / "source.npy"), str(tmp_path / "target.npy"), "--json"] + args,
+            check=True,
+            capture_output=True,
+            text=True,
+        )
+        cli = json.loads(out.stdout)
+        result = rgm.register(np.load(tmp_path / "source.npy"), np.load(tmp_path / "target.npy"), **kwargs)
+        assert cli["method"] == result.method
+        np.testing.assert_array_equal(np.array(cli["transform"]), result.transformation)
+        assert (cli["fitness"], cli["inlier_rmse"]) == (result.fitness, result.inlier_rmse)
+        assert cli["correspondences"] == len(result.correspondences)
