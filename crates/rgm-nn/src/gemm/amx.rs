@@ -1,0 +1,211 @@
+//! All the unsafe code of the bf16 GEMM: detecting AMX, asking Linux for the tile registers, and
+//! the tile instructions themselves, through `asm!` (their intrinsics are nightly-only).
+//!
+//! AMX has eight tile registers `tmm0..tmm7` of up to 16 rows × 64 bytes. `tdpbf16ps C, A, B`
+//! adds the product of a 16 × 32 bf16 tile A and a 32 × 16 bf16 tile B into a 16 × 16 f32 tile
+//! C; B is stored in "VNNI pairs": row r holds, for each of the 16 columns, the two bf16 of rows
+//! 2r and 2r + 1 side by side (so a B tile is also 16 rows × 64 bytes). The processor rounds
+//! each step to nearest even, treats bf16 denormals as zero and ignores MXCSR.
+//!
+//! [`Tiles`] holds the configuration below on its thread while it lives: tmm0..tmm3 are a
+//! 32 × 32 f32 block of the result (2 × 2 tiles), tmm4/tmm5 the two 16-row halves of A's
+//! 32 × 32 slice, tmm6/tmm7 the two 16-column halves of B's 32 × 32 slice; one step is 4
+//! `tdpbf16ps`, 32 × 32 × 32 multiply-adds.
+
+use std::marker::PhantomData;
+use std::sync::OnceLock;
+
+/// Elements (u16) of one packed 32 × 32 bf16 slice of A or of B: 2 KiB, two tiles.
+pub(super) const SLICE: usize = 32 * 32;
+
+/// Whether this process may run AMX-BF16: the processor has it, the kernel saves its state, and
+/// Linux granted the permission. Checked once per process.
+pub fn available() -> bool {
+    static AVAILABLE: OnceLock<bool> = OnceLock::new();
+    *AVAILABLE.get_or_init(detect)
+}
+
+#[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+fn detect() -> bool {
+    use std::arch::x86_64::{__cpuid, __cpuid_count};
+    // SAFETY: cpuid exists on every x86-64 processor and only reads identification registers;
+    // leaf 7 is asked for only when the processor reports it (max leaf ≥ 7).
+    #[allow(unused_unsafe)]
+    let (leaf1, leaf7) = unsafe {
+        if __cpuid(0).eax < 7 {
+            return false;
+        }
+        (__cpuid(1), __cpuid_count(7, 0))
+    };
+    let osxsave = leaf1.ecx & (1 << 27) != 0; // the OS enabled XSAVE and xgetbv
+    let amx_bf16 = leaf7.edx & (1 << 22) != 0;
+    let amx_tile = leaf7.edx & (1 << 24) != 0;
+    if !(osxsave && amx_bf16 && amx_tile) {
+        return false;
+    }
+    let (lo, hi): (u32, u32);
+    // SAFETY: xgetbv with ecx = 0 reads XCR0; it is valid because OSXSAVE is set (checked above).
+    unsafe {
+        std::arch::asm!("xgetbv", in("ecx") 0, out("eax") lo, out("edx") hi,
+                        options(nomem, nostack, preserves_flags));
+    }
+    let xcr0 = (u64::from(hi) << 32) | u64::from(lo);
+    // XCR0 bit 17 (XTILECFG) and bit 18 (XTILEDATA): the OS saves the tile state on switches.
+    if xcr0 & (0b11 << 17) != 0b11 << 17 {
+        return false;
+    }
+    // Linux (5.16+) keeps the 8 KiB tile data off until a process asks for it: without this call
+    // the first tile instruction is killed with SIGILL. The permission is process-wide.
+    const ARCH_REQ_XCOMP_PERM: libc::c_long = 0x1023;
+    const XFEATURE_XTILEDATA: libc::c_long = 18;
+    // SAFETY: arch_prctl(ARCH_REQ_XCOMP_PERM, feature) takes two integers, touches no memory of
+    // ours, and only widens the signal frame and the state the kernel saves for this process.
+    let granted = unsafe {
+        libc::syscall(
+            libc::SYS_arch_prctl,
+            ARCH_REQ_XCOMP_PERM,
+            XFEATURE_XTILEDATA,
+        )
+    };
+    granted == 0
+}
+
+#[cfg(not(all(target_arch = "x86_64", target_os = "linux")))]
+fn detect() -> bool {
+    false
+}
+
+/// The 64-byte operand of `ldtilecfg` (palette 1): bytes per row and rows of each tile.
+#[repr(C, align(64))]
+struct TileConfig {
+    palette: u8,
+    start_row: u8,
+    reserved: [u8; 14],
+    colsb: [u16; 16], // bytes per row of tmm0..tmm15 (only 0..7 exist)
+    rows: [u8; 16],   // rows of tmm0..tmm15
+}
+
+/// The tile registers configured on this thread (see the module doc) while the value lives;
+/// dropping it releases them (`tilerelease`), so the thread saves no tile state afterwards.
+/// Not `Send`: the configuration belongs to the thread that loaded it.
+pub(super) struct Tiles {
+    _on_this_thread: PhantomData<*const ()>,
+}
+
+impl Tiles {
+    /// Configures the tiles on the calling thread; `None` where AMX is not [`available`].
+    pub(super) fn configure() -> Option<Self> {
+        if !available() {
+            return None;
+        }
+        let config = TileConfig {
+            palette: 1,
+            start_row: 0,
+            reserved: [0; 14],
+            colsb: [64, 64, 64, 64, 64, 64, 64, 64, 0, 0, 0, 0, 0, 0, 0, 0],
+            rows: [16, 16, 16, 16, 16, 16, 16, 16, 0, 0, 0, 0, 0, 0, 0, 0],
+        };
+        // SAFETY: AMX is available and permitted (checked above); `config` is a valid palette-1
+        // configuration of 64 aligned bytes that ldtilecfg only reads.
+        #[cfg(target_arch = "x86_64")]
+        unsafe {
+            std::arch::asm!("ldtilecfg [{}]", in(reg) &config, options(nostack, readonly));
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = config;
+        Some(Self {
+            _on_this_thread: PhantomData,
+        })
+    }
+
+    /// `out = a · b` for one 32 × 32 block: `a` holds Kp/32 packed slices of A's 32 rows (each
+    /// 32 rows × 32 bf16, row-major), `b` Kp/32 packed slices of B's 32 columns (each two
+    /// VNNI-pair tiles of 16 columns: 16 pair rows × 16 columns × 2), `out` is row-major f32.
+    pub(super) fn block(&mut self, a: &[u16], b: &[u16], out: &mut [f32; 32 * 32]) {
+        assert!(
+            a.len() % SLICE == 0 && a.len() == b.len(),
+            "packed slices: a {} and b {} elements",
+            a.len(),
+            b.len()
+        );
+        #[cfg(target_arch = "x86_64")]
+        {
+            // SAFETY: `self` proves the tiles are configured on this thread (16 rows × 64 bytes
+            // each). Every load reads 16 rows of 64 bytes at a 64-byte stride, i.e. 1 KiB, from
+            // the start or the middle of a 2 KiB slice that lies inside `a` or `b` (lengths
+            // checked above); the stores write 4 × 16 rows of 64 bytes at a 128-byte stride into
+            // `out`'s 4 KiB.
+            unsafe {
+                std::arch::asm!(
+                    "tilezero tmm0",
+                    "tilezero tmm1",
+                    "tilezero tmm2",
+                    "tilezero tmm3",
+                    options(nomem, nostack)
+                );
+                for (a, b) in a.chunks_exact(SLICE).zip(b.chunks_exact(SLICE)) {
+                    std::arch::asm!(
+                        "tileloadd tmm4, [{a} + {stride}*1]",
+                        "tileloadd tmm5, [{a} + {stride}*1 + 1024]",
+                        "tileloadd tmm6, [{b} + {stride}*1]",
+                        "tileloadd tmm7, [{b} + {stride}*1 + 1024]",
+                        "tdpbf16ps tmm0, tmm4, tmm6",
+                        "tdpbf16ps tmm1, tmm4, tmm7",
+                        "tdpbf16ps tmm2, tmm5, tmm6",
+                        "tdpbf16ps tmm3, tmm5, tmm7",
+                        a = in(reg) a.as_ptr(),
+                        b = in(reg) b.as_ptr(),
+                        stride = in(reg) 64usize,
+                        options(nostack, readonly)
+                    );
+                }
+                std::arch::asm!(
+                    "tilestored [{c} + {stride}*1], tmm0",
+                    "tilestored [{c} + {stride}*1 + 64], tmm1",
+                    "tilestored [{c} + {stride}*1 + 2048], tmm2",
+                    "tilestored [{c} + {stride}*1 + 2112], tmm3",
+                    c = in(reg) out.as_mut_ptr(),
+                    stride = in(reg) 128usize,
+                    options(nostack)
+                );
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        unreachable!("Tiles exist only where AMX is available ({out:?})");
+    }
+}
+
+impl Drop for Tiles {
+    fn drop(&mut self) {
+        // SAFETY: tilerelease returns the tiles to their initial state; valid whenever AMX is
+        // available, which constructing `self` checked.
+        #[cfg(target_arch = "x86_64")]
+        unsafe {
+            std::arch::asm!("tilerelease", options(nomem, nostack));
+        }
+    }
+}
+
+/// `tdpbf16ps` on registers only, `steps` × 4 tiles of 16 × 16 × 32 multiply-adds: the unit's
+/// peak, without memory traffic (the benches report it beside the GEMM). Returns the
+/// multiply-adds done, or `None` without AMX.
+pub fn register_peak_loop(steps: u64) -> Option<u64> {
+    let _tiles = Tiles::configure()?;
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: the tiles are configured (`_tiles`); the loop only computes on tile registers
+    // (their contents are whatever they hold, e.g. zeros after configuration) and a counter.
+    unsafe {
+        std::arch::asm!(
+            "2:",
+            "tdpbf16ps tmm0, tmm4, tmm6",
+            "tdpbf16ps tmm1, tmm4, tmm7",
+            "tdpbf16ps tmm2, tmm5, tmm6",
+            "tdpbf16ps tmm3, tmm5, tmm7",
+            "dec {n}",
+            "jnz 2b",
+            n = inout(reg) steps.max(1) => _,
+            options(nomem, nostack)
+        );
+    }
+    Some(steps.max(1) * 4 * 16 * 16 * 32)
+}

@@ -1,0 +1,399 @@
+//! The matrix product every op calls, [`mat_mul`]: BLAS in f32 and f64, or bf16 on the
+//! processor's AMX tile units when the calling thread asked for [`Precision::Bf16`].
+//!
+//! The bf16 product ([`bf16_mat_mul`]) takes and returns f32: both inputs are rounded to bf16
+//! (nearest even) while they are packed, the products are accumulated in f32. It runs on the
+//! calling thread (training runs one network per worker thread; inference calls BLAS with one
+//! thread by default), in three steps:
+//! 1. pack A (M, K) into 32-row strips, each a run of 32 × 32 slices along K (2 KiB, two tiles);
+//! 2. pack B (K, N) into 32-column strips, each a run of 32 × 32 slices along K in the VNNI
+//!    pairs layout that `tdpbf16ps` reads (see [`amx`]); M, N and K are padded with zeros to
+//!    multiples of 32, so edges need no special kernel;
+//! 3. for each column panel of B small enough to stay in L2 (≤ 256 KiB), for each A strip (at
+//!    most 32 KiB for K ≤ 512: it stays in L1 across the panel), multiply the strip by each B
+//!    strip of the panel into a 32 × 32 f32 block, then write `alpha · block + beta · C` into
+//!    the matching (clipped) block of C, whatever C's strides.
+//!
+//! Packing reads A and B in the order they lie in memory, so transposed views cost the same.
+
+mod amx;
+
+pub use amx::register_peak_loop;
+
+use crate::precision::{self, Precision};
+use crate::Scalar;
+use ndarray::linalg::general_mat_mul;
+use ndarray::{s, ArrayBase, ArrayView2, ArrayViewMut2, Axis, Data, DataMut, Ix2, Zip};
+use std::cell::RefCell;
+
+/// `c = alpha · a · b + beta · c`, `a`: (M, K), `b`: (K, N), `c`: (M, N), in the calling
+/// thread's [`precision`] for f32 (f64 is always BLAS). `beta = 0` ignores what `c` held.
+/// Panics if the shapes do not agree (as `general_mat_mul`, which it replaces).
+pub fn mat_mul<T, S1, S2, S3>(
+    alpha: T,
+    a: &ArrayBase<S1, Ix2>,
+    b: &ArrayBase<S2, Ix2>,
+    beta: T,
+    c: &mut ArrayBase<S3, Ix2>,
+) where
+    T: Scalar,
+    S1: Data<Elem = T>,
+    S2: Data<Elem = T>,
+    S3: DataMut<Elem = T>,
+{
+    T::mat_mul(alpha, a.view(), b.view(), beta, c.view_mut());
+}
+
+/// [`mat_mul`] for f32: bf16 on AMX when the thread's precision is bf16 and AMX is available,
+/// BLAS otherwise.
+pub(crate) fn mat_mul_f32(
+    alpha: f32,
+    a: ArrayView2<'_, f32>,
+    b: ArrayView2<'_, f32>,
+    beta: f32,
+    mut c: ArrayViewMut2<'_, f32>,
+) {
+    if precision::current() == Precision::Bf16 && bf16_available() {
+        bf16_mat_mul(alpha, a, b, beta, c);
+    } else {
+        general_mat_mul(alpha, &a, &b, beta, &mut c);
+    }
+}
+
+/// Whether [`bf16_mat_mul`] can run here: an x86-64 processor with AMX-BF16 under Linux that
+/// granted the tile registers to this process (asked once, on the first call).
+pub fn bf16_available() -> bool {
+    amx::available()
+}
+
+/// `x` rounded to the nearest bfloat16 (ties to even; NaN stays NaN), as the bf16 bits.
+pub fn bf16_bits(x: f32) -> u16 {
+    let bits = x.to_bits();
+    if x.is_nan() {
+        return ((bits >> 16) | 0x40) as u16; // quiet, sign kept
+    }
+    let round = 0x7fff + ((bits >> 16) & 1);
+    (bits.wrapping_add(round) >> 16) as u16
+}
+
+/// `x` rounded to the nearest bfloat16, as an f32 (what the bf16 product multiplies).
+pub fn round_to_bf16(x: f32) -> f32 {
+    f32::from_bits(u32::from(bf16_bits(x)) << 16)
+}
+
+/// The packed operands and the result block, kept per thread so that repeated products of
+/// stable shapes allocate nothing.
+#[derive(Default)]
+struct Scratch {
+    a: Vec<u16>, // (M/32, K/32, 32, 32) padded
+    b: Vec<u16>, // (N/32, K/32, 2, 16, 16, 2) padded
+}
+
+thread_local! {
+    static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
+}
+
+/// Bytes of B's packed columns one pass keeps in L2 while every A strip meets them.
+const B_PANEL_BYTES: usize = 256 * 1024;
+
+/// `c = alpha · a · b + beta · c` with a and b rounded to bf16 and f32 accumulation, on AMX.
+/// `a`: (M, K), `b`: (K, N), `c`: (M, N), any strides. Panics if the shapes disagree or AMX
+/// is not [`bf16_available`].
+pub fn bf16_mat_mul(
+    alpha: f32,
+    a: ArrayView2<'_, f32>,
+    b: ArrayView2<'_, f32>,
+    beta: f32,
+    mut c: ArrayViewMut2<'_, f32>,
+) {
+    let ((m, k), n) = (a.dim(), b.ncols());
+    assert!(
+        b.nrows() == k && c.dim() == (m, n),
+        "bf16_mat_mul: a {:?} · b {:?} into c {:?}",
+        a.shape(),
+        b.shape(),
+        c.shape()
+    );
+    if m == 0 || n == 0 {
+        return;
+    }
+    let mut tiles = amx::Tiles::configure().expect("bf16_mat_mul needs AMX (bf16_available)");
+    packed_mat_mul(alpha, a, b, beta, c.view_mut(), |a, b, out| {
+        tiles.block(a, b, out)
+    });
+}
+
+/// The bf16 product with `block(a_strip, b_strip, out)` computing one 32 × 32 block from
+/// packed strips (the AMX kernel, or the tests' reference): packing, blocking, edges and the
+/// write-back into C.
+fn packed_mat_mul(
+    alpha: f32,
+    a: ArrayView2<'_, f32>,
+    b: ArrayView2<'_, f32>,
+    beta: f32,
+    mut c: ArrayViewMut2<'_, f32>,
+    mut block_of: impl FnMut(&[u16], &[u16], &mut [f32; 32 * 32]),
+) {
+    let ((m, k), n) = (a.dim(), b.ncols());
+    let kp = k.next_multiple_of(32);
+    let strip = kp * 32; // elements of one packed 32-row strip of A or 32-column strip of B
+    let panel_strips = (B_PANEL_BYTES / (2 * strip).max(1)).max(1);
+    SCRATCH.with(|scratch| {
+        let scratch = &mut *scratch.borrow_mut();
+        pack_a(a, kp, &mut scratch.a);
+        pack_b(b, kp, &mut scratch.b);
+        let mut block = [0f32; 32 * 32]; // (32, 32) row-major
+        let (m_strips, n_strips) = (m.div_ceil(32), n.div_ceil(32));
+        for first in (0..n_strips).step_by(panel_strips) {
+            for mi in 0..m_strips {
+                let a_strip = &scratch.a[mi * strip..][..strip];
+                let rows = mi * 32..(mi * 32 + 32).min(m);
+                for ni in first..(first + panel_strips).min(n_strips) {
+                    block_of(a_strip, &scratch.b[ni * strip..][..strip], &mut block);
+                    let cols = ni * 32..(ni * 32 + 32).min(n);
+                    let got = ArrayView2::from_shape((32, 32), &block[..]).expect("32 × 32");
+                    let got = got.slice(s![..rows.len(), ..cols.len()]);
+                    let dst = c.slice_mut(s![rows.clone(), cols]);
+                    if beta == 0.0 {
+                        Zip::from(dst).and(got).for_each(|c, &g| *c = alpha * g);
+                    } else {
+                        Zip::from(dst)
+                            .and(got)
+                            .for_each(|c, &g| *c = alpha * g + beta * *c);
+                    }
+                }
+            }
+        }
+    });
+}
+
+/// Packs `a` (M, K) as bf16 into `out`: 32-row strips, each Kp/32 slices of 32 × 32 (row-major),
+/// zero-padded to whole strips and to `kp` columns.
+fn pack_a(a: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>) {
+    let mp = a.nrows().next_multiple_of(32);
+    out.clear();
+    out.resize(mp * kp, 0);
+    for_each_in_memory_order(a, |i, k, x| {
+        out[(i / 32) * kp * 32 + (k / 32) * 1024 + (i % 32) * 32 + k % 32] = bf16_bits(x);
+    });
+}
+
+/// Packs `b` (K, N) as bf16 into `out`: 32-column strips, each Kp/32 slices of two 16-column
+/// tiles in VNNI pairs (pair row r, column j: rows 2r and 2r + 1 side by side), zero-padded.
+fn pack_b(b: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>) {
+    let np = b.ncols().next_multiple_of(32);
+    out.clear();
+    out.resize(np * kp, 0);
+    for_each_in_memory_order(b, |k, j, x| {
+        let strip = (j / 32) * kp * 32 + (k / 32) * 1024 + ((j % 32) / 16) * 512;
+        out[strip + ((k % 32) / 2) * 32 + (j % 16) * 2 + k % 2] = bf16_bits(x);
+    });
+}
+
+/// Calls `f(row, column, value)` for every element of `v`, row by row when its rows are
+/// contiguous-ish (the column stride is the smaller) and column by column otherwise.
+fn for_each_in_memory_order(v: ArrayView2<'_, f32>, mut f: impl FnMut(usize, usize, f32)) {
+    let [row_stride, col_stride] = [v.strides()[0], v.strides()[1]].map(isize::unsigned_abs);
+    if col_stride <= row_stride {
+        for (i, row) in v.axis_iter(Axis(0)).enumerate() {
+            row.iter().enumerate().for_each(|(j, &x)| f(i, j, x));
+        }
+    } else {
+        for (j, col) in v.axis_iter(Axis(1)).enumerate() {
+            col.iter().enumerate().for_each(|(i, &x)| f(i, j, x));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::Array2;
+    use rand::{rngs::StdRng, Rng, SeedableRng};
+
+    /// A (rows, cols) matrix uniform in [-1, 1) (far from bf16's flushed denormals).
+    fn uniform(rows: usize, cols: usize, seed: u64) -> Array2<f32> {
+        let mut rng = StdRng::seed_from_u64(seed);
+        Array2::from_shape_simple_fn((rows, cols), || rng.gen_range(-1.0..1.0))
+    }
+
+    /// What `tdpbf16ps` computes on one block, read from the packed layout as the module doc
+    /// describes it: A slices row-major, B slices as two 16-column tiles of VNNI pairs.
+    fn reference_block(a: &[u16], b: &[u16], out: &mut [f32; 32 * 32]) {
+        let f = |bits: u16| f32::from_bits(u32::from(bits) << 16);
+        out.fill(0.0);
+        for (a, b) in a.chunks_exact(1024).zip(b.chunks_exact(1024)) {
+            for (i, j) in (0..32).flat_map(|i| (0..32).map(move |j| (i, j))) {
+                let b_at = |k: usize| b[(j / 16) * 512 + (k / 2) * 32 + (j % 16) * 2 + k % 2];
+                out[i * 32 + j] += (0..32).map(|k| f(a[i * 32 + k]) * f(b_at(k))).sum::<f32>();
+            }
+        }
+    }
+
+    /// Checks `got` = alpha · round(a) · round(b) + beta · c0 up to f32 accumulation: each entry
+    /// within (K + 2) units of roundoff of Σ|a·b| (plus beta's share) of the f64 product.
+    fn assert_bf16_product(
+        got: ArrayView2<'_, f32>,
+        (alpha, a, b): (f32, ArrayView2<'_, f32>, ArrayView2<'_, f32>),
+        (beta, c0): (f32, ArrayView2<'_, f32>),
+    ) {
+        let k = a.ncols();
+        let (ra, rb) = (
+            a.mapv(|x| round_to_bf16(x) as f64),
+            b.mapv(|x| round_to_bf16(x) as f64),
+        );
+        let exact = ra.dot(&rb) * alpha as f64 + c0.mapv(|x| x as f64) * beta as f64;
+        let size = ra.mapv(f64::abs).dot(&rb.mapv(f64::abs)) * (alpha as f64).abs()
+            + c0.mapv(|x| (x as f64).abs()) * (beta as f64).abs();
+        let u = f32::EPSILON as f64 / 2.0;
+        for ((ij, &g), (&e, &s)) in got.indexed_iter().zip(exact.iter().zip(&size)) {
+            let tol = (k + 2) as f64 * u * s + f32::MIN_POSITIVE as f64;
+            assert!(
+                (g as f64 - e).abs() <= tol,
+                "entry {ij:?}: got {g}, exact {e} (tolerance {tol:e}, K = {k})"
+            );
+        }
+    }
+
+    /// The (M, K, N) shapes tested: single elements, edges off every multiple of 16 and 32,
+    /// K = 0, and a B wider than one L2 panel.
+    const SHAPES: [(usize, usize, usize); 7] = [
+        (1, 1, 1),
+        (17, 33, 15),
+        (45, 70, 100),
+        (64, 64, 64),
+        (100, 3, 37),
+        (5, 0, 7),
+        (33, 300, 500),
+    ];
+
+    /// Every case of [`SHAPES`] through `mul`: plain, both operands transposed views, strided
+    /// views, and `beta = 1` accumulation (as the backward passes use) with alpha ≠ 1.
+    fn check_cases(
+        mul: &mut dyn FnMut(f32, ArrayView2<f32>, ArrayView2<f32>, f32, ArrayViewMut2<f32>),
+    ) {
+        for (seed, &(m, k, n)) in (0u64..).step_by(8).zip(&SHAPES) {
+            let (a, b) = (uniform(m, k, seed), uniform(k, n, seed + 1));
+            let c0 = uniform(m, n, seed + 2);
+            // (K, M) and (N, K) stored: `.t()` views with unit stride down the rows.
+            let (at, bt) = (a.t().to_owned(), b.t().to_owned());
+            // Every other row and every third column of larger matrices.
+            let a_big = uniform(2 * m, 3 * k, seed + 3);
+            let b_big = uniform(2 * k, 3 * n, seed + 4);
+            let (a_str, b_str) = (a_big.slice(s![..;2, ..;3]), b_big.slice(s![..;2, ..;3]));
+            let mut c = c0.clone();
+            mul(1.0, a.view(), b.view(), 0.0, c.view_mut());
+            assert_bf16_product(c.view(), (1.0, a.view(), b.view()), (0.0, c0.view()));
+            let mut c = c0.clone();
+            mul(1.0, at.t(), bt.t(), 0.0, c.view_mut());
+            assert_bf16_product(c.view(), (1.0, a.view(), b.view()), (0.0, c0.view()));
+            let mut c = c0.clone();
+            mul(1.0, a_str, b_str, 0.0, c.view_mut());
+            assert_bf16_product(c.view(), (1.0, a_str, b_str), (0.0, c0.view()));
+            // Into a transposed destination, accumulating: c (N, M) stored, cᵀ += -0.5 · a · b.
+            let mut ct = c0.t().to_owned();
+            mul(-0.5, a.view(), b.view(), 1.0, ct.view_mut().reversed_axes());
+            assert_bf16_product(ct.t(), (-0.5, a.view(), b.view()), (1.0, c0.view()));
+        }
+    }
+
+    #[test]
+    fn rounding_to_bf16_is_to_nearest_even() {
+        let one_plus = |ulps: f32| round_to_bf16(1.0 + ulps * 2f32.powi(-8));
+        assert_eq!(round_to_bf16(1.0), 1.0);
+        assert_eq!(one_plus(1.0), 1.0); // halfway from 1 (even) to 1 + 2⁻⁷: down
+        assert_eq!(one_plus(3.0), 1.0 + 2f32.powi(-6)); // halfway from an odd one: up
+        assert_eq!(one_plus(1.0 + 2f32.powi(-12)), 1.0 + 2f32.powi(-7)); // past halfway: up
+        assert_eq!(
+            round_to_bf16(-1.0 - 3.0 * 2f32.powi(-8)),
+            -1.0 - 2f32.powi(-6)
+        );
+        assert_eq!(round_to_bf16(f32::MAX), f32::INFINITY); // beyond bf16's largest
+        assert_eq!(round_to_bf16(f32::NEG_INFINITY), f32::NEG_INFINITY);
+        assert!(round_to_bf16(f32::NAN).is_nan());
+        assert_eq!(bf16_bits(0.15625), 0x3e20); // 0.15625 = 1.25 · 2⁻³ is exact
+    }
+
+    #[test]
+    fn packing_blocking_and_write_back_give_the_bf16_product_on_every_machine() {
+        check_cases(&mut |alpha, a, b, beta, c| {
+            packed_mat_mul(alpha, a, b, beta, c, reference_block)
+        });
+    }
+
+    #[test]
+    fn the_bf16_check_tells_an_f32_product_apart() {
+        // The tolerance of the checks above is far below bf16's rounding: exact f32 fails it.
+        let (a, b) = (uniform(40, 64, 1), uniform(64, 40, 2));
+        let mut c = Array2::zeros((40, 40));
+        general_mat_mul(1.0, &a, &b, 0.0, &mut c);
+        let zero = Array2::zeros((40, 40));
+        let caught = std::panic::catch_unwind(|| {
+            assert_bf16_product(c.view(), (1.0, a.view(), b.view()), (0.0, zero.view()))
+        });
+        assert!(caught.is_err());
+    }
+
+    #[test]
+    fn amx_detection_agrees_with_the_kernel_s_cpu_flags() {
+        let flags = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
+        let has = |f: &str| flags.split_whitespace().any(|w| w == f);
+        if !(has("amx_bf16") && has("amx_tile")) {
+            assert!(
+                !bf16_available(),
+                "AMX detected, but /proc/cpuinfo lists no amx_bf16"
+            );
+        } else if cfg!(target_os = "linux") {
+            // The kernel lists the flags only when it supports AMX (Linux ≥ 5.16 grants it).
+            assert!(
+                bf16_available(),
+                "/proc/cpuinfo lists AMX, but it was not detected"
+            );
+        }
+    }
+
+    #[test]
+    fn amx_gives_the_bf16_product_where_the_processor_has_it() {
+        if !bf16_available() {
+            eprintln!("no AMX here: the AMX kernel is not run (the packing test covers the rest)");
+            return;
+        }
+        check_cases(&mut |alpha, a, b, beta, c| bf16_mat_mul(alpha, a, b, beta, c));
+        // On another thread too: each thread configures its own tiles.
+        std::thread::spawn(|| {
+            check_cases(&mut |alpha, a, b, beta, c| bf16_mat_mul(alpha, a, b, beta, c))
+        })
+        .join()
+        .unwrap();
+    }
+
+    #[test]
+    fn mat_mul_is_exact_f32_by_default_and_bf16_in_a_bf16_scope() {
+        let (a, b) = (uniform(50, 70, 5), uniform(70, 30, 6));
+        let mut blas = Array2::zeros((50, 30));
+        general_mat_mul(1.0, &a, &b, 0.0, &mut blas);
+        let mut f32_out = Array2::zeros((50, 30));
+        mat_mul(1.0, &a, &b, 0.0, &mut f32_out);
+        assert_eq!(f32_out, blas);
+        let mut bf16_out = Array2::zeros((50, 30));
+        {
+            let _bf16 = precision::enter(Precision::Bf16);
+            mat_mul(1.0, &a, &b, 0.0, &mut bf16_out);
+        }
+        if bf16_available() {
+            let mut amx = Array2::zeros((50, 30));
+            bf16_mat_mul(1.0, a.view(), b.view(), 0.0, amx.view_mut());
+            assert_eq!(bf16_out, amx);
+            assert_ne!(bf16_out, blas);
+        } else {
+            assert_eq!(bf16_out, blas, "the fallback is BLAS in f32, bit for bit");
+        }
+        // f64 ignores the setting.
+        let (a64, b64) = (a.mapv(f64::from), b.mapv(f64::from));
+        let (mut in_scope, mut plain) = (Array2::zeros((50, 30)), Array2::zeros((50, 30)));
+        general_mat_mul(1.0, &a64, &b64, 0.0, &mut plain);
+        let _bf16 = precision::enter(Precision::Bf16);
+        mat_mul(1.0, &a64, &b64, 0.0, &mut in_scope);
+        assert_eq!(in_scope, plain);
+    }
+}
