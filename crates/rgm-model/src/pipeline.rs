@@ -18,6 +18,7 @@ use rgm_geom::kabsch::kabsch;
 use rgm_geom::refine::{self, RefineConfig};
 use rgm_geom::{Point3, PointCloud, RegistrationResult, RigidTransform, Vector3};
 use rgm_match::{hard_match, Correspondences, MatchConfig};
+use rgm_nn::Precision;
 
 use crate::method::MethodError;
 use crate::network::{FeaturerCache, Rgm, RgmCache};
@@ -40,6 +41,8 @@ pub struct PipelineConfig {
     /// clouds, in the network's frame (so distances are in unit-sphere units). `None` in the
     /// paper.
     pub refine: Option<RefineConfig>,
+    /// The network's matrix products: f32, or bf16 on AMX where the processor has it.
+    pub precision: Precision,
 }
 
 impl Default for PipelineConfig {
@@ -50,6 +53,7 @@ impl Default for PipelineConfig {
             inlier_threshold: 0.5,
             match_points: None,
             refine: None,
+            precision: Precision::F32,
         }
     }
 }
@@ -276,6 +280,7 @@ impl RgmRegistrar {
     ) -> Result<RegistrationResult, MethodError> {
         self.pairs.clear();
         self.times = StageTimes::default();
+        self.network.set_precision(self.config.precision);
         let start = Instant::now();
         let frame = Normalisation::of_pair(source, target);
         let (source_n, target_n) = (frame.source(source), frame.target(target));
