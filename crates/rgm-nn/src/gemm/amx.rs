@@ -12,6 +12,7 @@
 //! 32 × 32 slice, tmm6/tmm7 the two 16-column halves of B's 32 × 32 slice; one step is 4
 //! `tdpbf16ps`, 32 × 32 × 32 multiply-adds.
 
+use ndarray::ArrayViewMut2;
 use std::marker::PhantomData;
 use std::sync::OnceLock;
 
@@ -118,31 +119,62 @@ impl Tiles {
         })
     }
 
-    /// `out = a · b` for one 32 × 32 block: `a` holds Kp/32 packed slices of A's 32 rows (each
-    /// 32 rows × 32 bf16, row-major), `b` Kp/32 packed slices of B's 32 columns (each two
-    /// VNNI-pair tiles of 16 columns: 16 pair rows × 16 columns × 2), `out` is row-major f32.
-    pub(super) fn block(&mut self, a: &[u16], b: &[u16], out: &mut [f32; 32 * 32]) {
+    /// One 32 × 32 block of `a · b` into `out`, a (32, 32) view with unit column stride (a
+    /// block of C, or a scratch block): `out = a · b`, or `out += a · b` when `accumulate`.
+    /// `a` holds Kp/32 packed slices of A's 32 rows (each 32 rows × 32 bf16, row-major), `b`
+    /// Kp/32 packed slices of B's 32 columns (each two VNNI-pair tiles of 16 columns: 16 pair
+    /// rows × 16 columns × 2).
+    pub(super) fn block(
+        &mut self,
+        a: &[u16],
+        b: &[u16],
+        mut out: ArrayViewMut2<'_, f32>,
+        accumulate: bool,
+    ) {
         assert!(
             a.len() % SLICE == 0 && a.len() == b.len(),
             "packed slices: a {} and b {} elements",
             a.len(),
             b.len()
         );
+        let row_stride = out.strides()[0];
+        assert!(
+            out.dim() == (32, 32) && out.strides()[1] == 1 && row_stride >= 32,
+            "a 32 × 32 block with unit column stride, got {:?} with strides {:?}",
+            out.shape(),
+            out.strides()
+        );
+        let (c, c_stride) = (out.as_mut_ptr(), row_stride as usize * 4); // row stride in bytes
         #[cfg(target_arch = "x86_64")]
         {
             // SAFETY: `self` proves the tiles are configured on this thread (16 rows × 64 bytes
-            // each). Every load reads 16 rows of 64 bytes at a 64-byte stride, i.e. 1 KiB, from
-            // the start or the middle of a 2 KiB slice that lies inside `a` or `b` (lengths
-            // checked above); the stores write 4 × 16 rows of 64 bytes at a 128-byte stride into
-            // `out`'s 4 KiB.
+            // each). Every A or B load reads 16 rows of 64 bytes at a 64-byte stride, i.e. 1 KiB,
+            // from the start or the middle of a 2 KiB slice that lies inside `a` or `b` (lengths
+            // checked above). The C loads and stores touch 16 rows of 16 f32 at `c_stride`
+            // bytes, at row 0 or 16 and column 0 or 16: exactly the 32 × 32 elements of `out`
+            // (checked above: rows ≥ 32 elements apart, unit column stride), which it borrows
+            // mutably.
             unsafe {
-                std::arch::asm!(
-                    "tilezero tmm0",
-                    "tilezero tmm1",
-                    "tilezero tmm2",
-                    "tilezero tmm3",
-                    options(nomem, nostack)
-                );
+                if accumulate {
+                    std::arch::asm!(
+                        "tileloadd tmm0, [{c} + {s}*1]",
+                        "tileloadd tmm1, [{c} + {s}*1 + 64]",
+                        "tileloadd tmm2, [{c16} + {s}*1]",
+                        "tileloadd tmm3, [{c16} + {s}*1 + 64]",
+                        c = in(reg) c,
+                        c16 = in(reg) c.add(16 * row_stride as usize),
+                        s = in(reg) c_stride,
+                        options(nostack, readonly)
+                    );
+                } else {
+                    std::arch::asm!(
+                        "tilezero tmm0",
+                        "tilezero tmm1",
+                        "tilezero tmm2",
+                        "tilezero tmm3",
+                        options(nomem, nostack)
+                    );
+                }
                 for (a, b) in a.chunks_exact(SLICE).zip(b.chunks_exact(SLICE)) {
                     std::arch::asm!(
                         "tileloadd tmm4, [{a} + {stride}*1]",
@@ -160,18 +192,19 @@ impl Tiles {
                     );
                 }
                 std::arch::asm!(
-                    "tilestored [{c} + {stride}*1], tmm0",
-                    "tilestored [{c} + {stride}*1 + 64], tmm1",
-                    "tilestored [{c} + {stride}*1 + 2048], tmm2",
-                    "tilestored [{c} + {stride}*1 + 2112], tmm3",
-                    c = in(reg) out.as_mut_ptr(),
-                    stride = in(reg) 128usize,
+                    "tilestored [{c} + {s}*1], tmm0",
+                    "tilestored [{c} + {s}*1 + 64], tmm1",
+                    "tilestored [{c16} + {s}*1], tmm2",
+                    "tilestored [{c16} + {s}*1 + 64], tmm3",
+                    c = in(reg) c,
+                    c16 = in(reg) c.add(16 * row_stride as usize),
+                    s = in(reg) c_stride,
                     options(nostack)
                 );
             }
         }
         #[cfg(not(target_arch = "x86_64"))]
-        unreachable!("Tiles exist only where AMX is available ({out:?})");
+        unreachable!("Tiles exist only where AMX is available ({c:?}, {c_stride}, {accumulate})");
     }
 }
 
@@ -208,4 +241,106 @@ pub fn register_peak_loop(steps: u64) -> Option<u64> {
         );
     }
     Some(steps.max(1) * 4 * 16 * 16 * 32)
+}
+
+/// Whether the AVX-512 BF16 conversions are there (every AMX processor has them; checked anyway).
+fn has_avx512_bf16() -> bool {
+    static HAS: OnceLock<bool> = OnceLock::new();
+    #[cfg(target_arch = "x86_64")]
+    {
+        *HAS.get_or_init(|| {
+            std::arch::is_x86_feature_detected!("avx512f")
+                && std::arch::is_x86_feature_detected!("avx512bf16")
+        })
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        *HAS.get_or_init(|| false)
+    }
+}
+
+/// `dst[i] = bf16(src[i])`, 16 at a time with `vcvtneps2bf16` where the processor has it. That
+/// instruction flushes f32 denormals to zero, which the tile units do with bf16 denormals anyway:
+/// the products are the same as with [`super::bf16_bits`].
+pub(super) fn round_into(dst: &mut [u16], src: &[f32]) {
+    assert_eq!(dst.len(), src.len(), "round_into: lengths");
+    #[cfg(target_arch = "x86_64")]
+    if has_avx512_bf16() {
+        // SAFETY: the processor has AVX-512F and AVX-512 BF16 (checked above).
+        unsafe { round_into_avx512(dst, src) };
+        return;
+    }
+    for (d, &x) in dst.iter_mut().zip(src) {
+        *d = super::bf16_bits(x);
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bf16")]
+unsafe fn round_into_avx512(dst: &mut [u16], src: &[f32]) {
+    use std::arch::x86_64::*;
+    let (mut d, mut s) = (dst.chunks_exact_mut(16), src.chunks_exact(16));
+    for (d, s) in (&mut d).zip(&mut s) {
+        // SAFETY: `s` holds 16 f32 and `d` 16 u16 (32 bytes); unaligned load and store.
+        unsafe {
+            let bf = _mm512_cvtneps_pbh(_mm512_loadu_ps(s.as_ptr()));
+            _mm256_storeu_si256(
+                d.as_mut_ptr().cast(),
+                std::mem::transmute::<__m256bh, __m256i>(bf),
+            );
+        }
+    }
+    for (d, &x) in d.into_remainder().iter_mut().zip(s.remainder()) {
+        *d = super::bf16_bits(x);
+    }
+}
+
+/// `dst[2j] = bf16(r0[j])`, `dst[2j + 1] = bf16(r1[j])`: two rows of B as VNNI pairs, 16 columns
+/// at a time where the processor has AVX-512 BF16 (denormals as in [`round_into`]).
+pub(super) fn pairs_into(dst: &mut [u16], r0: &[f32], r1: &[f32]) {
+    assert!(
+        dst.len() == 2 * r0.len() && r0.len() == r1.len(),
+        "pairs_into: lengths"
+    );
+    #[cfg(target_arch = "x86_64")]
+    if has_avx512_bf16() {
+        // SAFETY: the processor has AVX-512F and AVX-512 BF16 (checked above).
+        unsafe { pairs_into_avx512(dst, r0, r1) };
+        return;
+    }
+    for ((d, &x0), &x1) in dst.chunks_exact_mut(2).zip(r0).zip(r1) {
+        d[0] = super::bf16_bits(x0);
+        d[1] = super::bf16_bits(x1);
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bf16")]
+unsafe fn pairs_into_avx512(dst: &mut [u16], r0: &[f32], r1: &[f32]) {
+    use std::arch::x86_64::*;
+    let mut d = dst.chunks_exact_mut(32);
+    let (mut s0, mut s1) = (r0.chunks_exact(16), r1.chunks_exact(16));
+    for ((d, s0), s1) in (&mut d).zip(&mut s0).zip(&mut s1) {
+        // SAFETY: `s0`, `s1` hold 16 f32 each and `d` 32 u16 (64 bytes); unaligned loads and
+        // store. Each 32-bit lane j gets bf16(s0[j]) in its low half and bf16(s1[j]) above.
+        unsafe {
+            let lo = _mm512_cvtneps_pbh(_mm512_loadu_ps(s0.as_ptr()));
+            let hi = _mm512_cvtneps_pbh(_mm512_loadu_ps(s1.as_ptr()));
+            let lo = _mm512_cvtepu16_epi32(std::mem::transmute::<__m256bh, __m256i>(lo));
+            let hi = _mm512_cvtepu16_epi32(std::mem::transmute::<__m256bh, __m256i>(hi));
+            _mm512_storeu_si512(
+                d.as_mut_ptr().cast(),
+                _mm512_or_si512(lo, _mm512_slli_epi32::<16>(hi)),
+            );
+        }
+    }
+    let tail = d.into_remainder();
+    for ((d, &x0), &x1) in tail
+        .chunks_exact_mut(2)
+        .zip(s0.remainder())
+        .zip(s1.remainder())
+    {
+        d[0] = super::bf16_bits(x0);
+        d[1] = super::bf16_bits(x1);
+    }
 }

@@ -118,26 +118,30 @@ pub fn bf16_mat_mul(
         return;
     }
     let mut tiles = amx::Tiles::configure().expect("bf16_mat_mul needs AMX (bf16_available)");
-    packed_mat_mul(alpha, a, b, beta, c.view_mut(), |a, b, out| {
-        tiles.block(a, b, out)
+    packed_mat_mul(alpha, a, b, beta, c.view_mut(), |a, b, out, accumulate| {
+        tiles.block(a, b, out, accumulate)
     });
 }
 
-/// The bf16 product with `block(a_strip, b_strip, out)` computing one 32 × 32 block from
-/// packed strips (the AMX kernel, or the tests' reference): packing, blocking, edges and the
-/// write-back into C.
+/// The bf16 product with `block_of(a_strip, b_strip, out, accumulate)` computing one 32 × 32
+/// block from packed strips into a (32, 32) view (the AMX kernel, or the tests' reference):
+/// packing, blocking, edges and the write-back into C. Whole blocks of a C with unit column
+/// stride go straight into C when alpha = 1 and beta ∈ {0, 1} (the tiles load and store C
+/// themselves); the other blocks go through a scratch block.
 fn packed_mat_mul(
     alpha: f32,
     a: ArrayView2<'_, f32>,
     b: ArrayView2<'_, f32>,
     beta: f32,
     mut c: ArrayViewMut2<'_, f32>,
-    mut block_of: impl FnMut(&[u16], &[u16], &mut [f32; 32 * 32]),
+    mut block_of: impl FnMut(&[u16], &[u16], ArrayViewMut2<'_, f32>, bool),
 ) {
     let ((m, k), n) = (a.dim(), b.ncols());
     let kp = k.next_multiple_of(32);
     let strip = kp * 32; // elements of one packed 32-row strip of A or 32-column strip of B
     let panel_strips = (B_PANEL_BYTES / (2 * strip).max(1)).max(1);
+    let direct =
+        alpha == 1.0 && (beta == 0.0 || beta == 1.0) && c.strides()[1] == 1 && c.strides()[0] >= 32;
     SCRATCH.with(|scratch| {
         let scratch = &mut *scratch.borrow_mut();
         pack_a(a, kp, &mut scratch.a);
@@ -149,9 +153,15 @@ fn packed_mat_mul(
                 let a_strip = &scratch.a[mi * strip..][..strip];
                 let rows = mi * 32..(mi * 32 + 32).min(m);
                 for ni in first..(first + panel_strips).min(n_strips) {
-                    block_of(a_strip, &scratch.b[ni * strip..][..strip], &mut block);
+                    let b_strip = &scratch.b[ni * strip..][..strip];
                     let cols = ni * 32..(ni * 32 + 32).min(n);
-                    let got = ArrayView2::from_shape((32, 32), &block[..]).expect("32 × 32");
+                    if direct && rows.len() == 32 && cols.len() == 32 {
+                        let dst = c.slice_mut(s![rows.clone(), cols]);
+                        block_of(a_strip, b_strip, dst, beta == 1.0);
+                        continue;
+                    }
+                    let mut got = ArrayViewMut2::from_shape((32, 32), &mut block[..]).expect("32²");
+                    block_of(a_strip, b_strip, got.view_mut(), false);
                     let got = got.slice(s![..rows.len(), ..cols.len()]);
                     let dst = c.slice_mut(s![rows.clone(), cols]);
                     if beta == 0.0 {
@@ -173,6 +183,17 @@ fn pack_a(a: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>) {
     let mp = a.nrows().next_multiple_of(32);
     out.clear();
     out.resize(mp * kp, 0);
+    if a.strides()[1] == 1 {
+        // Rows contiguous: 32 elements at a time into their slice row.
+        for (i, row) in a.axis_iter(Axis(0)).enumerate() {
+            let row = row.to_slice().expect("unit column stride");
+            let strip_row = (i / 32) * kp * 32 + (i % 32) * 32;
+            for (s, chunk) in row.chunks(32).enumerate() {
+                amx::round_into(&mut out[strip_row + s * 1024..][..chunk.len()], chunk);
+            }
+        }
+        return;
+    }
     for_each_in_memory_order(a, |i, k, x| {
         out[(i / 32) * kp * 32 + (k / 32) * 1024 + (i % 32) * 32 + k % 32] = bf16_bits(x);
     });
@@ -181,9 +202,28 @@ fn pack_a(a: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>) {
 /// Packs `b` (K, N) as bf16 into `out`: 32-column strips, each Kp/32 slices of two 16-column
 /// tiles in VNNI pairs (pair row r, column j: rows 2r and 2r + 1 side by side), zero-padded.
 fn pack_b(b: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>) {
-    let np = b.ncols().next_multiple_of(32);
+    let (k, n) = b.dim();
+    let np = n.next_multiple_of(32);
     out.clear();
     out.resize(np * kp, 0);
+    if b.strides()[1] == 1 && n > 0 {
+        // Rows contiguous: two rows at a time, 16 columns into each tile row.
+        let zeros = vec![0.0; if k % 2 == 1 { n } else { 0 }]; // the row after an odd K
+        for pair in 0..k.div_ceil(2) {
+            let r0 = b.row(2 * pair).to_slice().expect("unit column stride");
+            let r1 = match 2 * pair + 1 < k {
+                true => b.row(2 * pair + 1).to_slice().expect("unit column stride"),
+                false => &zeros[..],
+            };
+            let pair_row = (pair / 16) * 1024 + (pair % 16) * 32;
+            for j in (0..n).step_by(16) {
+                let len = (n - j).min(16);
+                let at = (j / 32) * kp * 32 + ((j % 32) / 16) * 512 + pair_row;
+                amx::pairs_into(&mut out[at..][..2 * len], &r0[j..][..len], &r1[j..][..len]);
+            }
+        }
+        return;
+    }
     for_each_in_memory_order(b, |k, j, x| {
         let strip = (j / 32) * kp * 32 + (k / 32) * 1024 + ((j % 32) / 16) * 512;
         out[strip + ((k % 32) / 2) * 32 + (j % 16) * 2 + k % 2] = bf16_bits(x);
@@ -219,13 +259,15 @@ mod tests {
 
     /// What `tdpbf16ps` computes on one block, read from the packed layout as the module doc
     /// describes it: A slices row-major, B slices as two 16-column tiles of VNNI pairs.
-    fn reference_block(a: &[u16], b: &[u16], out: &mut [f32; 32 * 32]) {
+    fn reference_block(a: &[u16], b: &[u16], mut out: ArrayViewMut2<f32>, accumulate: bool) {
         let f = |bits: u16| f32::from_bits(u32::from(bits) << 16);
-        out.fill(0.0);
+        if !accumulate {
+            out.fill(0.0);
+        }
         for (a, b) in a.chunks_exact(1024).zip(b.chunks_exact(1024)) {
             for (i, j) in (0..32).flat_map(|i| (0..32).map(move |j| (i, j))) {
                 let b_at = |k: usize| b[(j / 16) * 512 + (k / 2) * 32 + (j % 16) * 2 + k % 2];
-                out[i * 32 + j] += (0..32).map(|k| f(a[i * 32 + k]) * f(b_at(k))).sum::<f32>();
+                out[(i, j)] += (0..32).map(|k| f(a[i * 32 + k]) * f(b_at(k))).sum::<f32>();
             }
         }
     }
@@ -268,7 +310,8 @@ mod tests {
     ];
 
     /// Every case of [`SHAPES`] through `mul`: plain, both operands transposed views, strided
-    /// views, and `beta = 1` accumulation (as the backward passes use) with alpha ≠ 1.
+    /// views, `beta = 1` accumulation into C (as the backward passes use), and into a
+    /// transposed C with alpha ≠ 1.
     fn check_cases(
         mul: &mut dyn FnMut(f32, ArrayView2<f32>, ArrayView2<f32>, f32, ArrayViewMut2<f32>),
     ) {
@@ -290,6 +333,10 @@ mod tests {
             let mut c = c0.clone();
             mul(1.0, a_str, b_str, 0.0, c.view_mut());
             assert_bf16_product(c.view(), (1.0, a_str, b_str), (0.0, c0.view()));
+            // Accumulating into C itself (as the backward passes do): c += a · b.
+            let mut c = c0.clone();
+            mul(1.0, a.view(), b.view(), 1.0, c.view_mut());
+            assert_bf16_product(c.view(), (1.0, a.view(), b.view()), (1.0, c0.view()));
             // Into a transposed destination, accumulating: c (N, M) stored, cᵀ += -0.5 · a · b.
             let mut ct = c0.t().to_owned();
             mul(-0.5, a.view(), b.view(), 1.0, ct.view_mut().reversed_axes());
@@ -312,6 +359,22 @@ mod tests {
         assert_eq!(round_to_bf16(f32::NEG_INFINITY), f32::NEG_INFINITY);
         assert!(round_to_bf16(f32::NAN).is_nan());
         assert_eq!(bf16_bits(0.15625), 0x3e20); // 0.15625 = 1.25 · 2⁻³ is exact
+    }
+
+    #[test]
+    fn the_packing_conversions_round_like_bf16_bits() {
+        // 37 values: two full vectors of 16 and a tail (the vector path where the processor
+        // has AVX-512 BF16, the scalar one elsewhere).
+        let (x, y) = (uniform(1, 37, 9), uniform(1, 37, 10));
+        let (x, y) = (x.as_slice().unwrap(), y.as_slice().unwrap());
+        let mut rounded = [0u16; 37];
+        amx::round_into(&mut rounded, x);
+        assert!(rounded.iter().zip(x).all(|(&r, &x)| r == bf16_bits(x)));
+        let mut pairs = [0u16; 74];
+        amx::pairs_into(&mut pairs, x, y);
+        for (j, p) in pairs.chunks_exact(2).enumerate() {
+            assert_eq!(p, [bf16_bits(x[j]), bf16_bits(y[j])], "column {j}");
+        }
     }
 
     #[test]
