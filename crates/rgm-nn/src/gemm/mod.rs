@@ -1,5 +1,6 @@
 //! The matrix product every op calls, [`mat_mul`]: BLAS in f32 and f64, or bf16 on the
-//! processor's AMX tile units when the calling thread asked for [`Precision::Bf16`].
+//! processor's AMX tile units (or its AVX-512 BF16 dot products where it has no AMX) when the
+//! calling thread asked for [`Precision::Bf16`].
 //!
 //! The bf16 product ([`bf16_mat_mul`]) takes and returns f32: both inputs are rounded to bf16
 //! (nearest even) while they are packed, the products are accumulated in f32. It runs on the
@@ -7,18 +8,20 @@
 //! thread by default), in three steps:
 //! 1. pack A (M, K) into 32-row strips, each a run of 32 × 32 slices along K (2 KiB, two tiles);
 //! 2. pack B (K, N) into 32-column strips, each a run of 32 × 32 slices along K in the VNNI
-//!    pairs layout that `tdpbf16ps` reads (see [`amx`]); M, N and K are padded with zeros to
+//!    pairs layout that `tdpbf16ps` and `vdpbf16ps` read (see [`kernels`]); M, N and K are
+//!    padded with zeros to
 //!    multiples of 32, so edges need no special kernel;
 //! 3. for each column panel of B small enough to stay in L2 (≤ 256 KiB), for each A strip (at
 //!    most 32 KiB for K ≤ 512: it stays in L1 across the panel), multiply the strip by each B
-//!    strip of the panel into a 32 × 32 f32 block, then write `alpha · block + beta · C` into
-//!    the matching (clipped) block of C, whatever C's strides.
+//!    strip of the panel into a 32 × 32 f32 block of C (whole blocks of a C with unit column
+//!    stride when alpha = 1 and beta ∈ {0, 1}), or into a scratch block whose
+//!    `alpha · block + beta · C` then goes into the matching (clipped) block of C.
 //!
 //! Packing reads A and B in the order they lie in memory, so transposed views cost the same.
 
-mod amx;
+mod kernels;
 
-pub use amx::register_peak_loop;
+pub use kernels::{backend, register_peak_loop};
 
 use crate::precision::{self, Precision};
 use crate::Scalar;
@@ -44,16 +47,30 @@ pub fn mat_mul<T, S1, S2, S3>(
     T::mat_mul(alpha, a.view(), b.view(), beta, c.view_mut());
 }
 
-/// [`mat_mul`] for f32: bf16 on AMX when the thread's precision is bf16 and AMX is available,
-/// BLAS otherwise.
+/// [`mat_mul`] for f32: bf16 when the thread's precision is bf16 and [`bf16_available`], BLAS
+/// otherwise.
 pub(crate) fn mat_mul_f32(
+    alpha: f32,
+    a: ArrayView2<'_, f32>,
+    b: ArrayView2<'_, f32>,
+    beta: f32,
+    c: ArrayViewMut2<'_, f32>,
+) {
+    mat_mul_f32_in(precision::current(), bf16_available(), alpha, a, b, beta, c);
+}
+
+/// [`mat_mul_f32`] with the precision and the processor's bf16 support given (so that the
+/// fallback is tested on every machine).
+fn mat_mul_f32_in(
+    precision: Precision,
+    bf16_here: bool,
     alpha: f32,
     a: ArrayView2<'_, f32>,
     b: ArrayView2<'_, f32>,
     beta: f32,
     mut c: ArrayViewMut2<'_, f32>,
 ) {
-    if precision::current() == Precision::Bf16 && bf16_available() {
+    if precision == Precision::Bf16 && bf16_here {
         bf16_mat_mul(alpha, a, b, beta, c);
     } else {
         general_mat_mul(alpha, &a, &b, beta, &mut c);
@@ -61,9 +78,10 @@ pub(crate) fn mat_mul_f32(
 }
 
 /// Whether [`bf16_mat_mul`] can run here: an x86-64 processor with AMX-BF16 under Linux that
-/// granted the tile registers to this process (asked once, on the first call).
+/// granted the tile registers to this process (asked once, on the first call), or one with
+/// AVX-512 BF16. [`backend`] says which.
 pub fn bf16_available() -> bool {
-    amx::available()
+    backend().is_some()
 }
 
 /// `x` rounded to the nearest bfloat16 (ties to even; NaN stays NaN), as the bf16 bits.
@@ -96,9 +114,9 @@ thread_local! {
 /// Bytes of B's packed columns one pass keeps in L2 while every A strip meets them.
 const B_PANEL_BYTES: usize = 256 * 1024;
 
-/// `c = alpha · a · b + beta · c` with a and b rounded to bf16 and f32 accumulation, on AMX.
-/// `a`: (M, K), `b`: (K, N), `c`: (M, N), any strides. Panics if the shapes disagree or AMX
-/// is not [`bf16_available`].
+/// `c = alpha · a · b + beta · c` with a and b rounded to bf16 and f32 accumulation, on AMX (or
+/// AVX-512 BF16). `a`: (M, K), `b`: (K, N), `c`: (M, N), any strides. Panics if the shapes
+/// disagree or bf16 is not [`bf16_available`].
 pub fn bf16_mat_mul(
     alpha: f32,
     a: ArrayView2<'_, f32>,
@@ -117,14 +135,14 @@ pub fn bf16_mat_mul(
     if m == 0 || n == 0 {
         return;
     }
-    let mut tiles = amx::Tiles::configure().expect("bf16_mat_mul needs AMX (bf16_available)");
+    let mut kernel = kernels::Kernel::new().expect("bf16_mat_mul needs AMX or AVX-512 BF16");
     packed_mat_mul(alpha, a, b, beta, c.view_mut(), |a, b, out, accumulate| {
-        tiles.block(a, b, out, accumulate)
+        kernel.block(a, b, out, accumulate)
     });
 }
 
 /// The bf16 product with `block_of(a_strip, b_strip, out, accumulate)` computing one 32 × 32
-/// block from packed strips into a (32, 32) view (the AMX kernel, or the tests' reference):
+/// block from packed strips into a (32, 32) view (a kernel, or the tests' reference):
 /// packing, blocking, edges and the write-back into C. Whole blocks of a C with unit column
 /// stride go straight into C when alpha = 1 and beta ∈ {0, 1} (the tiles load and store C
 /// themselves); the other blocks go through a scratch block.
@@ -189,7 +207,7 @@ fn pack_a(a: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>) {
             let row = row.to_slice().expect("unit column stride");
             let strip_row = (i / 32) * kp * 32 + (i % 32) * 32;
             for (s, chunk) in row.chunks(32).enumerate() {
-                amx::round_into(&mut out[strip_row + s * 1024..][..chunk.len()], chunk);
+                kernels::round_into(&mut out[strip_row + s * 1024..][..chunk.len()], chunk);
             }
         }
         return;
@@ -219,7 +237,7 @@ fn pack_b(b: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>) {
             for j in (0..n).step_by(16) {
                 let len = (n - j).min(16);
                 let at = (j / 32) * kp * 32 + ((j % 32) / 16) * 512 + pair_row;
-                amx::pairs_into(&mut out[at..][..2 * len], &r0[j..][..len], &r1[j..][..len]);
+                kernels::pairs_into(&mut out[at..][..2 * len], &r0[j..][..len], &r1[j..][..len]);
             }
         }
         return;
@@ -368,10 +386,10 @@ mod tests {
         let (x, y) = (uniform(1, 37, 9), uniform(1, 37, 10));
         let (x, y) = (x.as_slice().unwrap(), y.as_slice().unwrap());
         let mut rounded = [0u16; 37];
-        amx::round_into(&mut rounded, x);
+        kernels::round_into(&mut rounded, x);
         assert!(rounded.iter().zip(x).all(|(&r, &x)| r == bf16_bits(x)));
         let mut pairs = [0u16; 74];
-        amx::pairs_into(&mut pairs, x, y);
+        kernels::pairs_into(&mut pairs, x, y);
         for (j, p) in pairs.chunks_exact(2).enumerate() {
             assert_eq!(p, [bf16_bits(x[j]), bf16_bits(y[j])], "column {j}");
         }
@@ -398,36 +416,46 @@ mod tests {
     }
 
     #[test]
-    fn amx_detection_agrees_with_the_kernel_s_cpu_flags() {
+    fn the_kernel_detected_agrees_with_the_cpu_flags() {
         let flags = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
         let has = |f: &str| flags.split_whitespace().any(|w| w == f);
-        if !(has("amx_bf16") && has("amx_tile")) {
-            assert!(
-                !bf16_available(),
-                "AMX detected, but /proc/cpuinfo lists no amx_bf16"
-            );
-        } else if cfg!(target_os = "linux") {
-            // The kernel lists the flags only when it supports AMX (Linux ≥ 5.16 grants it).
-            assert!(
-                bf16_available(),
-                "/proc/cpuinfo lists AMX, but it was not detected"
-            );
-        }
+        // Linux lists the AMX flags only when it supports AMX (≥ 5.16, which grants it).
+        let expected = if has("amx_bf16") && has("amx_tile") && cfg!(target_os = "linux") {
+            Some("amx")
+        } else if has("avx512_bf16") {
+            Some("avx512_bf16")
+        } else {
+            None
+        };
+        assert_eq!(
+            backend(),
+            expected,
+            "/proc/cpuinfo and the detection disagree"
+        );
+        assert_eq!(kernels::amx_available(), expected == Some("amx"));
     }
 
     #[test]
-    fn amx_gives_the_bf16_product_where_the_processor_has_it() {
+    fn the_kernels_give_the_bf16_product_where_the_processor_has_them() {
         if !bf16_available() {
-            eprintln!("no AMX here: the AMX kernel is not run (the packing test covers the rest)");
+            eprintln!("no AMX, no AVX-512 BF16: no kernel runs (the packing test covers the rest)");
             return;
         }
         check_cases(&mut |alpha, a, b, beta, c| bf16_mat_mul(alpha, a, b, beta, c));
-        // On another thread too: each thread configures its own tiles.
+        // On another thread too: each thread sets its kernel up (AMX: its own tiles).
         std::thread::spawn(|| {
             check_cases(&mut |alpha, a, b, beta, c| bf16_mat_mul(alpha, a, b, beta, c))
         })
         .join()
         .unwrap();
+        // The AVX-512 BF16 kernel also where AMX takes precedence.
+        if let Some(mut kernel) = kernels::Avx512Bf16::new() {
+            check_cases(&mut |alpha, a, b, beta, c| {
+                packed_mat_mul(alpha, a, b, beta, c, |a, b, out, acc| {
+                    kernel.block(a, b, out, acc)
+                })
+            });
+        }
     }
 
     #[test]
@@ -443,10 +471,22 @@ mod tests {
             let _bf16 = precision::enter(Precision::Bf16);
             mat_mul(1.0, &a, &b, 0.0, &mut bf16_out);
         }
+        // Without a bf16 kernel, bf16 is BLAS in f32, bit for bit (on every machine).
+        let mut fallback = Array2::zeros((50, 30));
+        mat_mul_f32_in(
+            Precision::Bf16,
+            false,
+            1.0,
+            a.view(),
+            b.view(),
+            0.0,
+            fallback.view_mut(),
+        );
+        assert_eq!(fallback, blas);
         if bf16_available() {
-            let mut amx = Array2::zeros((50, 30));
-            bf16_mat_mul(1.0, a.view(), b.view(), 0.0, amx.view_mut());
-            assert_eq!(bf16_out, amx);
+            let mut direct = Array2::zeros((50, 30));
+            bf16_mat_mul(1.0, a.view(), b.view(), 0.0, direct.view_mut());
+            assert_eq!(bf16_out, direct);
             assert_ne!(bf16_out, blas);
         } else {
             assert_eq!(bf16_out, blas, "the fallback is BLAS in f32, bit for bit");

@@ -1,5 +1,8 @@
-//! All the unsafe code of the bf16 GEMM: detecting AMX, asking Linux for the tile registers, and
-//! the tile instructions themselves, through `asm!` (their intrinsics are nightly-only).
+//! All the unsafe code of the bf16 GEMM: its two kernels ([`Kernel`]) and the packing
+//! conversions. AMX: detecting it, asking Linux for the tile registers, and the tile instructions
+//! themselves, through `asm!` (their intrinsics are nightly-only). AVX-512 BF16 (`vdpbf16ps`,
+//! the processors without AMX that have it: AMD Zen 4 and later, Intel Cooper Lake): stable
+//! intrinsics in `#[target_feature]` functions, called after runtime detection.
 //!
 //! AMX has eight tile registers `tmm0..tmm7` of up to 16 rows × 64 bytes. `tdpbf16ps C, A, B`
 //! adds the product of a 16 × 32 bf16 tile A and a 32 × 16 bf16 tile B into a 16 × 16 f32 tile
@@ -19,9 +22,52 @@ use std::sync::OnceLock;
 /// Elements (u16) of one packed 32 × 32 bf16 slice of A or of B: 2 KiB, two tiles.
 pub(super) const SLICE: usize = 32 * 32;
 
+/// A kernel computing one 32 × 32 block of the product from packed strips (see [`Tiles::block`]).
+pub(super) enum Kernel {
+    Amx(Tiles),
+    Avx512Bf16(Avx512Bf16),
+}
+
+impl Kernel {
+    /// The fastest kernel this processor runs (AMX, then AVX-512 BF16), set up on the calling
+    /// thread; `None` without either.
+    pub(super) fn new() -> Option<Self> {
+        if let Some(tiles) = Tiles::configure() {
+            return Some(Self::Amx(tiles));
+        }
+        Avx512Bf16::new().map(Self::Avx512Bf16)
+    }
+
+    /// See [`Tiles::block`]; both kernels compute the same block (each step rounds to nearest
+    /// even and flushes bf16 denormals) up to the order of the f32 additions.
+    pub(super) fn block(
+        &mut self,
+        a: &[u16],
+        b: &[u16],
+        out: ArrayViewMut2<'_, f32>,
+        accumulate: bool,
+    ) {
+        match self {
+            Self::Amx(tiles) => tiles.block(a, b, out, accumulate),
+            Self::Avx512Bf16(k) => k.block(a, b, out, accumulate),
+        }
+    }
+}
+
+/// The name of the kernel [`Kernel::new`] picks here: "amx", "avx512_bf16", or `None`.
+pub fn backend() -> Option<&'static str> {
+    if amx_available() {
+        Some("amx")
+    } else if has_avx512_bf16() {
+        Some("avx512_bf16")
+    } else {
+        None
+    }
+}
+
 /// Whether this process may run AMX-BF16: the processor has it, the kernel saves its state, and
 /// Linux granted the permission. Checked once per process.
-pub fn available() -> bool {
+pub fn amx_available() -> bool {
     static AVAILABLE: OnceLock<bool> = OnceLock::new();
     *AVAILABLE.get_or_init(detect)
 }
@@ -94,9 +140,9 @@ pub(super) struct Tiles {
 }
 
 impl Tiles {
-    /// Configures the tiles on the calling thread; `None` where AMX is not [`available`].
+    /// Configures the tiles on the calling thread; `None` where AMX is not [`amx_available`].
     pub(super) fn configure() -> Option<Self> {
-        if !available() {
+        if !amx_available() {
             return None;
         }
         let config = TileConfig {
@@ -342,5 +388,101 @@ unsafe fn pairs_into_avx512(dst: &mut [u16], r0: &[f32], r1: &[f32]) {
     {
         d[0] = super::bf16_bits(x0);
         d[1] = super::bf16_bits(x1);
+    }
+}
+
+/// The AVX-512 BF16 kernel: proof that the processor has it (made by [`Kernel::new`] only).
+pub(super) struct Avx512Bf16 {
+    _private: (),
+}
+
+impl Avx512Bf16 {
+    /// The kernel, where the processor has AVX-512F and AVX-512 BF16.
+    pub(super) fn new() -> Option<Self> {
+        has_avx512_bf16().then_some(Self { _private: () })
+    }
+
+    /// One block as [`Tiles::block`] computes it, with `vdpbf16ps`: 8 rows at a time, 16
+    /// accumulators of 16 f32 (the block's 8 × 32), each pair row of B loaded once per 8 rows.
+    pub(super) fn block(
+        &mut self,
+        a: &[u16],
+        b: &[u16],
+        mut out: ArrayViewMut2<'_, f32>,
+        accumulate: bool,
+    ) {
+        assert!(
+            a.len() % SLICE == 0 && a.len() == b.len(),
+            "packed slices: a {} and b {} elements",
+            a.len(),
+            b.len()
+        );
+        assert!(
+            out.dim() == (32, 32) && out.strides()[1] == 1,
+            "a 32 × 32 block with unit column stride, got {:?} with strides {:?}",
+            out.shape(),
+            out.strides()
+        );
+        #[cfg(target_arch = "x86_64")]
+        for (group, rows) in out.axis_chunks_iter_mut(ndarray::Axis(0), 8).enumerate() {
+            // SAFETY: `self` exists only where the processor has AVX-512F and AVX-512 BF16.
+            unsafe { dp_rows_avx512(a, b, group * 8, rows, accumulate) };
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        unreachable!("Avx512Bf16 exists only on x86-64 ({accumulate})");
+    }
+}
+
+/// Rows `row0..row0 + 8` of the block into `out` (8, 32): see [`Avx512Bf16::block`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bf16")]
+unsafe fn dp_rows_avx512(
+    a: &[u16],
+    b: &[u16],
+    row0: usize,
+    mut out: ArrayViewMut2<'_, f32>,
+    accumulate: bool,
+) {
+    use std::arch::x86_64::*;
+    let mut rows: Vec<&mut [f32]> = out
+        .rows_mut()
+        .into_iter()
+        .map(|r| r.into_slice().expect("unit column stride"))
+        .collect();
+    let mut acc = [[_mm512_setzero_ps(); 2]; 8]; // (8 rows, 2 × 16 columns)
+    if accumulate {
+        for (acc, row) in acc.iter_mut().zip(&rows) {
+            // SAFETY: each row holds 32 f32 (a block row); unaligned loads.
+            unsafe {
+                acc[0] = _mm512_loadu_ps(row.as_ptr());
+                acc[1] = _mm512_loadu_ps(row.as_ptr().add(16));
+            }
+        }
+    }
+    for (a, b) in a.chunks_exact(SLICE).zip(b.chunks_exact(SLICE)) {
+        for r in 0..16 {
+            let (b0, b1) = (&b[r * 32..][..32], &b[512 + r * 32..][..32]);
+            // SAFETY: `b0`, `b1` hold 32 u16 (64 bytes) each; unaligned loads.
+            let (b0, b1): (__m512bh, __m512bh) = unsafe {
+                (
+                    std::mem::transmute(_mm512_loadu_si512(b0.as_ptr().cast())),
+                    std::mem::transmute(_mm512_loadu_si512(b1.as_ptr().cast())),
+                )
+            };
+            for (i, acc) in acc.iter_mut().enumerate() {
+                let at = (row0 + i) * 32 + 2 * r; // row row0 + i, k pair r
+                let pair = u32::from(a[at]) | (u32::from(a[at + 1]) << 16);
+                let pair: __m512bh = std::mem::transmute(_mm512_set1_epi32(pair as i32));
+                acc[0] = _mm512_dpbf16_ps(acc[0], pair, b0);
+                acc[1] = _mm512_dpbf16_ps(acc[1], pair, b1);
+            }
+        }
+    }
+    for (acc, row) in acc.iter().zip(&mut rows) {
+        // SAFETY: each row holds 32 f32; unaligned stores.
+        unsafe {
+            _mm512_storeu_ps(row.as_mut_ptr(), acc[0]);
+            _mm512_storeu_ps(row.as_mut_ptr().add(16), acc[1]);
+        }
     }
 }
