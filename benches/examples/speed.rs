@@ -141,12 +141,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let text = |v: Option<String>| v.map_or("null".to_string(), |v| format!("{v:?}"));
     let line = format!(
-        r#"{{"implementation": "rgm", "preset": {:?}, "what": {:?}, "points": {points}, "match_points": {}, "weights": {}, "reps": {reps}, "precision": "{precision}", "amx": {}, "median_s": {:.4}, "seconds": {:?}, "vm_hwm_mib": {:.1}, "blas_threads": {}, "correspondences": {correspondences}, "stage_share": {stage_share}}}"#,
+        r#"{{"implementation": "rgm", "preset": {:?}, "what": {:?}, "points": {points}, "match_points": {}, "weights": {}, "reps": {reps}, "precision": "{precision}", "bf16_kernel": {:?}, "median_s": {:.4}, "seconds": {:?}, "vm_hwm_mib": {:.1}, "blas_threads": {}, "correspondences": {correspondences}, "stage_share": {stage_share}}}"#,
         preset,
         what,
         text(match_points.map(|m| m.to_string())).replace('"', ""),
         text(weights),
-        rgm_nn::gemm::bf16_available(),
+        rgm_nn::gemm::backend().unwrap_or("none"),
         median(seconds.clone()),
         seconds,
         vm_hwm_kib() as f64 / 1024.0,

@@ -69,8 +69,8 @@ pub enum PrecisionArg {
     /// f32, exact (the default).
     #[default]
     F32,
-    /// Inputs rounded to bfloat16, f32 accumulation, on the processor's AMX tile units
-    /// (Intel Xeon since Sapphire Rapids); f32 on processors without them.
+    /// Inputs rounded to bfloat16, f32 accumulation, on the processor's AMX tile units (Intel
+    /// Xeon since Sapphire Rapids) or AVX-512 BF16 (AMD Zen 4 and later); f32 on others.
     Bf16,
 }
 
@@ -78,7 +78,10 @@ impl PrecisionArg {
     /// The library's precision; says on stderr when bf16 falls back to f32 on this processor.
     pub fn precision(self) -> rgm_nn::Precision {
         if self == Self::Bf16 && !rgm_nn::gemm::bf16_available() {
-            eprintln!("--precision bf16: this processor has no AMX-BF16; products run in f32");
+            eprintln!(
+                "--precision bf16: this processor has neither AMX nor AVX-512 BF16; products \
+                 run in f32"
+            );
         }
         match self {
             Self::F32 => rgm_nn::Precision::F32,
@@ -143,8 +146,8 @@ pub struct MethodArgs {
     /// Report the method's own transform, unrefined (as the paper's tables do).
     #[arg(long, overrides_with = "refine")]
     no_refine: bool,
-    /// RGM's matrix products: f32, or bf16 (about 2× faster where the processor has AMX; the
-    /// rest of the network stays f32).
+    /// RGM's matrix products: f32, or bf16 (faster where the processor has AMX or AVX-512
+    /// BF16; the rest of the network stays f32).
     #[arg(long, value_enum, default_value = "f32")]
     precision: PrecisionArg,
 }

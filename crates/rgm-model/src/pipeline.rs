@@ -41,7 +41,7 @@ pub struct PipelineConfig {
     /// clouds, in the network's frame (so distances are in unit-sphere units). `None` in the
     /// paper.
     pub refine: Option<RefineConfig>,
-    /// The network's matrix products: f32, or bf16 on AMX where the processor has it.
+    /// The network's matrix products: f32, or bf16 where the processor has AMX or AVX-512 BF16.
     pub precision: Precision,
 }
 

@@ -121,9 +121,9 @@ pub struct TrainConfig {
     /// PyTorch's `eval()` (spec §3). Only validation depends on it: it may change on resume.
     #[serde(default)]
     pub test_statistics: TestStatistics,
-    /// The network's matrix products in training and validation: f32, or bf16 on AMX where the
-    /// processor has it (weights, optimiser state, reductions and the loss stay f32). A compute
-    /// choice, not a setting of the run: it may change on resume.
+    /// The network's matrix products in training and validation: f32, or bf16 where the
+    /// processor has AMX or AVX-512 BF16 (weights, optimiser state, reductions and the loss
+    /// stay f32). A compute choice, not a setting of the run: it may change on resume.
     #[serde(default, with = "precision_name")]
     pub precision: Precision,
 }

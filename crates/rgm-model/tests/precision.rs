@@ -1,5 +1,6 @@
-//! `Rgm::set_precision`: f32 stays exact, bf16 runs the products on AMX where the processor has
-//! it (and is f32, bit for bit, where it has not), on whatever thread runs the pass.
+//! `Rgm::set_precision`: f32 stays exact, bf16 runs the products on AMX or AVX-512 BF16 where the
+//! processor has either (and is f32, bit for bit, where it has not), on whatever thread runs the
+//! pass.
 //!
 //! The fixture is the PyTorch export of `tests/pipeline.rs` (tiny preset, a 48×48 pair, PyTorch's
 //! evaluation-mode C̃).
@@ -83,13 +84,13 @@ fn bf16_is_close_to_pytorch_with_amx_and_exact_f32_without() {
         // bf16 keeps 8 significant bits (relative rounding 2⁻⁹) in every product's inputs.
         assert!(
             bf16_c != f32_c,
-            "bf16 gave f32's C̃ bit for bit: AMX did not run"
+            "bf16 gave f32's C̃ bit for bit: no bf16 kernel ran"
         );
         assert!(worst < 2e-2, "largest |ΔC̃| against PyTorch's f32 = {worst}");
     } else {
         assert_eq!(
             bf16_c, f32_c,
-            "without AMX, bf16 falls back to f32 bit for bit"
+            "without a bf16 kernel, bf16 falls back to f32 bit for bit"
         );
     }
 }
@@ -102,7 +103,7 @@ fn bf16_gradients_are_close_to_f32_with_amx_and_exact_without() {
     if bf16_available() {
         assert!(
             worst > 0.0,
-            "bf16 gave f32's gradients bit for bit: AMX did not run"
+            "bf16 gave f32's gradients bit for bit: no bf16 kernel ran"
         );
         assert!(
             worst < 5e-2 * scale,
@@ -111,7 +112,7 @@ fn bf16_gradients_are_close_to_f32_with_amx_and_exact_without() {
     } else {
         assert_eq!(
             worst, 0.0,
-            "without AMX, bf16 falls back to f32 bit for bit"
+            "without a bf16 kernel, bf16 falls back to f32 bit for bit"
         );
     }
 }

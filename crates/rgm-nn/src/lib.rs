@@ -32,7 +32,7 @@
 //! - **Elements**: every op is generic over [`Scalar`] (f32 for compute, f64 for the gradient
 //!   checks in [`gradcheck`]).
 //! - **Matrix products** all go through [`gemm::mat_mul`]: BLAS in f32 and f64, or bf16 inputs
-//!   with f32 accumulation on AMX tile units inside a [`precision::enter`]`(Precision::Bf16)`
+//!   with f32 accumulation on AMX tile units (or AVX-512 BF16) inside a [`precision::enter`]`(Precision::Bf16)`
 //!   scope (f32 elsewhere, and always f32 where the processor has no AMX).
 //! - **Threads**: matrix products use OpenBLAS's own threads; the attention's row softmax (and its
 //!   backward) runs on rayon's pool between BLAS calls; everything else runs on the calling

@@ -1,5 +1,6 @@
 //! The precision of the f32 matrix products: exact f32 (the default) or bf16 inputs with f32
-//! accumulation on the processor's AMX tile units ([`crate::gemm`]).
+//! accumulation on the processor's AMX tile units or AVX-512 BF16 dot products
+//! ([`crate::gemm`]).
 //!
 //! The setting is per thread and scoped: a caller enters it around the work it covers
 //! (`let _bf16 = precision::enter(Precision::Bf16);`) and the previous setting comes back when
@@ -19,7 +20,7 @@ pub enum Precision {
     #[default]
     F32,
     /// Inputs rounded to bfloat16 (round to nearest even), products accumulated in f32, on AMX
-    /// where the processor has it; f32 (BLAS) elsewhere.
+    /// or AVX-512 BF16 where the processor has either; f32 (BLAS) elsewhere.
     Bf16,
 }
 

@@ -82,8 +82,8 @@ pub struct Args {
     #[arg(long, value_enum, default_value = "cloud")]
     test_statistics: StatisticsArg,
     /// The network's matrix products in training and validation: f32, or bf16 on the
-    /// processor's AMX units (weights, optimiser, reductions and loss stay f32). May change
-    /// when resuming.
+    /// processor's AMX or AVX-512 BF16 units (weights, optimiser, reductions and loss stay
+    /// f32). May change when resuming.
     #[arg(long, value_enum, default_value = "f32")]
     precision: PrecisionArg,
 }

@@ -147,8 +147,9 @@ impl<T: Element> Rgm<T> {
     }
 
     /// Runs the matrix products of every later pass in `precision` (f32 by default; bf16 on AMX
-    /// where the processor has it, f32 elsewhere). Parameters, batch-norm statistics, softmax,
-    /// norms, Sinkhorn and the loss stay f32 either way; f64 networks ignore it.
+    /// or AVX-512 BF16 where the processor has either, f32 elsewhere). Parameters, batch-norm
+    /// statistics, softmax, norms, Sinkhorn and the loss stay f32 either way; f64 networks
+    /// ignore it.
     pub fn set_precision(&mut self, precision: Precision) {
         self.precision = precision;
     }

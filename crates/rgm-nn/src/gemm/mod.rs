@@ -212,6 +212,22 @@ fn pack_a(a: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>) {
         }
         return;
     }
+    if a.strides()[0] == 1 {
+        // Columns contiguous (a transposed view, as `doutᵀ · inp`): round a column at a time,
+        // then place its values 32 elements (one slice row) apart.
+        let mut column = vec![0u16; a.nrows()]; // (M)
+        for (k, col) in a.axis_iter(Axis(1)).enumerate() {
+            kernels::round_into(&mut column, col.to_slice().expect("unit row stride"));
+            let at_k = (k / 32) * 1024 + k % 32;
+            for (strip, rows) in column.chunks(32).enumerate() {
+                let start = strip * kp * 32 + at_k;
+                for (r, &x) in rows.iter().enumerate() {
+                    out[start + r * 32] = x;
+                }
+            }
+        }
+        return;
+    }
     for_each_in_memory_order(a, |i, k, x| {
         out[(i / 32) * kp * 32 + (k / 32) * 1024 + (i % 32) * 32 + k % 32] = bf16_bits(x);
     });
@@ -238,6 +254,22 @@ fn pack_b(b: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>) {
                 let len = (n - j).min(16);
                 let at = (j / 32) * kp * 32 + ((j % 32) / 16) * 512 + pair_row;
                 kernels::pairs_into(&mut out[at..][..2 * len], &r0[j..][..len], &r1[j..][..len]);
+            }
+        }
+        return;
+    }
+    if b.strides()[0] == 1 {
+        // Columns contiguous (a transposed view, as `inp · weightᵀ`): round a column at a time,
+        // then place its pairs of rows one tile row (32 elements) apart.
+        let mut column = vec![0u16; k]; // (K)
+        for (j, col) in b.axis_iter(Axis(1)).enumerate() {
+            kernels::round_into(&mut column, col.to_slice().expect("unit row stride"));
+            let at_j = (j / 32) * kp * 32 + ((j % 32) / 16) * 512 + (j % 16) * 2;
+            for (slice, ks) in column.chunks(32).enumerate() {
+                let start = at_j + slice * 1024;
+                for (r, pair) in ks.chunks(2).enumerate() {
+                    out[start + r * 32..][..pair.len()].copy_from_slice(pair);
+                }
             }
         }
         return;
