@@ -444,11 +444,11 @@ unsafe fn dp_rows_avx512(
     accumulate: bool,
 ) {
     use std::arch::x86_64::*;
-    let mut rows: Vec<&mut [f32]> = out
-        .rows_mut()
-        .into_iter()
-        .map(|r| r.into_slice().expect("unit column stride"))
-        .collect();
+    let mut each_row = out.rows_mut().into_iter();
+    let mut rows: [&mut [f32]; 8] = std::array::from_fn(|_| {
+        let row = each_row.next().expect("8 rows");
+        row.into_slice().expect("unit column stride")
+    });
     let mut acc = [[_mm512_setzero_ps(); 2]; 8]; // (8 rows, 2 × 16 columns)
     if accumulate {
         for (acc, row) in acc.iter_mut().zip(&rows) {

@@ -103,8 +103,10 @@ pub fn round_to_bf16(x: f32) -> f32 {
 /// stable shapes allocate nothing.
 #[derive(Default)]
 struct Scratch {
-    a: Vec<u16>, // (M/32, K/32, 32, 32) padded
-    b: Vec<u16>, // (N/32, K/32, 2, 16, 16, 2) padded
+    a: Vec<u16>,      // (M/32, K/32, 32, 32) padded
+    b: Vec<u16>,      // (N/32, K/32, 2, 16, 16, 2) padded
+    column: Vec<u16>, // (M) or (K): one column of a transposed operand, rounded
+    zeros: Vec<f32>,  // (N): the row after B's last when K is odd
 }
 
 thread_local! {
@@ -162,8 +164,14 @@ fn packed_mat_mul(
         alpha == 1.0 && (beta == 0.0 || beta == 1.0) && c.strides()[1] == 1 && c.strides()[0] >= 32;
     SCRATCH.with(|scratch| {
         let scratch = &mut *scratch.borrow_mut();
-        pack_a(a, kp, &mut scratch.a);
-        pack_b(b, kp, &mut scratch.b);
+        pack_a(a, kp, &mut scratch.a, &mut scratch.column);
+        pack_b(
+            b,
+            kp,
+            &mut scratch.b,
+            &mut scratch.column,
+            &mut scratch.zeros,
+        );
         let mut block = [0f32; 32 * 32]; // (32, 32) row-major
         let (m_strips, n_strips) = (m.div_ceil(32), n.div_ceil(32));
         for first in (0..n_strips).step_by(panel_strips) {
@@ -197,7 +205,7 @@ fn packed_mat_mul(
 
 /// Packs `a` (M, K) as bf16 into `out`: 32-row strips, each Kp/32 slices of 32 × 32 (row-major),
 /// zero-padded to whole strips and to `kp` columns.
-fn pack_a(a: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>) {
+fn pack_a(a: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>, column: &mut Vec<u16>) {
     let mp = a.nrows().next_multiple_of(32);
     out.clear();
     out.resize(mp * kp, 0);
@@ -215,9 +223,9 @@ fn pack_a(a: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>) {
     if a.strides()[0] == 1 {
         // Columns contiguous (a transposed view, as `doutᵀ · inp`): round a column at a time,
         // then place its values 32 elements (one slice row) apart.
-        let mut column = vec![0u16; a.nrows()]; // (M)
+        column.resize(a.nrows(), 0); // (M)
         for (k, col) in a.axis_iter(Axis(1)).enumerate() {
-            kernels::round_into(&mut column, col.to_slice().expect("unit row stride"));
+            kernels::round_into(column, col.to_slice().expect("unit row stride"));
             let at_k = (k / 32) * 1024 + k % 32;
             for (strip, rows) in column.chunks(32).enumerate() {
                 let start = strip * kp * 32 + at_k;
@@ -235,14 +243,21 @@ fn pack_a(a: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>) {
 
 /// Packs `b` (K, N) as bf16 into `out`: 32-column strips, each Kp/32 slices of two 16-column
 /// tiles in VNNI pairs (pair row r, column j: rows 2r and 2r + 1 side by side), zero-padded.
-fn pack_b(b: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>) {
+fn pack_b(
+    b: ArrayView2<'_, f32>,
+    kp: usize,
+    out: &mut Vec<u16>,
+    column: &mut Vec<u16>,
+    zeros: &mut Vec<f32>,
+) {
     let (k, n) = b.dim();
     let np = n.next_multiple_of(32);
     out.clear();
     out.resize(np * kp, 0);
     if b.strides()[1] == 1 && n > 0 {
         // Rows contiguous: two rows at a time, 16 columns into each tile row.
-        let zeros = vec![0.0; if k % 2 == 1 { n } else { 0 }]; // the row after an odd K
+        zeros.clear();
+        zeros.resize(n, 0.0);
         for pair in 0..k.div_ceil(2) {
             let r0 = b.row(2 * pair).to_slice().expect("unit column stride");
             let r1 = match 2 * pair + 1 < k {
@@ -261,9 +276,9 @@ fn pack_b(b: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>) {
     if b.strides()[0] == 1 {
         // Columns contiguous (a transposed view, as `inp · weightᵀ`): round a column at a time,
         // then place its pairs of rows one tile row (32 elements) apart.
-        let mut column = vec![0u16; k]; // (K)
+        column.resize(k, 0); // (K)
         for (j, col) in b.axis_iter(Axis(1)).enumerate() {
-            kernels::round_into(&mut column, col.to_slice().expect("unit row stride"));
+            kernels::round_into(column, col.to_slice().expect("unit row stride"));
             let at_j = (j / 32) * kp * 32 + ((j % 32) / 16) * 512 + (j % 16) * 2;
             for (slice, ks) in column.chunks(32).enumerate() {
                 let start = at_j + slice * 1024;
