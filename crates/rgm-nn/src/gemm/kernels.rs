@@ -178,7 +178,7 @@ impl Tiles {
         accumulate: bool,
     ) {
         assert!(
-            a.len() % SLICE == 0 && a.len() == b.len(),
+            a.len().is_multiple_of(SLICE) && a.len() == b.len(),
             "packed slices: a {} and b {} elements",
             a.len(),
             b.len()
@@ -412,7 +412,7 @@ impl Avx512Bf16 {
         accumulate: bool,
     ) {
         assert!(
-            a.len() % SLICE == 0 && a.len() == b.len(),
+            a.len().is_multiple_of(SLICE) && a.len() == b.len(),
             "packed slices: a {} and b {} elements",
             a.len(),
             b.len()
@@ -465,8 +465,12 @@ unsafe fn dp_rows_avx512(
             // SAFETY: `b0`, `b1` hold 32 u16 (64 bytes) each; unaligned loads.
             let (b0, b1): (__m512bh, __m512bh) = unsafe {
                 (
-                    std::mem::transmute(_mm512_loadu_si512(b0.as_ptr().cast())),
-                    std::mem::transmute(_mm512_loadu_si512(b1.as_ptr().cast())),
+                    std::mem::transmute::<__m512i, __m512bh>(_mm512_loadu_si512(
+                        b0.as_ptr().cast(),
+                    )),
+                    std::mem::transmute::<__m512i, __m512bh>(_mm512_loadu_si512(
+                        b1.as_ptr().cast(),
+                    )),
                 )
             };
             for (i, acc) in acc.iter_mut().enumerate() {

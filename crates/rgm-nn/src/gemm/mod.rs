@@ -374,12 +374,14 @@ mod tests {
         (33, 300, 500),
     ];
 
+    /// A bf16 product under test: `(alpha, a, b, beta, c)`.
+    type MatMul<'m> =
+        dyn FnMut(f32, ArrayView2<f32>, ArrayView2<f32>, f32, ArrayViewMut2<f32>) + 'm;
+
     /// Every case of [`SHAPES`] through `mul`: plain, both operands transposed views, strided
     /// views, `beta = 1` accumulation into C (as the backward passes use), and into a
     /// transposed C with alpha ≠ 1.
-    fn check_cases(
-        mul: &mut dyn FnMut(f32, ArrayView2<f32>, ArrayView2<f32>, f32, ArrayViewMut2<f32>),
-    ) {
+    fn check_cases(mul: &mut MatMul) {
         for (seed, &(m, k, n)) in (0u64..).step_by(8).zip(&SHAPES) {
             let (a, b) = (uniform(m, k, seed), uniform(k, n, seed + 1));
             let c0 = uniform(m, n, seed + 2);
