@@ -4,7 +4,7 @@
 //!
 //! ```text
 //! cargo run --release -p rgm-benches --example speed -- --preset fast --what procedure \
-//!     [--match-points 384] [--weights FILE] [--points 717] [--reps 5]
+//!     [--match-points 384] [--weights FILE] [--points 717] [--reps 5] [--precision bf16]
 //! ```
 //!
 //! `--what`: `forward` (one evaluation-mode forward), `train` (forward in training mode, BCE
@@ -26,6 +26,7 @@ use rgm_match::Correspondences;
 use rgm_model::network::{Config, Mode, Rgm, RgmCache};
 use rgm_model::pipeline::StageTimes;
 use rgm_model::{PipelineConfig, RgmRegistrar};
+use rgm_nn::Precision;
 
 /// `n` points uniform in the unit ball and their copy at a known pose in reverse order;
 /// source i is target n − 1 − i.
@@ -78,11 +79,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .map(|v| v.parse())
         .transpose()?;
     let weights = arg(&args, "--weights");
+    let precision: Precision =
+        arg(&args, "--precision").map_or(Ok(Precision::F32), |v| v.parse())?;
     let config = Config::preset(&preset)?;
     let mut network = match &weights {
         None => Rgm::<f32>::new(config, 0)?,
         Some(file) => Rgm::load(config, file.as_ref())?,
     };
+    network.set_precision(precision);
     let (source, target, truth) = pair(points);
     let mut seconds = Vec::with_capacity(reps);
     let mut stages = Vec::new();
@@ -105,6 +109,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "procedure" => {
             let config = PipelineConfig {
                 match_points,
+                precision,
                 ..PipelineConfig::default()
             };
             let mut registrar = RgmRegistrar::new(network, config);
@@ -136,11 +141,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let text = |v: Option<String>| v.map_or("null".to_string(), |v| format!("{v:?}"));
     let line = format!(
-        r#"{{"implementation": "rgm", "preset": {:?}, "what": {:?}, "points": {points}, "match_points": {}, "weights": {}, "reps": {reps}, "median_s": {:.4}, "seconds": {:?}, "vm_hwm_mib": {:.1}, "blas_threads": {}, "correspondences": {correspondences}, "stage_share": {stage_share}}}"#,
+        r#"{{"implementation": "rgm", "preset": {:?}, "what": {:?}, "points": {points}, "match_points": {}, "weights": {}, "reps": {reps}, "precision": "{precision}", "bf16_kernel": {:?}, "median_s": {:.4}, "seconds": {:?}, "vm_hwm_mib": {:.1}, "blas_threads": {}, "correspondences": {correspondences}, "stage_share": {stage_share}}}"#,
         preset,
         what,
         text(match_points.map(|m| m.to_string())).replace('"', ""),
         text(weights),
+        rgm_nn::gemm::backend().unwrap_or("none"),
         median(seconds.clone()),
         seconds,
         vm_hwm_kib() as f64 / 1024.0,

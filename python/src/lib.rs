@@ -153,6 +153,7 @@ impl Registrar {
             match_points,
             passes,
             refine,
+            ..MethodOptions::default()
         };
         let prototype = py.detach(|| options.build()).map_err(value_error)?;
         Ok(Self {

@@ -13,9 +13,17 @@ use serde::{Deserialize, Serialize};
 
 use crate::project_root;
 
-/// The benches whose declared elements are FLOPs: the GEMM-bound ops of `benches/benches/nn.rs`.
-/// Its other benches declare rows·channels; the rest declare nothing.
-const FLOP_BENCHES: [&str; 4] = ["sgemm/", "linear/", "attention/", "adjacency/gram/"];
+/// The benches whose declared elements are FLOPs: the GEMM-bound ops of `benches/benches/nn.rs`
+/// and the f32/bf16 products of `benches/benches/gemm.rs`. nn's other benches declare
+/// rows·channels; the rest declare nothing.
+const FLOP_BENCHES: [&str; 6] = [
+    "sgemm/",
+    "linear/",
+    "attention/",
+    "adjacency/gram/",
+    "gemm/",
+    "amx_peak/",
+];
 
 /// The bench whose best rate is the machine's GEMM peak (f32 products of square matrices).
 const GEMM_PEAK_BENCH: &str = "sgemm/";

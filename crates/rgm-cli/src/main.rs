@@ -63,6 +63,33 @@ pub enum MethodArg {
     Rgm,
 }
 
+/// How RGM's matrix products run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
+pub enum PrecisionArg {
+    /// f32, exact (the default).
+    #[default]
+    F32,
+    /// Inputs rounded to bfloat16, f32 accumulation, on the processor's AMX tile units (Intel
+    /// Xeon since Sapphire Rapids) or AVX-512 BF16 (AMD Zen 4 and later); f32 on others.
+    Bf16,
+}
+
+impl PrecisionArg {
+    /// The library's precision; says on stderr when bf16 falls back to f32 on this processor.
+    pub fn precision(self) -> rgm_nn::Precision {
+        if self == Self::Bf16 && !rgm_nn::gemm::bf16_available() {
+            eprintln!(
+                "--precision bf16: this processor has neither AMX nor AVX-512 BF16; products \
+                 run in f32"
+            );
+        }
+        match self {
+            Self::F32 => rgm_nn::Precision::F32,
+            Self::Bf16 => rgm_nn::Precision::Bf16,
+        }
+    }
+}
+
 /// Batch-norm statistics of RGM's feature extractor at test time.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 pub enum StatisticsArg {
@@ -121,6 +148,10 @@ pub struct MethodArgs {
     /// Report the method's own transform, unrefined (as the paper's tables do).
     #[arg(long, overrides_with = "refine")]
     no_refine: bool,
+    /// RGM's matrix products: f32, or bf16 (faster where the processor has AMX or AVX-512
+    /// BF16; the rest of the network stays f32).
+    #[arg(long, value_enum, default_value = "f32")]
+    precision: PrecisionArg,
 }
 
 impl MethodArgs {
@@ -145,6 +176,7 @@ impl MethodArgs {
             test_statistics: self.test_statistics.map(Into::into),
             match_points: self.match_points,
             passes: self.passes.map(usize::from),
+            precision: self.precision.precision(),
             refine,
         };
         Ok(options.build()?)

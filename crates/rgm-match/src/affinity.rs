@@ -1,9 +1,9 @@
 //! The AIS affinity with a symmetric learnable matrix: S = F_X · ((W + Wᵀ)/2) · F_Yᵀ.
 
 use crate::error::{check_shape, MatchError, Result};
-use ndarray::linalg::general_mat_mul;
 use ndarray::{Array2, ArrayView2, ArrayViewMut2, Ix2};
 use rand::Rng;
+use rgm_nn::gemm::mat_mul;
 use rgm_nn::param::{join_name, ParamViewMut};
 use rgm_nn::{Param, Parameters, Scalar};
 
@@ -90,8 +90,8 @@ impl<T: Scalar> Affinity<T> {
         cache.a.assign(w);
         cache.a += &w.t();
         cache.a *= half;
-        general_mat_mul(T::one(), &fx, &cache.a, T::zero(), &mut cache.fx_a);
-        general_mat_mul(T::one(), &cache.fx_a, &fy.t(), T::zero(), &mut s);
+        mat_mul(T::one(), &fx, &cache.a, T::zero(), &mut cache.fx_a);
+        mat_mul(T::one(), &cache.fx_a, &fy.t(), T::zero(), &mut s);
         Ok(())
     }
 
@@ -115,10 +115,10 @@ impl<T: Scalar> Affinity<T> {
         check_shape(OP, "dfy", dfy.shape(), &[m, q])?;
         check_shape(OP, "cache", cache.fx_a.shape(), &[n, q])?;
         // S = (F_X · A) · F_Yᵀ  →  dF_Y += dSᵀ · (F_X · A)
-        general_mat_mul(T::one(), &ds.t(), &cache.fx_a, T::one(), &mut dfy);
+        mat_mul(T::one(), &ds.t(), &cache.fx_a, T::one(), &mut dfy);
         let g = ds.dot(&fy); // (N, Q) dS · F_Y
                              // S = F_X · (A · F_Yᵀ)  →  dF_X += (dS · F_Y) · A
-        general_mat_mul(T::one(), &g, &cache.a, T::one(), &mut dfx);
+        mat_mul(T::one(), &g, &cache.a, T::one(), &mut dfx);
         // dA = F_Xᵀ · dS · F_Y, and A = (W + Wᵀ)/2  →  dW += (dA + dAᵀ)/2
         let half = T::from_f64(0.5);
         let da = fx.t().dot(&g); // (Q, Q)

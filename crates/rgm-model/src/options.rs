@@ -8,7 +8,10 @@ use std::str::FromStr;
 
 use rgm_geom::refine::RefineConfig;
 
-use crate::method::{Method, MethodError};
+use rgm_nn::Precision;
+
+use crate::error::MethodError;
+use crate::method::Method;
 use crate::network::{Config, TestStatistics};
 
 /// The registration methods selectable by name.
@@ -76,6 +79,9 @@ pub struct MethodOptions {
     pub match_points: Option<usize>,
     /// RGM's passes (2 when `None`, as in the paper).
     pub passes: Option<usize>,
+    /// RGM's matrix products: f32 (the default), or bf16 where the processor has AMX or
+    /// AVX-512 BF16 ([`Precision`]).
+    pub precision: Precision,
     /// Refine the transform of RGM or FGR with [`rgm_geom::refine`] ([`Method::refined`]); on
     /// by default, as in `rgm register` (the paper's protocol, and `rgm eval`, turn it off).
     /// ICP is its own refinement and ignores it.
@@ -92,6 +98,7 @@ impl Default for MethodOptions {
             test_statistics: None,
             match_points: None,
             passes: None,
+            precision: Precision::F32,
             refine: true,
         }
     }
@@ -121,9 +128,10 @@ impl MethodOptions {
             || self.preset.is_some()
             || self.test_statistics.is_some()
             || self.match_points.is_some()
-            || self.passes.is_some();
+            || self.passes.is_some()
+            || self.precision != Precision::F32;
         if self.method != MethodName::Rgm && rgm_only {
-            return invalid("weights, preset, test statistics, match points and passes apply to the rgm method only");
+            return invalid("weights, preset, test statistics, match points, passes and precision apply to the rgm method only");
         }
         if self.weights.is_none() && (self.preset.is_some() || self.test_statistics.is_some()) {
             return invalid("a preset and test statistics describe given weights; the built-in model has its own");
@@ -156,6 +164,7 @@ impl MethodOptions {
             if let Some(passes) = self.passes {
                 registrar.config.passes = passes;
             }
+            registrar.config.precision = self.precision;
         }
         Ok(method)
     }

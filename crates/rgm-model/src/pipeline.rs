@@ -22,6 +22,7 @@ use rgm_geom::kabsch::kabsch;
 use rgm_geom::refine::{self, RefineConfig};
 use rgm_geom::{Point3, PointCloud, RegistrationResult, RigidTransform, Vector3};
 use rgm_match::{hard_match, Correspondences, MatchConfig};
+use rgm_nn::Precision;
 
 use crate::error::MethodError;
 use crate::network::{FeaturerCache, Rgm, RgmCache};
@@ -45,6 +46,8 @@ pub struct PipelineConfig {
     /// clouds, in the network's frame (so distances are in unit-sphere units). `None` in the
     /// paper.
     pub refine: Option<RefineConfig>,
+    /// The network's matrix products: f32, or bf16 where the processor has AMX or AVX-512 BF16.
+    pub precision: Precision,
 }
 
 impl Default for PipelineConfig {
@@ -55,6 +58,7 @@ impl Default for PipelineConfig {
             inlier_threshold: 0.5,
             match_points: None,
             refine: None,
+            precision: Precision::F32,
         }
     }
 }
@@ -384,6 +388,7 @@ impl RgmRegistrar {
                 why: "passes must be at least 1".into(),
             });
         }
+        self.network.set_precision(self.config.precision);
         let start = Instant::now();
         let frame = Normalisation::of_pair(source, target);
         let (source_n, target_n) = (frame.source(source), frame.target(target));

@@ -45,7 +45,7 @@ use rgm_geom::refine::{refine, RefineConfig};
 use rgm_geom::RigidTransform;
 use rgm_match::{bce_forward, Correspondences};
 use rgm_nn::optim::{Adam, MultiStepLr, Sgd};
-use rgm_nn::{Parameters, Scalar};
+use rgm_nn::{Parameters, Precision, Scalar};
 use serde::{Deserialize, Serialize};
 
 use crate::evaluate::{evaluate_pair, PairRecord, Summary};
@@ -137,6 +137,25 @@ pub struct TrainConfig {
     /// PyTorch's `eval()` (spec §3). Only validation depends on it: it may change on resume.
     #[serde(default)]
     pub test_statistics: TestStatistics,
+    /// The network's matrix products in training and validation: f32, or bf16 where the
+    /// processor has AMX or AVX-512 BF16 (weights, optimiser state, reductions and the loss
+    /// stay f32). A compute choice, not a setting of the run: it may change on resume.
+    #[serde(default, with = "precision_name")]
+    pub precision: Precision,
+}
+
+/// [`Precision`] in `config.json` by name ("f32", "bf16"); absent in runs saved before it.
+mod precision_name {
+    use rgm_nn::Precision;
+    use serde::{de::Error, Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(p: &Precision, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(p.name())
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Precision, D::Error> {
+        String::deserialize(d)?.parse().map_err(D::Error::custom)
+    }
 }
 
 impl TrainConfig {
@@ -162,6 +181,7 @@ impl TrainConfig {
             checkpoint_every: 50,
             seed: 0,
             test_statistics: TestStatistics::Running,
+            precision: Precision::F32,
         }
     }
 
@@ -199,6 +219,7 @@ impl TrainConfig {
         Self {
             epochs: saved.epochs,
             test_statistics: saved.test_statistics,
+            precision: saved.precision,
             ..self.clone()
         } == *saved
     }
@@ -564,6 +585,8 @@ impl Trainer {
             let network = Rgm::new(config.network.clone(), config.seed)?;
             (network, Optimizer::new(&config), TrainState::default())
         };
+        let mut network = network;
+        network.set_precision(config.precision); // the workers' copies inherit it
         write_json(&dir.join("config.json"), &config)?;
         let workers = (0..config.workers)
             .map(|_| Worker {
@@ -820,6 +843,7 @@ impl Trainer {
         let workers = self.workers.len();
         let match_points = self.config.match_points;
         let test_statistics = self.config.test_statistics;
+        let precision = self.config.precision;
         let parts: Vec<Result<ValidationPart>> = self
             .workers
             .par_iter_mut()
@@ -828,7 +852,10 @@ impl Trainer {
                 worker.network.featurer.test_statistics = test_statistics;
                 let mut method = Method::Rgm(Box::new(RgmRegistrar::new(
                     worker.network.clone(),
-                    PipelineConfig::default(),
+                    PipelineConfig {
+                        precision,
+                        ..PipelineConfig::default()
+                    },
                 )));
                 let mut part = ValidationPart::default();
                 for i in (w..total).step_by(workers) {

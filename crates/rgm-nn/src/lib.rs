@@ -31,6 +31,9 @@
 //!   safetensors reader/writer use.
 //! - **Elements**: every op is generic over [`Scalar`] (f32 for compute, f64 for the gradient
 //!   checks in [`gradcheck`]).
+//! - **Matrix products** all go through [`gemm::mat_mul`]: BLAS in f32 and f64, or bf16 inputs
+//!   with f32 accumulation on AMX tile units (or AVX-512 BF16) inside a [`precision::enter`]`(Precision::Bf16)`
+//!   scope (f32 elsewhere, and always f32 where the processor has no AMX).
 //! - **Threads**: matrix products use OpenBLAS's own threads; the attention's row softmax (and its
 //!   backward) runs on rayon's pool between BLAS calls; everything else runs on the calling
 //!   thread. A caller that parallelises over independent work with rayon first sets BLAS to one
@@ -44,12 +47,14 @@
 extern crate openblas_src;
 
 pub mod error;
+pub mod gemm;
 pub mod gradcheck;
 pub mod init;
 pub mod io;
 pub mod ops;
 pub mod optim;
 pub mod param;
+pub mod precision;
 #[cfg(test)]
 mod pytorch_pinned;
 pub mod scalar;
@@ -72,4 +77,5 @@ pub use ops::normalize::{
 pub use ops::relu::{relu_backward, relu_forward};
 pub use ops::softmax::{softmax_rows_backward, softmax_rows_forward};
 pub use param::{Param, Parameters};
+pub use precision::Precision;
 pub use scalar::Scalar;

@@ -1,6 +1,7 @@
 //! The element types the ops run in: f32 for compute, f64 for the gradient checks.
 
-use ndarray::{LinalgScalar, ScalarOperand};
+use ndarray::linalg::general_mat_mul;
+use ndarray::{ArrayView2, ArrayViewMut2, LinalgScalar, ScalarOperand};
 use num_traits::{Float, NumAssign};
 
 /// A float element type of the ops (implemented for f32 and f64).
@@ -20,6 +21,15 @@ pub trait Scalar:
     fn from_f64(v: f64) -> Self;
     /// The value widened to f64.
     fn to_f64(self) -> f64;
+    /// `c = alpha · a · b + beta · c` in this type's way: see [`crate::gemm::mat_mul`], which
+    /// the ops call.
+    fn mat_mul(
+        alpha: Self,
+        a: ArrayView2<'_, Self>,
+        b: ArrayView2<'_, Self>,
+        beta: Self,
+        c: ArrayViewMut2<'_, Self>,
+    );
 }
 
 impl Scalar for f32 {
@@ -29,6 +39,16 @@ impl Scalar for f32 {
     fn to_f64(self) -> f64 {
         self as f64
     }
+    /// BLAS, or bf16 on AMX in a [`crate::precision::Precision::Bf16`] scope.
+    fn mat_mul(
+        alpha: Self,
+        a: ArrayView2<'_, Self>,
+        b: ArrayView2<'_, Self>,
+        beta: Self,
+        c: ArrayViewMut2<'_, Self>,
+    ) {
+        crate::gemm::mat_mul_f32(alpha, a, b, beta, c);
+    }
 }
 
 impl Scalar for f64 {
@@ -37,5 +57,15 @@ impl Scalar for f64 {
     }
     fn to_f64(self) -> f64 {
         self
+    }
+    /// Always BLAS: f64 runs the gradient checks, whatever the precision.
+    fn mat_mul(
+        alpha: Self,
+        a: ArrayView2<'_, Self>,
+        b: ArrayView2<'_, Self>,
+        beta: Self,
+        mut c: ArrayViewMut2<'_, Self>,
+    ) {
+        general_mat_mul(alpha, &a, &b, beta, &mut c);
     }
 }

@@ -9,7 +9,7 @@ use rgm_model::network::Config;
 use rgm_model::train::{Event, LogRecord, OptimizerKind, TrainConfig, Trainer};
 use rgm_model::weights::Variant;
 
-use crate::{progress, SettingArg, StatisticsArg};
+use crate::{progress, PrecisionArg, SettingArg, StatisticsArg};
 
 /// Options of `rgm train`. Defaults are the paper's schedule (spec §3) on the `fast` preset,
 /// matching on 384-point clouds.
@@ -92,6 +92,11 @@ pub struct Args {
     /// (the running averages, PyTorch's eval()). May change when resuming.
     #[arg(long, value_enum, default_value = "cloud")]
     test_statistics: StatisticsArg,
+    /// The network's matrix products in training and validation: f32, or bf16 on the
+    /// processor's AMX or AVX-512 BF16 units (weights, optimiser, reductions and loss stay
+    /// f32). May change when resuming.
+    #[arg(long, value_enum, default_value = "f32")]
+    precision: PrecisionArg,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -145,6 +150,7 @@ impl Args {
             checkpoint_every: self.checkpoint_every,
             seed: self.seed,
             test_statistics: self.test_statistics.into(),
+            precision: self.precision.precision(),
         })
     }
 }

@@ -4,7 +4,6 @@
 use super::config::{Config, Edges, Scoring};
 use super::transformer::{EdgeTransformer, EdgeTransformerCache};
 use super::{Element, Result};
-use ndarray::linalg::general_mat_mul;
 use ndarray::{s, Array2, ArrayView2, ArrayViewMut2};
 use rand::Rng;
 use rgm_match::{
@@ -12,6 +11,7 @@ use rgm_match::{
     AffinityConfig, InstNorm, InstNormCache, InstNormConfig, SinkhornCache, SinkhornConfig,
     Var1Config,
 };
+use rgm_nn::gemm::mat_mul;
 use rgm_nn::param::{join_name, ParamViewMut};
 use rgm_nn::{
     l1_normalize_columns_backward, l1_normalize_columns_forward, matmul_backward, matmul_forward,
@@ -171,7 +171,7 @@ fn sinkhorn_config(config: &Config) -> SinkhornConfig {
 /// Ê = column-L1-normalised softmax_rows(T Tᵀ / √C). `t`: (R, C).
 fn edges_forward<T: Element>(side: &mut Side<T>, t: ArrayView2<'_, T>) -> Result<()> {
     let scale = T::one() / T::from_f64(t.ncols() as f64).sqrt();
-    general_mat_mul(scale, &t, &t.t(), T::zero(), &mut side.scores);
+    mat_mul(scale, &t, &t.t(), T::zero(), &mut side.scores);
     softmax_rows_forward(side.adj.view_mut(), side.scores.view())?;
     l1_normalize_columns_forward(side.adj_norm.view_mut(), side.adj.view(), &mut side.l1)?;
     Ok(())
@@ -194,7 +194,7 @@ fn edges_backward<T: Element>(side: &mut Side<T>, t: ArrayView2<'_, T>) -> Resul
     side.dadj.assign(&side.dscores.t());
     side.dadj += &side.dscores;
     let scale = T::one() / T::from_f64(t.ncols() as f64).sqrt();
-    general_mat_mul(scale, &side.dadj, &t, T::one(), &mut side.dt);
+    mat_mul(scale, &side.dadj, &t, T::one(), &mut side.dt);
     Ok(())
 }
 

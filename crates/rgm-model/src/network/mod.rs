@@ -34,6 +34,7 @@ use ndarray::{Array2, ArrayD, ArrayView2, ArrayViewMutD};
 use rand::{rngs::StdRng, SeedableRng};
 use rgm_match::{bce_backward, bce_forward, Correspondences};
 use rgm_nn::param::{join_name, ParamViewMut};
+use rgm_nn::precision::{self, Precision};
 use rgm_nn::{Parameters, Scalar};
 use std::collections::HashMap;
 use std::path::Path;
@@ -67,6 +68,9 @@ pub struct Rgm<T: Element> {
     config: Config,
     pub featurer: PointFeaturer<T>,
     pub blocks: Vec<Block<T>>,
+    /// How its f32 matrix products run ([`Rgm::set_precision`]); every pass enters it on the
+    /// thread that runs the pass.
+    precision: Precision,
 }
 
 /// One forward pass of a pair: every intermediate the backward needs, and the backward's
@@ -125,6 +129,7 @@ impl<T: Element> Rgm<T> {
             config,
             featurer,
             blocks,
+            precision: Precision::F32,
         })
     }
 
@@ -139,6 +144,18 @@ impl<T: Element> Rgm<T> {
 
     pub fn config(&self) -> &Config {
         &self.config
+    }
+
+    /// Runs the matrix products of every later pass in `precision` (f32 by default; bf16 on AMX
+    /// or AVX-512 BF16 where the processor has either, f32 elsewhere). Parameters, batch-norm
+    /// statistics, softmax, norms, Sinkhorn and the loss stay f32 either way; f64 networks
+    /// ignore it.
+    pub fn set_precision(&mut self, precision: Precision) {
+        self.precision = precision;
+    }
+
+    pub fn precision(&self) -> Precision {
+        self.precision
     }
 
     /// Sets every parameter and buffer from `tensors` by name (the authors' state-dict names).
@@ -184,6 +201,7 @@ impl<T: Element> Rgm<T> {
     ) -> Result<()> {
         check_cloud("x", x)?;
         check_cloud("y", y)?;
+        let _precision = precision::enter(self.precision);
         self.featurer.forward(x, mode, &mut cache.fx)?;
         self.featurer.forward(y, mode, &mut cache.fy)?;
         cache.from_features = false;
@@ -203,6 +221,7 @@ impl<T: Element> Rgm<T> {
         cache: &mut FeaturerCache<T>,
     ) -> Result<()> {
         check_cloud("points", points)?;
+        let _precision = precision::enter(self.precision);
         self.featurer.forward(points, Mode::Eval, cache)
     }
 
@@ -253,6 +272,7 @@ impl<T: Element> Rgm<T> {
         input: BlocksInput<'_, T>,
         blocks: &mut Vec<BlockCache<T>>,
     ) -> Result<()> {
+        let _precision = precision::enter(self.precision);
         let (n, m) = match &input {
             BlocksInput::Features(fx, fy) => (fx.nrows(), fy.nrows()),
             BlocksInput::Swapped(first) => (first.dims().1, first.dims().0),
@@ -301,6 +321,7 @@ impl<T: Element> Rgm<T> {
                 ),
             });
         }
+        let _precision = precision::enter(self.precision);
         cache.dfeat.resize_with(blocks, Default::default);
         for b in (0..blocks).rev() {
             let (before, after) = cache.blocks.split_at_mut(b);

@@ -5,9 +5,9 @@
 use super::linear::Linear;
 use super::softmax::{softmax_backward_in_place, softmax_in_place};
 use crate::error::check_shape;
+use crate::gemm::mat_mul;
 use crate::param::{join_name, ParamViewMut};
 use crate::{NnError, Parameters, Result, Scalar};
-use ndarray::linalg::general_mat_mul;
 use ndarray::{s, Array2, Array3, ArrayView1, ArrayView2, ArrayViewMut1, ArrayViewMut2, Axis};
 use rand::Rng;
 use rayon::prelude::*;
@@ -92,7 +92,7 @@ impl<T: Scalar> MultiHeadAttention<T> {
         let scale = T::one() / T::from_f64(dk as f64).sqrt();
         for (head, mut p) in cache.probs.axis_iter_mut(Axis(0)).enumerate() {
             let cols = s![.., head * dk..(head + 1) * dk];
-            general_mat_mul(
+            mat_mul(
                 scale,
                 &cache.q.slice(cols),
                 &cache.k.slice(cols).t(),
@@ -111,7 +111,7 @@ impl<T: Scalar> MultiHeadAttention<T> {
             .for_each(|row| softmax_in_place(ArrayViewMut1::from(row)));
         for (head, p) in cache.probs.axis_iter(Axis(0)).enumerate() {
             let cols = s![.., head * dk..(head + 1) * dk];
-            general_mat_mul(
+            mat_mul(
                 T::one(),
                 &p,
                 &cache.v.slice(cols),
@@ -167,8 +167,8 @@ impl<T: Scalar> MultiHeadAttention<T> {
         {
             let cols = s![.., head * dk..(head + 1) * dk];
             let d_o = cache.dheads.slice(cols);
-            general_mat_mul(T::one(), &d_o, &cache.v.slice(cols).t(), T::zero(), &mut dp);
-            general_mat_mul(
+            mat_mul(T::one(), &d_o, &cache.v.slice(cols).t(), T::zero(), &mut dp);
+            mat_mul(
                 T::one(),
                 &p.t(),
                 &d_o,
@@ -190,14 +190,14 @@ impl<T: Scalar> MultiHeadAttention<T> {
             });
         for (head, ds) in cache.dprobs.axis_iter(Axis(0)).enumerate() {
             let cols = s![.., head * dk..(head + 1) * dk];
-            general_mat_mul(
+            mat_mul(
                 scale,
                 &ds,
                 &cache.k.slice(cols),
                 T::one(),
                 &mut cache.dq.slice_mut(cols),
             );
-            general_mat_mul(
+            mat_mul(
                 scale,
                 &ds.t(),
                 &cache.q.slice(cols),

@@ -3,8 +3,8 @@
 //! contributions must land in the same buffer.
 
 use crate::error::check_shape;
+use crate::gemm::mat_mul;
 use crate::{Result, Scalar};
-use ndarray::linalg::general_mat_mul;
 use ndarray::{ArrayView2, ArrayViewMut2};
 
 /// `out = α · a · aᵀ`. `out`: (N, N), `a`: (N, C).
@@ -14,7 +14,7 @@ pub fn gram_forward<T: Scalar>(
     alpha: T,
 ) -> Result<()> {
     check_shape("gram forward", "out", out.shape(), &[a.nrows(), a.nrows()])?;
-    general_mat_mul(alpha, &a, &a.t(), T::zero(), &mut out);
+    mat_mul(alpha, &a, &a.t(), T::zero(), &mut out);
     Ok(())
 }
 
@@ -28,8 +28,8 @@ pub fn gram_backward<T: Scalar>(
     let n = a.nrows();
     check_shape("gram backward", "dout", dout.shape(), &[n, n])?;
     check_shape("gram backward", "da", da.shape(), a.shape())?;
-    general_mat_mul(alpha, &dout, &a, T::one(), &mut da);
-    general_mat_mul(alpha, &dout.t(), &a, T::one(), &mut da);
+    mat_mul(alpha, &dout, &a, T::one(), &mut da);
+    mat_mul(alpha, &dout.t(), &a, T::one(), &mut da);
     Ok(())
 }
 

@@ -1,10 +1,10 @@
 //! Linear layer / 1×1 convolution on `(rows, C)` matrices, with or without bias.
 
 use crate::error::check_shape;
+use crate::gemm::mat_mul;
 use crate::init;
 use crate::param::{join_name, ParamViewMut};
 use crate::{Param, Parameters, Result, Scalar};
-use ndarray::linalg::general_mat_mul;
 use ndarray::{Array1, Array2, ArrayView2, ArrayViewMut2, Ix1, Ix2};
 use rand::Rng;
 
@@ -60,7 +60,7 @@ impl<T: Scalar> Linear<T> {
             }
             None => T::zero(),
         };
-        general_mat_mul(T::one(), &inp, &self.weight.value.t(), beta, &mut out);
+        mat_mul(T::one(), &inp, &self.weight.value.t(), beta, &mut out);
         Ok(())
     }
 
@@ -87,8 +87,8 @@ impl<T: Scalar> Linear<T> {
             dout.shape(),
             &[rows, self.c_out()],
         )?;
-        general_mat_mul(T::one(), &dout, &self.weight.value, T::one(), &mut dinp);
-        general_mat_mul(T::one(), &dout.t(), &inp, T::one(), &mut self.weight.grad);
+        mat_mul(T::one(), &dout, &self.weight.value, T::one(), &mut dinp);
+        mat_mul(T::one(), &dout.t(), &inp, T::one(), &mut self.weight.grad);
         if let Some(b) = &mut self.bias {
             for row in dout.rows() {
                 b.grad += &row;

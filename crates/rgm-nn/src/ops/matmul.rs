@@ -3,8 +3,8 @@
 //! gradient.
 
 use crate::error::check_shape;
+use crate::gemm::mat_mul;
 use crate::{Result, Scalar};
-use ndarray::linalg::general_mat_mul;
 use ndarray::{ArrayView2, ArrayView3, ArrayViewMut2, ArrayViewMut3, Axis};
 
 /// `out = a · b`. `out`: (P, R), `a`: (P, Q), `b`: (Q, R).
@@ -20,7 +20,7 @@ pub fn matmul_forward<T: Scalar>(
         out.shape(),
         &[a.nrows(), b.ncols()],
     )?;
-    general_mat_mul(T::one(), &a, &b, T::zero(), &mut out);
+    mat_mul(T::one(), &a, &b, T::zero(), &mut out);
     Ok(())
 }
 
@@ -41,8 +41,8 @@ pub fn matmul_backward<T: Scalar>(
     )?;
     check_shape("matmul backward", "da", da.shape(), a.shape())?;
     check_shape("matmul backward", "db", db.shape(), b.shape())?;
-    general_mat_mul(T::one(), &dout, &b.t(), T::one(), &mut da);
-    general_mat_mul(T::one(), &a.t(), &dout, T::one(), &mut db);
+    mat_mul(T::one(), &dout, &b.t(), T::one(), &mut da);
+    mat_mul(T::one(), &a.t(), &dout, T::one(), &mut db);
     Ok(())
 }
 

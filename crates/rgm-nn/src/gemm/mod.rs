@@ -1,0 +1,551 @@
+//! The matrix product every op calls, [`mat_mul`]: BLAS in f32 and f64, or bf16 on the
+//! processor's AMX tile units (or its AVX-512 BF16 dot products where it has no AMX) when the
+//! calling thread asked for [`Precision::Bf16`].
+//!
+//! The bf16 product ([`bf16_mat_mul`]) takes and returns f32: both inputs are rounded to bf16
+//! (nearest even) while they are packed, the products are accumulated in f32. It runs on the
+//! calling thread (training runs one network per worker thread; inference calls BLAS with one
+//! thread by default), in three steps:
+//! 1. pack A (M, K) into 32-row strips, each a run of 32 × 32 slices along K (2 KiB, two tiles);
+//! 2. pack B (K, N) into 32-column strips, each a run of 32 × 32 slices along K in the VNNI
+//!    pairs layout that `tdpbf16ps` and `vdpbf16ps` read (see [`kernels`]); M, N and K are
+//!    padded with zeros to
+//!    multiples of 32, so edges need no special kernel;
+//! 3. for each column panel of B small enough to stay in L2 (≤ 256 KiB), for each A strip (at
+//!    most 32 KiB for K ≤ 512: it stays in L1 across the panel), multiply the strip by each B
+//!    strip of the panel into a 32 × 32 f32 block of C (whole blocks of a C with unit column
+//!    stride when alpha = 1 and beta ∈ {0, 1}), or into a scratch block whose
+//!    `alpha · block + beta · C` then goes into the matching (clipped) block of C.
+//!
+//! Packing reads A and B in the order they lie in memory, so transposed views cost the same.
+
+mod kernels;
+
+pub use kernels::{backend, register_peak_loop};
+
+use crate::precision::{self, Precision};
+use crate::Scalar;
+use ndarray::linalg::general_mat_mul;
+use ndarray::{s, ArrayBase, ArrayView2, ArrayViewMut2, Axis, Data, DataMut, Ix2, Zip};
+use std::cell::RefCell;
+
+/// `c = alpha · a · b + beta · c`, `a`: (M, K), `b`: (K, N), `c`: (M, N), in the calling
+/// thread's [`precision`] for f32 (f64 is always BLAS). `beta = 0` ignores what `c` held.
+/// Panics if the shapes do not agree (as `general_mat_mul`, which it replaces).
+pub fn mat_mul<T, S1, S2, S3>(
+    alpha: T,
+    a: &ArrayBase<S1, Ix2>,
+    b: &ArrayBase<S2, Ix2>,
+    beta: T,
+    c: &mut ArrayBase<S3, Ix2>,
+) where
+    T: Scalar,
+    S1: Data<Elem = T>,
+    S2: Data<Elem = T>,
+    S3: DataMut<Elem = T>,
+{
+    T::mat_mul(alpha, a.view(), b.view(), beta, c.view_mut());
+}
+
+/// [`mat_mul`] for f32: bf16 when the thread's precision is bf16 and [`bf16_available`], BLAS
+/// otherwise.
+pub(crate) fn mat_mul_f32(
+    alpha: f32,
+    a: ArrayView2<'_, f32>,
+    b: ArrayView2<'_, f32>,
+    beta: f32,
+    c: ArrayViewMut2<'_, f32>,
+) {
+    mat_mul_f32_in(precision::current(), bf16_available(), alpha, a, b, beta, c);
+}
+
+/// [`mat_mul_f32`] with the precision and the processor's bf16 support given (so that the
+/// fallback is tested on every machine).
+fn mat_mul_f32_in(
+    precision: Precision,
+    bf16_here: bool,
+    alpha: f32,
+    a: ArrayView2<'_, f32>,
+    b: ArrayView2<'_, f32>,
+    beta: f32,
+    mut c: ArrayViewMut2<'_, f32>,
+) {
+    if precision == Precision::Bf16 && bf16_here {
+        bf16_mat_mul(alpha, a, b, beta, c);
+    } else {
+        general_mat_mul(alpha, &a, &b, beta, &mut c);
+    }
+}
+
+/// Whether [`bf16_mat_mul`] can run here: an x86-64 processor with AMX-BF16 under Linux that
+/// granted the tile registers to this process (asked once, on the first call), or one with
+/// AVX-512 BF16. [`backend`] says which.
+pub fn bf16_available() -> bool {
+    backend().is_some()
+}
+
+/// `x` rounded to the nearest bfloat16 (ties to even; NaN stays NaN), as the bf16 bits.
+pub fn bf16_bits(x: f32) -> u16 {
+    let bits = x.to_bits();
+    if x.is_nan() {
+        return ((bits >> 16) | 0x40) as u16; // quiet, sign kept
+    }
+    let round = 0x7fff + ((bits >> 16) & 1);
+    (bits.wrapping_add(round) >> 16) as u16
+}
+
+/// `x` rounded to the nearest bfloat16, as an f32 (what the bf16 product multiplies).
+pub fn round_to_bf16(x: f32) -> f32 {
+    f32::from_bits(u32::from(bf16_bits(x)) << 16)
+}
+
+/// The packed operands and the result block, kept per thread so that repeated products of
+/// stable shapes allocate nothing.
+#[derive(Default)]
+struct Scratch {
+    a: Vec<u16>,      // (M/32, K/32, 32, 32) padded
+    b: Vec<u16>,      // (N/32, K/32, 2, 16, 16, 2) padded
+    column: Vec<u16>, // (M) or (K): one column of a transposed operand, rounded
+    zeros: Vec<f32>,  // (N): the row after B's last when K is odd
+}
+
+thread_local! {
+    static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
+}
+
+/// Bytes of B's packed columns one pass keeps in L2 while every A strip meets them.
+const B_PANEL_BYTES: usize = 256 * 1024;
+
+/// `c = alpha · a · b + beta · c` with a and b rounded to bf16 and f32 accumulation, on AMX (or
+/// AVX-512 BF16). `a`: (M, K), `b`: (K, N), `c`: (M, N), any strides. Panics if the shapes
+/// disagree or bf16 is not [`bf16_available`].
+pub fn bf16_mat_mul(
+    alpha: f32,
+    a: ArrayView2<'_, f32>,
+    b: ArrayView2<'_, f32>,
+    beta: f32,
+    mut c: ArrayViewMut2<'_, f32>,
+) {
+    let ((m, k), n) = (a.dim(), b.ncols());
+    assert!(
+        b.nrows() == k && c.dim() == (m, n),
+        "bf16_mat_mul: a {:?} · b {:?} into c {:?}",
+        a.shape(),
+        b.shape(),
+        c.shape()
+    );
+    if m == 0 || n == 0 {
+        return;
+    }
+    let mut kernel = kernels::Kernel::new().expect("bf16_mat_mul needs AMX or AVX-512 BF16");
+    packed_mat_mul(alpha, a, b, beta, c.view_mut(), |a, b, out, accumulate| {
+        kernel.block(a, b, out, accumulate)
+    });
+}
+
+/// The bf16 product with `block_of(a_strip, b_strip, out, accumulate)` computing one 32 × 32
+/// block from packed strips into a (32, 32) view (a kernel, or the tests' reference):
+/// packing, blocking, edges and the write-back into C. Whole blocks of a C with unit column
+/// stride go straight into C when alpha = 1 and beta ∈ {0, 1} (the tiles load and store C
+/// themselves); the other blocks go through a scratch block.
+fn packed_mat_mul(
+    alpha: f32,
+    a: ArrayView2<'_, f32>,
+    b: ArrayView2<'_, f32>,
+    beta: f32,
+    mut c: ArrayViewMut2<'_, f32>,
+    mut block_of: impl FnMut(&[u16], &[u16], ArrayViewMut2<'_, f32>, bool),
+) {
+    let ((m, k), n) = (a.dim(), b.ncols());
+    let kp = k.next_multiple_of(32);
+    let strip = kp * 32; // elements of one packed 32-row strip of A or 32-column strip of B
+    let panel_strips = (B_PANEL_BYTES / (2 * strip).max(1)).max(1);
+    let direct =
+        alpha == 1.0 && (beta == 0.0 || beta == 1.0) && c.strides()[1] == 1 && c.strides()[0] >= 32;
+    SCRATCH.with(|scratch| {
+        let scratch = &mut *scratch.borrow_mut();
+        pack_a(a, kp, &mut scratch.a, &mut scratch.column);
+        pack_b(
+            b,
+            kp,
+            &mut scratch.b,
+            &mut scratch.column,
+            &mut scratch.zeros,
+        );
+        let mut block = [0f32; 32 * 32]; // (32, 32) row-major
+        let (m_strips, n_strips) = (m.div_ceil(32), n.div_ceil(32));
+        for first in (0..n_strips).step_by(panel_strips) {
+            for mi in 0..m_strips {
+                let a_strip = &scratch.a[mi * strip..][..strip];
+                let rows = mi * 32..(mi * 32 + 32).min(m);
+                for ni in first..(first + panel_strips).min(n_strips) {
+                    let b_strip = &scratch.b[ni * strip..][..strip];
+                    let cols = ni * 32..(ni * 32 + 32).min(n);
+                    if direct && rows.len() == 32 && cols.len() == 32 {
+                        let dst = c.slice_mut(s![rows.clone(), cols]);
+                        block_of(a_strip, b_strip, dst, beta == 1.0);
+                        continue;
+                    }
+                    let mut got = ArrayViewMut2::from_shape((32, 32), &mut block[..]).expect("32²");
+                    block_of(a_strip, b_strip, got.view_mut(), false);
+                    let got = got.slice(s![..rows.len(), ..cols.len()]);
+                    let dst = c.slice_mut(s![rows.clone(), cols]);
+                    if beta == 0.0 {
+                        Zip::from(dst).and(got).for_each(|c, &g| *c = alpha * g);
+                    } else {
+                        Zip::from(dst)
+                            .and(got)
+                            .for_each(|c, &g| *c = alpha * g + beta * *c);
+                    }
+                }
+            }
+        }
+    });
+}
+
+/// Packs `a` (M, K) as bf16 into `out`: 32-row strips, each Kp/32 slices of 32 × 32 (row-major),
+/// zero-padded to whole strips and to `kp` columns.
+fn pack_a(a: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>, column: &mut Vec<u16>) {
+    let mp = a.nrows().next_multiple_of(32);
+    out.clear();
+    out.resize(mp * kp, 0);
+    if a.strides()[1] == 1 {
+        // Rows contiguous: 32 elements at a time into their slice row.
+        for (i, row) in a.axis_iter(Axis(0)).enumerate() {
+            let row = row.to_slice().expect("unit column stride");
+            let strip_row = (i / 32) * kp * 32 + (i % 32) * 32;
+            for (s, chunk) in row.chunks(32).enumerate() {
+                kernels::round_into(&mut out[strip_row + s * 1024..][..chunk.len()], chunk);
+            }
+        }
+        return;
+    }
+    if a.strides()[0] == 1 {
+        // Columns contiguous (a transposed view, as `doutᵀ · inp`): round a column at a time,
+        // then place its values 32 elements (one slice row) apart.
+        column.resize(a.nrows(), 0); // (M)
+        for (k, col) in a.axis_iter(Axis(1)).enumerate() {
+            kernels::round_into(column, col.to_slice().expect("unit row stride"));
+            let at_k = (k / 32) * 1024 + k % 32;
+            for (strip, rows) in column.chunks(32).enumerate() {
+                let start = strip * kp * 32 + at_k;
+                for (r, &x) in rows.iter().enumerate() {
+                    out[start + r * 32] = x;
+                }
+            }
+        }
+        return;
+    }
+    for_each_in_memory_order(a, |i, k, x| {
+        out[(i / 32) * kp * 32 + (k / 32) * 1024 + (i % 32) * 32 + k % 32] = bf16_bits(x);
+    });
+}
+
+/// Packs `b` (K, N) as bf16 into `out`: 32-column strips, each Kp/32 slices of two 16-column
+/// tiles in VNNI pairs (pair row r, column j: rows 2r and 2r + 1 side by side), zero-padded.
+fn pack_b(
+    b: ArrayView2<'_, f32>,
+    kp: usize,
+    out: &mut Vec<u16>,
+    column: &mut Vec<u16>,
+    zeros: &mut Vec<f32>,
+) {
+    let (k, n) = b.dim();
+    let np = n.next_multiple_of(32);
+    out.clear();
+    out.resize(np * kp, 0);
+    if b.strides()[1] == 1 && n > 0 {
+        // Rows contiguous: two rows at a time, 16 columns into each tile row.
+        zeros.clear();
+        zeros.resize(n, 0.0);
+        for pair in 0..k.div_ceil(2) {
+            let r0 = b.row(2 * pair).to_slice().expect("unit column stride");
+            let r1 = match 2 * pair + 1 < k {
+                true => b.row(2 * pair + 1).to_slice().expect("unit column stride"),
+                false => &zeros[..],
+            };
+            let pair_row = (pair / 16) * 1024 + (pair % 16) * 32;
+            for j in (0..n).step_by(16) {
+                let len = (n - j).min(16);
+                let at = (j / 32) * kp * 32 + ((j % 32) / 16) * 512 + pair_row;
+                kernels::pairs_into(&mut out[at..][..2 * len], &r0[j..][..len], &r1[j..][..len]);
+            }
+        }
+        return;
+    }
+    if b.strides()[0] == 1 {
+        // Columns contiguous (a transposed view, as `inp · weightᵀ`): round a column at a time,
+        // then place its pairs of rows one tile row (32 elements) apart.
+        column.resize(k, 0); // (K)
+        for (j, col) in b.axis_iter(Axis(1)).enumerate() {
+            kernels::round_into(column, col.to_slice().expect("unit row stride"));
+            let at_j = (j / 32) * kp * 32 + ((j % 32) / 16) * 512 + (j % 16) * 2;
+            for (slice, ks) in column.chunks(32).enumerate() {
+                let start = at_j + slice * 1024;
+                for (r, pair) in ks.chunks(2).enumerate() {
+                    out[start + r * 32..][..pair.len()].copy_from_slice(pair);
+                }
+            }
+        }
+        return;
+    }
+    for_each_in_memory_order(b, |k, j, x| {
+        let strip = (j / 32) * kp * 32 + (k / 32) * 1024 + ((j % 32) / 16) * 512;
+        out[strip + ((k % 32) / 2) * 32 + (j % 16) * 2 + k % 2] = bf16_bits(x);
+    });
+}
+
+/// Calls `f(row, column, value)` for every element of `v`, row by row when its rows are
+/// contiguous-ish (the column stride is the smaller) and column by column otherwise.
+fn for_each_in_memory_order(v: ArrayView2<'_, f32>, mut f: impl FnMut(usize, usize, f32)) {
+    let [row_stride, col_stride] = [v.strides()[0], v.strides()[1]].map(isize::unsigned_abs);
+    if col_stride <= row_stride {
+        for (i, row) in v.axis_iter(Axis(0)).enumerate() {
+            row.iter().enumerate().for_each(|(j, &x)| f(i, j, x));
+        }
+    } else {
+        for (j, col) in v.axis_iter(Axis(1)).enumerate() {
+            col.iter().enumerate().for_each(|(i, &x)| f(i, j, x));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::Array2;
+    use rand::{rngs::StdRng, Rng, SeedableRng};
+
+    /// A (rows, cols) matrix uniform in [-1, 1) (far from bf16's flushed denormals).
+    fn uniform(rows: usize, cols: usize, seed: u64) -> Array2<f32> {
+        let mut rng = StdRng::seed_from_u64(seed);
+        Array2::from_shape_simple_fn((rows, cols), || rng.gen_range(-1.0..1.0))
+    }
+
+    /// What `tdpbf16ps` computes on one block, read from the packed layout as the module doc
+    /// describes it: A slices row-major, B slices as two 16-column tiles of VNNI pairs.
+    fn reference_block(a: &[u16], b: &[u16], mut out: ArrayViewMut2<f32>, accumulate: bool) {
+        let f = |bits: u16| f32::from_bits(u32::from(bits) << 16);
+        if !accumulate {
+            out.fill(0.0);
+        }
+        for (a, b) in a.chunks_exact(1024).zip(b.chunks_exact(1024)) {
+            for (i, j) in (0..32).flat_map(|i| (0..32).map(move |j| (i, j))) {
+                let b_at = |k: usize| b[(j / 16) * 512 + (k / 2) * 32 + (j % 16) * 2 + k % 2];
+                out[(i, j)] += (0..32).map(|k| f(a[i * 32 + k]) * f(b_at(k))).sum::<f32>();
+            }
+        }
+    }
+
+    /// Checks `got` = alpha · round(a) · round(b) + beta · c0 up to f32 accumulation: each entry
+    /// within (K + 2) units of roundoff of Σ|a·b| (plus beta's share) of the f64 product.
+    fn assert_bf16_product(
+        got: ArrayView2<'_, f32>,
+        (alpha, a, b): (f32, ArrayView2<'_, f32>, ArrayView2<'_, f32>),
+        (beta, c0): (f32, ArrayView2<'_, f32>),
+    ) {
+        let k = a.ncols();
+        let (ra, rb) = (
+            a.mapv(|x| round_to_bf16(x) as f64),
+            b.mapv(|x| round_to_bf16(x) as f64),
+        );
+        let exact = ra.dot(&rb) * alpha as f64 + c0.mapv(|x| x as f64) * beta as f64;
+        let size = ra.mapv(f64::abs).dot(&rb.mapv(f64::abs)) * (alpha as f64).abs()
+            + c0.mapv(|x| (x as f64).abs()) * (beta as f64).abs();
+        let u = f32::EPSILON as f64 / 2.0;
+        for ((ij, &g), (&e, &s)) in got.indexed_iter().zip(exact.iter().zip(&size)) {
+            let tol = (k + 2) as f64 * u * s + f32::MIN_POSITIVE as f64;
+            assert!(
+                (g as f64 - e).abs() <= tol,
+                "entry {ij:?}: got {g}, exact {e} (tolerance {tol:e}, K = {k})"
+            );
+        }
+    }
+
+    /// The (M, K, N) shapes tested: single elements, edges off every multiple of 16 and 32,
+    /// K = 0, and a B wider than one L2 panel.
+    const SHAPES: [(usize, usize, usize); 7] = [
+        (1, 1, 1),
+        (17, 33, 15),
+        (45, 70, 100),
+        (64, 64, 64),
+        (100, 3, 37),
+        (5, 0, 7),
+        (33, 300, 500),
+    ];
+
+    /// A bf16 product under test: `(alpha, a, b, beta, c)`.
+    type MatMul<'m> =
+        dyn FnMut(f32, ArrayView2<f32>, ArrayView2<f32>, f32, ArrayViewMut2<f32>) + 'm;
+
+    /// Every case of [`SHAPES`] through `mul`: plain, both operands transposed views, strided
+    /// views, `beta = 1` accumulation into C (as the backward passes use), and into a
+    /// transposed C with alpha ≠ 1.
+    fn check_cases(mul: &mut MatMul) {
+        for (seed, &(m, k, n)) in (0u64..).step_by(8).zip(&SHAPES) {
+            let (a, b) = (uniform(m, k, seed), uniform(k, n, seed + 1));
+            let c0 = uniform(m, n, seed + 2);
+            // (K, M) and (N, K) stored: `.t()` views with unit stride down the rows.
+            let (at, bt) = (a.t().to_owned(), b.t().to_owned());
+            // Every other row and every third column of larger matrices.
+            let a_big = uniform(2 * m, 3 * k, seed + 3);
+            let b_big = uniform(2 * k, 3 * n, seed + 4);
+            let (a_str, b_str) = (a_big.slice(s![..;2, ..;3]), b_big.slice(s![..;2, ..;3]));
+            let mut c = c0.clone();
+            mul(1.0, a.view(), b.view(), 0.0, c.view_mut());
+            assert_bf16_product(c.view(), (1.0, a.view(), b.view()), (0.0, c0.view()));
+            let mut c = c0.clone();
+            mul(1.0, at.t(), bt.t(), 0.0, c.view_mut());
+            assert_bf16_product(c.view(), (1.0, a.view(), b.view()), (0.0, c0.view()));
+            let mut c = c0.clone();
+            mul(1.0, a_str, b_str, 0.0, c.view_mut());
+            assert_bf16_product(c.view(), (1.0, a_str, b_str), (0.0, c0.view()));
+            // Accumulating into C itself (as the backward passes do): c += a · b.
+            let mut c = c0.clone();
+            mul(1.0, a.view(), b.view(), 1.0, c.view_mut());
+            assert_bf16_product(c.view(), (1.0, a.view(), b.view()), (1.0, c0.view()));
+            // Into a transposed destination, accumulating: c (N, M) stored, cᵀ += -0.5 · a · b.
+            let mut ct = c0.t().to_owned();
+            mul(-0.5, a.view(), b.view(), 1.0, ct.view_mut().reversed_axes());
+            assert_bf16_product(ct.t(), (-0.5, a.view(), b.view()), (1.0, c0.view()));
+        }
+    }
+
+    #[test]
+    fn rounding_to_bf16_is_to_nearest_even() {
+        let one_plus = |ulps: f32| round_to_bf16(1.0 + ulps * 2f32.powi(-8));
+        assert_eq!(round_to_bf16(1.0), 1.0);
+        assert_eq!(one_plus(1.0), 1.0); // halfway from 1 (even) to 1 + 2⁻⁷: down
+        assert_eq!(one_plus(3.0), 1.0 + 2f32.powi(-6)); // halfway from an odd one: up
+        assert_eq!(one_plus(1.0 + 2f32.powi(-12)), 1.0 + 2f32.powi(-7)); // past halfway: up
+        assert_eq!(
+            round_to_bf16(-1.0 - 3.0 * 2f32.powi(-8)),
+            -1.0 - 2f32.powi(-6)
+        );
+        assert_eq!(round_to_bf16(f32::MAX), f32::INFINITY); // beyond bf16's largest
+        assert_eq!(round_to_bf16(f32::NEG_INFINITY), f32::NEG_INFINITY);
+        assert!(round_to_bf16(f32::NAN).is_nan());
+        assert_eq!(bf16_bits(0.15625), 0x3e20); // 0.15625 = 1.25 · 2⁻³ is exact
+    }
+
+    #[test]
+    fn the_packing_conversions_round_like_bf16_bits() {
+        // 37 values: two full vectors of 16 and a tail (the vector path where the processor
+        // has AVX-512 BF16, the scalar one elsewhere).
+        let (x, y) = (uniform(1, 37, 9), uniform(1, 37, 10));
+        let (x, y) = (x.as_slice().unwrap(), y.as_slice().unwrap());
+        let mut rounded = [0u16; 37];
+        kernels::round_into(&mut rounded, x);
+        assert!(rounded.iter().zip(x).all(|(&r, &x)| r == bf16_bits(x)));
+        let mut pairs = [0u16; 74];
+        kernels::pairs_into(&mut pairs, x, y);
+        for (j, p) in pairs.chunks_exact(2).enumerate() {
+            assert_eq!(p, [bf16_bits(x[j]), bf16_bits(y[j])], "column {j}");
+        }
+    }
+
+    #[test]
+    fn packing_blocking_and_write_back_give_the_bf16_product_on_every_machine() {
+        check_cases(&mut |alpha, a, b, beta, c| {
+            packed_mat_mul(alpha, a, b, beta, c, reference_block)
+        });
+    }
+
+    #[test]
+    fn the_bf16_check_tells_an_f32_product_apart() {
+        // The tolerance of the checks above is far below bf16's rounding: exact f32 fails it.
+        let (a, b) = (uniform(40, 64, 1), uniform(64, 40, 2));
+        let mut c = Array2::zeros((40, 40));
+        general_mat_mul(1.0, &a, &b, 0.0, &mut c);
+        let zero = Array2::zeros((40, 40));
+        let caught = std::panic::catch_unwind(|| {
+            assert_bf16_product(c.view(), (1.0, a.view(), b.view()), (0.0, zero.view()))
+        });
+        assert!(caught.is_err());
+    }
+
+    #[test]
+    fn the_kernel_detected_agrees_with_the_cpu_flags() {
+        let flags = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
+        let has = |f: &str| flags.split_whitespace().any(|w| w == f);
+        // Linux lists the AMX flags only when it supports AMX (≥ 5.16, which grants it).
+        let expected = if has("amx_bf16") && has("amx_tile") && cfg!(target_os = "linux") {
+            Some("amx")
+        } else if has("avx512_bf16") {
+            Some("avx512_bf16")
+        } else {
+            None
+        };
+        assert_eq!(
+            backend(),
+            expected,
+            "/proc/cpuinfo and the detection disagree"
+        );
+        assert_eq!(kernels::amx_available(), expected == Some("amx"));
+    }
+
+    #[test]
+    fn the_kernels_give_the_bf16_product_where_the_processor_has_them() {
+        if !bf16_available() {
+            eprintln!("no AMX, no AVX-512 BF16: no kernel runs (the packing test covers the rest)");
+            return;
+        }
+        check_cases(&mut |alpha, a, b, beta, c| bf16_mat_mul(alpha, a, b, beta, c));
+        // On another thread too: each thread sets its kernel up (AMX: its own tiles).
+        std::thread::spawn(|| {
+            check_cases(&mut |alpha, a, b, beta, c| bf16_mat_mul(alpha, a, b, beta, c))
+        })
+        .join()
+        .unwrap();
+        // The AVX-512 BF16 kernel also where AMX takes precedence.
+        if let Some(mut kernel) = kernels::Avx512Bf16::new() {
+            check_cases(&mut |alpha, a, b, beta, c| {
+                packed_mat_mul(alpha, a, b, beta, c, |a, b, out, acc| {
+                    kernel.block(a, b, out, acc)
+                })
+            });
+        }
+    }
+
+    #[test]
+    fn mat_mul_is_exact_f32_by_default_and_bf16_in_a_bf16_scope() {
+        let (a, b) = (uniform(50, 70, 5), uniform(70, 30, 6));
+        let mut blas = Array2::zeros((50, 30));
+        general_mat_mul(1.0, &a, &b, 0.0, &mut blas);
+        let mut f32_out = Array2::zeros((50, 30));
+        mat_mul(1.0, &a, &b, 0.0, &mut f32_out);
+        assert_eq!(f32_out, blas);
+        let mut bf16_out = Array2::zeros((50, 30));
+        {
+            let _bf16 = precision::enter(Precision::Bf16);
+            mat_mul(1.0, &a, &b, 0.0, &mut bf16_out);
+        }
+        // Without a bf16 kernel, bf16 is BLAS in f32, bit for bit (on every machine).
+        let mut fallback = Array2::zeros((50, 30));
+        mat_mul_f32_in(
+            Precision::Bf16,
+            false,
+            1.0,
+            a.view(),
+            b.view(),
+            0.0,
+            fallback.view_mut(),
+        );
+        assert_eq!(fallback, blas);
+        if bf16_available() {
+            let mut direct = Array2::zeros((50, 30));
+            bf16_mat_mul(1.0, a.view(), b.view(), 0.0, direct.view_mut());
+            assert_eq!(bf16_out, direct);
+            assert_ne!(bf16_out, blas);
+        } else {
+            assert_eq!(bf16_out, blas, "the fallback is BLAS in f32, bit for bit");
+        }
+        // f64 ignores the setting.
+        let (a64, b64) = (a.mapv(f64::from), b.mapv(f64::from));
+        let (mut in_scope, mut plain) = (Array2::zeros((50, 30)), Array2::zeros((50, 30)));
+        general_mat_mul(1.0, &a64, &b64, 0.0, &mut plain);
+        let _bf16 = precision::enter(Precision::Bf16);
+        mat_mul(1.0, &a64, &b64, 0.0, &mut in_scope);
+        assert_eq!(in_scope, plain);
+    }
+}
