@@ -4,7 +4,8 @@
 #
 #   bash runs/train.sh          # start or resume the queue (background; log in runs/queue.out)
 #   bash runs/train.sh status   # where each run stands
-#   bash runs/train.sh stop     # stop after the current run's next checkpoint-safe moment
+#   bash runs/train.sh stop     # stop it (every run resumes from its last checkpoint)
+#   bash runs/train.sh snapshot # before committing a stopped queue: Adam moments in bf16
 #
 # The queue trains one run at a time on all cores, in the order below: each run until its
 # target epoch (`rgm train --until-epoch`), then the next. Every run is resumable, so stopping
@@ -94,7 +95,7 @@ run_queue() {
 case "${1:-start}" in
   status) status ;;
   stop)
-    # Checkpoints land every 50 batches; stopping the process between them loses at most that.
+    # A checkpoint is one atomic commit every 50 batches: a stop loses at most that much work.
     touch runs/queue.stop
     [ -f runs/queue.pid ] && kill "$(cat runs/queue.pid)" 2>/dev/null || true
     pkill -INT -f "runs/rgm-train train" || true
@@ -110,6 +111,7 @@ case "${1:-start}" in
     nohup bash "$0" run-queue >>runs/queue.out 2>&1 &
     echo $! >runs/queue.pid
     echo "training queue in the background, pid $(cat runs/queue.pid); bash runs/train.sh status" ;;
+  snapshot) cargo xtask snapshot-runs ;;
   run-queue) run_queue ;;
-  *) echo "usage: bash runs/train.sh [start|status|stop]" >&2; exit 2 ;;
+  *) echo "usage: bash runs/train.sh [start|status|stop|snapshot]" >&2; exit 2 ;;
 esac

@@ -4,6 +4,7 @@
 //! methods, evaluation and figures; rgm-data's pairs); it holds no algorithm of its own.
 
 mod bench;
+mod snapshot;
 mod tables;
 
 use std::path::{Path, PathBuf};
@@ -25,12 +26,15 @@ enum Command {
     Bench(bench::Args),
     /// Reproduce the paper's Tables 1–5 on ModelNet40: docs/results.md, per-pair JSON, figures.
     ReproduceTables(tables::Args),
+    /// Make the training runs under runs/ small enough to commit (Adam moments in bf16).
+    SnapshotRuns(snapshot::Args),
 }
 
 fn main() -> ExitCode {
     let outcome = match Cli::parse().command {
         Command::Bench(args) => bench::run(args),
         Command::ReproduceTables(args) => tables::run(args),
+        Command::SnapshotRuns(args) => snapshot::run(args),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

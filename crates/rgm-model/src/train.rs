@@ -92,7 +92,7 @@ pub type Result<T> = std::result::Result<T, TrainError>;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum OptimizerKind {
-    /// SGD with momentum, as the paper.
+    /// SGD with Nesterov momentum, as the reference code (spec §3).
     Sgd,
     /// Adam (β 0.9, 0.999).
     Adam,
@@ -342,7 +342,11 @@ impl Optimizer {
     fn new(config: &TrainConfig) -> Self {
         match config.optimizer {
             OptimizerKind::Sgd => {
-                Self::Sgd(Sgd::new(config.lr, config.momentum, config.weight_decay))
+                // Nesterov momentum, as the reference sets it (spec §3).
+                Self::Sgd(Sgd {
+                    nesterov: true,
+                    ..Sgd::new(config.lr, config.momentum, config.weight_decay)
+                })
             }
             OptimizerKind::Adam => Self::Adam(Adam::new(config.lr, config.weight_decay)),
         }

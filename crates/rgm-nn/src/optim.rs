@@ -79,8 +79,11 @@ impl<T: Scalar> Slots<T> {
     }
 
     /// Rebuilds the slots from the tensors and `order` metadata written by [`Slots::named`].
+    /// The kinds in `zero_if_missing` may be absent from the file (a snapshot that left them
+    /// out): they start as zeros of the parameter's shape, taken from the last kind.
     fn read(
         kinds: &'static [&'static str],
+        zero_if_missing: &[&str],
         path: &Path,
     ) -> Result<(Self, HashMap<String, String>)> {
         let (mut tensors, meta) = read_tensors(path)?;
@@ -90,16 +93,26 @@ impl<T: Scalar> Slots<T> {
             .map(|o| o.lines().collect::<Vec<_>>())
             .unwrap_or_default()
         {
-            let mut per_kind = Vec::new();
-            for kind in kinds {
-                let key = format!("{kind}.{name}");
-                per_kind.push(tensors.remove(&key).ok_or_else(|| NnError::MissingTensor {
-                    path: path.to_path_buf(),
-                    name: key,
-                })?);
+            let mut per_kind: Vec<Option<ArrayD<T>>> = kinds
+                .iter()
+                .map(|kind| tensors.remove(&format!("{kind}.{name}")))
+                .collect();
+            let shape = per_kind.last().cloned().flatten().map(|t| t.raw_dim());
+            for (kind, slot) in kinds.iter().zip(&mut per_kind) {
+                if slot.is_none() {
+                    match (&shape, zero_if_missing.contains(kind)) {
+                        (Some(shape), true) => *slot = Some(ArrayD::zeros(shape.clone())),
+                        _ => {
+                            return Err(NnError::MissingTensor {
+                                path: path.to_path_buf(),
+                                name: format!("{kind}.{name}"),
+                            })
+                        }
+                    }
+                }
             }
             slots.names.push(name.to_string());
-            slots.tensors.push(per_kind);
+            slots.tensors.push(per_kind.into_iter().flatten().collect());
         }
         Ok((slots, meta))
     }
@@ -117,22 +130,26 @@ fn metadata_number(meta: &HashMap<String, String>, key: &str, path: &Path) -> Re
         })
 }
 
-/// SGD with momentum, `torch.optim.SGD` (dampening 0, not Nesterov):
-/// `g = grad + weight_decay · p`, `v = momentum · v + g`, `p −= lr · v`.
+/// SGD with momentum, `torch.optim.SGD` (dampening 0):
+/// `g = grad + weight_decay · p`, `v = momentum · v + g`, then `p −= lr · v`, or with
+/// `nesterov` (the reference's setting, spec §3) `p −= lr · (g + momentum · v)`.
 #[derive(Clone, Debug)]
 pub struct Sgd<T> {
     pub lr: f64,
     pub momentum: f64,
     pub weight_decay: f64,
+    pub nesterov: bool,
     velocity: Slots<T>,
 }
 
 impl<T: Scalar> Sgd<T> {
+    /// Plain momentum; set [`Sgd::nesterov`] for Nesterov's.
     pub fn new(lr: f64, momentum: f64, weight_decay: f64) -> Self {
         Self {
             lr,
             momentum,
             weight_decay,
+            nesterov: false,
             velocity: Slots::new(&["velocity"]),
         }
     }
@@ -144,13 +161,15 @@ impl<T: Scalar> Sgd<T> {
             T::from_f64(self.momentum),
             T::from_f64(self.weight_decay),
         );
+        let nesterov = self.nesterov;
         self.velocity.for_each("sgd step", model, |state, mut p| {
             Zip::from(&mut state[0])
                 .and(&mut p.value)
                 .and(&p.grad)
                 .for_each(|v, w, &g| {
-                    *v = mu * *v + g + wd * *w;
-                    *w -= lr * *v;
+                    let g = g + wd * *w;
+                    *v = mu * *v + g;
+                    *w -= lr * if nesterov { g + mu * *v } else { *v };
                 });
         })
     }
@@ -163,19 +182,21 @@ impl<T: Scalar> Sgd<T> {
             ("lr".to_string(), self.lr.to_string()),
             ("momentum".to_string(), self.momentum.to_string()),
             ("weight_decay".to_string(), self.weight_decay.to_string()),
+            ("nesterov".to_string(), self.nesterov.to_string()),
             order,
         ]);
         write_tensors(path, &tensors, meta)
     }
 
-    /// Reads a state written by [`Sgd::save`].
+    /// Reads a state written by [`Sgd::save`] (plain momentum when it names none).
     pub fn load(path: &Path) -> Result<Self> {
-        let (velocity, meta) = Slots::read(&["velocity"], path)?;
+        let (velocity, meta) = Slots::read(&["velocity"], &[], path)?;
         let num = |k| metadata_number(&meta, k, path);
         Ok(Self {
             lr: num("lr")?,
             momentum: num("momentum")?,
             weight_decay: num("weight_decay")?,
+            nesterov: meta.get("nesterov").is_some_and(|v| v == "true"),
             velocity,
         })
     }
@@ -250,9 +271,11 @@ impl<T: Scalar> Adam<T> {
         write_tensors(path, &tensors, meta)
     }
 
-    /// Reads a state written by [`Adam::save`].
+    /// Reads a state written by [`Adam::save`]. The first moments may be missing (a snapshot
+    /// kept small for git): they restart from zero, and after n steps hold all but 0.9ⁿ of
+    /// the gradient history they would have had.
     pub fn load(path: &Path) -> Result<Self> {
-        let (moments, meta) = Slots::read(&["m", "v"], path)?;
+        let (moments, meta) = Slots::read(&["m", "v"], &["m"], path)?;
         let num = |k| metadata_number(&meta, k, path);
         Ok(Self {
             lr: num("lr")?,
@@ -297,6 +320,20 @@ mod tests {
         let mut lin = Linear::<f64>::from_values(ndarray::array![[1.0]], None).unwrap();
         let mut sgd = Sgd::new(0.1, 0.9, 0.0);
         for want in [0.95, 0.855] {
+            lin.weight.grad.fill(0.5);
+            sgd.step(&mut lin).unwrap();
+            assert!((lin.weight.value[[0, 0]] - want).abs() < 1e-15);
+        }
+    }
+
+    #[test]
+    fn sgd_nesterov_by_hand() {
+        // As above with Nesterov: the step is g + μv = 0.95, then 0.5 + 0.9·0.95 = 1.355,
+        // so p = 0.905, then 0.7695 (torch.optim.SGD(nesterov=True)).
+        let mut lin = Linear::<f64>::from_values(ndarray::array![[1.0]], None).unwrap();
+        let mut sgd = Sgd::new(0.1, 0.9, 0.0);
+        sgd.nesterov = true;
+        for want in [0.905, 0.7695] {
             lin.weight.grad.fill(0.5);
             sgd.step(&mut lin).unwrap();
             assert!((lin.weight.value[[0, 0]] - want).abs() < 1e-15);
@@ -356,14 +393,19 @@ mod tests {
 
     #[test]
     fn sgd_resumes_exactly_from_a_saved_state() {
-        assert_resume_is_exact(
-            || Sgd::new(0.1, 0.9, 0.01),
-            |o, m| o.step(m),
-            |o, path| {
-                o.save(path)?;
-                Sgd::load(path)
-            },
-        );
+        for nesterov in [false, true] {
+            assert_resume_is_exact(
+                || Sgd {
+                    nesterov,
+                    ..Sgd::new(0.1, 0.9, 0.01)
+                },
+                |o, m| o.step(m),
+                |o, path| {
+                    o.save(path)?;
+                    Sgd::load(path)
+                },
+            );
+        }
     }
 
     #[test]
@@ -409,6 +451,40 @@ mod tests {
         assert_ne!(m, &exact["m.weight"], "0.37 w is not a bf16 value");
         let mut loaded = loaded;
         loaded.step(&mut lin).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A snapshot without the first moments loads them as zeros and keeps the second; one
+    /// without the second moments is refused, naming the tensor.
+    #[test]
+    fn adam_restarts_missing_first_moments_from_zero() {
+        let dir = std::env::temp_dir().join(format!("rgm-nn-adam-no-m-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut lin = Linear::<f32>::new(3, 2, true, &mut StdRng::seed_from_u64(6));
+        let mut adam = Adam::new(0.01, 0.0);
+        lin.weight.grad.fill(0.5);
+        lin.bias.as_mut().unwrap().grad.fill(-0.25);
+        adam.step(&mut lin).unwrap();
+        let full = dir.join("adam.safetensors");
+        adam.save(&full).unwrap();
+        let (tensors, meta) = read_tensors::<f32>(&full).unwrap();
+        for (drop, path) in [("m.", "no-m"), ("v.", "no-v")] {
+            let kept: Vec<_> = tensors
+                .iter()
+                .filter(|(n, _)| !n.starts_with(drop))
+                .map(|(n, t)| (n.clone(), t.view()))
+                .collect();
+            crate::io::write_tensors(&dir.join(path), &kept, meta.clone()).unwrap();
+        }
+        let loaded = Adam::<f32>::load(&dir.join("no-m")).unwrap();
+        let (m, v) = (&loaded.moments.tensors[0][0], &loaded.moments.tensors[0][1]);
+        assert!(m.iter().all(|&x| x == 0.0));
+        assert_eq!(v, &tensors["v.weight"]);
+        assert!(v.iter().all(|&x| x > 0.0));
+        let err = Adam::<f32>::load(&dir.join("no-v"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("v.weight") || err.contains("v.bias"), "{err}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -50,7 +50,7 @@ pub struct Args {
     /// Pairs per optimiser step.
     #[arg(long, default_value_t = 4)]
     batch: usize,
-    /// sgd (momentum, as the paper) or adam.
+    /// sgd (Nesterov momentum, as the reference code) or adam.
     #[arg(long, value_enum, default_value = "sgd")]
     optimizer: OptimizerArg,
     /// Learning rate before the first milestone.
