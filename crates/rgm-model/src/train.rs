@@ -342,11 +342,9 @@ impl Optimizer {
     fn new(config: &TrainConfig) -> Self {
         match config.optimizer {
             OptimizerKind::Sgd => {
-                // Nesterov momentum, as the reference sets it (spec §3).
-                Self::Sgd(Sgd {
-                    nesterov: true,
-                    ..Sgd::new(config.lr, config.momentum, config.weight_decay)
-                })
+                let mut sgd = Sgd::new(config.lr, config.momentum, config.weight_decay);
+                sgd.nesterov = true; // as the reference sets it (spec §3)
+                Self::Sgd(sgd)
             }
             OptimizerKind::Adam => Self::Adam(Adam::new(config.lr, config.weight_decay)),
         }
