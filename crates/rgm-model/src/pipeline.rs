@@ -22,7 +22,7 @@ use rgm_geom::kabsch::kabsch;
 use rgm_geom::refine::{self, RefineConfig};
 use rgm_geom::{Point3, PointCloud, RegistrationResult, RigidTransform, Vector3};
 use rgm_match::{hard_match, Correspondences, MatchConfig};
-use rgm_nn::Precision;
+use rgm_nn::{Parameters, Precision};
 
 use crate::error::MethodError;
 use crate::network::{FeaturerCache, Rgm, RgmCache};
@@ -215,27 +215,29 @@ pub(crate) fn as_rows(cloud: &PointCloud) -> Array2<f32> {
 }
 
 /// The peak memory, in bytes, of registering N source and M target matched points with a
-/// network of `config` (both chains when `cycle_consistency`).
+/// network of `config` holding `params` parameters (both chains when `cycle_consistency`).
 ///
-/// Counted from the buffers a pass keeps (f32): per block, each side's six R×R adjacency
-/// buffers, the attention weights of the edge transformer (H·(2N² + 2M² + 2NM)) and seven N×M
-/// matrices of scoring and Sinkhorn; one such pass cache per chain. The local features add
-/// 12 bytes per point, neighbour and channel of the feature extractor; the rest (weights,
-/// code) is a constant 100 MiB. Checked against measured peaks in docs/speed.md.
+/// The part that grows with N·M is counted from the buffers a pass keeps (f32): per block,
+/// each side's six R×R adjacency buffers, the edge transformer's attention weights
+/// (H·(2N² + 2M² + 2NM)) and seven N×M matrices of scoring and Sinkhorn; one such pass cache per
+/// chain. The part linear in the points (60 bytes per point, neighbour and DGCNN channel) and
+/// the constant (64 MiB and the weights) are fitted to measured peaks: the estimate is 2–26 %
+/// above the peaks measured for the `fast` and `paper` presets at 384 to 2,048 points
+/// (docs/speed.md).
 pub fn estimated_peak_bytes(
     config: &crate::network::Config,
+    params: usize,
     n: usize,
     m: usize,
     cycle_consistency: bool,
 ) -> u64 {
     let (n, m) = (n as u64, m as u64);
     let (h, blocks) = (config.heads as u64, config.blocks as u64);
-    let squares = n * n + m * m;
-    let per_pass = 4 * blocks * ((6 + 2 * h) * squares + (7 + 2 * h) * n * m);
+    let per_pass = 4 * blocks * ((6 + 2 * h) * (n * n + m * m) + (7 + 2 * h) * n * m);
     let chains = if cycle_consistency { 2 } else { 1 };
-    let widths: u64 = config.dgcnn.iter().map(|&c| c as u64).sum::<u64>() + config.edge as u64;
-    let features = 12 * (n + m) * (config.k as u64) * widths;
-    chains * per_pass + features + (100 << 20)
+    let channels: u64 = config.dgcnn.iter().map(|&c| c as u64).sum();
+    let features = 60 * (n + m) * config.k as u64 * channels;
+    chains * per_pass + features + (64 << 20) + 4 * params as u64
 }
 
 /// The memory the system can give this process now (Linux's MemAvailable), if known.
@@ -405,8 +407,10 @@ impl RgmRegistrar {
                 });
             }
         }
+        let params = self.network.num_params();
         let estimate = estimated_peak_bytes(
             self.network.config(),
+            params,
             x.len(),
             y.len(),
             self.config.cycle_consistency,
@@ -558,6 +562,42 @@ mod tests {
         assert!(!mapped.is_empty());
         assert_eq!(whole.correspondences(), &mapped[..]);
         assert_eq!(a.fitness, mapped.len() as f64 / 30.0);
+    }
+
+    #[test]
+    fn the_memory_estimate_counts_the_pass_buffers() {
+        // fast preset, 1,024 × 1,024 points, both chains: 2 × 4·2·(14·2N² + 15N²) bytes of pass
+        // buffers, 60·2N·20·128 of features, 64 MiB and the weights (measured peak: 910 MiB).
+        let fast = crate::network::Config::fast();
+        let n = 1024u64;
+        let expected = 2 * 8 * 43 * n * n + 60 * 2 * n * 20 * 128 + (64 << 20) + 4 * 1_572_324;
+        assert_eq!(
+            estimated_peak_bytes(&fast, 1_572_324, 1024, 1024, true),
+            expected
+        );
+        let one_chain = estimated_peak_bytes(&fast, 1_572_324, 1024, 1024, false);
+        assert_eq!(expected - one_chain, 8 * 43 * n * n);
+    }
+
+    #[test]
+    fn a_registration_beyond_the_free_memory_is_refused_before_it_starts() {
+        // 200,000 points matched whole would need terabytes: refused, naming the estimate.
+        let (network, source, _) = fixture();
+        let big = PointCloud::new(
+            (0..200_000)
+                .map(|i| source.points[i % source.len()] * (1.0 + i as f64 * 1e-7))
+                .collect(),
+        );
+        let mut registrar = RgmRegistrar::new(network, PipelineConfig::default());
+        match registrar.register(&big, &big) {
+            Err(MethodError::TooMuchMemory {
+                points, estimate, ..
+            }) => {
+                assert_eq!(points, (200_000, 200_000));
+                assert!(estimate > 1 << 40, "{estimate}");
+            }
+            other => panic!("expected a refusal, got {other:?}"),
+        }
     }
 
     #[test]
