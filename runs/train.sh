@@ -56,7 +56,7 @@ for entry in sys.argv[1:]:
         rate = dp / dt if dt > 0 else 0.0
     val = "-"
     if vals:
-        v = vals[-1]["result"]
+        v = vals[-1]
         val = (f"epoch {v['epoch'] + 1}: {100 * v['recall']:.1f} % / "
                f"{100 * v.get('recall_refined', 0):.1f} % / {v['mie_r_deg']:.1f}°")
     epoch = state["epoch"] + state["batch"] / max(train[-1]["batches"], 1) if train else 0
