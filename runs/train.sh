@@ -98,7 +98,7 @@ case "${1:-start}" in
     # A checkpoint is one atomic commit every 50 batches: a stop loses at most that much work.
     touch runs/queue.stop
     [ -f runs/queue.pid ] && kill "$(cat runs/queue.pid)" 2>/dev/null || true
-    pkill -INT -f "runs/rgm-train train" || true
+    pkill -TERM -f "runs/rgm-train train" || true
     echo "queue stopped" ;;
   start)
     if [ -f runs/queue.pid ] && kill -0 "$(cat runs/queue.pid)" 2>/dev/null; then
