@@ -7,7 +7,8 @@ Register two clouds (float32 or float64 arrays of shape (N, 3))::
     result.transformation        # (4, 4) float64, maps the source onto the target
 
 ``rgm.register`` runs what the ``rgm register`` command runs, with the same defaults: the RGM
-network with the model built into rgm, refined by ICP on the full clouds. ``rgm.Registrar``
+network with the model built into rgm and FGR, each refined by ICP on the full clouds, and the
+result that overlaps better (``result.candidates`` holds both, with their scores). ``rgm.Registrar``
 loads a method once for many pairs; ``rgm.metrics`` and ``rgm.modelnet_pairs`` give the
 paper's metrics and the benchmark's pairs, to evaluate any method on exactly rgm's pairs.
 
@@ -17,6 +18,7 @@ The work runs in Rust with the GIL released: Python threads register pairs in pa
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import os
 from collections.abc import Sequence
@@ -29,6 +31,7 @@ from . import _rgm
 
 __all__ = [
     "BenchmarkPair",
+    "Candidate",
     "DEFAULT_METHOD",
     "METHODS",
     "Metrics",
@@ -95,6 +98,25 @@ def _homogeneous(rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True, eq=False)  # arrays have no single truth value to compare by
+class Candidate:
+    """One method's result inside the default method (``"auto"``), which runs RGM and FGR.
+
+    Attributes:
+        method: ``"rgm+icp"`` or ``"fgr+icp"`` (without ``+icp`` when unrefined).
+        score: the share of each cloud's points within 0.02 of the other cloud after the
+            transform (in the unit-sphere frame), source to target plus target to source: 0 to
+            2, higher is better; the highest wins. ``None`` when the method failed.
+        transformation: (4, 4) float64, target ← source (the identity when it failed).
+        failure: why the method failed, or ``None``.
+    """
+
+    method: str
+    score: Optional[float]
+    transformation: np.ndarray
+    failure: Optional[str]
+
+
+@dataclass(frozen=True, eq=False)  # arrays have no single truth value to compare by
 class RegistrationResult:
     """The outcome of registering a source cloud onto a target cloud.
 
@@ -109,9 +131,13 @@ class RegistrationResult:
             RGM's matches of its last pass, or for FGR and ICP the source points that the
             transform brings within the method's scoring distance of their nearest target point.
         time_ms: the method's own time in milliseconds (no conversion, no file reading).
-        method: the method run, as ``rgm register`` names it (``rgm+icp`` when refined).
+        method: the method run, as ``rgm register`` names it (``auto+icp`` by default,
+            ``rgm+icp`` for RGM refined).
         iterations: RGM's passes plus ICP iterations, or the method's iterations.
         converged: whether the method's convergence test stopped it.
+        candidates: the default method's candidates (RGM's, then FGR's), each with its score;
+            empty for the other methods.
+        chosen: the method of the candidate returned, or ``None`` for the other methods.
     """
 
     transformation: np.ndarray
@@ -122,6 +148,8 @@ class RegistrationResult:
     method: str
     iterations: int
     converged: bool
+    candidates: list = dataclasses.field(default_factory=list)
+    chosen: Optional[str] = None
 
     @property
     def rotation(self) -> np.ndarray:
@@ -143,28 +171,30 @@ class Registrar:
     settings: unpickled in another process, it loads its network there, once per process.
 
     Args:
-        method: ``"rgm"`` (the RGM network), ``"fgr"`` (Fast Global Registration on FPFH
-            features) or ``"icp"`` (point-to-point ICP from the identity). Default: the
-            method of ``rgm register`` (``rgm.DEFAULT_METHOD``).
-        refine: refine the transform of RGM or FGR with trimmed point-to-plane ICP on the full
-            clouds (pairs closer than 0.2, then 0.1, then 0.05; RGM measures them in its
-            unit-sphere frame, FGR in the clouds' units). On by default, as in
-            ``rgm register``; ``False`` gives the method's own transform, as the paper's tables
-            do. ICP is its own refinement and ignores it.
-        weights: RGM only: a safetensors file of weights with the authors' parameter names
+        method: ``"auto"`` (RGM and FGR, each refined, the better by its overlap score),
+            ``"rgm"`` (the RGM network), ``"fgr"`` (Fast Global Registration on FPFH features)
+            or ``"icp"`` (point-to-point ICP from the identity). Default: the method of
+            ``rgm register`` (``rgm.DEFAULT_METHOD``, ``"auto"``).
+        refine: refine the transform of RGM or FGR (both, with ``"auto"``) by ICP on the full
+            clouds (trimmed point-to-plane with pairs closer than 0.2, then 0.1, then 0.05, and
+            point-to-point at 0.05, then 0.03; RGM and auto measure them in the unit-sphere
+            frame, FGR alone in the clouds' units). On by default, as in ``rgm register``;
+            ``False`` gives the method's own transform, as the paper's tables do. ICP is its own
+            refinement and ignores it.
+        weights: RGM and auto only: a safetensors file of weights with the authors' parameter names
             (made by ``rgm train``, or converted from the authors' PyTorch model). Default: the
             model built into rgm.
-        preset: RGM with ``weights`` only: the network sizes they were trained with,
+        preset: RGM or auto with ``weights`` only: the network sizes they were trained with,
             ``"paper"`` (default), ``"small"``, ``"fast"`` or ``"tiny"``.
-        test_statistics: RGM with ``weights`` only: the batch-norm statistics at test time,
+        test_statistics: RGM or auto with ``weights`` only: the batch-norm statistics at test time,
             ``"cloud"`` for weights trained by ``rgm train`` or ``"running"`` (default) for the
             authors' weights.
-        match_points: RGM only: match on at most this many randomly drawn points of each cloud
+        match_points: RGM and auto only: match on at most this many randomly drawn points of each cloud
             (a fixed seed, so a pair always gives the same result) and apply the transform to
             the full clouds; 0 matches on every point (memory grows with the square of the
             points; a request beyond the machine's free memory raises). Default: the built-in
             model's training size, 384; 1,024 with ``weights``.
-        passes: RGM only: passes of network, matching and Kabsch, each on the source moved by
+        passes: RGM and auto only: passes of network, matching and Kabsch, each on the source moved by
             the passes before. Default: 2, as in the paper.
 
     Raises:
@@ -200,7 +230,7 @@ class Registrar:
 
     @property
     def name(self) -> str:
-        """The method's name as ``rgm register`` prints it (``rgm+icp`` when refined)."""
+        """The method's name as ``rgm register`` prints it (``auto+icp`` by default)."""
         return self._native.name
 
     def register(self, source: np.ndarray, target: np.ndarray) -> RegistrationResult:
@@ -223,9 +253,17 @@ class Registrar:
         """
         source = _points("source", source)
         target = _points("target", target)
-        transformation, fitness, rmse, pairs, time_ms, iterations, converged = (
-            self._native.register(source, target)
-        )
+        (
+            transformation,
+            fitness,
+            rmse,
+            pairs,
+            time_ms,
+            iterations,
+            converged,
+            candidates,
+            chosen,
+        ) = self._native.register(source, target)
         return RegistrationResult(
             transformation=transformation,
             fitness=fitness,
@@ -235,6 +273,8 @@ class Registrar:
             method=self._native.name,
             iterations=iterations,
             converged=converged,
+            candidates=[Candidate(*fields) for fields in candidates],
+            chosen=chosen,
         )
 
     def __reduce__(self):
@@ -278,23 +318,23 @@ def register(
         target: the cloud to move it onto, float32 or float64, shape (M, 3). Clouds of any
             size and scale work: RGM moves both into its unit-sphere frame with one common
             scale, and reports the transform in the clouds' own units.
-        method: ``"rgm"`` (the RGM network), ``"fgr"`` (Fast Global Registration on FPFH
-            features) or ``"icp"`` (point-to-point ICP from the identity). Default: the
-            method of ``rgm register`` (``rgm.DEFAULT_METHOD``).
-        refine: refine the transform of RGM or FGR with trimmed point-to-plane ICP on the full
+        method: ``"auto"`` (RGM and FGR, the better by its overlap score), ``"rgm"``,
+            ``"fgr"`` or ``"icp"``. Default: the method of ``rgm register``
+            (``rgm.DEFAULT_METHOD``, ``"auto"``).
+        refine: refine the transform of RGM or FGR (both, with ``"auto"``) by ICP on the full
             clouds (``rgm register``'s default); ``False`` gives the method's own transform,
             as the paper's tables do. ICP ignores it.
-        weights: RGM only: a safetensors weight file (``rgm train`` makes them; the authors'
+        weights: RGM and auto only: a safetensors weight file (``rgm train`` makes them; the authors'
             PyTorch weights convert to one). Default: the model built into rgm.
-        preset: RGM with ``weights`` only: their network sizes, ``"paper"`` (default),
+        preset: RGM or auto with ``weights`` only: their network sizes, ``"paper"`` (default),
             ``"small"``, ``"fast"`` or ``"tiny"``.
-        test_statistics: RGM with ``weights`` only: batch-norm statistics at test time,
+        test_statistics: RGM or auto with ``weights`` only: batch-norm statistics at test time,
             ``"cloud"`` for weights from ``rgm train``, ``"running"`` (default) for the
             authors' weights.
-        match_points: RGM only: match on at most this many random points of each cloud
+        match_points: RGM and auto only: match on at most this many random points of each cloud
             (fixed seed); 0: every point. Default: 384 for the built-in model, 1,024 with
             ``weights``.
-        passes: RGM only: passes of network, matching and Kabsch. Default: 2.
+        passes: RGM and auto only: passes of network, matching and Kabsch. Default: 2.
 
     Returns:
         A RegistrationResult: ``transformation`` ((4, 4) float64, target ← source),

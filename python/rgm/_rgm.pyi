@@ -32,6 +32,10 @@ class Registrar:
         float,  # time in milliseconds
         int,  # iterations
         bool,  # converged
+        list[
+            tuple[str, Optional[float], npt.NDArray[np.float64], Optional[str]]
+        ],  # candidates: method, score, (4, 4) transformation, failure
+        Optional[str],  # the chosen candidate's method
     ]: ...
 
 class ModelNetPairs:

@@ -107,6 +107,14 @@ impl Registrar {
     }
 }
 
+/// One candidate of the combined method, in the order `rgm/__init__.py` reads it.
+type CandidateFields<'py> = (
+    &'static str,              // method
+    Option<f64>,               // score
+    Bound<'py, PyArray2<f64>>, // (4, 4) transformation
+    Option<String>,            // why it failed
+);
+
 /// Result fields of one registration, in the order `rgm/__init__.py` reads them.
 type Outcome<'py> = (
     Bound<'py, PyArray2<f64>>, // (4, 4) transformation, target ← source
@@ -116,6 +124,8 @@ type Outcome<'py> = (
     f64,                       // time in milliseconds
     usize,                     // iterations
     bool,                      // converged
+    Vec<CandidateFields<'py>>, // the combined method's candidates (empty for the others)
+    Option<&'static str>,      // the chosen candidate's method
 );
 
 #[pymethods]
@@ -190,6 +200,18 @@ impl Registrar {
             PyRuntimeError::new_err(format!("{} failed: {e}", self.prototype.name()))
         })?;
         let result = registration.result;
+        let candidates = registration
+            .candidates
+            .iter()
+            .map(|c| {
+                (
+                    c.method,
+                    c.score,
+                    matrix_array(py, &c.t_target_source),
+                    c.failure.clone(),
+                )
+            })
+            .collect();
         Ok((
             matrix_array(py, &result.t_target_source),
             result.fitness,
@@ -198,6 +220,10 @@ impl Registrar {
             registration.time_ms,
             result.iterations,
             result.converged,
+            candidates,
+            registration
+                .chosen
+                .map(|k| registration.candidates[k].method),
         ))
     }
 }

@@ -32,7 +32,7 @@ def registrar():
 def test_the_default_recovers_a_known_pose(airplane, registrar):
     target = moved(airplane, KNOWN)
     result = rgm.register(airplane, target)
-    assert result.method == "rgm+icp" == registrar.name
+    assert result.method == "auto+icp" == registrar.name
     assert result.transformation.shape == (4, 4) and result.transformation.dtype == np.float64
     angle, shift = errors(result.transformation, KNOWN)
     assert angle < 1.0 and shift < 0.01, (angle, shift)
@@ -44,15 +44,22 @@ def test_the_default_recovers_a_known_pose(airplane, registrar):
     np.testing.assert_array_equal(again.transformation, result.transformation)
     single = registrar.register(airplane, target.astype(np.float32))
     np.testing.assert_allclose(single.transformation, result.transformation, atol=1e-4)
-    # Refined: the fitness is the refinement's (source points within 0.05 of the target).
-    assert 0.9 < result.fitness <= 1.0 and 0 < result.inlier_rmse < 0.05
+    # Refined: the fitness is the refinement's (source points within 0.03 of the target).
+    assert 0.9 < result.fitness <= 1.0 and 0 < result.inlier_rmse < 0.03
     assert result.time_ms > 0 and result.iterations > 2 and result.converged
-    # RGM's matches of its last pass, on 384 of the 1,024 points each.
+    # Both candidates scored (two-way overlap, at most 2), the winner named.
+    assert [c.method for c in result.candidates] == ["rgm+icp", "fgr+icp"]
+    assert all(1.5 < c.score <= 2.0 and c.failure is None for c in result.candidates)
+    assert result.chosen in ("rgm+icp", "fgr+icp")
+    # The source points within 0.03 of their nearest target point after the transform.
     pairs = result.correspondences
     assert pairs.dtype == np.int64 and pairs.ndim == 2 and pairs.shape[1] == 2
-    assert 3 <= len(pairs) <= 384
+    assert len(pairs) == round(result.fitness * len(airplane))
     assert pairs.min() >= 0 and pairs.max() < 1024
-    assert len(np.unique(pairs[:, 0])) == len(pairs) == len(np.unique(pairs[:, 1]))
+    distances = np.linalg.norm(
+        moved(airplane[pairs[:, 0]], result.transformation) - target[pairs[:, 1]], axis=1
+    )
+    assert distances.max() < 0.03
 
 
 def test_strided_and_fortran_arrays_give_the_same_result(airplane, registrar):
@@ -82,9 +89,14 @@ def test_classical_methods_and_options(airplane):
     assert distances.max() < 0.025 and len(distances) == round(fgr.fitness * len(airplane))
     # ICP ignores refinement; one pass of RGM on 200 points is still RGM.
     assert rgm.register(airplane, target, method="icp").method == "icp"
-    small = rgm.register(airplane, target, passes=1, match_points=200, refine=False)
-    assert small.method == "rgm" and small.iterations == 1
-    assert len(small.correspondences) <= 200
+    small = rgm.register(
+        airplane, target, method="rgm", passes=1, match_points=200, refine=False
+    )
+    assert small.method == "rgm" and small.iterations == 1 and small.candidates == []
+    # RGM's matches of its last pass, one to one, on 200 of the 1,024 points each.
+    pairs = small.correspondences
+    assert 3 <= len(pairs) <= 200
+    assert len(np.unique(pairs[:, 0])) == len(pairs) == len(np.unique(pairs[:, 1]))
 
 
 @pytest.mark.parametrize(

@@ -20,7 +20,7 @@ use rgm_geom::refine::RefineConfig;
 use rgm_model::evaluate::{evaluate_pair, table_header, table_row};
 use rgm_model::render::{correct_fraction, correspondence_figure, registration_figure};
 use rgm_model::weights::{weights_dir, Manifest, ModelEntry};
-use rgm_model::{Method, PairRecord, Summary};
+use rgm_model::{Method, MethodOptions, PairRecord, Summary};
 
 use crate::project_root;
 
@@ -201,8 +201,9 @@ fn test_shapes(dataset: &ModelNet40, set: TestSet, limit: Option<usize>) -> Vec<
 /// The methods of the tables of `set`: ICP and FGR (identity initialisation, Open3D's
 /// settings; spec §6), on partial pairs also FGR refined by `rgm_geom::refine` (the classical
 /// pipeline RGM competes with there; on clean and noisy pairs FGR alone registers 97–100 %),
-/// then every model of the manifest trained for `set`, alone and refined (`NAME+icp`, not part of
-/// the ablation).
+/// `rgm register`'s default (`auto+icp`: RGM with the built-in model and FGR, both refined, the
+/// better by its score), then every model of the manifest trained for `set`, alone and refined
+/// (`NAME+icp`, not part of the ablation).
 fn candidates(set: TestSet, manifest: &Manifest) -> Result<Vec<Candidate>> {
     let mut list = vec![
         Candidate {
@@ -224,6 +225,15 @@ fn candidates(set: TestSet, manifest: &Manifest) -> Result<Vec<Candidate>> {
             stem: "fgr-icp".into(),
             variant: None,
             method: Method::fgr().refined(RefineConfig::default()),
+        });
+    }
+    // `rgm register`'s default on every test set, named by the built-in model it runs.
+    if let Some(builtin) = manifest.builtin_entry() {
+        list.push(Candidate {
+            name: "auto+icp".into(),
+            stem: format!("auto-{}-{}pairs-icp", builtin.name, builtin.pairs_seen),
+            variant: None,
+            method: MethodOptions::default().build()?,
         });
     }
     for entry in models_for(manifest, set) {
@@ -816,6 +826,21 @@ mod tests {
             names(TestSet::ALL[2]),
             [("icp".to_string(), "icp"), ("fgr".to_string(), "fgr")]
         );
+    }
+
+    #[test]
+    fn every_table_has_the_default_of_rgm_register() {
+        let manifest = Manifest::builtin();
+        for set in TestSet::ALL {
+            let list = candidates(set, &manifest).unwrap();
+            let default = list.iter().find(|c| c.name == "auto+icp").unwrap();
+            assert_eq!(default.method.name(), "auto+icp", "{}", set.key());
+            assert!(
+                default.stem.starts_with("auto-partial-fast-"),
+                "{}",
+                default.stem
+            );
+        }
     }
 
     #[test]

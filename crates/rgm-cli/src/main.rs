@@ -26,11 +26,14 @@ struct Cli {
 enum Command {
     /// Find the rigid transform that maps SRC onto TGT and print it as a 4×4 matrix.
     ///
-    /// Uses RGM with the partial-to-partial model built into rgm (or --weights), then refines
-    /// its transform with ICP on the full clouds (--no-refine: the network's own transform;
-    /// --method fgr or icp: the classical methods; docs/results.md compares them). Clouds of any
-    /// size and scale: both are scaled by one factor into the unit sphere for matching (and the
-    /// result scaled back), and RGM matches on 384 random points of each.
+    /// By default (--method auto) runs both RGM, with the partial-to-partial model built into
+    /// rgm (or --weights), and FGR, refines each with ICP, and returns the one whose result
+    /// overlaps better; the output names both candidates and their scores. --method rgm, fgr or
+    /// icp runs one method; --no-refine skips the refinement; docs/results.md compares them.
+    /// Clouds of any size, scale and density: unless already in the unit-sphere frame, both are
+    /// centred and scaled by one factor into it, clouds denser than ModelNet40's 1,024 points
+    /// are thinned by farthest-point sampling, RGM matches on 384 random points of each, and the
+    /// transform is reported for the clouds as given.
     /// Reads PLY (ascii or binary), OFF, XYZ/CSV text and .npy files.
     Register(commands::register::Args),
     /// Run a method over the ModelNet40 test pairs and print the paper's metrics.
@@ -61,6 +64,10 @@ pub enum MethodArg {
     Fgr,
     /// The RGM network: the model built into rgm, or --weights.
     Rgm,
+    /// RGM and FGR on the same pair, each refined, and the result that overlaps better (both
+    /// clouds' share of points within 0.02 of the other, in the unit-sphere frame): `rgm
+    /// register`'s default.
+    Auto,
 }
 
 /// How RGM's matrix products run.
@@ -111,8 +118,9 @@ impl From<StatisticsArg> for rgm_model::network::TestStatistics {
 /// The method and, for RGM, its weights and test-time options.
 #[derive(clap::Args, Debug, Clone)]
 pub struct MethodArgs {
-    /// The registration method [default: rgm, the RGM network with the model built into rgm
-    /// unless --weights names another].
+    /// The registration method [default: auto in `rgm register` and `rgm render`; rgm, the
+    /// paper's method, in `rgm eval`]. RGM uses the model built into rgm unless --weights names
+    /// another.
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
     /// RGM weights: a safetensors file with the authors' parameter names
@@ -138,11 +146,12 @@ pub struct MethodArgs {
     /// before [default: 2, as in the paper's tables].
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
     passes: Option<u16>,
-    /// Refine the transform of RGM or FGR with ICP on the full clouds: trimmed point-to-plane,
-    /// pairs closer than 0.2, then 0.1, then 0.05 (RGM measures them in its unit-sphere frame,
-    /// FGR in the clouds' own units, like its own radii, which suit unit-sized shapes). On by
-    /// default in `rgm register` and `rgm render`; `rgm eval` follows the paper's protocol and
-    /// refines only when asked.
+    /// Refine the transform of RGM or FGR (both with auto) with ICP on the full clouds: trimmed
+    /// point-to-plane with pairs closer than 0.2, then 0.1, then 0.05, and point-to-point at
+    /// 0.05, then 0.03 (RGM and auto measure them in the unit-sphere frame, FGR alone in the
+    /// clouds' own units, like its own radii, which suit unit-sized shapes). On by default in
+    /// `rgm register` and `rgm render`; `rgm eval` follows the paper's protocol and refines only
+    /// when asked.
     #[arg(long, overrides_with = "no_refine")]
     refine: bool,
     /// Report the method's own transform, unrefined (as the paper's tables do).
@@ -154,16 +163,28 @@ pub struct MethodArgs {
     precision: PrecisionArg,
 }
 
+/// What a command runs when the options leave it open.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Defaults {
+    /// `rgm register`'s: [`MethodOptions::default`], RGM and FGR combined, refined.
+    Register,
+    /// The paper's protocol (`rgm eval`): RGM, unrefined.
+    Paper,
+}
+
 impl MethodArgs {
     /// The method these options select, with its weights loaded; refined when --refine is
-    /// given, or by `refine_by_default` unless --no-refine is (ICP is its own refinement).
+    /// given, or by `defaults` unless --no-refine is (ICP is its own refinement).
     /// `rgm_model::MethodOptions` builds it, as it does for the Python package.
-    fn build(&self, refine_by_default: bool) -> anyhow::Result<Method> {
+    fn build(&self, defaults: Defaults) -> anyhow::Result<Method> {
+        let refine_by_default = defaults == Defaults::Register;
         let method = match self.method {
-            None => MethodOptions::default().method,
+            None if refine_by_default => MethodOptions::default().method,
+            None => MethodName::Rgm,
             Some(MethodArg::Icp) => MethodName::Icp,
             Some(MethodArg::Fgr) => MethodName::Fgr,
             Some(MethodArg::Rgm) => MethodName::Rgm,
+            Some(MethodArg::Auto) => MethodName::Auto,
         };
         if method == MethodName::Icp && self.refine {
             anyhow::bail!("--refine adds ICP after RGM or FGR; --method icp is ICP already");

@@ -63,6 +63,38 @@ impl PointCloud {
         Self::new(order.iter().map(|&i| self.points[i]).collect())
     }
 
+    /// Indices of at most `count` points picked by farthest-point sampling: the first point,
+    /// then again and again the point farthest from those picked (ties to the lowest index),
+    /// until `count` are picked or every point left coincides with a picked one; every index,
+    /// in order, when the cloud has no more than `count` points. It evens out the density of a
+    /// cloud (a scan dense in one place and sparse in another, duplicated points) without
+    /// choosing a grid size, and is deterministic.
+    pub fn farthest_point_indices(&self, count: usize) -> Vec<usize> {
+        let n = self.points.len();
+        if n <= count {
+            return (0..n).collect();
+        }
+        let mut picked = Vec::with_capacity(count);
+        let mut nearest = vec![f64::INFINITY; n]; // (N,) squared distance to the picked points
+        let mut next = 0;
+        while picked.len() < count {
+            picked.push(next);
+            let p = self.points[next];
+            let mut farthest = (0, -1.0);
+            for (i, d) in nearest.iter_mut().enumerate() {
+                *d = d.min((self.points[i] - p).norm_squared());
+                if *d > farthest.1 {
+                    farthest = (i, *d);
+                }
+            }
+            if farthest.1 <= 0.0 {
+                break;
+            }
+            next = farthest.0;
+        }
+        picked
+    }
+
     /// One point per occupied cube of side `voxel` (cubes aligned on the origin): the mean of
     /// the cube's points, as Open3D's `voxel_down_sample`; in the order the cubes are first met.
     pub fn voxel_downsampled(&self, voxel: f64) -> Self {
@@ -109,6 +141,24 @@ mod tests {
         assert!((d.points[0] - Point3::new(0.2, 0.2, 0.2)).norm() < 1e-15);
         assert_eq!(d.points[1], Point3::new(1.2, 0.0, 0.0));
         assert_eq!(d.points[2], Point3::new(-0.2, 0.0, 0.0));
+    }
+
+    #[test]
+    fn farthest_point_sampling_spreads_out_and_drops_duplicates() {
+        // 0, 1, …, 10 on a line, with 3 and 7 repeated: the ends first, then the middle.
+        let mut xs: Vec<f64> = (0..=10).map(f64::from).collect();
+        xs.extend([3.0, 7.0]);
+        let c = PointCloud::new(xs.iter().map(|&x| Point3::new(x, 0.0, 0.0)).collect());
+        assert_eq!(c.farthest_point_indices(3), vec![0, 10, 5]);
+        // Then 2, 3, 7, 8 and the second 7 are 2 from the picked points: the lowest index
+        // first, then 7 (3 is now 1 from 2).
+        assert_eq!(c.farthest_point_indices(5), vec![0, 10, 5, 2, 7]);
+        // 11 distinct points: asked for 12, it stops there, and the repeats are never picked.
+        let all = c.farthest_point_indices(12);
+        assert_eq!(all.len(), 11);
+        assert!(!all.contains(&11) && !all.contains(&12));
+        assert_eq!(c.farthest_point_indices(20), (0..13).collect::<Vec<_>>());
+        assert!(PointCloud::default().farthest_point_indices(4).is_empty());
     }
 
     #[test]

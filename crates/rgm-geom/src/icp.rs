@@ -60,13 +60,28 @@ pub fn register(
             ),
         });
     }
-    let index = KnnIndex::new(&target.points);
+    Ok(register_with_index(
+        source,
+        target,
+        &KnnIndex::new(&target.points),
+        config,
+    ))
+}
+
+/// [`register`] with the target's index built already (`index` over `target.points`), for
+/// callers that run several ICP stages on one target. The clouds and distance are not checked.
+pub(crate) fn register_with_index(
+    source: &PointCloud,
+    target: &PointCloud,
+    index: &KnnIndex,
+    config: &IcpConfig,
+) -> RegistrationResult {
     let max_d = config.max_correspondence_distance;
     let identity = RigidTransform::identity();
     let mut transform = config.initial;
     let mut moved: Vec<Point3<f64>> = source.points.iter().map(|p| transform.apply(p)).collect(); // (N,)
     let mut pairs = Vec::with_capacity(source.len());
-    let mut current = score(&moved, &index, &identity, max_d, Some(&mut pairs));
+    let mut current = score(&moved, index, &identity, max_d, Some(&mut pairs));
     let (mut xs, mut ys) = (
         Vec::with_capacity(source.len()),
         Vec::with_capacity(source.len()),
@@ -88,7 +103,7 @@ pub fn register(
             *m = transform.apply(p);
         }
         let previous = current;
-        current = score(&moved, &index, &identity, max_d, Some(&mut pairs));
+        current = score(&moved, index, &identity, max_d, Some(&mut pairs));
         if (previous.fitness - current.fitness).abs() < config.relative_fitness
             && (previous.inlier_rmse - current.inlier_rmse).abs() < config.relative_rmse
         {
@@ -96,9 +111,7 @@ pub fn register(
             break;
         }
     }
-    Ok(RegistrationResult::scored(
-        transform, iterations, converged, current,
-    ))
+    RegistrationResult::scored(transform, iterations, converged, current)
 }
 
 /// Both clouds non-empty with finite coordinates.

@@ -12,11 +12,17 @@
 //! - **coarse to fine**: stages with shrinking correspondence distances (0.2, 0.1, 0.05 for
 //!   shapes in the unit sphere), a few iterations each.
 //!
+//! It ends with point-to-point stages ([`crate::icp`], untrimmed, at 0.05 then 0.03): once the
+//! clouds lie on each other, the nearest points are mostly the same surface points, and fitting
+//! them point to point pins down the slide along the surface that point-to-plane leaves loose.
+//! On 300 partial validation pairs this took the median rotation error of the registered pairs
+//! from 0.55° to 0.31° and registered 4 points more (docs/training/README.md, session 6).
+//!
 //! Normals of the target are estimated once by PCA ([`crate::normals`]).
 
 use nalgebra::{Matrix6, Point3, Rotation3, Vector3, Vector6};
 
-use crate::icp::check_clouds;
+use crate::icp::{self, check_clouds, IcpConfig};
 use crate::normals::{estimate_normals, NormalsConfig};
 use crate::registration::{score, RegistrationResult};
 use crate::{GeomError, KnnIndex, PointCloud, Result, RigidTransform};
@@ -33,6 +39,9 @@ pub struct RefineConfig {
     /// Fraction of the pairs found in an iteration that the step fits: the closest ones
     /// (default 0.8, in (0, 1]).
     pub trim: f64,
+    /// Correspondence distance of each point-to-point stage run after the point-to-plane ones
+    /// (Open3D's ICP loop and convergence test, at most 30 iterations; default 0.05, 0.03).
+    pub point_distances: Vec<f64>,
     /// How the target's normals are estimated (default radius 0.2, at most 30 neighbours).
     pub normals: NormalsConfig,
 }
@@ -43,6 +52,7 @@ impl Default for RefineConfig {
             distances: vec![0.2, 0.1, 0.05],
             iterations: 10,
             trim: 0.8,
+            point_distances: vec![0.05, 0.03],
             normals: NormalsConfig::default(),
         }
     }
@@ -50,8 +60,12 @@ impl Default for RefineConfig {
 
 impl RefineConfig {
     /// The last (finest) stage's correspondence distance, at which the result is scored.
-    fn finest_distance(&self) -> f64 {
-        self.distances.last().copied().unwrap_or(0.0)
+    pub fn finest_distance(&self) -> f64 {
+        self.point_distances
+            .last()
+            .or(self.distances.last())
+            .copied()
+            .unwrap_or(0.0)
     }
 
     fn validate(&self, op: &'static str) -> Result<()> {
@@ -60,6 +74,16 @@ impl RefineConfig {
             return bad(format!(
                 "the stages' correspondence distances must be finite and > 0, got {:?}",
                 self.distances
+            ));
+        }
+        if !self
+            .point_distances
+            .iter()
+            .all(|&d| d > 0.0 && d.is_finite())
+        {
+            return bad(format!(
+                "the point-to-point stages' distances must be finite and > 0, got {:?}",
+                self.point_distances
             ));
         }
         if !(self.trim > 0.0 && self.trim <= 1.0) {
@@ -117,6 +141,21 @@ pub fn refine(
                 break;
             }
         }
+    }
+    for &max_correspondence_distance in &config.point_distances {
+        let stage = icp::register_with_index(
+            source,
+            target,
+            &index,
+            &IcpConfig {
+                max_correspondence_distance,
+                initial: transform,
+                ..IcpConfig::default()
+            },
+        );
+        transform = stage.t_target_source;
+        iterations += stage.iterations;
+        converged = stage.converged;
     }
     let moved_score = score(
         &source.points,
@@ -250,6 +289,35 @@ mod tests {
             "refined error {angle:.3}°, {shift:.4}"
         );
         assert!(refined.iterations > 3 && refined.converged, "{refined:?}");
+    }
+
+    /// Two crops of one jittered shape, as the benchmark pairs them: the point-to-point stages
+    /// pin down what point-to-plane leaves loose along the surface.
+    #[test]
+    fn point_to_point_stages_sharpen_the_result() {
+        let shape = airplane();
+        let truth = RigidTransform::new(
+            rotation_xyz_intrinsic(0.1, -0.05, 0.08),
+            Vector3::new(0.03, -0.02, 0.01),
+        );
+        let target = cropped_and_jittered(&shape, Vector3::new(1.0, 0.3, 0.0), 3);
+        let source = cropped_and_jittered(&shape, Vector3::new(0.6, 1.0, 0.2), 4)
+            .transformed(&truth.inverse());
+        let start = RigidTransform::identity();
+        let plane_only = RefineConfig {
+            point_distances: vec![],
+            ..RefineConfig::default()
+        };
+        let coarse = refine(&source, &target, &start, &plane_only).unwrap();
+        let fine = refine(&source, &target, &start, &RefineConfig::default()).unwrap();
+        let (coarse_angle, _) = error(&coarse.t_target_source, &truth);
+        let (fine_angle, fine_shift) = error(&fine.t_target_source, &truth);
+        // Measured: 0.84° after the point-to-plane stages, 0.64° (and 0.0035) after all.
+        assert!(
+            fine_angle < coarse_angle - 0.15 && fine_shift < 0.01,
+            "{fine_angle:.3}° and {fine_shift:.4} vs {coarse_angle:.3}°"
+        );
+        assert!(fine.iterations > coarse.iterations);
     }
 
     #[test]

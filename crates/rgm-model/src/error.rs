@@ -42,6 +42,9 @@ pub enum MethodError {
         estimate: u64,
         available: u64,
     },
+    /// Every candidate of the combined method failed; each one's cause, `method: why; …`.
+    #[error("every candidate failed ({0})")]
+    AllCandidatesFailed(String),
     /// Options that do not fit the method ([`crate::options::MethodOptions`]).
     #[error("{0}")]
     InvalidOptions(String),

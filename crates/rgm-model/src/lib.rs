@@ -7,6 +7,7 @@
 //! builds on it but the `rgm` command, xtask and the Python package (`python/`). It owns no
 //! geometry or tensor op of its own.
 
+pub mod combined;
 pub mod error;
 pub mod evaluate;
 pub mod method;
@@ -17,6 +18,7 @@ pub mod render;
 pub mod train;
 pub mod weights;
 
+pub use combined::{Candidate, CombinedRegistrar};
 pub use error::MethodError;
 pub use evaluate::{PairRecord, Summary};
 pub use method::{Method, Registration};

@@ -9,6 +9,7 @@ use rgm_geom::refine::{self, RefineConfig};
 use rgm_geom::registration::score;
 use rgm_geom::{KnnIndex, PointCloud, RegistrationResult};
 
+use crate::combined::{Candidate, CombinedRegistrar};
 use crate::error::MethodError;
 use crate::network::{Config, Rgm};
 use crate::pipeline::{PipelineConfig, RgmRegistrar};
@@ -28,6 +29,9 @@ pub enum Method {
     },
     /// The RGM network and the test-time procedure of spec §4.
     Rgm(Box<RgmRegistrar>),
+    /// RGM and FGR, each refined when asked, and the better by a score without ground truth
+    /// ([`crate::combined`]): `rgm register`'s default.
+    Combined(Box<CombinedRegistrar>),
 }
 
 /// A method's result on one pair and the time the method itself took.
@@ -37,6 +41,10 @@ pub struct Registration {
     pub result: RegistrationResult,
     /// Wall time of the method alone (no file reading), in milliseconds.
     pub time_ms: f64,
+    /// The combined method's candidates, each with its score (empty for the other methods),
+    /// and the index of the one returned.
+    pub candidates: Vec<Candidate>,
+    pub chosen: Option<usize>,
 }
 
 impl Method {
@@ -66,6 +74,10 @@ impl Method {
     /// already its own refinement, is returned unchanged.
     pub fn refined(self, refine: RefineConfig) -> Self {
         match self {
+            Self::Combined(mut combined) => {
+                combined.refine = Some(refine);
+                Self::Combined(combined)
+            }
             Self::Fgr(fgr) | Self::FgrRefined { fgr, .. } => Self::FgrRefined { fgr, refine },
             Self::Rgm(mut registrar) => {
                 registrar.config.refine = Some(refine);
@@ -81,6 +93,7 @@ impl Method {
             Self::Icp(_) | Self::Fgr(_) => false,
             Self::FgrRefined { .. } => true,
             Self::Rgm(registrar) => registrar.config.refine.is_some(),
+            Self::Combined(combined) => combined.refine.is_some(),
         }
     }
 
@@ -93,6 +106,8 @@ impl Method {
             Self::FgrRefined { .. } => "fgr+icp",
             Self::Rgm(_) if self.is_refined() => "rgm+icp",
             Self::Rgm(_) => "rgm",
+            Self::Combined(_) if self.is_refined() => "auto+icp",
+            Self::Combined(_) => "auto",
         }
     }
 
@@ -126,10 +141,17 @@ impl Method {
                 }
             }
             Self::Rgm(registrar) => registrar.register(source, target)?,
+            Self::Combined(combined) => combined.register(source, target)?,
+        };
+        let (candidates, chosen) = match self {
+            Self::Combined(combined) => (combined.candidates().to_vec(), combined.chosen()),
+            _ => (Vec::new(), None),
         };
         Ok(Registration {
             result,
             time_ms: start.elapsed().as_secs_f64() * 1e3,
+            candidates,
+            chosen,
         })
     }
 
@@ -147,7 +169,8 @@ impl Method {
             Self::Rgm(registrar) => return registrar.correspondences().to_vec(),
             Self::Icp(config) => config.max_correspondence_distance,
             Self::Fgr(config) => config.maximum_correspondence_distance,
-            Self::FgrRefined { refine, .. } => refine.distances.last().copied().unwrap_or(0.0),
+            Self::FgrRefined { refine, .. } => refine.finest_distance(),
+            Self::Combined(combined) => combined.scoring_distance(),
         };
         let mut pairs = Vec::new();
         score(
@@ -192,7 +215,10 @@ mod tests {
                 Method::fgr(),
                 FgrConfig::default().maximum_correspondence_distance,
             ),
-            (Method::fgr().refined(refine.clone()), refine.distances[2]),
+            (
+                Method::fgr().refined(refine.clone()),
+                refine.finest_distance(),
+            ),
         ] {
             let result = method.register(&source, &target).unwrap().result;
             let pairs = method.correspondences(&source, &target, &result);

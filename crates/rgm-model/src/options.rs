@@ -10,6 +10,7 @@ use rgm_geom::refine::RefineConfig;
 
 use rgm_nn::Precision;
 
+use crate::combined::CombinedRegistrar;
 use crate::error::MethodError;
 use crate::method::Method;
 use crate::network::{Config, TestStatistics};
@@ -22,13 +23,16 @@ pub enum MethodName {
     /// Fast Global Registration on FPFH features.
     Fgr,
     /// The RGM network: the built-in model or given weights.
-    #[default]
     Rgm,
+    /// RGM and FGR, each refined, and the better by a score without ground truth
+    /// ([`crate::combined`]).
+    #[default]
+    Auto,
 }
 
 impl MethodName {
     /// Every name, in the order the command line lists them.
-    pub const ALL: [Self; 3] = [Self::Icp, Self::Fgr, Self::Rgm];
+    pub const ALL: [Self; 4] = [Self::Icp, Self::Fgr, Self::Rgm, Self::Auto];
 
     /// The name as users spell it (`rgm`).
     pub fn name(self) -> &'static str {
@@ -36,6 +40,7 @@ impl MethodName {
             Self::Icp => "icp",
             Self::Fgr => "fgr",
             Self::Rgm => "rgm",
+            Self::Auto => "auto",
         }
     }
 }
@@ -64,10 +69,10 @@ pub const WEIGHTS_MATCH_POINTS: usize = 1024;
 /// A method and its options; `None` leaves an option at the method's own default.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MethodOptions {
-    /// The method (RGM by default).
+    /// The method (RGM and FGR combined by default).
     pub method: MethodName,
-    /// RGM weights: a safetensors file with the authors' parameter names; `None`: the model
-    /// built into rgm ([`crate::weights::builtin_method`]).
+    /// RGM weights (for `rgm` and `auto`): a safetensors file with the authors' parameter
+    /// names; `None`: the model built into rgm ([`crate::weights::builtin_method`]).
     pub weights: Option<PathBuf>,
     /// The network sizes `weights` were trained with ([`Config::preset`]; `paper` when `None`).
     pub preset: Option<String>,
@@ -82,9 +87,9 @@ pub struct MethodOptions {
     /// RGM's matrix products: f32 (the default), or bf16 where the processor has AMX or
     /// AVX-512 BF16 ([`Precision`]).
     pub precision: Precision,
-    /// Refine the transform of RGM or FGR with [`rgm_geom::refine`] ([`Method::refined`]); on
-    /// by default, as in `rgm register` (the paper's protocol, and `rgm eval`, turn it off).
-    /// ICP is its own refinement and ignores it.
+    /// Refine the transform of RGM or FGR (both, for `auto`) with [`rgm_geom::refine`]
+    /// ([`Method::refined`]); on by default, as in `rgm register` (the paper's protocol, and
+    /// `rgm eval`, turn it off). ICP is its own refinement and ignores it.
     pub refine: bool,
 }
 
@@ -114,6 +119,16 @@ impl MethodOptions {
             MethodName::Icp => Method::icp(),
             MethodName::Fgr => Method::fgr(),
             MethodName::Rgm => self.build_rgm()?,
+            MethodName::Auto => {
+                let Method::Rgm(rgm) = self.build_rgm()? else {
+                    unreachable!("build_rgm builds RGM")
+                };
+                Method::Combined(Box::new(CombinedRegistrar::new(
+                    *rgm,
+                    rgm_geom::fgr::FgrConfig::default(),
+                    None,
+                )))
+            }
         };
         Ok(if self.refine {
             method.refined(RefineConfig::default())
@@ -130,8 +145,8 @@ impl MethodOptions {
             || self.match_points.is_some()
             || self.passes.is_some()
             || self.precision != Precision::F32;
-        if self.method != MethodName::Rgm && rgm_only {
-            return invalid("weights, preset, test statistics, match points, passes and precision apply to the rgm method only");
+        if matches!(self.method, MethodName::Icp | MethodName::Fgr) && rgm_only {
+            return invalid("weights, preset, test statistics, match points, passes and precision apply to the rgm and auto methods only");
         }
         if self.weights.is_none() && (self.preset.is_some() || self.test_statistics.is_some()) {
             return invalid("a preset and test statistics describe given weights; the built-in model has its own");
@@ -175,12 +190,17 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_default_is_the_built_in_rgm_refined() {
+    fn the_default_is_the_built_in_rgm_and_fgr_refined() {
         let method = MethodOptions::default().build().unwrap();
-        assert_eq!(method.name(), "rgm+icp");
-        let Method::Rgm(registrar) = method else {
-            panic!("an RGM method")
+        assert_eq!(method.name(), "auto+icp");
+        let Method::Combined(combined) = method else {
+            panic!("the combined method")
         };
+        assert_eq!(combined.refine, Some(RefineConfig::default()));
+        assert_eq!(combined.fgr, rgm_geom::fgr::FgrConfig::default());
+        // RGM inside is the built-in model, unrefined (the combined method refines).
+        let registrar = combined.rgm;
+        assert!(registrar.config.refine.is_none());
         let Method::Rgm(builtin) = crate::weights::builtin_method().unwrap() else {
             panic!("an RGM method")
         };
@@ -262,7 +282,7 @@ mod tests {
                     passes: Some(1),
                     ..fgr.clone()
                 },
-                "apply to the rgm method only",
+                "apply to the rgm and auto methods only",
             ),
             (
                 MethodOptions {
@@ -300,7 +320,7 @@ mod tests {
         let err = "gicp".parse::<MethodName>().unwrap_err().to_string();
         assert_eq!(
             err,
-            "unknown method \"gicp\" (expected one of icp, fgr, rgm)"
+            "unknown method \"gicp\" (expected one of icp, fgr, rgm, auto)"
         );
     }
 }

@@ -32,7 +32,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     let (dataset, generator) = args.data.open()?;
     let shapes = args.data.shapes(&dataset);
-    let method = args.method.build(false)?;
+    let method = args.method.build(crate::Defaults::Paper)?;
     let bar = progress(shapes.len(), method.name());
     let recalled = AtomicUsize::new(0);
     let pool = rayon::ThreadPoolBuilder::new()

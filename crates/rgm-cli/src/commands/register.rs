@@ -31,7 +31,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     let source = read_point_cloud(&args.source)?;
     let target = read_point_cloud(&args.target)?;
-    let mut method = args.method.build(true)?;
+    let mut method = args.method.build(crate::Defaults::Register)?;
     let registration = crate::register_files(
         &mut method,
         (&source, &target),
@@ -45,7 +45,22 @@ pub fn run(args: Args) -> Result<()> {
         write_point_cloud(out, &source.transformed(&result.t_target_source))?;
     }
     let rows = result.t_target_source.to_rows();
+    let chosen = registration
+        .chosen
+        .map(|k| registration.candidates[k].method);
     if args.json {
+        let candidates: Vec<serde_json::Value> = registration
+            .candidates
+            .iter()
+            .map(|c| {
+                serde_json::json!({
+                    "method": c.method,
+                    "score": c.score,
+                    "transform": c.t_target_source.to_rows(),
+                    "failure": c.failure,
+                })
+            })
+            .collect();
         let value = serde_json::json!({
             "method": method.name(),
             "transform": rows,
@@ -58,6 +73,8 @@ pub fn run(args: Args) -> Result<()> {
             "inlier_rmse": result.inlier_rmse,
             "source_points": source.len(),
             "target_points": target.len(),
+            "candidates": candidates,
+            "chosen": chosen,
         });
         println!("{value}");
         return Ok(());
@@ -86,6 +103,20 @@ pub fn run(args: Args) -> Result<()> {
         },
         registration.time_ms
     );
+    for (k, c) in registration.candidates.iter().enumerate() {
+        let mark = if Some(k) == registration.chosen {
+            " (chosen)"
+        } else {
+            ""
+        };
+        match (c.score, &c.failure) {
+            (Some(score), _) => {
+                println!("# candidate {}: overlap score {score:.4}{mark}", c.method)
+            }
+            (None, Some(why)) => println!("# candidate {}: failed: {why}", c.method),
+            (None, None) => println!("# candidate {}: no score", c.method),
+        }
+    }
     if let Some(out) = &args.out {
         println!("# wrote the moved source to {}", out.display());
     }

@@ -65,7 +65,7 @@ pub fn run(args: Args) -> Result<()> {
     let found = match (&given, &args.matrix) {
         (Some(_), None) => None, // nothing to find
         _ => {
-            let mut method = args.method.build(true)?;
+            let mut method = args.method.build(crate::Defaults::Register)?;
             let registration = crate::register_files(
                 &mut method,
                 (&source, &target),

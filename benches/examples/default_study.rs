@@ -1,0 +1,379 @@
+//! The measurements behind `rgm register`'s default (issue 17), on validation pairs: how the
+//! refinement ends, which score picks between RGM and FGR, and what the network's frame does.
+//!
+//! ```text
+//! cargo run --release -p rgm-benches --example default_study -- --data DIR \
+//!     [--setting partial] [--limit 300] [--split validation] [--frame native|centred] \
+//!     [--study choices|robustness] [--versions 'as they are,half size,twice the size,20000 points each']
+//! ```
+//!
+//! `--study robustness` instead runs `rgm register`'s default on each pair as it is, at half
+//! and at twice its size, and with each cloud made of 20,000 points (every point repeated, with
+//! N(0, 0.005²) noise), and prints each version's recall (transforms scaled back to the pair's
+//! size) and time.
+//!
+//! For each pair: RGM (the built-in model, unrefined) and FGR give a start; each refinement
+//! variant refines both starts; each score picks a candidate per pair. Printed: one row per
+//! (refinement, score) with recall, the share off by more than 45° and the median MIE(R) of the
+//! recalled pairs. `--frame centred` moves each pair into the frame of
+//! `Normalisation::centred` before everything (the transform is reported back in the pair's frame).
+
+use std::time::Instant;
+
+use rgm_data::{ModelNet40, PairGenerator, Setting, Split};
+use rgm_geom::fgr::{self, FgrConfig};
+use rgm_geom::metrics::PairMetrics;
+use rgm_geom::refine::{self, RefineConfig};
+use rgm_geom::registration::score;
+use rgm_geom::{KnnIndex, PointCloud, RigidTransform};
+use rgm_model::{MethodOptions, Normalisation};
+
+fn arg(args: &[String], name: &str) -> Option<String> {
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1).cloned())
+}
+
+/// The refinements compared: `rgm_geom::refine`'s point-to-plane stages (session 4), then
+/// point-to-point stages at these distances (the default since session 6: 0.05, 0.03).
+const REFINEMENTS: [(&str, &[f64]); 4] = [
+    ("plane", &[]),
+    ("plane + point 0.05", &[0.05]),
+    ("plane + point 0.03", &[0.03]),
+    ("plane + point 0.05, 0.03", &[0.05, 0.03]),
+];
+
+fn refined(
+    s: &PointCloud,
+    t: &PointCloud,
+    start: &RigidTransform,
+    points: &[f64],
+) -> RigidTransform {
+    let config = RefineConfig {
+        point_distances: points.to_vec(),
+        ..RefineConfig::default()
+    };
+    refine::refine(s, t, start, &config)
+        .map(|r| r.t_target_source)
+        .unwrap_or(*start)
+}
+
+/// A score of a transform without ground truth: higher is better.
+type Score = (
+    &'static str,
+    fn(&PointCloud, &KnnIndex, &PointCloud, &KnnIndex, &RigidTransform) -> f64,
+);
+
+fn fitness(s: &PointCloud, ti: &KnnIndex, t: &RigidTransform, d: f64) -> f64 {
+    score(&s.points, ti, t, d, None).fitness
+}
+
+/// Mean of min(d, clip) from the moved source to the target and back (the CCD of spec §5 at
+/// `clip`), negated.
+fn neg_ccd(
+    s: &PointCloud,
+    si: &KnnIndex,
+    tc: &PointCloud,
+    ti: &KnnIndex,
+    t: &RigidTransform,
+    clip: f64,
+) -> f64 {
+    let inv = t.inverse();
+    let there: f64 = s
+        .points
+        .iter()
+        .map(|p| ti.nearest(&t.apply(p)).1.min(clip))
+        .sum::<f64>()
+        / s.len() as f64;
+    let back: f64 = tc
+        .points
+        .iter()
+        .map(|q| si.nearest(&inv.apply(q)).1.min(clip))
+        .sum::<f64>()
+        / tc.len() as f64;
+    -(there + back)
+}
+
+const SCORES: [Score; 6] = [
+    ("fitness 0.05", |s, _, _, ti, t| fitness(s, ti, t, 0.05)),
+    ("fitness 0.02", |s, _, _, ti, t| fitness(s, ti, t, 0.02)),
+    ("fitness 0.02 both ways", |s, si, tc, ti, t| {
+        fitness(s, ti, t, 0.02) + fitness(tc, si, &t.inverse(), 0.02)
+    }),
+    ("CCD 0.1", |s, si, tc, ti, t| neg_ccd(s, si, tc, ti, t, 0.1)),
+    ("CCD 0.05", |s, si, tc, ti, t| {
+        neg_ccd(s, si, tc, ti, t, 0.05)
+    }),
+    ("CCD 0.03", |s, si, tc, ti, t| {
+        neg_ccd(s, si, tc, ti, t, 0.03)
+    }),
+];
+
+struct Outcome {
+    recall: bool,
+    mie_r: f64,
+}
+
+fn outcome(t: &RigidTransform, gt: &RigidTransform, s: &PointCloud, tc: &PointCloud) -> Outcome {
+    let m = PairMetrics::compute(t, gt, s, tc).expect("non-empty clouds");
+    Outcome {
+        recall: m.recall,
+        mie_r: m.mie_r_deg,
+    }
+}
+
+/// Recall, the share off by more than 45°, and the median MIE(R) of the recalled pairs.
+fn summary(outcomes: &[Outcome]) -> (f64, f64, f64) {
+    let n = outcomes.len() as f64;
+    let recall = outcomes.iter().filter(|o| o.recall).count() as f64 / n;
+    let wild = outcomes.iter().filter(|o| o.mie_r > 45.0).count() as f64 / n;
+    let mut good: Vec<f64> = outcomes
+        .iter()
+        .filter(|o| o.recall)
+        .map(|o| o.mie_r)
+        .collect();
+    good.sort_by(f64::total_cmp);
+    let median = good.get(good.len() / 2).copied().unwrap_or(f64::NAN);
+    (recall, wild, median)
+}
+
+fn row(name: &str, outcomes: &[Outcome]) {
+    let (recall, wild, median) = summary(outcomes);
+    println!(
+        "| {name:<58} | {:>6.2} % | {:>5.2} % | {:>6.3}° |",
+        100.0 * recall,
+        100.0 * wild,
+        median
+    );
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    rgm_nn::threads::flush_denormals_to_zero();
+    let args: Vec<String> = std::env::args().collect();
+    let data = arg(&args, "--data").unwrap_or_else(|| "../shared/data/modelnet40_npy1024".into());
+    let setting: Setting = arg(&args, "--setting")
+        .unwrap_or_else(|| "partial".into())
+        .parse()?;
+    let limit: usize = arg(&args, "--limit").map_or(Ok(300), |v| v.parse())?;
+    let split = match arg(&args, "--split").as_deref() {
+        Some("test") => Split::Test,
+        _ => Split::Validation,
+    };
+    let centred = arg(&args, "--frame").as_deref() == Some("centred");
+    let dataset = ModelNet40::open(&data)?;
+    let shapes = dataset.split(split, false);
+    let generator = PairGenerator::new(setting);
+    if arg(&args, "--study").as_deref() == Some("robustness") {
+        let versions = arg(&args, "--versions")
+            .unwrap_or_else(|| "as they are,half size,twice the size,20000 points each".into());
+        let versions: Vec<&str> = versions.split(',').collect();
+        return robustness(&generator, &shapes, limit.min(shapes.len()), &versions);
+    }
+    let mut rgm = MethodOptions {
+        refine: false,
+        ..MethodOptions::default()
+    }
+    .build()?;
+    let fgr_config = FgrConfig::default();
+
+    let n = limit.min(shapes.len());
+    // [start][refinement][candidate]: candidate 0 RGM, 1 FGR.
+    let mut transforms: Vec<Vec<[RigidTransform; 2]>> = Vec::new();
+    let mut pairs = Vec::new();
+    let (mut rgm_ms, mut fgr_ms, mut refine_ms) = (0.0, 0.0, vec![0.0; REFINEMENTS.len()]);
+    for i in 0..n {
+        let pair = generator.test_pair(&shapes, i)?;
+        let frame = if centred {
+            Normalisation::centred(&pair.source, &pair.target)
+        } else {
+            Normalisation::identity()
+        };
+        let (s, t) = (frame.source(&pair.source), frame.target(&pair.target));
+        let clock = Instant::now();
+        let start_rgm = rgm
+            .register(&s, &t)
+            .map(|r| r.result.t_target_source)
+            .unwrap_or_else(|_| RigidTransform::identity());
+        rgm_ms += clock.elapsed().as_secs_f64() * 1e3;
+        let clock = Instant::now();
+        let start_fgr = fgr::register(&s, &t, &fgr_config)
+            .map(|r| r.t_target_source)
+            .unwrap_or_else(|_| RigidTransform::identity());
+        fgr_ms += clock.elapsed().as_secs_f64() * 1e3;
+        let mut per = vec![[start_rgm, start_fgr]];
+        for (k, (_, points)) in REFINEMENTS.iter().enumerate() {
+            let clock = Instant::now();
+            per.push([
+                refined(&s, &t, &start_rgm, points),
+                refined(&s, &t, &start_fgr, points),
+            ]);
+            refine_ms[k] += clock.elapsed().as_secs_f64() * 1e3 / 2.0;
+        }
+        transforms.push(per);
+        pairs.push((pair, frame, s, t));
+        if (i + 1) % 50 == 0 {
+            eprintln!("{} / {n} pairs", i + 1);
+        }
+    }
+    let mean = |ms: f64| ms / n as f64;
+    println!(
+        "{n} {} {:?} pairs, frame {}; ms per pair: RGM {:.1}, FGR {:.1}, refinements {:?}\n",
+        setting.name(),
+        split,
+        if centred { "centred" } else { "native" },
+        mean(rgm_ms),
+        mean(fgr_ms),
+        refine_ms
+            .iter()
+            .map(|&ms| (mean(ms) * 10.0).round() / 10.0)
+            .collect::<Vec<_>>()
+    );
+    println!("| candidates and choice | recall | > 45° | median MIE(R), recalled |");
+    println!("|---|---:|---:|---:|");
+    let evaluate = |choose: &dyn Fn(usize) -> RigidTransform| -> Vec<Outcome> {
+        (0..n)
+            .map(|i| {
+                let (pair, frame, _, _) = &pairs[i];
+                outcome(
+                    &frame.undo(&choose(i)),
+                    &pair.t_target_source,
+                    &pair.source,
+                    &pair.target,
+                )
+            })
+            .collect()
+    };
+    let names = std::iter::once("start").chain(REFINEMENTS.iter().map(|r| r.0));
+    for (k, name) in names.enumerate() {
+        row(&format!("RGM, {name}"), &evaluate(&|i| transforms[i][k][0]));
+        row(&format!("FGR, {name}"), &evaluate(&|i| transforms[i][k][1]));
+        let oracle: Vec<Outcome> = (0..n)
+            .map(|i| {
+                let (pair, frame, _, _) = &pairs[i];
+                let [a, b] = transforms[i][k].map(|t| {
+                    outcome(
+                        &frame.undo(&t),
+                        &pair.t_target_source,
+                        &pair.source,
+                        &pair.target,
+                    )
+                });
+                if a.recall || (!b.recall && a.mie_r < b.mie_r) {
+                    a
+                } else {
+                    b
+                }
+            })
+            .collect();
+        row(&format!("either, {name}: oracle"), &oracle);
+        for (score_name, f) in SCORES {
+            for keep_start in [false, true] {
+                if keep_start && k == 0 {
+                    continue;
+                }
+                let chosen = evaluate(&|i| {
+                    let (_, _, s, t) = &pairs[i];
+                    let (si, ti) = (KnnIndex::new(&s.points), KnnIndex::new(&t.points));
+                    let mut options: Vec<RigidTransform> = transforms[i][k].to_vec();
+                    if keep_start {
+                        options.extend(transforms[i][0]);
+                    }
+                    *options
+                        .iter()
+                        .max_by(|a, b| f(s, &si, t, &ti, a).total_cmp(&f(s, &si, t, &ti, b)))
+                        .expect("two candidates")
+                });
+                let how = if keep_start { " or its start" } else { "" };
+                row(&format!("either{how}, {name}: by {score_name}"), &chosen);
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The pair's clouds scaled by `k` about the origin.
+fn scaled(cloud: &PointCloud, k: f64) -> PointCloud {
+    PointCloud::new(cloud.points.iter().map(|p| p * k).collect())
+}
+
+/// `n` points: the cloud's points over and over, each copy moved by N(0, σ²) noise (seeded).
+fn densified(cloud: &PointCloud, n: usize, seed: u64) -> PointCloud {
+    use rand::SeedableRng;
+    use rand_distr::Distribution;
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let noise = rand_distr::Normal::new(0.0, 0.005).expect("a valid σ");
+    PointCloud::new(
+        (0..n)
+            .map(|i| {
+                let p = cloud.points[i % cloud.len()];
+                p + rgm_geom::Vector3::new(
+                    noise.sample(&mut rng),
+                    noise.sample(&mut rng),
+                    noise.sample(&mut rng),
+                )
+            })
+            .collect(),
+    )
+}
+
+fn robustness(
+    generator: &PairGenerator,
+    shapes: &[&rgm_data::Shape],
+    n: usize,
+    versions: &[&str],
+) -> Result<(), Box<dyn std::error::Error>> {
+    let mut method = MethodOptions::default().build()?;
+    println!(
+        "| `{}` on {n} {} pairs | recall | > 45° | median MIE(R), recalled | ms / pair | its RGM candidate | its FGR candidate |",
+        method.name(),
+        generator.setting.name()
+    );
+    println!("|---|---:|---:|---:|---:|---:|---:|");
+    for (name, scale, points) in [
+        ("as they are", 1.0, None),
+        ("half size", 0.5, None),
+        ("twice the size", 2.0, None),
+        ("20000 points each", 1.0, Some(20_000)),
+    ] {
+        if !versions.contains(&name) {
+            continue;
+        }
+        let (mut outcomes, mut ms) = (Vec::new(), 0.0);
+        let mut per_candidate = [Vec::new(), Vec::new()]; // RGM's, FGR's outcomes
+        for i in 0..n {
+            let pair = generator.test_pair(shapes, i)?;
+            let (s, t) = match points {
+                Some(p) => (
+                    densified(&pair.source, p, 2 * i as u64),
+                    densified(&pair.target, p, 2 * i as u64 + 1),
+                ),
+                None => (scaled(&pair.source, scale), scaled(&pair.target, scale)),
+            };
+            let back = |t: &RigidTransform| {
+                let native = RigidTransform::new(t.rotation, t.translation / scale);
+                outcome(&native, &pair.t_target_source, &pair.source, &pair.target)
+            };
+            match method.register(&s, &t) {
+                Ok(r) => {
+                    ms += r.time_ms;
+                    outcomes.push(back(&r.result.t_target_source));
+                    for (k, c) in r.candidates.iter().enumerate() {
+                        per_candidate[k].push(back(&c.t_target_source));
+                    }
+                }
+                Err(_) => outcomes.push(back(&RigidTransform::identity())),
+            }
+        }
+        let (recall, wild, median) = summary(&outcomes);
+        let (rgm, fgr) = (summary(&per_candidate[0]).0, summary(&per_candidate[1]).0);
+        println!(
+            "| {name} | {:.2} % | {:.2} % | {median:.3}° | {:.0} | {:.2} % | {:.2} % |",
+            100.0 * recall,
+            100.0 * wild,
+            ms / n as f64,
+            100.0 * rgm,
+            100.0 * fgr
+        );
+    }
+    Ok(())
+}

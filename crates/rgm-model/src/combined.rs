@@ -1,0 +1,225 @@
+//! `rgm register`'s default: RGM and FGR on the same pair, each refined, and the result that
+//! scores better by a measure that needs no ground truth.
+//!
+//! The two fail on different pairs: RGM's network is robust to partial overlap but reads
+//! rotationally symmetric shapes (bottles, vases, bowls) ambiguously; FGR's FPFH features pin
+//! those down on full clouds but fail wildly on many partial ones. The score that picks between
+//! them, [`SCORE_DISTANCE`]'s two-way overlap, was chosen on validation pairs
+//! (`docs/training/README.md`, session 6: `cargo run --release -p rgm-benches --example
+//! default_study`).
+//!
+//! Both run in one frame: the pair centred and scaled as the network expects
+//! ([`Normalisation`]) and thinned to the training clouds' spacing ([`DENSITY_POINTS`]), so
+//! that FGR's radii and the refinement's distances, set for unit-sphere shapes, fit inputs of
+//! any size and density. The transform is reported for the clouds as given.
+
+use rgm_geom::fgr::{self, FgrConfig};
+use rgm_geom::refine::{self, RefineConfig};
+use rgm_geom::registration::score;
+use rgm_geom::{KnnIndex, PointCloud, RegistrationResult, RigidTransform};
+
+use crate::error::MethodError;
+use crate::pipeline::{Normalisation, RgmRegistrar, DENSITY_POINTS};
+
+/// Distance (unit-sphere units) within which a moved point counts as overlapping the other
+/// cloud in the score.
+pub const SCORE_DISTANCE: f64 = 0.02;
+
+/// One candidate's outcome on the last pair.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Candidate {
+    /// The method that made it (`rgm+icp`, `fgr+icp`; without `+icp` when unrefined).
+    pub method: &'static str,
+    /// Its transform, in the caller's frame.
+    pub t_target_source: RigidTransform,
+    /// Its score ([`overlap_score`]); the highest wins. `None` when the method failed.
+    pub score: Option<f64>,
+    /// Why the method failed, if it did.
+    pub failure: Option<String>,
+}
+
+/// RGM and FGR side by side.
+#[derive(Clone, Debug)]
+pub struct CombinedRegistrar {
+    /// RGM with its own refinement off: the candidates are refined alike, here.
+    pub rgm: Box<RgmRegistrar>,
+    /// FGR's settings (unit-sphere radii: it runs in the network's frame).
+    pub fgr: FgrConfig,
+    /// The refinement of both candidates; `None`: their transforms as found.
+    pub refine: Option<RefineConfig>,
+    candidates: Vec<Candidate>, // of the last registration: RGM's, then FGR's
+    chosen: Option<usize>,      // the winner among them
+    scoring_distance: f64,      // of the last result's fitness, in the caller's units
+}
+
+/// Share of the points of each cloud that the transform brings within [`SCORE_DISTANCE`] of
+/// the other cloud, source → target plus target → source (0 to 2). Counting both ways rewards
+/// an overlap that both clouds agree on, where a one-way fitness is fooled by a small cloud
+/// lying anywhere on a large one.
+pub fn overlap_score(
+    source: (&PointCloud, &KnnIndex),
+    target: (&PointCloud, &KnnIndex),
+    transform: &RigidTransform,
+) -> f64 {
+    let there = score(&source.0.points, target.1, transform, SCORE_DISTANCE, None);
+    let back = score(
+        &target.0.points,
+        source.1,
+        &transform.inverse(),
+        SCORE_DISTANCE,
+        None,
+    );
+    there.fitness + back.fitness
+}
+
+impl CombinedRegistrar {
+    /// RGM (`rgm`'s own refinement is turned off) and FGR with `fgr`, both refined with
+    /// `refine` when given.
+    pub fn new(mut rgm: RgmRegistrar, fgr: FgrConfig, refine: Option<RefineConfig>) -> Self {
+        rgm.config.refine = None;
+        Self {
+            rgm: Box::new(rgm),
+            fgr,
+            refine,
+            candidates: Vec::new(),
+            chosen: None,
+            scoring_distance: SCORE_DISTANCE,
+        }
+    }
+
+    /// The candidates of the last registration, RGM's first; empty before any.
+    pub fn candidates(&self) -> &[Candidate] {
+        &self.candidates
+    }
+
+    /// The name of a candidate: `base`, `+icp` when refined.
+    fn candidate_name(&self, rgm: bool) -> &'static str {
+        match (rgm, self.refine.is_some()) {
+            (true, true) => "rgm+icp",
+            (true, false) => "rgm",
+            (false, true) => "fgr+icp",
+            (false, false) => "fgr",
+        }
+    }
+
+    /// The best-scoring candidate's transform, scored as Open3D scores ICP on the clouds as
+    /// given (the refinement's finest distance, or [`SCORE_DISTANCE`], times the frame's
+    /// scale); an error only when both candidates failed (naming both causes).
+    pub fn register(
+        &mut self,
+        source: &PointCloud,
+        target: &PointCloud,
+    ) -> Result<RegistrationResult, MethodError> {
+        self.candidates.clear();
+        self.chosen = None;
+        let frame = Normalisation::of_pair(source, target);
+        let thin = |cloud: PointCloud| {
+            let kept = cloud.farthest_point_indices(DENSITY_POINTS);
+            if kept.len() == cloud.len() {
+                cloud
+            } else {
+                cloud.select(&kept)
+            }
+        };
+        let (s, t) = (thin(frame.source(source)), thin(frame.target(target)));
+        let (si, ti) = (KnnIndex::new(&s.points), KnnIndex::new(&t.points));
+        let starts = [
+            self.rgm.register(&s, &t).map(|r| r.t_target_source),
+            fgr::register(&s, &t, &self.fgr)
+                .map(|r| r.t_target_source)
+                .map_err(MethodError::from),
+        ];
+        let mut best: Option<(f64, RigidTransform, usize)> = None; // score, transform, iterations
+        for (k, start) in starts.into_iter().enumerate() {
+            let method = self.candidate_name(k == 0);
+            let found = start.and_then(|start| match &self.refine {
+                Some(config) => {
+                    let refined = refine::refine(&s, &t, &start, config)?;
+                    Ok((refined.t_target_source, refined.iterations))
+                }
+                None => Ok((start, 0)),
+            });
+            match found {
+                Ok((transform, iterations)) => {
+                    let value = overlap_score((&s, &si), (&t, &ti), &transform);
+                    // Ties go to RGM, the first.
+                    if best.is_none_or(|(b, _, _)| value > b) {
+                        best = Some((value, transform, iterations));
+                        self.chosen = Some(k);
+                    }
+                    self.candidates.push(Candidate {
+                        method,
+                        t_target_source: frame.undo(&transform),
+                        score: Some(value),
+                        failure: None,
+                    });
+                }
+                Err(err) => self.candidates.push(Candidate {
+                    method,
+                    t_target_source: RigidTransform::identity(),
+                    score: None,
+                    failure: Some(err.to_string()),
+                }),
+            }
+        }
+        let Some((_, transform, iterations)) = best else {
+            let why: Vec<String> = self
+                .candidates
+                .iter()
+                .map(|c| format!("{}: {}", c.method, c.failure.as_deref().unwrap_or("?")))
+                .collect();
+            return Err(MethodError::AllCandidatesFailed(why.join("; ")));
+        };
+        let total = frame.undo(&transform);
+        self.scoring_distance = self
+            .refine
+            .as_ref()
+            .map_or(SCORE_DISTANCE, RefineConfig::finest_distance)
+            * frame.scale;
+        let scored = score(
+            &source.points,
+            &KnnIndex::new(&target.points),
+            &total,
+            self.scoring_distance,
+            None,
+        );
+        Ok(RegistrationResult::scored(total, iterations, true, scored))
+    }
+
+    /// The distance at which the last result's fitness and inlier RMSE were scored, in the
+    /// caller's units.
+    pub fn scoring_distance(&self) -> f64 {
+        self.scoring_distance
+    }
+
+    /// The index in [`CombinedRegistrar::candidates`] of the last registration's winner.
+    pub fn chosen(&self) -> Option<usize> {
+        self.chosen
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rgm_geom::{Point3, Vector3};
+
+    #[test]
+    fn overlap_counts_both_ways() {
+        // 10 points 0.1 apart on a line, and its first 4 points.
+        let line = PointCloud::new(
+            (0..10)
+                .map(|i| Point3::new(0.1 * i as f64, 0.0, 0.0))
+                .collect(),
+        );
+        let part = PointCloud::new(line.points[..4].to_vec());
+        let (li, pi) = (KnnIndex::new(&line.points), KnnIndex::new(&part.points));
+        let identity = RigidTransform::identity();
+        assert_eq!(overlap_score((&line, &li), (&line, &li), &identity), 2.0);
+        // The part lies on the line (1.0), which it covers for 4 of 10 points (0.4).
+        assert!((overlap_score((&part, &pi), (&line, &li), &identity) - 1.4).abs() < 1e-12);
+        // Shifted by 0.05 every point is 0.05 from the other cloud: beyond 0.02.
+        let shifted =
+            RigidTransform::new(rgm_geom::Matrix3::identity(), Vector3::new(0.0, 0.05, 0.0));
+        assert_eq!(overlap_score((&line, &li), (&line, &li), &shifted), 0.0);
+    }
+}

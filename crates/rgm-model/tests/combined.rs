@@ -1,0 +1,142 @@
+//! The combined method (`rgm register`'s default): the candidate that overlaps better wins, a
+//! failed candidate leaves the other, and the pair's size does not matter.
+
+use std::path::PathBuf;
+
+use rgm_data::{ModelNet40, PairGenerator, Setting, Split};
+use rgm_geom::fgr::FgrConfig;
+use rgm_geom::refine::RefineConfig;
+use rgm_geom::{PairMetrics, Point3, PointCloud, RigidTransform};
+use rgm_model::network::{Config, Rgm};
+use rgm_model::{
+    CombinedRegistrar, Method, MethodError, MethodOptions, PipelineConfig, RgmRegistrar,
+};
+
+/// The tiny network of `tests/fixtures` (random weights: its transforms are poor).
+fn tiny_rgm() -> RgmRegistrar {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/rgm_tiny_state_dict.safetensors");
+    let network = Rgm::load(Config::tiny(), &path).unwrap();
+    RgmRegistrar::new(
+        network,
+        PipelineConfig {
+            match_points: Some(200),
+            ..PipelineConfig::default()
+        },
+    )
+}
+
+/// Test pair 0 of the clean setting: the same 1,024 points at another pose.
+fn clean_pair() -> rgm_data::Pair {
+    let data =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/modelnet40_npy1024");
+    let dataset = ModelNet40::open(&data).unwrap();
+    let shapes = dataset.split(Split::Test, false);
+    PairGenerator::new(Setting::Clean)
+        .test_pair(&shapes, 0)
+        .unwrap()
+}
+
+fn combined() -> Method {
+    Method::Combined(Box::new(CombinedRegistrar::new(
+        tiny_rgm(),
+        FgrConfig::default(),
+        Some(RefineConfig::default()),
+    )))
+}
+
+#[test]
+fn the_candidate_that_overlaps_better_wins() {
+    // rgm register's default on a clean pair: both candidates register it; the one with the
+    // higher two-way overlap is returned, scored on the clouds as given.
+    let pair = clean_pair();
+    let mut method = MethodOptions::default().build().unwrap();
+    assert_eq!(method.name(), "auto+icp");
+    let found = method.register(&pair.source, &pair.target).unwrap();
+    let names: Vec<&str> = found.candidates.iter().map(|c| c.method).collect();
+    assert_eq!(names, ["rgm+icp", "fgr+icp"]);
+    let scores: Vec<f64> = found.candidates.iter().map(|c| c.score.unwrap()).collect();
+    let chosen = found.chosen.unwrap();
+    assert!(
+        scores.iter().all(|&s| s <= scores[chosen] && s > 1.9),
+        "{scores:?}"
+    );
+    assert_eq!(
+        found.result.t_target_source,
+        found.candidates[chosen].t_target_source
+    );
+    let metrics = PairMetrics::compute(
+        &found.result.t_target_source,
+        &pair.t_target_source,
+        &pair.source,
+        &pair.target,
+    )
+    .unwrap();
+    assert!(metrics.recall && metrics.mie_r_deg < 0.05, "{metrics:?}");
+    // Scored as Open3D scores ICP at the refinement's finest distance: every point.
+    assert_eq!(found.result.fitness, 1.0);
+    let pairs = method.correspondences(&pair.source, &pair.target, &found.result);
+    assert_eq!(pairs.len(), pair.source.len());
+}
+
+#[test]
+fn a_failed_candidate_leaves_the_other_and_both_failing_names_both() {
+    // The tiny network needs K + 1 = 5 points: with 4 it refuses, and FGR's result stands.
+    let pair = clean_pair();
+    let few = |c: &PointCloud| PointCloud::new(c.points[..4].to_vec());
+    let mut method = combined();
+    let found = method
+        .register(&few(&pair.source), &few(&pair.target))
+        .unwrap();
+    let rgm = &found.candidates[0];
+    assert!(rgm.score.is_none(), "{rgm:?}");
+    assert!(
+        rgm.failure.as_deref().unwrap().contains("needs at least 5"),
+        "{rgm:?}"
+    );
+    assert_eq!(found.chosen, Some(1));
+    assert_eq!(
+        found.result.t_target_source,
+        found.candidates[1].t_target_source
+    );
+    // Empty clouds: neither can run.
+    let empty = PointCloud::default();
+    match method.register(&empty, &empty) {
+        Err(MethodError::AllCandidatesFailed(why)) => {
+            assert!(
+                why.contains("rgm+icp: ") && why.contains("fgr+icp: "),
+                "{why}"
+            );
+        }
+        other => panic!("expected both to fail, got {other:?}"),
+    }
+}
+
+#[test]
+fn a_pair_at_half_and_at_twice_the_size_gets_the_same_transform() {
+    // Both sizes reach the candidates as the same centred unit-sphere clouds.
+    let pair = clean_pair();
+    let scaled = |c: &PointCloud, k: f64| {
+        PointCloud::new(
+            c.points
+                .iter()
+                .map(|p| Point3::from(p.coords * k))
+                .collect(),
+        )
+    };
+    let mut method = MethodOptions::default().build().unwrap();
+    let mut at = |k: f64| {
+        let t = method
+            .register(&scaled(&pair.source, k), &scaled(&pair.target, k))
+            .unwrap()
+            .result
+            .t_target_source;
+        RigidTransform::new(t.rotation, t.translation / k)
+    };
+    let (half, double) = (at(0.5), at(2.0));
+    assert!((half.rotation - double.rotation).abs().max() < 1e-9);
+    assert!((half.translation - double.translation).abs().max() < 1e-9);
+    let metrics =
+        PairMetrics::compute(&half, &pair.t_target_source, &pair.source, &pair.target).unwrap();
+    assert!(metrics.recall, "{metrics:?}");
+}
