@@ -191,6 +191,8 @@ fn rgm_passes_are_an_option() {
             src,
             tgt,
             "--json",
+            "--method",
+            "rgm",
             "--no-refine",
             "--passes",
             passes,
@@ -314,26 +316,26 @@ fn register_runs_rgm_with_the_built_in_model() {
         src,
         tgt,
         "--json",
+        "--method",
+        "rgm",
         "--no-refine",
     ])))
     .unwrap();
     assert_eq!(plain["method"], "rgm");
     assert_eq!(plain["refined"], false);
+    assert_eq!(plain["candidates"], serde_json::json!([]));
+    assert_eq!(plain["chosen"], serde_json::Value::Null);
     // Matched on 384 of the 1,024 points: at most 384 one-to-one correspondences.
     let used = plain["correspondences"].as_u64().unwrap();
     assert!((3..=384).contains(&used), "{plain}");
-    // The default: RGM refined by ICP (`--refine` says the same).
-    let refined: serde_json::Value =
-        serde_json::from_str(&stdout(&rgm(&["register", src, tgt, "--json"]))).unwrap();
+    let refined: serde_json::Value = serde_json::from_str(&stdout(&rgm(&[
+        "register", src, tgt, "--json", "--method", "rgm", "--refine",
+    ])))
+    .unwrap();
     assert_eq!(
         (&refined["method"], &refined["refined"]),
         (&"rgm+icp".into(), &true.into())
     );
-    let explicit = stdout(&rgm(&[
-        "register", src, tgt, "--json", "--method", "rgm", "--refine",
-    ]));
-    let explicit: serde_json::Value = serde_json::from_str(&explicit).unwrap();
-    assert_eq!(explicit["transform"], refined["transform"]);
     assert_eq!(refined["correspondences"], plain["correspondences"]);
     let residual = known_pose().inverse().compose(&parse_transform(&refined));
     assert!(
@@ -345,6 +347,51 @@ fn register_runs_rgm_with_the_built_in_model() {
 }
 
 #[test]
+fn register_by_default_runs_rgm_and_fgr_and_names_the_winner() {
+    let dir = scratch("auto");
+    let (src, tgt) = known_pair(&dir);
+    let (src, tgt) = (src.to_str().unwrap(), tgt.to_str().unwrap());
+    let out: serde_json::Value =
+        serde_json::from_str(&stdout(&rgm(&["register", src, tgt, "--json"]))).unwrap();
+    assert_eq!(
+        (&out["method"], &out["refined"]),
+        (&"auto+icp".into(), &true.into())
+    );
+    let candidates = out["candidates"].as_array().unwrap();
+    let names: Vec<&str> = candidates
+        .iter()
+        .map(|c| c["method"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["rgm+icp", "fgr+icp"]);
+    let chosen = candidates
+        .iter()
+        .find(|c| c["method"] == out["chosen"])
+        .unwrap();
+    assert_eq!(chosen["transform"], out["transform"]);
+    for c in candidates {
+        let score = c["score"].as_f64().unwrap();
+        assert!(
+            score <= chosen["score"].as_f64().unwrap() && score > 1.9,
+            "{out}"
+        );
+    }
+    let residual = known_pose().inverse().compose(&parse_transform(&out));
+    assert!(
+        residual.rotation_angle_deg() < 0.1 && residual.translation.norm() < 1e-3,
+        "{}° and {}",
+        residual.rotation_angle_deg(),
+        residual.translation.norm()
+    );
+    // The text output lists both, the winner marked.
+    let text = stdout(&rgm(&["register", src, tgt]));
+    assert!(
+        text.contains("# candidate rgm+icp: overlap score"),
+        "{text}"
+    );
+    assert!(text.contains("(chosen)"), "{text}");
+}
+
+#[test]
 fn rgm_options_with_another_method_are_refused() {
     let dir = scratch("options");
     let (src, tgt) = known_pair(&dir);
@@ -352,7 +399,7 @@ fn rgm_options_with_another_method_are_refused() {
     for (args, says) in [
         (
             ["--method", "fgr", "--match-points", "100"],
-            "apply to the rgm method only",
+            "apply to the rgm and auto methods only",
         ),
         (["--method", "icp", "--refine", "--json"], "ICP already"),
     ] {

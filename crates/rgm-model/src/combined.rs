@@ -9,9 +9,9 @@
 //! default_study`).
 //!
 //! Both run in one frame: the pair centred and scaled as the network expects
-//! ([`Normalisation`]) and thinned to the training clouds' spacing ([`DENSITY_POINTS`]), so
-//! that FGR's radii and the refinement's distances, set for unit-sphere shapes, fit inputs of
-//! any size and density. The transform is reported for the clouds as given.
+//! ([`Normalisation`]) and thinned to the training clouds' density ([`thinned`]), so that FGR's
+//! radii and the refinement's distances, set for unit-sphere shapes, fit inputs of any size and
+//! density. The transform is reported for the clouds as given.
 
 use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::refine::{self, RefineConfig};
@@ -50,6 +50,25 @@ pub struct CombinedRegistrar {
     candidates: Vec<Candidate>, // of the last registration: RGM's, then FGR's
     chosen: Option<usize>,      // the winner among them
     scoring_distance: f64,      // of the last result's fitness, in the caller's units
+}
+
+/// Voxel of the first thinning step of a cloud denser than [`DENSITY_POINTS`], in unit-sphere
+/// units (the training clouds' median nearest-neighbour distance is 0.011–0.042).
+pub const DENSITY_VOXEL: f64 = 0.035;
+
+/// `cloud` (in the unit-sphere frame) as the candidates see it: unchanged up to
+/// [`DENSITY_POINTS`] points; a denser cloud is averaged over voxels of [`DENSITY_VOXEL`]
+/// (merging duplicates and averaging their noise), then thinned to [`DENSITY_POINTS`] points by
+/// farthest-point sampling. On 100 partial validation pairs with each cloud made of 20,000
+/// points (every point repeated, σ 0.005), farthest-point sampling alone registered 90 %, with
+/// the voxels first 94 %, the pairs as they are 96 % (`default_study --study robustness`).
+pub fn thinned(cloud: PointCloud) -> PointCloud {
+    if cloud.len() <= DENSITY_POINTS {
+        return cloud;
+    }
+    let averaged = cloud.voxel_downsampled(DENSITY_VOXEL);
+    let kept = averaged.farthest_point_indices(DENSITY_POINTS);
+    averaged.select(&kept)
 }
 
 /// Share of the points of each cloud that the transform brings within [`SCORE_DISTANCE`] of
@@ -113,15 +132,7 @@ impl CombinedRegistrar {
         self.candidates.clear();
         self.chosen = None;
         let frame = Normalisation::of_pair(source, target);
-        let thin = |cloud: PointCloud| {
-            let kept = cloud.farthest_point_indices(DENSITY_POINTS);
-            if kept.len() == cloud.len() {
-                cloud
-            } else {
-                cloud.select(&kept)
-            }
-        };
-        let (s, t) = (thin(frame.source(source)), thin(frame.target(target)));
+        let (s, t) = (thinned(frame.source(source)), thinned(frame.target(target)));
         let (si, ti) = (KnnIndex::new(&s.points), KnnIndex::new(&t.points));
         let starts = [
             self.rgm.register(&s, &t).map(|r| r.t_target_source),

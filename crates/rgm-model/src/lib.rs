@@ -1,7 +1,8 @@
 //! rgm-model — RGM put together from the layers below, and every registration method behind one
-//! interface: [`method::Method`] runs ICP, FGR or the RGM network ([`pipeline`], spec §4) on a
-//! pair of clouds; [`options`] builds one from a name and options, with `rgm register`'s
-//! defaults; [`evaluate`] runs a method over the benchmark's test pairs and scores it.
+//! interface: [`method::Method`] runs ICP, FGR, the RGM network ([`pipeline`], spec §4) or RGM
+//! and FGR together ([`combined`], `rgm register`'s default) on a pair of clouds; [`options`]
+//! builds one from a name and options, with `rgm register`'s defaults; [`evaluate`] runs a
+//! method over the benchmark's test pairs and scores it.
 //!
 //! Layering rule: rgm-model builds on rgm-geom, rgm-nn, rgm-match and rgm-data, and nothing
 //! builds on it but the `rgm` command, xtask and the Python package (`python/`). It owns no

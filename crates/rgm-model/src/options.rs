@@ -217,6 +217,7 @@ mod tests {
         let weights = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("tests/fixtures/rgm_tiny_state_dict.safetensors");
         let options = MethodOptions {
+            method: MethodName::Rgm,
             weights: Some(weights),
             preset: Some("tiny".into()),
             test_statistics: Some(TestStatistics::Cloud),

@@ -259,16 +259,25 @@ pub enum Refinement {
     /// Point-to-point ICP (0.1, 30 iterations): what logs without the field measured.
     #[default]
     PointToPointIcp,
-    /// [`rgm_geom::refine`]: trimmed point-to-plane ICP, coarse to fine.
+    /// [`rgm_geom::refine`] before session 6: trimmed point-to-plane ICP, coarse to fine.
     TrimmedPointToPlane,
+    /// [`rgm_geom::refine`] since session 6: the same, then point-to-point ICP at 0.05 and 0.03.
+    PlaneThenPoint,
 }
 
 impl Validation {
     /// Whether `self` beats `other`: higher recall after refinement, then higher recall, then
-    /// lower loss.
+    /// lower loss; recall after refinement counts only when both were refined alike (a new
+    /// refinement must not make a newer checkpoint look better).
     fn beats(&self, other: &Self) -> bool {
-        (self.recall_refined, self.recall, -self.loss)
-            > (other.recall_refined, other.recall, -other.loss)
+        let refined = |v: &Self| {
+            if self.refined_with == other.refined_with {
+                v.recall_refined
+            } else {
+                0.0
+            }
+        };
+        (refined(self), self.recall, -self.loss) > (refined(other), other.recall, -other.loss)
     }
 }
 
@@ -920,7 +929,7 @@ impl Trainer {
             mae_t: m.mae_t,
             recall: m.recall,
             recall_refined: all.refined as f64 / total as f64,
-            refined_with: Refinement::TrimmedPointToPlane,
+            refined_with: Refinement::PlaneThenPoint,
             failures: summary.failures,
         })
     }
@@ -1035,6 +1044,26 @@ mod tests {
             "{line}"
         );
         assert_eq!(serde_json::from_str::<Validation>(&line).unwrap(), new);
+    }
+
+    #[test]
+    fn recall_after_refinement_compares_only_like_refinements() {
+        let before = r#"{"epoch":16,"pairs":300,"loss":2.25,"match_accuracy":0.3,"mie_r_deg":5.7,"mie_t":0.06,"mae_r_deg":3.1,"mae_t":0.03,"recall":0.41,"recall_refined":0.92,"refined_with":"trimmed_point_to_plane","failures":0}"#;
+        let before: Validation = serde_json::from_str(before).unwrap();
+        // Refined more sharply, worse alone: not better.
+        let sharper = Validation {
+            refined_with: Refinement::PlaneThenPoint,
+            recall_refined: 0.96,
+            recall: 0.40,
+            ..before
+        };
+        assert!(!sharper.beats(&before) && before.beats(&sharper));
+        // Alike, the refined recall decides.
+        let alike = Validation {
+            refined_with: Refinement::TrimmedPointToPlane,
+            ..sharper
+        };
+        assert!(alike.beats(&before));
     }
 
     #[test]

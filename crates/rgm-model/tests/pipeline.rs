@@ -276,9 +276,9 @@ fn benchmark_pairs_are_used_as_they_are() {
 }
 
 #[test]
-fn a_pair_at_half_or_twice_the_size_reaches_the_network_centred_alike() {
+fn a_pair_at_a_quarter_or_four_times_the_size_reaches_the_network_centred_alike() {
     let (source, target) = fixture_pair();
-    let frames: Vec<(PointCloud, PointCloud)> = [0.5, 2.0]
+    let frames: Vec<(PointCloud, PointCloud)> = [0.25, 4.0]
         .iter()
         .map(|&k| {
             let scaled = |c: &PointCloud| PointCloud::new(c.points.iter().map(|p| p * k).collect());
