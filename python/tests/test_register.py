@@ -134,7 +134,7 @@ def test_non_finite_coordinates_are_value_errors(airplane, value, dtype):
 
 def test_options_that_do_not_fit_are_value_errors(tmp_path):
     for kwargs, says in [
-        ({"method": "gicp"}, 'unknown method "gicp" (expected one of icp, fgr, rgm)'),
+        ({"method": "gicp"}, 'unknown method "gicp" (expected one of icp, fgr, rgm, auto)'),
         ({"method": "fgr", "passes": 1}, "apply to the rgm and auto methods only"),
         ({"preset": "tiny"}, "the built-in model has its own"),
         ({"passes": 0}, "passes must be at least 1, got 0"),
@@ -147,9 +147,9 @@ def test_options_that_do_not_fit_are_value_errors(tmp_path):
         assert says in str(err.value), (kwargs, err.value)
 
 
-def test_too_few_points_is_a_runtime_error_that_says_why(airplane, registrar):
+def test_too_few_points_is_a_runtime_error_that_says_why(airplane):
     with pytest.raises(RuntimeError, match="rgm\\+icp failed: .*needs at least"):
-        registrar.register(airplane[:5], airplane[:5])
+        rgm.Registrar(method="rgm").register(airplane[:5], airplane[:5])
 
 
 def _pairs(data, count):
