@@ -22,7 +22,8 @@
 
 use crate::error::{check_shape, MatchError, Result};
 use ndarray::linalg::{general_mat_mul, general_mat_vec_mul};
-use ndarray::{Array1, Array2, ArrayView1, ArrayView2, ArrayViewMut2, Axis, Zip};
+use ndarray::{Array1, Array2, ArrayView1, ArrayView2, ArrayViewMut1, ArrayViewMut2, Axis, Zip};
+use rgm_nn::exp::exp_shifted_sum;
 use rgm_nn::Scalar;
 
 /// Which computation [`sinkhorn_forward`] uses.
@@ -149,9 +150,15 @@ pub fn sinkhorn_forward<T: Scalar>(
     };
     let (rows, cols) = (last(&cache.rows), last(&cache.cols));
     match cache.form {
-        SinkhornForm::Log => Zip::indexed(&mut c)
-            .and(&s)
-            .for_each(|(i, j), c, &s| *c = (s + rows[i] + cols[j]).exp()),
+        SinkhornForm::Log => {
+            for ((mut c_row, s_row), &a) in c.outer_iter_mut().zip(s.outer_iter()).zip(rows) {
+                Zip::from(&mut c_row)
+                    .and(&s_row)
+                    .and(&cols)
+                    .for_each(|c, &s, &b| *c = s + a + b);
+                exp_row(c_row);
+            }
+        }
         SinkhornForm::Scaling => Zip::indexed(&mut c)
             .and(&cache.k)
             .for_each(|(i, j), c, &k| *c = k * rows[i] * cols[j]),
@@ -173,16 +180,25 @@ fn log_forward<T: Scalar>(
         T::neg_infinity()
     };
     let (alpha, beta) = (&mut cache.rows, &mut cache.cols);
+    let zeros = Array1::<T>::zeros(m); // (M) β before the first column step
     let mut col_max = Array1::<T>::zeros(m); // (M)
     let mut col_sum = Array1::<T>::zeros(m); // (M)
+    let mut terms = Array1::<T>::zeros(m); // (M) one row's exponents, then their exponentials
+    let terms = terms.as_slice_mut().expect("a new array is contiguous");
     for t in 0..cfg.iterations {
         // Row step: α_i = −LSE(S_ij + β_j over j, slack 0), with β = 0 before the first column step.
-        let beta_prev = |j: usize| if t == 0 { T::zero() } else { beta[[t - 1, j]] };
+        let beta_prev = if t == 0 {
+            zeros.view()
+        } else {
+            beta.row(t - 1)
+        };
         for (i, row) in s.outer_iter().enumerate() {
-            let max = (0..m).fold(slack_log, |acc, j| acc.max(row[j] + beta_prev(j)));
-            let sum = (0..m).fold((slack_log - max).exp(), |acc, j| {
-                acc + (row[j] + beta_prev(j) - max).exp()
-            });
+            Zip::from(&mut *terms)
+                .and(&row)
+                .and(&beta_prev)
+                .for_each(|x, &v, &b| *x = v + b);
+            let max = terms.iter().fold(slack_log, |acc, &x| acc.max(x));
+            let sum = (slack_log - max).exp() + exp_shifted_sum(terms, max);
             alpha[[t, i]] = -(max + sum.ln());
         }
         // Column step: β_j = −LSE(S_ij + α_i over i, slack 0), row by row for contiguous access.
@@ -197,10 +213,14 @@ fn log_forward<T: Scalar>(
             .and(&col_max)
             .for_each(|sum, &mx| *sum = (slack_log - mx).exp());
         for (row, &a) in s.outer_iter().zip(a) {
-            Zip::from(&mut col_sum)
+            Zip::from(&mut *terms)
                 .and(&col_max)
                 .and(&row)
-                .for_each(|sum, &mx, &v| *sum += (v + a - mx).exp());
+                .for_each(|x, &mx, &v| *x = v + a - mx);
+            T::exp_in_place(terms);
+            Zip::from(&mut col_sum)
+                .and(&*terms)
+                .for_each(|sum, &e| *sum += e);
         }
         Zip::from(beta.row_mut(t))
             .and(&col_max)
@@ -218,7 +238,8 @@ fn scaling_forward<T: Scalar>(
 ) -> bool {
     let slack = if cfg.slack { T::one() } else { T::zero() };
     let (k, u, v) = (&mut cache.k, &mut cache.rows, &mut cache.cols);
-    Zip::from(&mut *k).and(&s).for_each(|k, &s| *k = s.exp());
+    k.assign(&s);
+    T::exp_in_place(k.as_slice_mut().expect("the cache's K is standard layout"));
     v.row_mut(0).fill(T::one()); // v before the first column step, overwritten by it
     for t in 0..cfg.iterations {
         // Row step: u_i = 1 / (Σ_j K_ij·v_j + slack)
@@ -278,29 +299,61 @@ fn log_backward<T: Scalar>(
     mut dbeta: Array1<T>,         // (M) gradient of the last β
 ) {
     let m = s.ncols();
+    let zeros = Array1::<T>::zeros(m); // (M) β before the first column step
     let mut dbeta_prev = Array1::<T>::zeros(m); // (M)
+    let mut p = Array1::<T>::zeros(m); // (M) one row of P, then of P'
     for t in (0..alpha.nrows()).rev() {
         let (a, b) = (alpha.row(t), beta.row(t));
+        let b_prev = if t == 0 {
+            zeros.view()
+        } else {
+            beta.row(t - 1)
+        };
         dbeta_prev.fill(T::zero());
         for (i, (s_row, mut ds_row)) in s.outer_iter().zip(ds.outer_iter_mut()).enumerate() {
             // β_j = −LSE_i(S_ij + α_i)  →  dS_ij −= P_ij·dβ_j, dα_i −= Σ_j P_ij·dβ_j
+            Zip::from(&mut p)
+                .and(&s_row)
+                .and(&b)
+                .for_each(|p, &s, &b| *p = s + a[i] + b);
+            exp_row(p.view_mut());
             let mut da = dalpha[i];
-            for j in 0..m {
-                let p_db = (s_row[j] + a[i] + b[j]).exp() * dbeta[j];
-                ds_row[j] -= p_db;
-                da -= p_db;
-            }
+            Zip::from(&mut ds_row)
+                .and(&p)
+                .and(&dbeta)
+                .for_each(|ds, &p, &db| {
+                    *ds -= p * db;
+                    da -= p * db;
+                });
             // α_i = −LSE_j(S_ij + β'_j)  →  dS_ij −= P'_ij·dα_i, dβ'_j −= P'_ij·dα_i
-            for j in 0..m {
-                let b_prev = if t == 0 { T::zero() } else { beta[[t - 1, j]] };
-                let p_da = (s_row[j] + a[i] + b_prev).exp() * da;
-                ds_row[j] -= p_da;
-                dbeta_prev[j] -= p_da;
-            }
+            Zip::from(&mut p)
+                .and(&s_row)
+                .and(&b_prev)
+                .for_each(|p, &s, &b| *p = s + a[i] + b);
+            exp_row(p.view_mut());
+            Zip::from(&mut ds_row)
+                .and(&mut dbeta_prev)
+                .and(&p)
+                .for_each(|ds, db_prev, &p| {
+                    *ds -= p * da;
+                    *db_prev -= p * da;
+                });
         }
         // α of earlier rounds feeds only its own column step; β' only this row step.
         dalpha.fill(T::zero());
         std::mem::swap(&mut dbeta, &mut dbeta_prev);
+    }
+}
+
+/// exp of a row in place (strided rows through a contiguous copy).
+fn exp_row<T: Scalar>(mut row: ArrayViewMut1<'_, T>) {
+    match row.as_slice_mut() {
+        Some(xs) => T::exp_in_place(xs),
+        None => {
+            let mut xs = row.to_vec();
+            T::exp_in_place(&mut xs);
+            row.assign(&ArrayView1::from(&xs));
+        }
     }
 }
 

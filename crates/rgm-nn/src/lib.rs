@@ -47,6 +47,7 @@
 extern crate openblas_src;
 
 pub mod error;
+pub mod exp;
 pub mod gemm;
 pub mod gradcheck;
 pub mod init;

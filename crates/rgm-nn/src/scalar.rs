@@ -30,6 +30,9 @@ pub trait Scalar:
         beta: Self,
         c: ArrayViewMut2<'_, Self>,
     );
+    /// Replaces every value by its exponential: libm's in f64, [`crate::exp`]'s vectorised
+    /// polynomial (≤ 2 ulp) in f32.
+    fn exp_in_place(xs: &mut [Self]);
 }
 
 impl Scalar for f32 {
@@ -49,6 +52,9 @@ impl Scalar for f32 {
     ) {
         crate::gemm::mat_mul_f32(alpha, a, b, beta, c);
     }
+    fn exp_in_place(xs: &mut [Self]) {
+        crate::exp::exp_f32_in_place(xs);
+    }
 }
 
 impl Scalar for f64 {
@@ -67,5 +73,8 @@ impl Scalar for f64 {
         mut c: ArrayViewMut2<'_, Self>,
     ) {
         general_mat_mul(alpha, &a, &b, beta, &mut c);
+    }
+    fn exp_in_place(xs: &mut [Self]) {
+        xs.iter_mut().for_each(|x| *x = x.exp());
     }
 }

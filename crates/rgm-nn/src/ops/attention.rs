@@ -3,7 +3,7 @@
 //! self-attention).
 
 use super::linear::Linear;
-use super::softmax::{softmax_backward_in_place, softmax_in_place};
+use super::softmax::{softmax_backward_in_place, softmax_slice};
 use crate::error::check_shape;
 use crate::gemm::mat_mul;
 use crate::param::{join_name, ParamViewMut};
@@ -106,9 +106,7 @@ impl<T: Scalar> MultiHeadAttention<T> {
             .probs
             .as_slice_mut()
             .expect("probs is standard layout"); // (H*Nq*Nk)
-        probs
-            .par_chunks_mut(nk.max(1))
-            .for_each(|row| softmax_in_place(ArrayViewMut1::from(row)));
+        probs.par_chunks_mut(nk.max(1)).for_each(softmax_slice);
         for (head, p) in cache.probs.axis_iter(Axis(0)).enumerate() {
             let cols = s![.., head * dk..(head + 1) * dk];
             mat_mul(

@@ -1,20 +1,27 @@
 //! Softmax along each row of a score matrix.
 
 use crate::error::{check_shape, check_shapes};
+use crate::exp::exp_shifted_sum;
 use crate::{Result, Scalar};
 use ndarray::{ArrayView1, ArrayView2, ArrayViewMut1, ArrayViewMut2, Zip};
 
 /// Replaces a row by its softmax, shifted by the row maximum so no exponent overflows.
+pub(crate) fn softmax_slice<T: Scalar>(xs: &mut [T]) {
+    let max = xs.iter().fold(T::neg_infinity(), |m, &v| m.max(v));
+    let inv = T::one() / exp_shifted_sum(xs, max);
+    xs.iter_mut().for_each(|x| *x *= inv);
+}
+
+/// [`softmax_slice`] of a row, strided rows through a contiguous copy.
 pub(crate) fn softmax_in_place<T: Scalar>(mut row: ArrayViewMut1<'_, T>) {
-    let max = row.iter().fold(T::neg_infinity(), |m, &v| m.max(v));
-    let mut sum = T::zero();
-    row.mapv_inplace(|v| {
-        let e = (v - max).exp();
-        sum += e;
-        e
-    });
-    let inv = T::one() / sum;
-    row.mapv_inplace(|v| v * inv);
+    match row.as_slice_mut() {
+        Some(xs) => softmax_slice(xs),
+        None => {
+            let mut xs = row.to_vec();
+            softmax_slice(&mut xs);
+            row.assign(&ArrayView1::from(&xs));
+        }
+    }
 }
 
 /// `Σ_k dout_k out_k` of one row, shared by both forms of the softmax backward.
