@@ -4,7 +4,8 @@
 //! bf16: a quarter of the f32 file. The weights stay f32. A run resumed from such a snapshot
 //! restarts the first moments from zero (`rgm_nn::optim::Adam::load`) and continues from second
 //! moments rounded to 8 bits of mantissa: inexact by design (the f32 files a run writes while
-//! it trains resume bit for bit). A run that is training (its folder's lock is held) is left
+//! it trains resume bit for bit). A state that is already a snapshot is left as it is. A run
+//! that is training (its folder's lock is held) is left
 //! alone and named.
 
 use std::fs;
@@ -50,6 +51,12 @@ fn snapshot(folder: &Path) -> Result<()> {
     let before = fs::metadata(&optim)?.len();
     let (tensors, metadata) = rgm_nn::io::read_tensors::<f32>(&optim)
         .with_context(|| format!("reading {}", optim.display()))?;
+    if !tensors.keys().any(|name| name.starts_with("m.")) {
+        // Already a snapshot (a training run always writes its first moments): rewriting it
+        // would make new bytes, and a new blob in git, for the same state.
+        println!("{}: already a snapshot", folder.display());
+        return Ok(());
+    }
     let mut kept: Vec<_> = tensors
         .iter()
         .filter(|(name, _)| !name.starts_with("m."))

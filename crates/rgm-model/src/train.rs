@@ -142,6 +142,10 @@ pub struct TrainConfig {
     /// stay f32). A compute choice, not a setting of the run: it may change on resume.
     #[serde(default, with = "precision_name")]
     pub precision: Precision,
+    /// Weights a new run starts from instead of the seeded initialisation (fine-tuning, e.g.
+    /// the noise model from the partial one). Only the start: a resumed run loads its own.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub init: Option<PathBuf>,
 }
 
 /// [`Precision`] in `config.json` by name ("f32", "bf16"); absent in runs saved before it.
@@ -182,6 +186,7 @@ impl TrainConfig {
             seed: 0,
             test_statistics: TestStatistics::Running,
             precision: Precision::F32,
+            init: None,
         }
     }
 
@@ -593,7 +598,10 @@ impl Trainer {
             let optimizer = Optimizer::load(config.optimizer, &dir.join("last.optim.safetensors"))?;
             (network, optimizer, state)
         } else {
-            let network = Rgm::new(config.network.clone(), config.seed)?;
+            let network = match &config.init {
+                Some(init) => Rgm::load(config.network.clone(), init)?,
+                None => Rgm::new(config.network.clone(), config.seed)?,
+            };
             (network, Optimizer::new(&config), TrainState::default())
         };
         let mut network = network;

@@ -152,6 +152,55 @@ fn a_run_refuses_other_settings_but_may_be_extended() {
 }
 
 #[test]
+fn a_run_started_from_weights_starts_where_they_ended() {
+    let one_epoch = TrainConfig {
+        epochs: 1,
+        ..config()
+    };
+    let source = run_dir("init-source");
+    train(one_epoch.clone(), &source, None);
+    // Fine-tuning at a learning rate too small to move the weights: its first validation is
+    // the source's, and a run from the seeded initialisation validates far worse.
+    let still = TrainConfig {
+        lr: 1e-12,
+        init: Some(source.join("last.safetensors")),
+        ..one_epoch.clone()
+    };
+    let tuned = run_dir("init-tuned");
+    train(still.clone(), &tuned, None);
+    let scratch = run_dir("init-scratch");
+    train(
+        TrainConfig {
+            init: None,
+            ..still.clone()
+        },
+        &scratch,
+        None,
+    );
+    let (source_val, tuned_val, scratch_val) = (
+        validations(&source)[0],
+        validations(&tuned)[0],
+        validations(&scratch)[0],
+    );
+    assert!(
+        (tuned_val.loss - source_val.loss).abs() < 1e-4 * source_val.loss,
+        "{source_val:?} vs {tuned_val:?}"
+    );
+    assert!(
+        (scratch_val.loss - source_val.loss).abs() > 1e-2 * source_val.loss,
+        "{source_val:?} vs {scratch_val:?}"
+    );
+    let missing = TrainConfig {
+        init: Some(source.join("no-such.safetensors")),
+        ..one_epoch
+    };
+    let err = Trainer::open(missing, &run_dir("init-missing"))
+        .err()
+        .expect("missing weights refused");
+    assert!(err.to_string().contains("no-such.safetensors"), "{err}");
+}
+
+#[test]
 fn training_lowers_the_validation_loss() {
     let dir = run_dir("learn");
     let trainer = train(

@@ -97,6 +97,11 @@ pub struct Args {
     /// f32). May change when resuming.
     #[arg(long, value_enum, default_value = "f32")]
     precision: PrecisionArg,
+    /// Start a new run from these weights (a .safetensors of the same network) instead of
+    /// the seeded initialisation: fine-tuning, e.g. the noise model from the partial one.
+    /// A resumed run loads its own checkpoint; give the same --init again.
+    #[arg(long, value_name = "WEIGHTS")]
+    init: Option<PathBuf>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -151,6 +156,7 @@ impl Args {
             seed: self.seed,
             test_statistics: self.test_statistics.into(),
             precision: self.precision.precision(),
+            init: self.init.clone(),
         })
     }
 }
