@@ -95,6 +95,26 @@ impl PointCloud {
         picked
     }
 
+    /// One point per seed: the mean of the points of this cloud nearer to that seed than to
+    /// any other (its Voronoi cell; one step of Lloyd's k-means); seeds whose cell is empty are
+    /// left out. After farthest-point seeds it thins a dense cloud to evenly spread points with
+    /// its noise averaged out, cut along other borders than a voxel grid's.
+    pub fn cell_means(&self, seeds: &[Point3<f64>]) -> Self {
+        let index = crate::KnnIndex::new(seeds);
+        let mut sums = vec![(Vector3::zeros(), 0usize); seeds.len()]; // (S,) sum and count
+        for p in &self.points {
+            let (cell, _) = index.nearest(p);
+            sums[cell].0 += p.coords;
+            sums[cell].1 += 1;
+        }
+        Self::new(
+            sums.into_iter()
+                .filter(|&(_, n)| n > 0)
+                .map(|(sum, n)| Point3::from(sum / n as f64))
+                .collect(),
+        )
+    }
+
     /// One point per occupied cube of side `voxel` (cubes aligned on the origin): the mean of
     /// the cube's points, as Open3D's `voxel_down_sample`; in the order the cubes are first met.
     pub fn voxel_downsampled(&self, voxel: f64) -> Self {
@@ -126,6 +146,27 @@ impl From<Vec<Point3<f64>>> for PointCloud {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn cell_means_average_each_seeds_nearest_points() {
+        let c = PointCloud::new(vec![
+            Point3::new(0.0, 0.0, 0.0),
+            Point3::new(0.2, 0.0, 0.0),
+            Point3::new(1.0, 0.0, 0.0),
+            Point3::new(1.0, 0.4, 0.0),
+            Point3::new(0.9, 0.0, 0.0),
+        ]);
+        // The middle seed is nearest to no point: left out.
+        let seeds = [
+            Point3::new(0.0, 0.0, 0.0),
+            Point3::new(0.5, 5.0, 0.0),
+            Point3::new(1.0, 0.0, 0.0),
+        ];
+        let m = c.cell_means(&seeds);
+        assert_eq!(m.len(), 2);
+        assert!((m.points[0] - Point3::new(0.1, 0.0, 0.0)).norm() < 1e-12);
+        assert!((m.points[1] - Point3::new(2.9 / 3.0, 0.4 / 3.0, 0.0)).norm() < 1e-12);
+    }
 
     #[test]
     fn voxel_downsampling_keeps_one_mean_per_cube() {

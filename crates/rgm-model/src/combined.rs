@@ -11,7 +11,12 @@
 //! Both run in one frame: the pair centred and scaled as the network expects
 //! ([`Normalisation`]) and thinned to the training clouds' density ([`thinned`]), so that FGR's
 //! radii and the refinement's distances, set for unit-sphere shapes, fit inputs of any size and
-//! density. The transform is reported for the clouds as given.
+//! density. A pair denser than the training clouds can be thinned many ways, none of them the
+//! sampling the benchmark's pairs share; both methods run on two thinnings of it
+//! ([`Thinning`]), four candidates scored alike on the dense clouds. The transform is reported
+//! for the clouds as given.
+
+use std::borrow::Cow;
 
 use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::refine::{self, RefineConfig};
@@ -28,7 +33,8 @@ pub const SCORE_DISTANCE: f64 = 0.02;
 /// One candidate's outcome on the last pair.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Candidate {
-    /// The method that made it (`rgm+icp`, `fgr+icp`; without `+icp` when unrefined).
+    /// The method that made it (`rgm+icp`, `fgr+icp`; without `+icp` when unrefined; with
+    /// `/cells` when it ran on the [`Thinning::Cells`] version of a dense pair).
     pub method: &'static str,
     /// Its transform, in the caller's frame.
     pub t_target_source: RigidTransform,
@@ -47,7 +53,7 @@ pub struct CombinedRegistrar {
     pub fgr: FgrConfig,
     /// The refinement of both candidates; `None`: their transforms as found.
     pub refine: Option<RefineConfig>,
-    candidates: Vec<Candidate>, // of the last registration: RGM's, then FGR's
+    candidates: Vec<Candidate>, // of the last registration: RGM's, FGR's, per thinning
     chosen: Option<usize>,      // the winner among them
     scoring_distance: f64,      // of the last result's fitness, in the caller's units
 }
@@ -56,19 +62,38 @@ pub struct CombinedRegistrar {
 /// units (the training clouds' median nearest-neighbour distance is 0.011–0.042).
 pub const DENSITY_VOXEL: f64 = 0.035;
 
-/// `cloud` (in the unit-sphere frame) as the candidates see it: unchanged up to
-/// [`DENSITY_POINTS`] points; a denser cloud is averaged over voxels of [`DENSITY_VOXEL`]
-/// (merging duplicates and averaging their noise), then thinned to [`DENSITY_POINTS`] points by
-/// farthest-point sampling. On 100 partial validation pairs with each cloud made of 20,000
-/// points (every point repeated, σ 0.005), farthest-point sampling alone registered 90 %, with
-/// the voxels first 94 %, the pairs as they are 96 % (`default_study --study robustness`).
-pub fn thinned(cloud: PointCloud) -> PointCloud {
+/// How a cloud denser than [`DENSITY_POINTS`] (in the unit-sphere frame) is thinned to
+/// [`DENSITY_POINTS`] points for the candidates; a cloud of no more points is used as it is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Thinning {
+    /// Averaged over voxels of [`DENSITY_VOXEL`] (merging duplicates and averaging their
+    /// noise), then thinned by farthest-point sampling. On 100 partial validation pairs with
+    /// each cloud made of 20,000 points (every point repeated, σ 0.005), farthest-point
+    /// sampling alone registered 90 %, with the voxels first 94 %, the pairs as they are 96 %
+    /// (`default_study --study robustness`).
+    Voxels,
+    /// Farthest-point seeds, each replaced by the mean of its Voronoi cell in the dense cloud
+    /// ([`PointCloud::cell_means`]): as good as [`Thinning::Voxels`] alone on 200 validation
+    /// pairs (`docs/training/default-study/thinning-200-validation.md`), and wrong on other
+    /// pairs.
+    Cells,
+}
+
+/// `cloud` as the candidates see it, thinned `how` if it has more than [`DENSITY_POINTS`].
+pub fn thinned(cloud: &PointCloud, how: Thinning) -> Cow<'_, PointCloud> {
     if cloud.len() <= DENSITY_POINTS {
-        return cloud;
+        return Cow::Borrowed(cloud);
     }
-    let averaged = cloud.voxel_downsampled(DENSITY_VOXEL);
-    let kept = averaged.farthest_point_indices(DENSITY_POINTS);
-    averaged.select(&kept)
+    Cow::Owned(match how {
+        Thinning::Voxels => {
+            let averaged = cloud.voxel_downsampled(DENSITY_VOXEL);
+            averaged.select(&averaged.farthest_point_indices(DENSITY_POINTS))
+        }
+        Thinning::Cells => {
+            let seeds = cloud.select(&cloud.farthest_point_indices(DENSITY_POINTS));
+            cloud.cell_means(&seeds.points)
+        }
+    })
 }
 
 /// Share of the points of each cloud that the transform brings within [`SCORE_DISTANCE`] of
@@ -111,13 +136,17 @@ impl CombinedRegistrar {
         &self.candidates
     }
 
-    /// The name of a candidate: `base`, `+icp` when refined.
-    fn candidate_name(&self, rgm: bool) -> &'static str {
-        match (rgm, self.refine.is_some()) {
-            (true, true) => "rgm+icp",
-            (true, false) => "rgm",
-            (false, true) => "fgr+icp",
-            (false, false) => "fgr",
+    /// The name of a candidate: `base`, `+icp` when refined, `/cells` on that thinning.
+    fn candidate_name(&self, rgm: bool, how: Thinning) -> &'static str {
+        match (rgm, self.refine.is_some(), how) {
+            (true, true, Thinning::Voxels) => "rgm+icp",
+            (true, false, Thinning::Voxels) => "rgm",
+            (false, true, Thinning::Voxels) => "fgr+icp",
+            (false, false, Thinning::Voxels) => "fgr",
+            (true, true, Thinning::Cells) => "rgm+icp/cells",
+            (true, false, Thinning::Cells) => "rgm/cells",
+            (false, true, Thinning::Cells) => "fgr+icp/cells",
+            (false, false, Thinning::Cells) => "fgr/cells",
         }
     }
 
@@ -132,45 +161,55 @@ impl CombinedRegistrar {
         self.candidates.clear();
         self.chosen = None;
         let frame = Normalisation::of_pair(source, target);
-        let (s, t) = (thinned(frame.source(source)), thinned(frame.target(target)));
-        let (si, ti) = (KnnIndex::new(&s.points), KnnIndex::new(&t.points));
-        let starts = [
-            self.rgm.register(&s, &t).map(|r| r.t_target_source),
-            fgr::register(&s, &t, &self.fgr)
-                .map(|r| r.t_target_source)
-                .map_err(MethodError::from),
-        ];
+        // (N, 3) and (M, 3) in the network's frame, at the caller's density: what every
+        // candidate is scored on.
+        let (fs, ft) = (frame.source(source), frame.target(target));
+        let (fsi, fti) = (KnnIndex::new(&fs.points), KnnIndex::new(&ft.points));
+        let thinnings: &[Thinning] = if fs.len().max(ft.len()) > DENSITY_POINTS {
+            &[Thinning::Voxels, Thinning::Cells]
+        } else {
+            &[Thinning::Voxels] // leaves the clouds as they are
+        };
         let mut best: Option<(f64, RigidTransform, usize)> = None; // score, transform, iterations
-        for (k, start) in starts.into_iter().enumerate() {
-            let method = self.candidate_name(k == 0);
-            let found = start.and_then(|start| match &self.refine {
-                Some(config) => {
-                    let refined = refine::refine(&s, &t, &start, config)?;
-                    Ok((refined.t_target_source, refined.iterations))
-                }
-                None => Ok((start, 0)),
-            });
-            match found {
-                Ok((transform, iterations)) => {
-                    let value = overlap_score((&s, &si), (&t, &ti), &transform);
-                    // Ties go to RGM, the first.
-                    if best.is_none_or(|(b, _, _)| value > b) {
-                        best = Some((value, transform, iterations));
-                        self.chosen = Some(k);
+        for &how in thinnings {
+            let (s, t) = (thinned(&fs, how), thinned(&ft, how));
+            let starts = [
+                self.rgm.register(&s, &t).map(|r| r.t_target_source),
+                fgr::register(&s, &t, &self.fgr)
+                    .map(|r| r.t_target_source)
+                    .map_err(MethodError::from),
+            ];
+            for (k, start) in starts.into_iter().enumerate() {
+                let method = self.candidate_name(k == 0, how);
+                let found = start.and_then(|start| match &self.refine {
+                    Some(config) => {
+                        let refined = refine::refine(&s, &t, &start, config)?;
+                        Ok((refined.t_target_source, refined.iterations))
                     }
-                    self.candidates.push(Candidate {
+                    None => Ok((start, 0)),
+                });
+                match found {
+                    Ok((transform, iterations)) => {
+                        let value = overlap_score((&fs, &fsi), (&ft, &fti), &transform);
+                        // Ties go to the earlier candidate: RGM, and the first thinning.
+                        if best.is_none_or(|(b, _, _)| value > b) {
+                            best = Some((value, transform, iterations));
+                            self.chosen = Some(self.candidates.len());
+                        }
+                        self.candidates.push(Candidate {
+                            method,
+                            t_target_source: frame.undo(&transform),
+                            score: Some(value),
+                            failure: None,
+                        });
+                    }
+                    Err(err) => self.candidates.push(Candidate {
                         method,
-                        t_target_source: frame.undo(&transform),
-                        score: Some(value),
-                        failure: None,
-                    });
+                        t_target_source: RigidTransform::identity(),
+                        score: None,
+                        failure: Some(err.to_string()),
+                    }),
                 }
-                Err(err) => self.candidates.push(Candidate {
-                    method,
-                    t_target_source: RigidTransform::identity(),
-                    score: None,
-                    failure: Some(err.to_string()),
-                }),
             }
         }
         let Some((_, transform, iterations)) = best else {

@@ -140,3 +140,55 @@ fn a_pair_at_half_and_at_twice_the_size_gets_the_same_transform() {
         PairMetrics::compute(&half, &pair.t_target_source, &pair.source, &pair.target).unwrap();
     assert!(metrics.recall, "{metrics:?}");
 }
+
+#[test]
+fn a_dense_pair_gets_both_methods_on_two_thinnings_scored_alike() {
+    // Each point of the clean pair made four, 0.003 apart along fixed directions: 4,096 points
+    // a cloud, more than the training clouds' 1,024, so both methods run on the voxel and on
+    // the cell thinning.
+    let pair = clean_pair();
+    let dense = |c: &PointCloud| {
+        let offsets = [
+            (1.0, 0.0, 0.0),
+            (0.0, 1.0, 0.0),
+            (0.0, 0.0, 1.0),
+            (-1.0, -1.0, -1.0),
+        ];
+        PointCloud::new(
+            c.points
+                .iter()
+                .flat_map(|p| {
+                    offsets
+                        .iter()
+                        .map(move |&(x, y, z)| p + 0.003 * rgm_geom::Vector3::new(x, y, z))
+                })
+                .collect(),
+        )
+    };
+    let (source, target) = (dense(&pair.source), dense(&pair.target));
+    assert_eq!(source.len(), 4096);
+    let mut method = MethodOptions::default().build().unwrap();
+    let found = method.register(&source, &target).unwrap();
+    let names: Vec<&str> = found.candidates.iter().map(|c| c.method).collect();
+    assert_eq!(
+        names,
+        ["rgm+icp", "fgr+icp", "rgm+icp/cells", "fgr+icp/cells"]
+    );
+    let scores: Vec<f64> = found.candidates.iter().map(|c| c.score.unwrap()).collect();
+    let chosen = found.chosen.unwrap();
+    assert!(scores.iter().all(|&s| s <= scores[chosen]), "{scores:?}");
+    // Scored on the dense clouds: the right transform overlaps nearly every point both ways.
+    assert!(scores[chosen] > 1.9, "{scores:?}");
+    assert_eq!(
+        found.result.t_target_source,
+        found.candidates[chosen].t_target_source
+    );
+    let metrics = PairMetrics::compute(
+        &found.result.t_target_source,
+        &pair.t_target_source,
+        &pair.source,
+        &pair.target,
+    )
+    .unwrap();
+    assert!(metrics.recall, "{metrics:?}");
+}
