@@ -32,8 +32,9 @@ enum Command {
     /// icp runs one method; --no-refine skips the refinement; docs/results.md compares them.
     /// Clouds of any size, scale and density: unless already in the unit-sphere frame, both are
     /// centred and scaled by one factor into it, clouds denser than ModelNet40's 1,024 points
-    /// are thinned by farthest-point sampling, RGM matches on 384 random points of each, and the
-    /// transform is reported for the clouds as given.
+    /// are thinned to 1,024 (two ways by default, each method running on both: four candidates,
+    /// those of the second thinning named …/cells), RGM matches on 384 random points of each,
+    /// and the transform is reported for the clouds as given.
     /// Reads PLY (ascii or binary), OFF, XYZ/CSV text and .npy files.
     Register(commands::register::Args),
     /// Run a method over the ModelNet40 test pairs and print the paper's metrics.
