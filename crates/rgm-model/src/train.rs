@@ -595,7 +595,14 @@ impl Trainer {
                 });
             }
             let network = Rgm::load(config.network.clone(), &dir.join("last.safetensors"))?;
-            let optimizer = Optimizer::load(config.optimizer, &dir.join("last.optim.safetensors"))?;
+            // A finished run may be committed without its optimiser state (the largest file,
+            // needed by no resume until the run is extended): it then goes on with a fresh one.
+            let optim = dir.join("last.optim.safetensors");
+            let optimizer = if optim.exists() {
+                Optimizer::load(config.optimizer, &optim)?
+            } else {
+                Optimizer::new(&config)
+            };
             (network, optimizer, state)
         } else {
             let network = match &config.init {

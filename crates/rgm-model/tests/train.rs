@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rgm_data::{ModelNet40, Shape};
-use rgm_model::network::Config;
+use rgm_model::network::{Config, TestStatistics};
 use rgm_model::train::{
     Event, LogRecord, OptimizerKind, TrainConfig, TrainError, TrainState, Trainer, Validation,
 };
@@ -153,8 +153,11 @@ fn a_run_refuses_other_settings_but_may_be_extended() {
 
 #[test]
 fn a_run_started_from_weights_starts_where_they_ended() {
+    // Each cloud's own batch-norm statistics at validation: training updates the running ones
+    // whatever the learning rate, so only these show the weights alone.
     let one_epoch = TrainConfig {
         epochs: 1,
+        test_statistics: TestStatistics::Cloud,
         ..config()
     };
     let source = run_dir("init-source");
@@ -198,6 +201,21 @@ fn a_run_started_from_weights_starts_where_they_ended() {
         .err()
         .expect("missing weights refused");
     assert!(err.to_string().contains("no-such.safetensors"), "{err}");
+}
+
+#[test]
+fn a_finished_run_without_its_optimiser_state_goes_on_with_a_fresh_one() {
+    let dir = run_dir("no-optim");
+    let one_epoch = TrainConfig {
+        epochs: 1,
+        ..config()
+    };
+    train(one_epoch, &dir, None);
+    fs::remove_file(dir.join("last.optim.safetensors")).unwrap();
+    let longer = train(config(), &dir, None);
+    assert_eq!(longer.state().epoch, 2);
+    assert_eq!(validations(&dir).len(), 2);
+    assert!(dir.join("last.optim.safetensors").exists());
 }
 
 #[test]
@@ -400,6 +418,11 @@ fn a_run_saved_in_the_old_layout_resumes_and_so_does_a_bf16_snapshot() {
     let weights = fs::metadata(dir.join("last.safetensors")).unwrap().len();
     assert!(fs::metadata(&bf16).unwrap().len() < weights * 11 / 10);
     fs::rename(&bf16, &optim).unwrap();
+    // The weights as bf16 too (`cargo xtask snapshot-runs`): half the bytes, and they resume.
+    let last = dir.join("last.safetensors");
+    rgm_nn::io::rewrite_with_bf16(&last, &bf16, &|_| true).unwrap();
+    assert!(fs::metadata(&bf16).unwrap().len() < weights * 51 / 100);
+    fs::rename(&bf16, &last).unwrap();
     let resumed = Trainer::open(config, &dir).unwrap();
     assert_eq!(resumed.state(), &state);
     fs::remove_dir_all(&dir).unwrap();
