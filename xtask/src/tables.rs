@@ -98,6 +98,8 @@ struct Candidate {
     stem: String,
     /// The RGM variant (`rgm`, `var1`, `var2`) of a trained model; `None` for ICP and FGR.
     variant: Option<String>,
+    /// The training pairs of a trained model.
+    pairs_seen: Option<u64>,
     method: Method,
 }
 
@@ -108,6 +110,8 @@ struct Row {
     stem: String,
     /// As [`Candidate::variant`].
     variant: Option<String>,
+    /// As [`Candidate::pairs_seen`].
+    pairs_seen: Option<u64>,
     records: Vec<PairRecord>,
     total: usize,
     /// For an RGM model: the share of correct hard correspondences on each drawn pair, by
@@ -165,14 +169,36 @@ pub fn run(args: Args) -> Result<()> {
         for candidate in candidates(set, &manifest)? {
             let records = run.evaluate(set, &candidate, &shapes, &generator)?;
             let matched = run.draw(set, &candidate, &records, &shapes, &generator, args.figures)?;
+            // A trained model refined as `rgm eval --refine` refines it, from its own
+            // transforms: the refinement alone is computed.
+            let refined = match candidate.variant {
+                Some(_) => {
+                    let stem = format!("{}-icp", candidate.stem);
+                    let name = format!("{}+icp", candidate.name);
+                    let records = run.refine(set, &name, &stem, &records, &shapes, &generator)?;
+                    run.draw_clouds(set, &stem, &records, &shapes, &generator, args.figures)?;
+                    Some(Row {
+                        name,
+                        stem,
+                        variant: None,
+                        pairs_seen: None,
+                        records,
+                        total: shapes.len(),
+                        matched: BTreeMap::new(),
+                    })
+                }
+                None => None,
+            };
             rows.push(Row {
                 name: candidate.name,
                 stem: candidate.stem,
                 variant: candidate.variant,
+                pairs_seen: candidate.pairs_seen,
                 records,
                 total: shapes.len(),
                 matched,
             });
+            rows.extend(refined);
         }
         results.insert(set.key(), rows);
     }
@@ -203,19 +229,21 @@ fn test_shapes(dataset: &ModelNet40, set: TestSet, limit: Option<usize>) -> Vec<
 /// pipeline RGM competes with there; on clean and noisy pairs FGR alone registers 97–100 %),
 /// `rgm register`'s default (`auto+icp`: RGM with the built-in model and FGR, both refined, the
 /// better by its score), then every model of the manifest trained for `set`, as the paper runs
-/// it (unrefined; `rgm eval --method rgm --refine` gives a model refined alone).
+/// it (unrefined; [`run`] adds each model refined, `<name>+icp`, from its own transforms).
 fn candidates(set: TestSet, manifest: &Manifest) -> Result<Vec<Candidate>> {
     let mut list = vec![
         Candidate {
             name: "icp".into(),
             stem: "icp".into(),
             variant: None,
+            pairs_seen: None,
             method: Method::icp(),
         },
         Candidate {
             name: "fgr".into(),
             stem: "fgr".into(),
             variant: None,
+            pairs_seen: None,
             method: Method::fgr(),
         },
     ];
@@ -224,6 +252,7 @@ fn candidates(set: TestSet, manifest: &Manifest) -> Result<Vec<Candidate>> {
             name: "fgr+icp".into(),
             stem: "fgr-icp".into(),
             variant: None,
+            pairs_seen: None,
             method: Method::fgr().refined(RefineConfig::default()),
         });
     }
@@ -233,6 +262,7 @@ fn candidates(set: TestSet, manifest: &Manifest) -> Result<Vec<Candidate>> {
             name: "auto+icp".into(),
             stem: format!("auto-{}-{}pairs-icp", builtin.name, builtin.pairs_seen),
             variant: None,
+            pairs_seen: None,
             method: MethodOptions::default().build()?,
         });
     }
@@ -244,6 +274,7 @@ fn candidates(set: TestSet, manifest: &Manifest) -> Result<Vec<Candidate>> {
             name: entry.name.clone(),
             stem: format!("{}-{}pairs", entry.name, entry.pairs_seen),
             variant: Some(variant_name(entry)),
+            pairs_seen: Some(entry.pairs_seen),
             method,
         });
     }
@@ -285,11 +316,56 @@ impl Run {
         shapes: &[&Shape],
         generator: &PairGenerator,
     ) -> Result<Vec<PairRecord>> {
-        let path = self.records_path(set, &candidate.stem);
+        self.records(
+            set,
+            &candidate.name,
+            &candidate.stem,
+            &(0..shapes.len()).collect::<Vec<_>>(),
+            || candidate.method.clone(),
+            |method, i| {
+                let pair = generator.test_pair(shapes, i)?;
+                Ok(evaluate_pair(method, i, &pair)?)
+            },
+        )
+    }
+
+    /// The records of `plain` (a trained model's) refined as `rgm eval --refine` refines them,
+    /// kept like [`Run::evaluate`]'s: the pairs of `plain` (sorted by pair index).
+    fn refine(
+        &self,
+        set: TestSet,
+        name: &str,
+        stem: &str,
+        plain: &[PairRecord],
+        shapes: &[&Shape],
+        generator: &PairGenerator,
+    ) -> Result<Vec<PairRecord>> {
+        let config = RefineConfig::default();
+        let indices: Vec<usize> = plain.iter().map(|r| r.index).collect();
+        self.records(set, name, stem, &indices, || (), |_, i| {
+            let start = &plain[indices.binary_search(&i).expect("an index of plain")];
+            let pair = generator.test_pair(shapes, i)?;
+            Ok(start.refined(&pair, &config)?)
+        })
+    }
+
+    /// The records of the pairs `indices` (sorted) in the per-pair file `stem` of `set`: those
+    /// already there read back, the others made by `compute` (with a state per worker from
+    /// `init`) in parallel chunks appended as they finish. Fewer when the deadline came first.
+    fn records<S>(
+        &self,
+        set: TestSet,
+        name: &str,
+        stem: &str,
+        indices: &[usize],
+        init: impl Fn() -> S + Sync + Send,
+        compute: impl Fn(&mut S, usize) -> Result<PairRecord> + Sync + Send,
+    ) -> Result<Vec<PairRecord>> {
+        let path = self.records_path(set, stem);
         let mut records = read_records(&path)?;
-        records.retain(|r| r.index < shapes.len());
+        records.retain(|r| indices.binary_search(&r.index).is_ok());
         let done: std::collections::HashSet<usize> = records.iter().map(|r| r.index).collect();
-        let missing: Vec<usize> = (0..shapes.len()).filter(|i| !done.contains(i)).collect();
+        let missing: Vec<usize> = indices.iter().copied().filter(|i| !done.contains(i)).collect();
         if missing.is_empty() {
             return Ok(records);
         }
@@ -299,11 +375,7 @@ impl Run {
             .append(true)
             .open(&path)
             .with_context(|| format!("opening {}", path.display()))?;
-        let bar = progress(
-            shapes.len(),
-            records.len(),
-            &format!("{} {}", set.key(), candidate.name),
-        );
+        let bar = progress(indices.len(), records.len(), &format!("{} {name}", set.key()));
         let chunk = 4 * self.pool.current_num_threads();
         for indices in missing.chunks(chunk) {
             if self.deadline.is_some_and(|d| Instant::now() >= d) {
@@ -313,13 +385,7 @@ impl Run {
             let found: Vec<PairRecord> = self.pool.install(|| {
                 indices
                     .par_iter()
-                    .map_init(
-                        || candidate.method.clone(),
-                        |method, &i| -> Result<PairRecord> {
-                            let pair = generator.test_pair(shapes, i)?;
-                            Ok(evaluate_pair(method, i, &pair)?)
-                        },
-                    )
+                    .map_init(&init, |state, &i| compute(state, i))
                     .collect::<Result<_>>()
             })?;
             let mut lines = String::new();
@@ -336,11 +402,10 @@ impl Run {
         Ok(records)
     }
 
-    /// For the first `count` pairs: the clouds before and after `candidate`'s transform, the
-    /// pair's ground-truth correspondence matrix and, for an RGM model, its hard
-    /// correspondences (the pair is registered again for them). Existing cloud and
-    /// ground-truth pictures are kept. Returns the share of correct hard correspondences of
-    /// each pair drawn for an RGM model.
+    /// For the first `count` pairs: the clouds before and after `candidate`'s transform
+    /// ([`Run::draw_clouds`]) and, for an RGM model, its hard correspondences (the pair is
+    /// registered again for them). Returns the share of correct hard correspondences of each
+    /// pair drawn for an RGM model.
     fn draw(
         &self,
         set: TestSet,
@@ -350,13 +415,48 @@ impl Run {
         generator: &PairGenerator,
         count: usize,
     ) -> Result<BTreeMap<usize, f64>> {
-        let dir = self.out.join("figures").join(set.key());
-        fs::create_dir_all(&dir)?;
+        self.draw_clouds(set, &candidate.stem, records, shapes, generator, count)?;
         let mut matched = BTreeMap::new();
+        // The network's correspondences; a refined model's are its plain twin's.
+        let Method::Rgm(registrar) = &candidate.method else {
+            return Ok(matched);
+        };
+        if candidate.method.is_refined() {
+            return Ok(matched);
+        }
+        let dir = self.out.join("figures").join(set.key());
         for record in records.iter().take(count) {
             let i = record.index;
             let pair = generator.test_pair(shapes, i)?;
-            let clouds = dir.join(format!("{}-pair{i}.png", candidate.stem));
+            let mut registrar = registrar.clone();
+            // A failure leaves no correspondences: an empty matrix, 0 % correct.
+            let _ = registrar.register(&pair.source, &pair.target);
+            let found = registrar.correspondences();
+            correspondence_figure(&pair.correspondence, found, 36)?
+                .write_png(dir.join(format!("{}-matrix-pair{i}.png", candidate.stem)))?;
+            matched.insert(i, correct_fraction(&pair.correspondence, found));
+        }
+        Ok(matched)
+    }
+
+    /// For the first `count` pairs: the clouds before and after the transform of the method
+    /// whose files are named `stem`, and the pair's ground-truth correspondence matrix.
+    /// Existing pictures are kept.
+    fn draw_clouds(
+        &self,
+        set: TestSet,
+        stem: &str,
+        records: &[PairRecord],
+        shapes: &[&Shape],
+        generator: &PairGenerator,
+        count: usize,
+    ) -> Result<()> {
+        let dir = self.out.join("figures").join(set.key());
+        fs::create_dir_all(&dir)?;
+        for record in records.iter().take(count) {
+            let i = record.index;
+            let pair = generator.test_pair(shapes, i)?;
+            let clouds = dir.join(format!("{stem}-pair{i}.png"));
             if !clouds.exists() {
                 registration_figure(&pair.source, &pair.target, &record.transform)?
                     .write_png(&clouds)?;
@@ -366,20 +466,8 @@ impl Run {
                 correspondence_figure(&pair.correspondence, &pair.correspondence.pairs, 36)?
                     .write_png(&truth)?;
             }
-            // The network's correspondences; a refined model's are its plain twin's.
-            if let (Method::Rgm(registrar), false) =
-                (&candidate.method, candidate.method.is_refined())
-            {
-                let mut registrar = registrar.clone();
-                // A failure leaves no correspondences: an empty matrix, 0 % correct.
-                let _ = registrar.register(&pair.source, &pair.target);
-                let found = registrar.correspondences();
-                correspondence_figure(&pair.correspondence, found, 36)?
-                    .write_png(dir.join(format!("{}-matrix-pair{i}.png", candidate.stem)))?;
-                matched.insert(i, correct_fraction(&pair.correspondence, found));
-            }
         }
-        Ok(matched)
+        Ok(())
     }
 }
 
@@ -646,23 +734,32 @@ impl Report {
     }
 }
 
-/// One table: the rows of its test set (trained models only for the ablation), a note where a
-/// row covers fewer pairs than the set, and a line when no trained model exists for it.
+/// One table: the rows of its test set, a note where a row covers fewer pairs than the set, and
+/// a line when no trained model exists for it. The ablation lists trained models only, and of
+/// those only the ones at the training budget of a Var1 or Var2 model, so that it compares like
+/// with like.
 fn table_markdown(table: &Table, rows: &[Row]) -> String {
+    let ablation_budgets: Vec<u64> = rows
+        .iter()
+        .filter(|r| matches!(r.variant.as_deref(), Some("var1" | "var2")))
+        .filter_map(|r| r.pairs_seen)
+        .collect();
     let mut lines = String::new();
     let mut notes = String::new();
     let mut models = 0;
-    for row in rows
-        .iter()
-        .filter(|r| !table.ablation || r.variant.is_some())
-    {
+    for row in rows.iter().filter(|r| {
+        !table.ablation
+            || (r.variant.is_some() && r.pairs_seen.is_some_and(|p| ablation_budgets.contains(&p)))
+    }) {
         models += row.variant.is_some() as usize;
         let Ok(summary) = Summary::from_records(&row.records) else {
             notes += &format!("\n{}: no pair finished yet.\n", row.name);
             continue;
         };
-        let name = match &row.variant {
-            Some(variant) if table.ablation => format!("{} ({variant})", row.name),
+        let name = match (&row.variant, row.pairs_seen) {
+            (Some(variant), Some(pairs)) if table.ablation => {
+                format!("{} ({variant}, {pairs} pairs)", row.name)
+            }
             _ => row.name.clone(),
         };
         lines += &table_row(&name, table.key, &summary);
@@ -676,7 +773,9 @@ fn table_markdown(table: &Table, rows: &[Row]) -> String {
             );
         }
     }
-    if models == 0 {
+    if table.ablation && ablation_budgets.is_empty() {
+        notes += "\nVar1, Var2: no trained weights (yet).\n";
+    } else if models == 0 {
         notes += "\nRGM: no trained weights for this setting (yet).\n";
     }
     if lines.is_empty() {
@@ -701,7 +800,9 @@ Euclidean distances, means), not the paper's formula. Recall: MAE(R) < 1° and M
 settings (see baselines.md for the agreement with Open3D). `+icp` rows: the method's transform \
 refined as `rgm register` refines it (`rgm_geom::refine`: trimmed point-to-plane ICP on the \
 full clouds, pairs closer than 0.2, 0.1, then 0.05, 10 iterations each, the closest 80 % of \
-them fitted, then point-to-point ICP at 0.05 and 0.03); the paper reports no refined rows. \
+them fitted, then point-to-point ICP at 0.05 and 0.03); the paper reports no refined rows. A \
+trained model's `+icp` row refines the transforms of its own row (what `rgm eval --refine` \
+gives, without running the network twice; its time adds the refinement's). \
 `auto+icp`: `rgm register`'s default, RGM with the built-in model and FGR, both refined so, and \
 per pair the result with the larger two-way overlap (`rgm_model::combined`). The paper's learned \
 peers (RPM-Net, IDAM, DeepGMR) are not reproduced here.
@@ -738,6 +839,7 @@ mod tests {
             name: name.into(),
             stem: name.into(),
             variant: variant.map(String::from),
+            pairs_seen: variant.map(|_| 100),
             records,
             total,
             matched: BTreeMap::new(),
@@ -763,21 +865,34 @@ mod tests {
         // The ablation lists trained models only: here none, so no table at all.
         let ablation = table_markdown(&TABLES[4], &rows);
         assert!(!ablation.contains('|'), "{ablation}");
-        assert!(ablation.contains("no trained weights"), "{ablation}");
+        assert!(
+            ablation.contains("Var1, Var2: no trained weights"),
+            "{ablation}"
+        );
     }
 
     #[test]
-    fn the_ablation_lists_every_variant_by_name() {
+    fn the_ablation_lists_the_variants_at_equal_budget_by_name() {
+        let longer = Row {
+            pairs_seen: Some(900),
+            ..row("partial-fast", Some("rgm"), vec![record(0, true)], 1)
+        };
         let rows = [
             row("icp", None, vec![record(0, true)], 1),
-            row("partial-fast", Some("rgm"), vec![record(0, true)], 1),
+            longer,
+            row("partial-fast-e1", Some("rgm"), vec![record(0, true)], 1),
             row("partial-var1", Some("var1"), vec![record(0, false)], 1),
         ];
         let md = table_markdown(&TABLES[4], &rows);
-        assert!(md.contains("| partial-fast (rgm) "), "{md}");
-        assert!(md.contains("| partial-var1 (var1) "), "{md}");
+        assert!(md.contains("| partial-fast-e1 (rgm, 100 pairs) "), "{md}");
+        assert!(md.contains("| partial-var1 (var1, 100 pairs) "), "{md}");
+        assert!(!md.contains("| partial-fast ("), "{md}");
         assert!(!md.contains("| icp"), "{md}");
         assert!(!md.contains("no trained weights"), "{md}");
+        // Table 3 lists every model, by its name alone.
+        let partial = table_markdown(&TABLES[2], &rows);
+        assert!(partial.contains("| partial-fast "), "{partial}");
+        assert!(partial.contains("| partial-var1 "), "{partial}");
     }
 
     #[test]

@@ -7,7 +7,9 @@ use rgm_geom::metrics::{MetricsSummary, PairMetrics};
 use rgm_geom::{Matrix4, RigidTransform};
 use serde::{Deserialize, Serialize};
 
-use crate::Method;
+use rgm_geom::refine::{self, RefineConfig};
+
+use crate::{Method, Normalisation};
 
 /// One test pair's outcome.
 #[derive(Clone, Debug)]
@@ -53,6 +55,31 @@ impl PairRecord {
             metrics,
             failure,
         })
+    }
+
+    /// This record's transform refined as [`Method::refined`] refines RGM's (in the network's
+    /// frame, on the full clouds of `pair`), scored: the record `rgm eval --refine` would give,
+    /// without running the network again. Its time adds the refinement's to this record's. A
+    /// failed record stays as it is; a failed refinement is recorded as a failure (the identity),
+    /// as the pipeline reports it.
+    pub fn refined(&self, pair: &Pair, config: &RefineConfig) -> rgm_geom::Result<Self> {
+        if self.failure.is_some() {
+            return Ok(self.clone());
+        }
+        let start = Instant::now();
+        let frame = Normalisation::of_pair(&pair.source, &pair.target);
+        let refined = refine::refine(
+            &frame.source(&pair.source),
+            &frame.target(&pair.target),
+            &frame.redo(&self.transform),
+            config,
+        );
+        let time_ms = self.time_ms + start.elapsed().as_secs_f64() * 1e3;
+        let (transform, failure) = match refined {
+            Ok(r) => (frame.undo(&r.t_target_source), None),
+            Err(e) => (RigidTransform::identity(), Some(e.to_string())),
+        };
+        Self::score(self.index, pair, transform, time_ms, self.correspondences, failure)
     }
 }
 

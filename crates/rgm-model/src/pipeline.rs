@@ -161,6 +161,14 @@ impl Normalisation {
             self.scale * t.translation + self.target_centre - t.rotation * self.source_centre;
         RigidTransform::new(t.rotation, translation)
     }
+
+    /// The transform in the network's frame of `t` (in the caller's frame): the inverse of
+    /// [`Normalisation::undo`], t' = (t − c_Y + R c_X) / s.
+    pub fn redo(&self, t: &RigidTransform) -> RigidTransform {
+        let translation =
+            (t.translation - self.target_centre + t.rotation * self.source_centre) / self.scale;
+        RigidTransform::new(t.rotation, translation)
+    }
 }
 
 /// Points of a training cloud (1,024 per ModelNet40 shape; 717 after the partial crop).

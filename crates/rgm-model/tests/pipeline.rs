@@ -13,6 +13,7 @@ use rgm_geom::{Point3, PointCloud, RigidTransform, Vector3};
 use rgm_match::{hard_match, MatchConfig};
 use rgm_model::network::{Config, Edges, FeaturerCache, Mode, Rgm, RgmCache, Scoring};
 use rgm_model::pipeline::Normalisation;
+use rgm_model::evaluate::evaluate_pair;
 use rgm_model::{Method, MethodError, PipelineConfig, RgmRegistrar};
 
 fn fixture() -> PathBuf {
@@ -331,6 +332,8 @@ fn normalisation_is_undone_on_the_transform() {
     assert!((farthest.fold(0.0, f64::max) - 1.0).abs() < 1e-12);
     let in_frame = rgm_geom::kabsch(&ns.points, &nt.points, &vec![1.0; source.len()]).unwrap();
     assert_same_transform(&frame.undo(&in_frame), &t_big, 1e-9);
+    // And back: the caller's transform in the network's frame.
+    assert_same_transform(&frame.redo(&t_big), &in_frame, 1e-9);
 }
 
 #[test]
@@ -392,6 +395,44 @@ fn refinement_starts_from_rgms_transform() {
     assert!((both.fitness - expected.fitness).abs() < 1e-12);
     assert!((both.inlier_rmse - expected.inlier_rmse).abs() < 1e-12);
     assert!(both.inlier_rmse < rgm.inlier_rmse, "{both:?} {rgm:?}");
+}
+
+#[test]
+fn a_record_refined_afterwards_is_what_the_refined_method_records() {
+    // Far and large clouds: the refinement runs in the network's frame, not the caller's.
+    let network = Rgm::<f32>::load(Config::tiny(), &fixture()).unwrap();
+    let (source, target) = far_and_large(&fixture_pair().0, &fixture_pair().1);
+    let pair = rgm_data::Pair {
+        correspondence: rgm_data::Correspondence {
+            n_source: source.len(),
+            n_target: target.len(),
+            pairs: (0..source.len().min(target.len())).map(|i| (i, i)).collect(),
+        },
+        t_target_source: RigidTransform::identity(),
+        source,
+        target,
+        shape_index: 0,
+        label: 0,
+    };
+    let plain = PipelineConfig {
+        passes: 1,
+        ..Default::default()
+    };
+    let method = |config| Method::Rgm(Box::new(RgmRegistrar::new(network.clone(), config)));
+    let record = evaluate_pair(&mut method(plain.clone()), 3, &pair).unwrap();
+    let refined_config = PipelineConfig {
+        refine: Some(RefineConfig::default()),
+        ..plain
+    };
+    let expected = evaluate_pair(&mut method(refined_config), 3, &pair).unwrap();
+    let refined = record.refined(&pair, &RefineConfig::default()).unwrap();
+    // The same refinement from the same start, up to the rounding of leaving the network's
+    // frame and coming back (clouds 40 across, 100 from the origin).
+    assert_same_transform(&refined.transform, &expected.transform, 1e-6);
+    assert_ne!(refined.transform, record.transform);
+    assert_eq!(refined.metrics.recall, expected.metrics.recall);
+    assert_eq!(refined.correspondences, expected.correspondences);
+    assert!(refined.time_ms >= record.time_ms);
 }
 
 #[test]
