@@ -5,7 +5,8 @@
 #   bash runs/train.sh          # start or resume the queue (background; log in runs/queue.out)
 #   bash runs/train.sh status   # where each run stands
 #   bash runs/train.sh stop     # stop it (every run resumes from its last checkpoint)
-#   bash runs/train.sh snapshot # before committing a stopped queue: Adam moments in bf16
+#   bash runs/train.sh snapshot # before committing a stopped queue: weights and Adam moments in
+#                               # bf16, no Adam state for runs at their last target
 #
 # The queue trains one run at a time on all cores, in the order below: each run until its
 # target epoch (`rgm train --until-epoch`), then the next. Every run is resumable, so stopping
@@ -25,7 +26,7 @@ QUEUE=(
   "noise-fast|1|--setting noise --init $PARTIAL25"
   "clean-fast|1|--setting clean --init $PARTIAL25"
   "var2-fast|7|--setting partial --variant var2"
-  "unseen-fast|10|--setting partial --unseen"
+  "unseen-fast|14|--setting partial --unseen"
   "var1-fast|7|--setting partial --variant var1"
   "partial-fast|100|--setting partial"
 )
@@ -114,7 +115,20 @@ case "${1:-start}" in
     nohup bash "$0" run-queue >>runs/queue.out 2>&1 &
     echo $! >runs/queue.pid
     echo "training queue in the background, pid $(cat runs/queue.pid); bash runs/train.sh status" ;;
-  snapshot) cargo xtask snapshot-runs ;;
+  snapshot)
+    # Runs at the last target the queue gives them are committed without their Adam state.
+    finished=()
+    declare -A final
+    for entry in "${QUEUE[@]}"; do
+      IFS='|' read -r name target _ <<<"$entry"
+      final[$name]=$target
+    done
+    for name in "${!final[@]}"; do
+      [ -f "runs/$name/state.json" ] || continue
+      epoch=$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["epoch"])' "runs/$name/state.json")
+      [ "$epoch" -ge "${final[$name]}" ] && finished+=("$name")
+    done
+    cargo xtask snapshot-runs ${finished:+--finished "${finished[@]}"} ;;
   run-queue) run_queue ;;
   *) echo "usage: bash runs/train.sh [start|status|stop|snapshot]" >&2; exit 2 ;;
 esac

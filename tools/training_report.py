@@ -70,9 +70,17 @@ def main():
           f"K {net['k']}, L {net['blocks']}; matching on {config['match_points'] or 'all'} points per cloud; "
           f"{config['optimizer']} lr {config['lr']} (×{config['gamma']} at epochs {config['milestones']}), "
           f"batch {config['batch']}, {config['workers']} workers. Full configuration: `{run}/config.json`.\n")
-    print(f"State when this page was written: epoch {state['epoch'] + 1} of {config['epochs']}, batch "
-          f"{state['batch']}, {state['pairs_seen']} training pairs seen in {state['seconds'] / 3600:.2f} h of "
-          f"training and validation (`{run}/state.json`).\n")
+    ablation = {"Full": "Var2 (no transformer: the fully connected graph without self-loops)"}.get(net.get("edges"))
+    if net.get("scoring") == "Var1":
+        ablation = "Var1 (no affinity matrix or instance norm: squared feature distances into the Sinkhorn)"
+    if ablation:
+        print(f"Ablation: **{ablation}**, spec §2.7.\n")
+    if config.get("init"):
+        print(f"Started from the weights `{config['init']}` (fine-tuning; `rgm train --init`), not from "
+              f"the seeded initialisation: the pairs below are this run's only.\n")
+    print(f"State when this page was written: {state['epoch']} epochs and {state['batch']} batches of "
+          f"{config['epochs']} done, {state['pairs_seen']} training pairs seen in {state['seconds'] / 3600:.2f} h "
+          f"of training and validation (`{run}/state.json`).\n")
     print("![learning curve](curve.svg)\n")
     print("## Validation after each epoch\n")
     if val:
