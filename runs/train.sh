@@ -26,7 +26,7 @@ QUEUE=(
   "noise-fast|1|--setting noise --init $PARTIAL25"
   "clean-fast|1|--setting clean --init $PARTIAL25"
   "var2-fast|7|--setting partial --variant var2"
-  "unseen-fast|14|--setting partial --unseen"
+  "unseen-fast|9|--setting partial --unseen"
   "var1-fast|7|--setting partial --variant var1"
   "partial-fast|100|--setting partial"
 )
