@@ -44,8 +44,14 @@ pub fn run(args: Args) -> Result<()> {
         .collect();
     folders.sort();
     for name in &args.finished {
-        if !folders.iter().any(|f| f.file_name().is_some_and(|n| n == name.as_str())) {
-            bail!("--finished {name}: no run folder {}", runs.join(name).display());
+        if !folders
+            .iter()
+            .any(|f| f.file_name().is_some_and(|n| n == name.as_str()))
+        {
+            bail!(
+                "--finished {name}: no run folder {}",
+                runs.join(name).display()
+            );
         }
     }
     for folder in folders {
@@ -103,14 +109,20 @@ fn known_to_git(path: &Path) -> Result<bool> {
             .output()
             .context("running git")?;
         if !out.status.success() {
-            bail!("git {:?} failed: {}", args, String::from_utf8_lossy(&out.stderr));
+            bail!(
+                "git {:?} failed: {}",
+                args,
+                String::from_utf8_lossy(&out.stderr)
+            );
         }
         Ok(String::from_utf8_lossy(&out.stdout).into_owned())
     };
     let id = git(&["hash-object".as_ref(), "--".as_ref(), path.as_os_str()])?;
     let id = id.trim();
     let reachable = git(&["rev-list".as_ref(), "--objects".as_ref(), "--all".as_ref()])?;
-    Ok(reachable.lines().any(|line| line.split(' ').next() == Some(id)))
+    Ok(reachable
+        .lines()
+        .any(|line| line.split(' ').next() == Some(id)))
 }
 
 /// Rounds the weights in `path` to bf16, unless git stores these bytes already or they are
@@ -121,7 +133,11 @@ fn round_weights(path: &Path) -> Result<()> {
         return Ok(());
     }
     let (tensors, metadata) = read(path)?;
-    if tensors.values().flatten().all(|v| v.to_bits() & 0xFFFF == 0) {
+    if tensors
+        .values()
+        .flatten()
+        .all(|v| v.to_bits() & 0xFFFF == 0)
+    {
         println!("{}: already a snapshot", path.display());
         return Ok(());
     }
@@ -137,7 +153,13 @@ fn keep_second_moments(optim: &Path) -> Result<()> {
         return Ok(());
     }
     let second = |name: &str| name.starts_with("v.");
-    rewrite(optim, &tensors, metadata, &|name| !name.starts_with("m."), &second)
+    rewrite(
+        optim,
+        &tensors,
+        metadata,
+        &|name| !name.starts_with("m."),
+        &second,
+    )
 }
 
 type Tensors = rgm_nn::io::Tensors<f32>;
@@ -183,7 +205,12 @@ mod tests {
     fn write(path: &Path, tensors: &[(&str, Vec<f32>)]) {
         let arrays: Vec<(String, ArrayD<f32>)> = tensors
             .iter()
-            .map(|(n, v)| (n.to_string(), ArrayD::from_shape_vec(vec![v.len()], v.clone()).unwrap()))
+            .map(|(n, v)| {
+                (
+                    n.to_string(),
+                    ArrayD::from_shape_vec(vec![v.len()], v.clone()).unwrap(),
+                )
+            })
             .collect();
         let views: Vec<_> = arrays.iter().map(|(n, a)| (n.clone(), a.view())).collect();
         rgm_nn::io::write_tensors(path, &views, HashMap::new()).unwrap();
@@ -198,7 +225,10 @@ mod tests {
         let weights = [("w", vec![1.0 + 2f32.powi(-10), -0.3, 1e-3])];
         write(&dir.join("last.safetensors"), &weights);
         write(&dir.join("best.safetensors"), &weights);
-        let moments = [("m.w", vec![0.1; 3]), ("v.w", vec![0.2 + 2f32.powi(-12); 3])];
+        let moments = [
+            ("m.w", vec![0.1; 3]),
+            ("v.w", vec![0.2 + 2f32.powi(-12); 3]),
+        ];
         write(&dir.join("last.optim.safetensors"), &moments);
         dir
     }
@@ -208,7 +238,10 @@ mod tests {
         let dir = run_folder("going-on");
         snapshot(&dir, false).unwrap();
         let (last, _) = read(&dir.join("last.safetensors")).unwrap();
-        assert_eq!(last["w"].as_slice().unwrap(), &[1.0, -0.30078125, 0.00099945068359375]);
+        assert_eq!(
+            last["w"].as_slice().unwrap(),
+            &[1.0, -0.30078125, 0.00099945068359375]
+        );
         let bytes = |name: &str| fs::read(dir.join(name)).unwrap();
         assert_eq!(bytes("last.safetensors"), bytes("best.safetensors"));
         let (optim, _) = read(&dir.join("last.optim.safetensors")).unwrap();
@@ -217,7 +250,10 @@ mod tests {
         // A second snapshot leaves the files byte for byte.
         let before = (bytes("last.safetensors"), bytes("last.optim.safetensors"));
         snapshot(&dir, false).unwrap();
-        assert_eq!(before, (bytes("last.safetensors"), bytes("last.optim.safetensors")));
+        assert_eq!(
+            before,
+            (bytes("last.safetensors"), bytes("last.optim.safetensors"))
+        );
         fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -342,11 +342,18 @@ impl Run {
     ) -> Result<Vec<PairRecord>> {
         let config = RefineConfig::default();
         let indices: Vec<usize> = plain.iter().map(|r| r.index).collect();
-        self.records(set, name, stem, &indices, || (), |_, i| {
-            let start = &plain[indices.binary_search(&i).expect("an index of plain")];
-            let pair = generator.test_pair(shapes, i)?;
-            Ok(start.refined(&pair, &config)?)
-        })
+        self.records(
+            set,
+            name,
+            stem,
+            &indices,
+            || (),
+            |_, i| {
+                let start = &plain[indices.binary_search(&i).expect("an index of plain")];
+                let pair = generator.test_pair(shapes, i)?;
+                Ok(start.refined(&pair, &config)?)
+            },
+        )
     }
 
     /// The records of the pairs `indices` (sorted) in the per-pair file `stem` of `set`: those
@@ -365,7 +372,11 @@ impl Run {
         let mut records = read_records(&path)?;
         records.retain(|r| indices.binary_search(&r.index).is_ok());
         let done: std::collections::HashSet<usize> = records.iter().map(|r| r.index).collect();
-        let missing: Vec<usize> = indices.iter().copied().filter(|i| !done.contains(i)).collect();
+        let missing: Vec<usize> = indices
+            .iter()
+            .copied()
+            .filter(|i| !done.contains(i))
+            .collect();
         if missing.is_empty() {
             return Ok(records);
         }
@@ -375,7 +386,11 @@ impl Run {
             .append(true)
             .open(&path)
             .with_context(|| format!("opening {}", path.display()))?;
-        let bar = progress(indices.len(), records.len(), &format!("{} {name}", set.key()));
+        let bar = progress(
+            indices.len(),
+            records.len(),
+            &format!("{} {name}", set.key()),
+        );
         let chunk = 4 * self.pool.current_num_threads();
         for indices in missing.chunks(chunk) {
             if self.deadline.is_some_and(|d| Instant::now() >= d) {

@@ -79,7 +79,14 @@ impl PairRecord {
             Ok(r) => (frame.undo(&r.t_target_source), None),
             Err(e) => (RigidTransform::identity(), Some(e.to_string())),
         };
-        Self::score(self.index, pair, transform, time_ms, self.correspondences, failure)
+        Self::score(
+            self.index,
+            pair,
+            transform,
+            time_ms,
+            self.correspondences,
+            failure,
+        )
     }
 }
 

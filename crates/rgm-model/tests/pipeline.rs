@@ -11,9 +11,9 @@ use ndarray::Array2;
 use rgm_geom::refine::{refine, RefineConfig};
 use rgm_geom::{Point3, PointCloud, RigidTransform, Vector3};
 use rgm_match::{hard_match, MatchConfig};
+use rgm_model::evaluate::evaluate_pair;
 use rgm_model::network::{Config, Edges, FeaturerCache, Mode, Rgm, RgmCache, Scoring};
 use rgm_model::pipeline::Normalisation;
-use rgm_model::evaluate::evaluate_pair;
 use rgm_model::{Method, MethodError, PipelineConfig, RgmRegistrar};
 
 fn fixture() -> PathBuf {
@@ -406,7 +406,9 @@ fn a_record_refined_afterwards_is_what_the_refined_method_records() {
         correspondence: rgm_data::Correspondence {
             n_source: source.len(),
             n_target: target.len(),
-            pairs: (0..source.len().min(target.len())).map(|i| (i, i)).collect(),
+            pairs: (0..source.len().min(target.len()))
+                .map(|i| (i, i))
+                .collect(),
         },
         t_target_source: RigidTransform::identity(),
         source,
