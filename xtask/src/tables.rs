@@ -267,7 +267,7 @@ fn candidates(set: TestSet, manifest: &Manifest) -> Result<Vec<Candidate>> {
         });
     }
     for entry in models_for(manifest, set) {
-        let method = entry
+        let method = from_history(entry)?
             .method(&weights_dir())
             .with_context(|| format!("loading the model {}", entry.name))?;
         list.push(Candidate {
@@ -279,6 +279,36 @@ fn candidates(set: TestSet, manifest: &Manifest) -> Result<Vec<Candidate>> {
         });
     }
     Ok(list)
+}
+
+/// `entry` with its weights on disk: a file named `git:REV:PATH` (weights a commit of the
+/// history holds, e.g. an earlier built-in model, kept out of the tree so that git does not count
+/// the same bytes again) is written once to `target/git-weights/` by `git show`.
+fn from_history(entry: &ModelEntry) -> Result<ModelEntry> {
+    let Some(object) = entry.file.strip_prefix("git:") else {
+        return Ok(entry.clone());
+    };
+    let dir = project_root().join("target/git-weights");
+    let path = dir.join(format!("{}.safetensors", entry.name));
+    if !path.exists() {
+        let out = Command::new("git")
+            .args(["show", object])
+            .current_dir(project_root())
+            .output()
+            .context("running git show")?;
+        anyhow::ensure!(
+            out.status.success(),
+            "the weights of {}: git show {object} failed: {}",
+            entry.name,
+            String::from_utf8_lossy(&out.stderr)
+        );
+        fs::create_dir_all(&dir)?;
+        fs::write(&path, out.stdout)?;
+    }
+    Ok(ModelEntry {
+        file: path.to_string_lossy().into_owned(),
+        ..entry.clone()
+    })
 }
 
 /// The manifest's models trained for `set`'s setting and categories.
