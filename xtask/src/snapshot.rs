@@ -17,7 +17,7 @@
 //! for the same values). A run that is training (its folder's lock is held) is left alone and
 //! named.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::fs;
 use std::path::Path;
 use std::process::Command;
@@ -54,18 +54,19 @@ pub fn run(args: Args) -> Result<()> {
             );
         }
     }
+    let committed = Committed::read()?;
     for folder in folders {
         let finished = args
             .finished
             .iter()
             .any(|n| folder.file_name().is_some_and(|f| f == n.as_str()));
-        snapshot(&folder, finished)?;
+        snapshot(&folder, finished, &committed)?;
     }
     Ok(())
 }
 
 /// Rewrites the run in `folder` for a commit, unless it is training.
-fn snapshot(folder: &Path, finished: bool) -> Result<()> {
+fn snapshot(folder: &Path, finished: bool, committed: &Committed) -> Result<()> {
     let lock = folder.join("lock");
     if lock.exists() {
         let file = fs::File::open(&lock)?;
@@ -80,12 +81,12 @@ fn snapshot(folder: &Path, finished: bool) -> Result<()> {
     let last = folder.join("last.safetensors");
     let best = folder.join("best.safetensors");
     let same = best.is_file() && fs::read(&last)? == fs::read(&best)?;
-    round_weights(&last)?;
+    round_weights(&last, committed)?;
     if same {
         // One rounding for both, so that git keeps one blob.
         fs::copy(&last, &best)?;
     } else if best.is_file() {
-        round_weights(&best)?;
+        round_weights(&best, committed)?;
     }
     let optim = folder.join("last.optim.safetensors");
     if finished {
@@ -99,36 +100,45 @@ fn snapshot(folder: &Path, finished: bool) -> Result<()> {
     Ok(())
 }
 
-/// Whether a commit already holds the bytes of `path` (in any file of any branch): a blob
-/// that only sits in git's object store, e.g. staged once, does not count.
-fn known_to_git(path: &Path) -> Result<bool> {
-    let git = |args: &[&std::ffi::OsStr]| -> Result<String> {
-        let out = Command::new("git")
-            .args(args)
-            .current_dir(project_root())
-            .output()
-            .context("running git")?;
-        if !out.status.success() {
-            bail!(
-                "git {:?} failed: {}",
-                args,
-                String::from_utf8_lossy(&out.stderr)
-            );
-        }
-        Ok(String::from_utf8_lossy(&out.stdout).into_owned())
-    };
-    let id = git(&["hash-object".as_ref(), "--".as_ref(), path.as_os_str()])?;
-    let id = id.trim();
-    let reachable = git(&["rev-list".as_ref(), "--objects".as_ref(), "--all".as_ref()])?;
-    Ok(reachable
-        .lines()
-        .any(|line| line.split(' ').next() == Some(id)))
+/// The blobs the commits of every branch hold: a file with the bytes of one of them costs
+/// nothing to commit (a blob that only sits in git's object store, e.g. staged once, is not
+/// one of them).
+struct Committed(HashSet<String>);
+
+impl Committed {
+    fn read() -> Result<Self> {
+        let objects = git(&["rev-list".as_ref(), "--objects".as_ref(), "--all".as_ref()])?;
+        let ids = objects.lines().filter_map(|l| l.split(' ').next());
+        Ok(Self(ids.map(String::from).collect()))
+    }
+
+    fn holds(&self, path: &Path) -> Result<bool> {
+        let id = git(&["hash-object".as_ref(), "--".as_ref(), path.as_os_str()])?;
+        Ok(self.0.contains(id.trim()))
+    }
+}
+
+/// The output of git with `args`, run in the repository.
+fn git(args: &[&std::ffi::OsStr]) -> Result<String> {
+    let out = Command::new("git")
+        .args(args)
+        .current_dir(project_root())
+        .output()
+        .context("running git")?;
+    if !out.status.success() {
+        bail!(
+            "git {:?} failed: {}",
+            args,
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    Ok(String::from_utf8_lossy(&out.stdout).into_owned())
 }
 
 /// Rounds the weights in `path` to bf16, unless git stores these bytes already or they are
 /// rounded already.
-fn round_weights(path: &Path) -> Result<()> {
-    if known_to_git(path)? {
+fn round_weights(path: &Path, committed: &Committed) -> Result<()> {
+    if committed.holds(path)? {
         println!("{}: in git already, left as it is", path.display());
         return Ok(());
     }
@@ -236,7 +246,7 @@ mod tests {
     #[test]
     fn a_snapshot_rounds_the_weights_once_and_keeps_the_second_moments() {
         let dir = run_folder("going-on");
-        snapshot(&dir, false).unwrap();
+        snapshot(&dir, false, &Committed::read().unwrap()).unwrap();
         let (last, _) = read(&dir.join("last.safetensors")).unwrap();
         assert_eq!(
             last["w"].as_slice().unwrap(),
@@ -249,7 +259,7 @@ mod tests {
         assert_eq!(optim["v.w"][0], 0.2001953125);
         // A second snapshot leaves the files byte for byte.
         let before = (bytes("last.safetensors"), bytes("last.optim.safetensors"));
-        snapshot(&dir, false).unwrap();
+        snapshot(&dir, false, &Committed::read().unwrap()).unwrap();
         assert_eq!(
             before,
             (bytes("last.safetensors"), bytes("last.optim.safetensors"))
@@ -260,7 +270,7 @@ mod tests {
     #[test]
     fn a_finished_run_is_snapshot_without_its_adam_state() {
         let dir = run_folder("finished");
-        snapshot(&dir, true).unwrap();
+        snapshot(&dir, true, &Committed::read().unwrap()).unwrap();
         assert!(!dir.join("last.optim.safetensors").exists());
         assert!(dir.join("best.safetensors").exists());
         fs::remove_dir_all(&dir).unwrap();
