@@ -84,7 +84,7 @@ def main():
     print("![learning curve](curve.svg)\n")
     print("## Validation after each epoch\n")
     if val:
-        print("| epoch | pairs seen | pairs | loss | matching accuracy | MIE(R) ° | MIE(t) | recall "
+        print("| epoch | pairs seen | pairs (sample) | loss | matching accuracy | MIE(R) ° | MIE(t) | recall "
               "| recall after refinement |")
         print("|---|---|---|---|---|---|---|---|---|")
         for r in val:
@@ -93,13 +93,19 @@ def main():
             refined = f"{100 * r['recall_refined']:.2f} %" if "recall_refined" in r else "—"
             if "recall_refined" in r and r.get("refined_with", "point_to_point_icp") == "point_to_point_icp":
                 refined += " ¹"
-            print(f"| {r['epoch'] + 1} | {r['pairs_seen']} | {r['pairs']} | {r['loss']:.4f} | "
+            # Records written before `rgm train --val-sample` validated on the first shapes.
+            sample = r.get("sample", "first")
+            print(f"| {r['epoch'] + 1} | {r['pairs_seen']} | {r['pairs']} ({sample}) | {r['loss']:.4f} | "
                   f"{100 * r['match_accuracy']:.2f} % | {r['mie_r_deg']:.2f} | {r['mie_t']:.4f} | "
                   f"{100 * r['recall']:.2f} % | {refined} |")
         if any("recall_refined" in r and "refined_with" not in r for r in val):
             print("\n¹ Point-to-point ICP (pairs closer than 0.1, 30 iterations), rgm's refinement until "
                   "2026-11-23; the others: trimmed point-to-plane ICP, coarse to fine (`rgm_geom::refine`, "
                   "what `--refine` does).")
+        print("\n`first`: the first validation shapes of the split, which is ordered by category (300 of "
+              "the full split are five categories, airplane to bookshelf); `spread`: shapes spread evenly "
+              "over the split (`rgm train --val-sample`). Recalls on the two samples are not comparable; the "
+              "first validation on a new sample becomes the run's best.")
     else:
         print("No epoch finished yet.")
     print("\n## Training loss (mean over the batches since the previous checkpoint)\n")

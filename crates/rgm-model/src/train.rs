@@ -124,8 +124,13 @@ pub struct TrainConfig {
     pub gamma: f64,
     /// Use only the first N training shapes per epoch (None: all).
     pub train_shapes: Option<usize>,
-    /// Validate on the first N validation shapes (None: all).
+    /// Validate on N validation shapes (None: all), taken as `val_sample` says.
     pub val_shapes: Option<usize>,
+    /// Which `val_shapes` shapes validate. Only validation depends on it: it may change on
+    /// resume (the first validation on a new sample then becomes the best, see
+    /// [`Validation::beats`]). Runs saved before the field validated on the first ones.
+    #[serde(default)]
+    pub val_sample: ValSample,
     /// Threads, each working on its own pairs of a batch.
     pub workers: usize,
     /// Save `last.*` every this many batches.
@@ -181,6 +186,7 @@ impl TrainConfig {
             gamma: 0.2,
             train_shapes: None,
             val_shapes: None,
+            val_sample: ValSample::Spread,
             workers: 2,
             checkpoint_every: 50,
             seed: 0,
@@ -219,14 +225,43 @@ impl TrainConfig {
     }
 
     /// Whether a run saved with `saved` can go on under `self`: everything equal but the
-    /// number of epochs (a run may be extended) and the validation's batch-norm statistics.
+    /// number of epochs (a run may be extended) and what only validation or speed depends on
+    /// (batch-norm statistics at validation, its sample, the products' precision).
     fn same_run(&self, saved: &Self) -> bool {
         Self {
             epochs: saved.epochs,
             test_statistics: saved.test_statistics,
+            val_sample: saved.val_sample,
             precision: saved.precision,
             ..self.clone()
         } == *saved
+    }
+}
+
+/// Which validation shapes a run validates on when it takes fewer than all of them.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ValSample {
+    /// The first N of the split. The split is ordered by category, so these are a few
+    /// categories only (the first 300 of the partial protocol: airplane to bookshelf). What runs
+    /// saved before the choice existed did.
+    #[default]
+    First,
+    /// N shapes spread evenly over the split (every category when N ≥ 40).
+    Spread,
+}
+
+impl ValSample {
+    /// The `n` shapes of `shapes` this sample takes (all of them when `n` ≥ their number).
+    pub fn take<'a>(self, shapes: &[&'a Shape], n: usize) -> Vec<&'a Shape> {
+        let len = shapes.len();
+        if n >= len {
+            return shapes.to_vec();
+        }
+        match self {
+            ValSample::First => shapes[..n].to_vec(),
+            ValSample::Spread => (0..n).map(|j| shapes[j * len / n]).collect(),
+        }
     }
 }
 
@@ -235,6 +270,9 @@ impl TrainConfig {
 pub struct Validation {
     pub epoch: usize,
     pub pairs: usize,
+    /// The shapes validated on ([`ValSample::First`] in records written before the field).
+    #[serde(default)]
+    pub sample: ValSample,
     /// Mean BCE per pair (spec §3), network in evaluation mode.
     pub loss: f64,
     /// Fraction of ground-truth matched source points whose largest entry of C̃ is their match.
@@ -273,8 +311,13 @@ pub enum Refinement {
 impl Validation {
     /// Whether `self` beats `other`: higher recall after refinement, then higher recall, then
     /// lower loss; recall after refinement counts only when both were refined alike (a new
-    /// refinement must not make a newer checkpoint look better).
+    /// refinement must not make a newer checkpoint look better). A validation on another
+    /// sample of shapes than `other`'s always beats it: the two are not comparable, and `self`
+    /// is on the sample the run validates on now.
     fn beats(&self, other: &Self) -> bool {
+        if self.sample != other.sample {
+            return true;
+        }
         let refined = |v: &Self| {
             if self.refined_with == other.refined_with {
                 v.recall_refined
@@ -670,8 +713,10 @@ impl Trainer {
         let generator = PairGenerator::new(setting);
         let mut train = dataset.split(Split::Train, self.config.unseen);
         train.truncate(self.config.train_shapes.unwrap_or(usize::MAX));
-        let mut val = dataset.split(Split::Validation, self.config.unseen);
-        val.truncate(self.config.val_shapes.unwrap_or(usize::MAX));
+        let val = self.config.val_sample.take(
+            &dataset.split(Split::Validation, self.config.unseen),
+            self.config.val_shapes.unwrap_or(usize::MAX),
+        );
         if train.is_empty() || val.is_empty() {
             return Err(TrainError::Config {
                 why: format!(
@@ -936,6 +981,7 @@ impl Trainer {
         Ok(Validation {
             epoch,
             pairs: total,
+            sample: self.config.val_sample,
             loss,
             match_accuracy: hits as f64 / matched.max(1) as f64,
             mie_r_deg: m.mie_r_deg,
@@ -1079,6 +1125,55 @@ mod tests {
             ..sharper
         };
         assert!(alike.beats(&before));
+    }
+
+    #[test]
+    fn a_validation_on_another_sample_beats_the_best_whatever_its_numbers() {
+        // Epoch 25 of runs/partial-fast (first 300 shapes) and a worse one on the spread sample.
+        let first = r#"{"epoch":24,"pairs":300,"loss":2.0,"match_accuracy":0.4,"mie_r_deg":3.0,"mie_t":0.03,"mae_r_deg":1.6,"mae_t":0.02,"recall":0.487,"recall_refined":0.983,"refined_with":"plane_then_point","failures":0}"#;
+        let first: Validation = serde_json::from_str(first).unwrap();
+        assert_eq!(first.sample, ValSample::First);
+        let spread = Validation {
+            epoch: 25,
+            sample: ValSample::Spread,
+            recall: 0.29,
+            recall_refined: 0.89,
+            ..first
+        };
+        assert!(spread.beats(&first));
+        // On the same sample the numbers decide again.
+        let next = Validation {
+            epoch: 26,
+            recall: 0.28,
+            ..spread
+        };
+        assert!(!next.beats(&spread) && spread.beats(&next));
+        let line = serde_json::to_string(&spread).unwrap();
+        assert!(line.contains(r#""sample":"spread""#), "{line}");
+    }
+
+    #[test]
+    fn the_spread_sample_takes_evenly_spaced_shapes_and_the_first_the_head() {
+        let shapes: Vec<Shape> = (0..10)
+            .map(|i| Shape {
+                name: format!("shape_{i}"),
+                label: i / 2,
+                points: vec![[i as f32, 0.0, 0.0]],
+            })
+            .collect();
+        let refs: Vec<&Shape> = shapes.iter().collect();
+        let labels = |taken: Vec<&Shape>| taken.iter().map(|s| s.label).collect::<Vec<_>>();
+        assert_eq!(labels(ValSample::Spread.take(&refs, 5)), [0, 1, 2, 3, 4]);
+        assert_eq!(labels(ValSample::First.take(&refs, 5)), [0, 0, 1, 1, 2]);
+        assert_eq!(
+            ValSample::Spread
+                .take(&refs, 3)
+                .iter()
+                .map(|s| s.name.as_str())
+                .collect::<Vec<_>>(),
+            ["shape_0", "shape_3", "shape_6"]
+        );
+        assert_eq!(ValSample::Spread.take(&refs, 50).len(), 10);
     }
 
     #[test]

@@ -11,7 +11,8 @@ use rand::{Rng, SeedableRng};
 use rgm_data::{ModelNet40, Shape};
 use rgm_model::network::{Config, TestStatistics};
 use rgm_model::train::{
-    Event, LogRecord, OptimizerKind, TrainConfig, TrainError, TrainState, Trainer, Validation,
+    Event, LogRecord, OptimizerKind, TrainConfig, TrainError, TrainState, Trainer, ValSample,
+    Validation,
 };
 
 /// Two categories of ten 64-point shapes: noisy spheres and noisy boxes (8 train + 2
@@ -126,6 +127,8 @@ fn a_run_refuses_other_settings_but_may_be_extended() {
     let dir = run_dir("settings");
     let one_epoch = TrainConfig {
         epochs: 1,
+        val_shapes: Some(2),
+        val_sample: ValSample::First,
         ..config()
     };
     train(one_epoch.clone(), &dir, None);
@@ -138,9 +141,20 @@ fn a_run_refuses_other_settings_but_may_be_extended() {
         .expect("other settings refused");
     assert!(matches!(err, TrainError::Config { .. }), "{err}");
     assert!(err.to_string().contains("other settings"), "{err}");
-    let longer = train(config(), &dir, None);
+    // Extended, and validated on another sample (of the 4 validation shapes, 0 and 2 instead
+    // of 0 and 1): its first validation there becomes the best whatever its numbers.
+    let longer = train(
+        TrainConfig {
+            val_shapes: Some(2),
+            ..config()
+        },
+        &dir,
+        None,
+    );
     assert_eq!(longer.state().epoch, 2);
-    assert_eq!(validations(&dir).len(), 2);
+    let samples: Vec<ValSample> = validations(&dir).iter().map(|v| v.sample).collect();
+    assert_eq!(samples, [ValSample::First, ValSample::Spread]);
+    assert_eq!(longer.state().best.map(|b| b.epoch), Some(1));
     let bad = TrainConfig {
         match_points: Some(4),
         ..config()

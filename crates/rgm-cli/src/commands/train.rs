@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use rgm_data::ModelNet40;
 use rgm_model::network::Config;
-use rgm_model::train::{Event, LogRecord, OptimizerKind, TrainConfig, Trainer};
+use rgm_model::train::{Event, LogRecord, OptimizerKind, TrainConfig, Trainer, ValSample};
 use rgm_model::weights::Variant;
 
 use crate::{progress, PrecisionArg, SettingArg, StatisticsArg};
@@ -76,9 +76,16 @@ pub struct Args {
     /// Use only the first N training shapes per epoch.
     #[arg(long, value_name = "N")]
     train_shapes: Option<usize>,
-    /// Validate on the first N validation shapes after each epoch (default: all).
+    /// Validate on N validation shapes after each epoch (default: all), taken as
+    /// --val-sample says.
     #[arg(long, value_name = "N")]
     val_shapes: Option<usize>,
+    /// Which --val-shapes shapes: spread (evenly over the split, so every category counts) or
+    /// first (the split's first N, which is ordered by category: a few categories only; what
+    /// runs started before this option validated on). May change when resuming: the first
+    /// validation on the new sample then becomes the best.
+    #[arg(long, value_enum, default_value = "spread")]
+    val_sample: ValSampleArg,
     /// Worker threads (default: one per core).
     #[arg(long, value_name = "N")]
     workers: Option<usize>,
@@ -122,6 +129,12 @@ impl From<VariantArg> for Variant {
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum ValSampleArg {
+    Spread,
+    First,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 enum OptimizerArg {
     Sgd,
     Adam,
@@ -151,6 +164,10 @@ impl Args {
             gamma: self.gamma,
             train_shapes: self.train_shapes,
             val_shapes: self.val_shapes,
+            val_sample: match self.val_sample {
+                ValSampleArg::First => ValSample::First,
+                ValSampleArg::Spread => ValSample::Spread,
+            },
             workers,
             checkpoint_every: self.checkpoint_every,
             seed: self.seed,
