@@ -35,8 +35,13 @@ pub struct Args {
     /// target/reproduce-tables/limit-N/ so that docs/ keeps the full tables.
     #[arg(long, value_name = "N")]
     limit: Option<usize>,
-    /// Where results.md, results/ and figures/ go [default: docs/, or the folder above with
-    /// --limit].
+    /// Only these rows (`icp`, `fgr`, `fgr+icp`, `auto+icp` or a model of the manifest, which
+    /// brings its `+icp` row): a new model's rows without recomputing the others' missing
+    /// pairs. Written under target/reproduce-tables/ unless --out says otherwise.
+    #[arg(long, value_delimiter = ',', value_name = "NAME,NAME")]
+    only: Vec<String>,
+    /// Where results.md, results/ and figures/ go [default: docs/, or
+    /// target/reproduce-tables/limit-N[-only-NAMES]/ with --limit or --only].
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
     /// Test pairs per setting drawn as figures (the first ones).
@@ -136,10 +141,18 @@ pub fn run(args: Args) -> Result<()> {
         .data
         .clone()
         .unwrap_or_else(|| root.join("../shared/data/modelnet40_npy1024"));
-    let out = match (&args.out, args.limit) {
-        (Some(dir), _) => dir.clone(),
-        (None, Some(n)) => root.join(format!("target/reproduce-tables/limit-{n}")),
-        (None, None) => root.join("docs"),
+    let part = [
+        args.limit.map(|n| format!("limit-{n}")),
+        (!args.only.is_empty()).then(|| format!("only-{}", args.only.join("-"))),
+    ]
+    .into_iter()
+    .flatten()
+    .collect::<Vec<_>>()
+    .join("-");
+    let out = match &args.out {
+        Some(dir) => dir.clone(),
+        None if part.is_empty() => root.join("docs"),
+        None => root.join("target/reproduce-tables").join(part),
     };
     let threads = args
         .threads
@@ -162,11 +175,12 @@ pub fn run(args: Args) -> Result<()> {
     // Each worker runs one network: OpenBLAS must not start threads of its own under them.
     rgm_nn::threads::set_blas_threads(1);
     let mut results = Results::new();
+    check_only(&manifest, &args.only)?;
     for set in TestSet::ALL {
         let shapes = test_shapes(&dataset, set, run.limit);
         let generator = PairGenerator::new(set.setting);
         let mut rows = Vec::new();
-        for candidate in candidates(set, &manifest)? {
+        for candidate in candidates_named(set, &manifest, &args.only)? {
             let records = run.evaluate(set, &candidate, &shapes, &generator)?;
             let matched = run.draw(set, &candidate, &records, &shapes, &generator, args.figures)?;
             // A trained model refined as `rgm eval --refine` refines it, from its own
@@ -279,6 +293,32 @@ fn candidates(set: TestSet, manifest: &Manifest) -> Result<Vec<Candidate>> {
         });
     }
     Ok(list)
+}
+
+/// The candidates of `set` named in `only` (all of them when it is empty).
+fn candidates_named(set: TestSet, manifest: &Manifest, only: &[String]) -> Result<Vec<Candidate>> {
+    let mut list = candidates(set, manifest)?;
+    list.retain(|c| only.is_empty() || only.contains(&c.name));
+    Ok(list)
+}
+
+/// An error naming the rows of `only` that no test set has.
+fn check_only(manifest: &Manifest, only: &[String]) -> Result<()> {
+    let known: Vec<&str> = ["icp", "fgr", "fgr+icp", "auto+icp"]
+        .into_iter()
+        .chain(manifest.models.iter().map(|m| m.name.as_str()))
+        .collect();
+    let unknown: Vec<&str> = only
+        .iter()
+        .map(String::as_str)
+        .filter(|name| !known.contains(name))
+        .collect();
+    anyhow::ensure!(
+        unknown.is_empty(),
+        "--only {}: no such row (the rows are icp, fgr, fgr+icp, auto+icp and the models of the manifest)",
+        unknown.join(",")
+    );
+    Ok(())
 }
 
 /// `entry` with its weights on disk: a file named `git:REV:PATH` (weights a commit of the
@@ -562,6 +602,9 @@ fn command_line(args: &Args) -> String {
     let mut command = String::from("cargo xtask reproduce-tables");
     if let Some(n) = args.limit {
         command += &format!(" --limit {n}");
+    }
+    if !args.only.is_empty() {
+        command += &format!(" --only {}", args.only.join(","));
     }
     if args.figures != 2 {
         command += &format!(" --figures {}", args.figures);
@@ -963,6 +1006,31 @@ mod tests {
         assert_eq!(names(TestSet::ALL[1]), ["b:rgm"]);
         assert_eq!(names(TestSet::ALL[2]), ["d:var2"]);
         assert!(names(TestSet::ALL[3]).is_empty());
+    }
+
+    #[test]
+    fn only_keeps_the_named_rows_and_refuses_unknown_names() {
+        let manifest: Manifest = serde_json::from_value(serde_json::json!({"models": []})).unwrap();
+        let names = |set: TestSet, only: &[&str]| {
+            let only: Vec<String> = only.iter().map(|s| s.to_string()).collect();
+            candidates_named(set, &manifest, &only)
+                .unwrap()
+                .into_iter()
+                .map(|c| c.name)
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(
+            names(TestSet::ALL[0], &["fgr+icp", "icp"]),
+            ["icp", "fgr+icp"]
+        );
+        assert!(names(TestSet::ALL[2], &["fgr+icp"]).is_empty());
+        assert_eq!(names(TestSet::ALL[2], &[]), ["icp", "fgr"]);
+        assert!(check_only(&manifest, &["icp".into(), "fgr+icp".into()]).is_ok());
+        let err = check_only(&manifest, &["icp".into(), "var9".into()]).unwrap_err();
+        assert!(
+            err.to_string().starts_with("--only var9: no such row"),
+            "{err}"
+        );
     }
 
     #[test]
