@@ -253,9 +253,14 @@ pub struct DataArgs {
     /// Unseen categories: test on categories 20–39 only.
     #[arg(long)]
     unseen: bool,
-    /// Use only the first N pairs.
+    /// Use only the first N pairs (of those --every keeps).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     limit: Option<u64>,
+    /// Use every Nth pair only (pairs 0, N, 2N, …; each is the same pair as in the whole run).
+    /// The splits are ordered by category, so a sample that speaks for all of them takes a
+    /// stride rather than the first pairs.
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+    every: u64,
     /// The shapes the pairs are made of: the official test split, or the validation part of
     /// the training split (for choosing settings without looking at the test pairs).
     #[arg(long, value_enum, default_value = "test")]
@@ -288,15 +293,19 @@ impl DataArgs {
         Ok((dataset, PairGenerator::new(self.setting.into())))
     }
 
-    /// The shapes of the selected split (and categories), cut to `--limit`.
-    fn shapes<'a>(&self, dataset: &'a ModelNet40) -> Vec<&'a Shape> {
+    /// The shapes of the selected split (and categories), and the indices of the pairs that
+    /// `--every` and `--limit` select among them.
+    fn shapes<'a>(&self, dataset: &'a ModelNet40) -> (Vec<&'a Shape>, Vec<usize>) {
         let split = match self.split {
             SplitArg::Test => Split::Test,
             SplitArg::Validation => Split::Validation,
         };
-        let mut shapes = dataset.split(split, self.unseen);
-        shapes.truncate(self.limit.map_or(usize::MAX, |n| n as usize));
-        shapes
+        let shapes = dataset.split(split, self.unseen);
+        let indices = (0..shapes.len())
+            .step_by(self.every as usize)
+            .take(self.limit.map_or(usize::MAX, |n| n as usize))
+            .collect();
+        (shapes, indices)
     }
 
     /// The name of the selected pairs in tables: `partial`, `partial-unseen`, and

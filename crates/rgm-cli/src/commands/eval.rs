@@ -31,9 +31,9 @@ pub fn run(args: Args) -> Result<()> {
         crate::check_writable(json)?;
     }
     let (dataset, generator) = args.data.open()?;
-    let shapes = args.data.shapes(&dataset);
+    let (shapes, indices) = args.data.shapes(&dataset);
     let method = args.method.build(crate::Defaults::Paper)?;
-    let bar = progress(shapes.len(), method.name());
+    let bar = progress(indices.len(), method.name());
     let recalled = AtomicUsize::new(0);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(args.workers.map_or(0, usize::from))
@@ -42,11 +42,11 @@ pub fn run(args: Args) -> Result<()> {
         })
         .build()?;
     let records: Vec<PairRecord> = pool.install(|| {
-        (0..shapes.len())
-            .into_par_iter()
+        indices
+            .par_iter()
             .map_init(
                 || method.clone(),
-                |method, i| -> Result<PairRecord> {
+                |method, &i| -> Result<PairRecord> {
                     let pair = generator.test_pair(&shapes, i)?;
                     let record = evaluate_pair(method, i, &pair)?;
                     let hits = recalled

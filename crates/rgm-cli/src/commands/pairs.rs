@@ -24,11 +24,12 @@ pub struct Args {
 
 pub fn run(args: Args) -> Result<()> {
     let (dataset, generator) = args.data.open()?;
-    let shapes = args.data.shapes(&dataset);
+    let (shapes, indices) = args.data.shapes(&dataset);
     fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
-    let bar = progress(shapes.len(), "pairs");
-    let mut entries = Vec::with_capacity(shapes.len());
-    for (i, shape) in shapes.iter().enumerate() {
+    let bar = progress(indices.len(), "pairs");
+    let mut entries = Vec::with_capacity(indices.len());
+    for &i in &indices {
+        let shape = shapes[i];
         let pair = generator.test_pair(&shapes, i)?;
         let (source, target) = (format!("{i:04}_source.ply"), format!("{i:04}_target.ply"));
         write_point_cloud(args.out.join(&source), &pair.source)?;
@@ -53,6 +54,6 @@ pub fn run(args: Args) -> Result<()> {
     let path = args.out.join("pairs.json");
     fs::write(&path, serde_json::to_string(&manifest)?)
         .with_context(|| format!("writing {}", path.display()))?;
-    println!("wrote {} pairs to {}", shapes.len(), args.out.display());
+    println!("wrote {} pairs to {}", indices.len(), args.out.display());
     Ok(())
 }
