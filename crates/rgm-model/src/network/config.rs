@@ -163,7 +163,7 @@ impl Config {
         if self.edges == Edges::Transformer {
             for b in 0..self.blocks.min(2) {
                 let c = self.block_width(b);
-                if c % self.heads != 0 {
+                if !c.is_multiple_of(self.heads) {
                     return Err(NetworkError::Config {
                         why: format!(
                             "block {b} width {c} is not divisible by {} heads",

@@ -49,7 +49,7 @@ fn ensure<T: Scalar>(buf: &mut Array2<T>, shape: (usize, usize)) {
 impl<T: Scalar> MultiHeadAttention<T> {
     /// Four `C × C` linear maps with bias, PyTorch-initialised; `c` must divide into `heads`.
     pub fn new(c: usize, heads: usize, rng: &mut impl Rng) -> Result<Self> {
-        if heads == 0 || c % heads != 0 {
+        if heads == 0 || !c.is_multiple_of(heads) {
             return Err(NnError::InvalidArgument {
                 op: "multi_head_attention",
                 why: format!("C = {c} is not divisible by H = {heads}"),
