@@ -69,8 +69,9 @@ pub struct ModelEntry {
     pub variant: Variant,
     /// The network sizes ([`Config::preset`]).
     pub preset: String,
-    /// Clouds are randomly subsampled to this many points for matching, as in training;
-    /// `None` matches on the full clouds.
+    /// Clouds are randomly subsampled to this many points for matching (usually as in
+    /// training); `None` matches on the full clouds (chosen on validation pairs for some models
+    /// trained on subsets: `docs/training/match-points/`).
     pub match_points: Option<usize>,
     /// The safetensors file, relative to the manifest's folder.
     pub file: String,
