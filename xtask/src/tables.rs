@@ -323,13 +323,17 @@ fn check_only(manifest: &Manifest, only: &[String]) -> Result<()> {
 
 /// `entry` with its weights on disk: a file named `git:REV:PATH` (weights a commit of the
 /// history holds, e.g. an earlier built-in model, kept out of the tree so that git does not count
-/// the same bytes again) is written once to `target/git-weights/` by `git show`.
+/// the same bytes again, or a run's weights that its folder has since replaced) is written once
+/// to `target/git-weights/` by `git show`.
 fn from_history(entry: &ModelEntry) -> Result<ModelEntry> {
     let Some(object) = entry.file.strip_prefix("git:") else {
         return Ok(entry.clone());
     };
     let dir = project_root().join("target/git-weights");
-    let path = dir.join(format!("{}.safetensors", entry.name));
+    // Named by the revision too, so that a manifest pinning the name to another commit does
+    // not read the earlier extraction.
+    let revision = object.split(':').next().unwrap_or_default();
+    let path = dir.join(format!("{}-{revision}.safetensors", entry.name));
     if !path.exists() {
         let out = Command::new("git")
             .args(["show", object])
