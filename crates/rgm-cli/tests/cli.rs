@@ -209,7 +209,13 @@ fn every_nth_pair_is_the_same_pair_as_in_the_whole_run() {
     let data = data_dir();
     let written = |name: &str, extra: &[&str]| -> Vec<serde_json::Value> {
         let dir = scratch(name);
-        let mut args = vec!["pairs", "--setting", "noise", "--out", dir.to_str().unwrap()];
+        let mut args = vec![
+            "pairs",
+            "--setting",
+            "noise",
+            "--out",
+            dir.to_str().unwrap(),
+        ];
         args.extend_from_slice(extra);
         args.extend_from_slice(&["--data", data.to_str().unwrap()]);
         stdout(&rgm(&args));
@@ -220,7 +226,10 @@ fn every_nth_pair_is_the_same_pair_as_in_the_whole_run() {
     };
     let whole = written("pairs-first", &["--limit", "7"]);
     let sample = written("pairs-every", &["--every", "3", "--limit", "3"]);
-    let indices: Vec<u64> = sample.iter().map(|p| p["index"].as_u64().unwrap()).collect();
+    let indices: Vec<u64> = sample
+        .iter()
+        .map(|p| p["index"].as_u64().unwrap())
+        .collect();
     assert_eq!(indices, [0, 3, 6]);
     for p in &sample {
         let same = &whole[p["index"].as_u64().unwrap() as usize];

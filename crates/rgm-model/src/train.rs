@@ -763,7 +763,10 @@ impl Trainer {
                     loss,
                 })
                 .is_break();
-                let due = self.state.batch.is_multiple_of(self.config.checkpoint_every);
+                let due = self
+                    .state
+                    .batch
+                    .is_multiple_of(self.config.checkpoint_every);
                 if due || stop || self.state.batch == batches {
                     self.state.seconds += clock.elapsed().as_secs_f64();
                     clock = Instant::now();
