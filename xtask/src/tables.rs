@@ -180,7 +180,7 @@ pub fn run(args: Args) -> Result<()> {
         let shapes = test_shapes(&dataset, set, run.limit);
         let generator = PairGenerator::new(set.setting);
         let mut rows = Vec::new();
-        for candidate in candidates_named(set, &manifest, &args.only)? {
+        for candidate in candidates(set, &manifest, &args.only)? {
             let records = run.evaluate(set, &candidate, &shapes, &generator)?;
             let matched = run.draw(set, &candidate, &records, &shapes, &generator, args.figures)?;
             // A trained model refined as `rgm eval --refine` refines it, from its own
@@ -244,7 +244,11 @@ fn test_shapes(dataset: &ModelNet40, set: TestSet, limit: Option<usize>) -> Vec<
 /// `rgm register`'s default (`auto+icp`: RGM with the built-in model and FGR, both refined, the
 /// better by its score), then every model of the manifest trained for `set`, as the paper runs
 /// it (unrefined; [`run`] adds each model refined, `<name>+icp`, from its own transforms).
-fn candidates(set: TestSet, manifest: &Manifest) -> Result<Vec<Candidate>> {
+///
+/// Only the rows named in `only` when it is not empty: the others' methods are not even built
+/// (a model's weights are not read).
+fn candidates(set: TestSet, manifest: &Manifest, only: &[String]) -> Result<Vec<Candidate>> {
+    let wanted = |name: &str| only.is_empty() || only.iter().any(|o| o == name);
     let mut list = vec![
         Candidate {
             name: "icp".into(),
@@ -271,7 +275,7 @@ fn candidates(set: TestSet, manifest: &Manifest) -> Result<Vec<Candidate>> {
         });
     }
     // `rgm register`'s default on every test set, named by the built-in model it runs.
-    if let Some(builtin) = manifest.builtin_entry() {
+    if let Some(builtin) = manifest.builtin_entry().filter(|_| wanted("auto+icp")) {
         list.push(Candidate {
             name: "auto+icp".into(),
             stem: format!("auto-{}-{}pairs-icp", builtin.name, builtin.pairs_seen),
@@ -280,7 +284,7 @@ fn candidates(set: TestSet, manifest: &Manifest) -> Result<Vec<Candidate>> {
             method: MethodOptions::default().build()?,
         });
     }
-    for entry in models_for(manifest, set) {
+    for entry in models_for(manifest, set).filter(|e| wanted(&e.name)) {
         let method = from_history(entry)?
             .method(&weights_dir())
             .with_context(|| format!("loading the model {}", entry.name))?;
@@ -292,13 +296,7 @@ fn candidates(set: TestSet, manifest: &Manifest) -> Result<Vec<Candidate>> {
             method,
         });
     }
-    Ok(list)
-}
-
-/// The candidates of `set` named in `only` (all of them when it is empty).
-fn candidates_named(set: TestSet, manifest: &Manifest, only: &[String]) -> Result<Vec<Candidate>> {
-    let mut list = candidates(set, manifest)?;
-    list.retain(|c| only.is_empty() || only.contains(&c.name));
+    list.retain(|c| wanted(&c.name));
     Ok(list)
 }
 
@@ -1017,7 +1015,7 @@ mod tests {
         let manifest: Manifest = serde_json::from_value(serde_json::json!({"models": []})).unwrap();
         let names = |set: TestSet, only: &[&str]| {
             let only: Vec<String> = only.iter().map(|s| s.to_string()).collect();
-            candidates_named(set, &manifest, &only)
+            candidates(set, &manifest, &only)
                 .unwrap()
                 .into_iter()
                 .map(|c| c.name)
@@ -1041,7 +1039,7 @@ mod tests {
     fn fgr_refined_by_icp_is_a_row_of_the_partial_tables_only() {
         let manifest: Manifest = serde_json::from_value(serde_json::json!({"models": []})).unwrap();
         let names = |set: TestSet| {
-            let list = candidates(set, &manifest).unwrap();
+            let list = candidates(set, &manifest, &[]).unwrap();
             list.iter()
                 .map(|c| (c.name.clone(), c.method.name()))
                 .collect::<Vec<_>>()
@@ -1059,7 +1057,7 @@ mod tests {
     fn every_table_has_the_default_of_rgm_register() {
         let manifest = Manifest::builtin();
         for set in TestSet::ALL {
-            let list = candidates(set, &manifest).unwrap();
+            let list = candidates(set, &manifest, &[]).unwrap();
             let default = list.iter().find(|c| c.name == "auto+icp").unwrap();
             assert_eq!(default.method.name(), "auto+icp", "{}", set.key());
             assert!(
