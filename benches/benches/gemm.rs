@@ -12,9 +12,12 @@
 //! training shapes at 384 points (K = 20 neighbours).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use ndarray::linalg::general_mat_mul;
 use ndarray::{Array2, ArrayView2};
 use rand::{rngs::StdRng, Rng, SeedableRng};
-use rgm_nn::gemm::{bf16_available, mat_mul, register_peak_loop};
+use rgm_nn::gemm::{
+    bf16_available, f32_avx512_available, f32_mat_mul, mat_mul, register_peak_loop,
+};
 use rgm_nn::precision::{self, Precision};
 
 /// A (rows, cols) f32 matrix uniform in [-1, 1), reproducible from `seed`.
@@ -79,6 +82,14 @@ fn gemm(c: &mut Criterion) {
             let _scope = precision::enter(p);
             group.bench_function(BenchmarkId::new(p.name(), name), |bench| {
                 bench.iter(|| mat_mul(1.0, &view(&a, la), &view(&b, lb), 0.0, &mut out))
+            });
+        }
+        group.bench_function(BenchmarkId::new("blas", name), |bench| {
+            bench.iter(|| general_mat_mul(1.0, &view(&a, la), &view(&b, lb), 0.0, &mut out))
+        });
+        if f32_avx512_available() {
+            group.bench_function(BenchmarkId::new("f32_avx512", name), |bench| {
+                bench.iter(|| f32_mat_mul(1.0, view(&a, la), view(&b, lb), 0.0, out.view_mut()))
             });
         }
     }

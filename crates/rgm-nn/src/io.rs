@@ -42,6 +42,65 @@ pub fn bf16_to_f32(bits: u16) -> f32 {
     f32::from_bits(u32::from(bits) << 16)
 }
 
+/// How a tensor is stored in a file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Storage {
+    /// The model's element type (F32 or F64), exact.
+    Native,
+    /// bfloat16: half of f32's bytes, 8 significant bits.
+    Bf16,
+    /// One byte per value on a logarithmic scale between the tensor's smallest and largest
+    /// positive values ([`log8_encode`]); zero stays zero. For non-negative tensors whose
+    /// values span many octaves and need only a rough relative precision, such as Adam's second
+    /// moments in a snapshot: a quarter of f32's bytes.
+    Log8,
+}
+
+/// The metadata key that holds the log₂ range of the [`Storage::Log8`] tensor `name`.
+fn log8_key(name: &str) -> String {
+    format!("log8:{name}")
+}
+
+/// Codes of [`Storage::Log8`]: 0 for zero, and 1..=255 spread evenly over log₂ of the
+/// positive values from their minimum `lo` to their maximum `hi`, which are returned. Every
+/// positive value comes back within a factor 2^((hi − lo)/508) of itself. Refuses negative
+/// and non-finite values (`None`).
+pub fn log8_encode(values: impl Iterator<Item = f64> + Clone) -> Option<(Vec<u8>, f64, f64)> {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for v in values.clone() {
+        if !(v.is_finite() && v >= 0.0) {
+            return None;
+        }
+        if v > 0.0 {
+            lo = lo.min(v.log2());
+            hi = hi.max(v.log2());
+        }
+    }
+    if lo > hi {
+        (lo, hi) = (0.0, 0.0); // all zero
+    }
+    let span = (hi - lo).max(f64::MIN_POSITIVE);
+    let codes = values
+        .map(|v| {
+            if v == 0.0 {
+                0
+            } else {
+                1 + ((v.log2() - lo) / span * 254.0).round().clamp(0.0, 254.0) as u8
+            }
+        })
+        .collect();
+    Some((codes, lo, hi))
+}
+
+/// The value of [`log8_encode`]'s `code` for the range `lo`..=`hi`.
+pub fn log8_decode(code: u8, lo: f64, hi: f64) -> f64 {
+    if code == 0 {
+        0.0
+    } else {
+        (lo + f64::from(code - 1) / 254.0 * (hi - lo)).exp2()
+    }
+}
+
 /// The little-endian bytes of `t` stored as `dtype` (F32, F64 or BF16).
 fn le_bytes<T: Scalar>(t: &ArrayViewD<'_, T>, dtype: Dtype) -> Vec<u8> {
     let mut out = Vec::with_capacity(t.len() * dtype.size());
@@ -68,34 +127,57 @@ pub fn write_tensors<T: Scalar>(
 
 /// [`write_tensors`], storing the tensors whose name `bf16` accepts as bfloat16 (rounded to
 /// nearest, ties to even; F64 values through f32): half the bytes, 8 significant bits. For
-/// snapshots where that precision is enough (an optimiser's moments); the readers upcast.
+/// snapshots where that precision is enough; the readers upcast.
 pub fn write_tensors_with_bf16<T: Scalar>(
     path: &Path,
     tensors: &[(String, ArrayViewD<'_, T>)],
     metadata: HashMap<String, String>,
     bf16: &dyn Fn(&str) -> bool,
 ) -> Result<()> {
-    let dtypes: Vec<Dtype> = tensors
-        .iter()
-        .map(|(name, _)| {
-            if bf16(name) {
-                Dtype::BF16
-            } else {
-                dtype_of::<T>()
+    write_tensors_stored(path, tensors, metadata, &|name| {
+        if bf16(name) {
+            Storage::Bf16
+        } else {
+            Storage::Native
+        }
+    })
+}
+
+/// [`write_tensors`] with each tensor stored as `storage` says for its name; the readers
+/// ([`read_tensors`], [`load_params`]) convert every storage back to `T`. A
+/// [`Storage::Log8`] tensor with a negative or non-finite value is refused.
+pub fn write_tensors_stored<T: Scalar>(
+    path: &Path,
+    tensors: &[(String, ArrayViewD<'_, T>)],
+    mut metadata: HashMap<String, String>,
+    storage: &dyn Fn(&str) -> Storage,
+) -> Result<()> {
+    let mut encoded: Vec<(Dtype, Vec<u8>)> = Vec::with_capacity(tensors.len());
+    for (name, t) in tensors {
+        encoded.push(match storage(name) {
+            Storage::Native => (dtype_of::<T>(), le_bytes(t, dtype_of::<T>())),
+            Storage::Bf16 => (Dtype::BF16, le_bytes(t, Dtype::BF16)),
+            Storage::Log8 => {
+                let values = t.iter().map(|&v| Scalar::to_f64(v));
+                let (codes, lo, hi) =
+                    log8_encode(values).ok_or_else(|| NnError::InvalidArgument {
+                        op: "write_tensors_stored",
+                        why: format!(
+                            "{}: tensor {name} has a negative or non-finite value, which \
+                             8-bit logarithmic storage cannot hold",
+                            path.display()
+                        ),
+                    })?;
+                metadata.insert(log8_key(name), format!("{lo:?} {hi:?}"));
+                (Dtype::U8, codes)
             }
-        })
-        .collect();
-    let bytes: Vec<Vec<u8>> = tensors
-        .iter()
-        .zip(&dtypes)
-        .map(|((_, t), &dtype)| le_bytes(t, dtype))
-        .collect();
+        });
+    }
     let views = tensors
         .iter()
-        .zip(&dtypes)
-        .zip(&bytes)
-        .map(|(((name, t), &dtype), b)| {
-            let view = TensorView::new(dtype, t.shape().to_vec(), b).map_err(|source| {
+        .zip(&encoded)
+        .map(|((name, t), (dtype, b))| {
+            let view = TensorView::new(*dtype, t.shape().to_vec(), b).map_err(|source| {
                 NnError::Safetensors {
                     path: path.to_path_buf(),
                     source,
@@ -178,9 +260,30 @@ fn parse<'b>(path: &Path, buffer: &'b [u8]) -> Result<SafeTensors<'b>> {
     SafeTensors::deserialize(buffer).map_err(|source| not_safetensors(path, source))
 }
 
-/// The values of one F32, F64 or BF16 tensor, converted to `T`, in the file's shape.
-fn to_array<T: Scalar>(path: &Path, name: &str, view: &TensorView<'_>) -> Result<ArrayD<T>> {
+/// The log₂ range `metadata` gives the [`Storage::Log8`] tensor `name`, if it has one.
+fn log8_range(metadata: &HashMap<String, String>, name: &str) -> Option<(f64, f64)> {
+    let range = metadata.get(&log8_key(name))?;
+    let (lo, hi) = range.split_once(' ')?;
+    let (lo, hi) = (lo.parse::<f64>().ok()?, hi.parse::<f64>().ok()?);
+    (lo.is_finite() && hi.is_finite() && lo <= hi).then_some((lo, hi))
+}
+
+/// The values of one F32, F64, BF16 or [`Storage::Log8`] tensor, converted to `T`, in the
+/// file's shape; `metadata` is the file's (it holds the Log8 ranges).
+fn to_array<T: Scalar>(
+    path: &Path,
+    name: &str,
+    view: &TensorView<'_>,
+    metadata: &HashMap<String, String>,
+) -> Result<ArrayD<T>> {
     let values: Vec<T> = match view.dtype() {
+        Dtype::U8 if log8_range(metadata, name).is_some() => {
+            let (lo, hi) = log8_range(metadata, name).expect("checked");
+            view.data()
+                .iter()
+                .map(|&c| T::from_f64(log8_decode(c, lo, hi)))
+                .collect()
+        }
         Dtype::F32 => view
             .data()
             .chunks_exact(4)
@@ -208,8 +311,8 @@ fn to_array<T: Scalar>(path: &Path, name: &str, view: &TensorView<'_>) -> Result
         .expect("safetensors checked the byte length"))
 }
 
-/// Reads every tensor of a safetensors file (all must be F32, F64 or BF16; converted to `T`)
-/// and its metadata.
+/// Reads every tensor of a safetensors file (all must be F32, F64, BF16 or
+/// [`Storage::Log8`]; converted to `T`) and its metadata.
 pub fn read_tensors<T: Scalar>(path: &Path) -> Result<(Tensors<T>, HashMap<String, String>)> {
     read_tensors_from_bytes(&read_bytes(path)?, path)
 }
@@ -225,7 +328,7 @@ pub fn read_tensors_from_bytes<T: Scalar>(
     let metadata = header.metadata().clone().unwrap_or_default();
     let mut tensors = HashMap::new();
     for (name, view) in parse(origin, buffer)?.tensors() {
-        let array = to_array(origin, &name, &view)?;
+        let array = to_array(origin, &name, &view, &metadata)?;
         tensors.insert(name, array);
     }
     Ok((tensors, metadata))
@@ -253,6 +356,9 @@ pub fn save_params<T: Scalar>(path: &Path, model: &mut dyn Parameters<T>) -> Res
 pub fn load_params<T: Scalar>(path: &Path, model: &mut dyn Parameters<T>) -> Result<()> {
     let buffer = read_bytes(path)?;
     let file = parse(path, &buffer)?;
+    let (_, header) =
+        SafeTensors::read_metadata(&buffer).map_err(|source| not_safetensors(path, source))?;
+    let metadata = header.metadata().clone().unwrap_or_default();
     let mut err = None;
     let mut fill = |name: &str, mut dst: ndarray::ArrayViewMutD<'_, T>| {
         if err.is_some() {
@@ -276,7 +382,7 @@ pub fn load_params<T: Scalar>(path: &Path, model: &mut dyn Parameters<T>) -> Res
             });
             return;
         }
-        match to_array::<T>(path, name, &view) {
+        match to_array::<T>(path, name, &view, &metadata) {
             Ok(t) => dst.assign(
                 &t.into_shape_with_order(want.to_vec())
                     .expect("same number of values"),
@@ -316,6 +422,48 @@ mod tests {
         load_params(&path, &mut back).unwrap();
         assert_eq!(back.weight.value, ndarray::array![1.5f32, 2.5, 3.5]);
         assert_eq!(back.running_var, ndarray::array![0.25f32, 0.5, 4.0]);
+        std::fs::remove_file(&path).unwrap();
+    }
+
+    /// Log8 keeps zero, the extremes and every value within its stated factor; a negative
+    /// value is refused with the tensor named.
+    #[test]
+    fn log8_storage_round_trips_within_its_bound() {
+        let path = temp("log8");
+        let v = ndarray::array![0.0f32, 1e-12, 3.7e-9, 2.5e-6, 0.01, 4.0].into_dyn();
+        let w = ndarray::array![-1.5f32, 2.0].into_dyn();
+        let tensors = [("v.a".to_string(), v.view()), ("w".to_string(), w.view())];
+        write_tensors_stored(&path, &tensors, HashMap::new(), &|n| {
+            if n == "v.a" {
+                Storage::Log8
+            } else {
+                Storage::Native
+            }
+        })
+        .unwrap();
+        assert!(
+            std::fs::metadata(&path).unwrap().len() < 200,
+            "6 bytes, not 24, for v.a"
+        );
+        let (back, _) = read_tensors::<f64>(&path).unwrap();
+        assert_eq!(back["w"], w.mapv(f64::from));
+        let got = back["v.a"].as_slice().unwrap().to_vec();
+        assert_eq!(got[0], 0.0);
+        // log2 spans 4e0 / 1e-12 ≈ 41.9 octaves: every value within 2^(41.9/508) ≈ 1.059×.
+        let bound = (4.0f64.log2() - 1e-12f64.log2()) / 508.0;
+        for (g, want) in got.iter().zip(v.iter()).skip(1) {
+            let octaves = (g / f64::from(*want)).log2().abs();
+            assert!(octaves <= bound + 1e-9, "{g} for {want}: {octaves} octaves");
+        }
+        assert!((got[1] / 1e-12 - 1.0).abs() < 1e-6, "the minimum is exact");
+        assert!((got[5] / 4.0 - 1.0).abs() < 1e-6, "the maximum is exact");
+        let err = write_tensors_stored(&path, &tensors, HashMap::new(), &|_| Storage::Log8)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("tensor w") && err.contains("negative"),
+            "{err}"
+        );
         std::fs::remove_file(&path).unwrap();
     }
 

@@ -19,9 +19,25 @@
 //!
 //! Packing reads A and B in the order they lie in memory, so transposed views cost the same.
 
+#[cfg(target_arch = "x86_64")]
+mod f32_avx512;
 mod kernels;
 
+#[cfg(target_arch = "x86_64")]
+pub use f32_avx512::f32_mat_mul;
 pub use kernels::{backend, register_peak_loop};
+
+/// Whether this processor runs [`f32_mat_mul`] (x86-64 with AVX-512 F).
+pub fn f32_avx512_available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        f32_avx512::available()
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
 
 use crate::precision::{self, Precision};
 use crate::Scalar;
@@ -378,10 +394,44 @@ mod tests {
     type MatMul<'m> =
         dyn FnMut(f32, ArrayView2<f32>, ArrayView2<f32>, f32, ArrayViewMut2<f32>) + 'm;
 
+    /// A check of a product's result: `(got, (alpha, a, b), (beta, c0))`.
+    type Check = fn(
+        ArrayView2<'_, f32>,
+        (f32, ArrayView2<'_, f32>, ArrayView2<'_, f32>),
+        (f32, ArrayView2<'_, f32>),
+    );
+
+    /// Every case of [`SHAPES`] through `mul`, checked as bf16 products.
+    fn check_cases(mul: &mut MatMul) {
+        check_cases_with(mul, assert_bf16_product);
+    }
+
+    /// Checks `got` = alpha · a · b + beta · c0 in f32 arithmetic: each entry within (K + 2)
+    /// units of roundoff of Σ|a·b| (plus beta's share) of the f64 product.
+    fn assert_f32_product(
+        got: ArrayView2<'_, f32>,
+        (alpha, a, b): (f32, ArrayView2<'_, f32>, ArrayView2<'_, f32>),
+        (beta, c0): (f32, ArrayView2<'_, f32>),
+    ) {
+        let k = a.ncols();
+        let (a, b) = (a.mapv(f64::from), b.mapv(f64::from));
+        let exact = a.dot(&b) * alpha as f64 + c0.mapv(|x| x as f64) * beta as f64;
+        let size = a.mapv(f64::abs).dot(&b.mapv(f64::abs)) * (alpha as f64).abs()
+            + c0.mapv(|x| (x as f64).abs()) * (beta as f64).abs();
+        let u = f32::EPSILON as f64 / 2.0;
+        for ((ij, &g), (&e, &s)) in got.indexed_iter().zip(exact.iter().zip(&size)) {
+            let tol = (k + 2) as f64 * u * s + f32::MIN_POSITIVE as f64;
+            assert!(
+                (g as f64 - e).abs() <= tol,
+                "entry {ij:?}: got {g}, exact {e} (tolerance {tol:e}, K = {k})"
+            );
+        }
+    }
+
     /// Every case of [`SHAPES`] through `mul`: plain, both operands transposed views, strided
     /// views, `beta = 1` accumulation into C (as the backward passes use), and into a
-    /// transposed C with alpha ≠ 1.
-    fn check_cases(mul: &mut MatMul) {
+    /// transposed C with alpha ≠ 1; each result checked by `check`.
+    fn check_cases_with(mul: &mut MatMul, check: Check) {
         for (seed, &(m, k, n)) in (0u64..).step_by(8).zip(&SHAPES) {
             let (a, b) = (uniform(m, k, seed), uniform(k, n, seed + 1));
             let c0 = uniform(m, n, seed + 2);
@@ -393,21 +443,21 @@ mod tests {
             let (a_str, b_str) = (a_big.slice(s![..;2, ..;3]), b_big.slice(s![..;2, ..;3]));
             let mut c = c0.clone();
             mul(1.0, a.view(), b.view(), 0.0, c.view_mut());
-            assert_bf16_product(c.view(), (1.0, a.view(), b.view()), (0.0, c0.view()));
+            check(c.view(), (1.0, a.view(), b.view()), (0.0, c0.view()));
             let mut c = c0.clone();
             mul(1.0, at.t(), bt.t(), 0.0, c.view_mut());
-            assert_bf16_product(c.view(), (1.0, a.view(), b.view()), (0.0, c0.view()));
+            check(c.view(), (1.0, a.view(), b.view()), (0.0, c0.view()));
             let mut c = c0.clone();
             mul(1.0, a_str, b_str, 0.0, c.view_mut());
-            assert_bf16_product(c.view(), (1.0, a_str, b_str), (0.0, c0.view()));
+            check(c.view(), (1.0, a_str, b_str), (0.0, c0.view()));
             // Accumulating into C itself (as the backward passes do): c += a · b.
             let mut c = c0.clone();
             mul(1.0, a.view(), b.view(), 1.0, c.view_mut());
-            assert_bf16_product(c.view(), (1.0, a.view(), b.view()), (1.0, c0.view()));
+            check(c.view(), (1.0, a.view(), b.view()), (1.0, c0.view()));
             // Into a transposed destination, accumulating: c (N, M) stored, cᵀ += -0.5 · a · b.
             let mut ct = c0.t().to_owned();
             mul(-0.5, a.view(), b.view(), 1.0, ct.view_mut().reversed_axes());
-            assert_bf16_product(ct.t(), (-0.5, a.view(), b.view()), (1.0, c0.view()));
+            check(ct.t(), (-0.5, a.view(), b.view()), (1.0, c0.view()));
         }
     }
 
@@ -504,6 +554,35 @@ mod tests {
                     kernel.block(a, b, out, acc)
                 })
             });
+        }
+    }
+
+    #[test]
+    fn the_avx512_kernel_gives_the_f32_product_where_the_processor_has_it() {
+        if !f32_avx512_available() {
+            eprintln!("no AVX-512 F: the f32 kernel does not run here");
+            return;
+        }
+        #[cfg(target_arch = "x86_64")]
+        check_cases_with(
+            &mut |alpha, a, b, beta, c| f32_mat_mul(alpha, a, b, beta, c),
+            assert_f32_product,
+        );
+        // Deeper than one K panel and wider than one B panel (the kernel blocks at 256 and 512).
+        #[cfg(target_arch = "x86_64")]
+        {
+            let (a, b, c0) = (
+                uniform(130, 600, 40),
+                uniform(600, 530, 41),
+                uniform(130, 530, 42),
+            );
+            let mut c = c0.clone();
+            f32_mat_mul(0.5, a.view(), b.view(), 2.0, c.view_mut());
+            assert_f32_product(c.view(), (0.5, a.view(), b.view()), (2.0, c0.view()));
+            // beta = 0 ignores C, even where it holds NaN.
+            let mut c = Array2::from_elem((130, 530), f32::NAN);
+            f32_mat_mul(1.0, a.view(), b.view(), 0.0, c.view_mut());
+            assert_f32_product(c.view(), (1.0, a.view(), b.view()), (0.0, c0.view()));
         }
     }
 
