@@ -31,10 +31,12 @@
 //!   safetensors reader/writer use.
 //! - **Elements**: every op is generic over [`Scalar`] (f32 for compute, f64 for the gradient
 //!   checks in [`gradcheck`]).
-//! - **Matrix products** all go through [`gemm::mat_mul`]: BLAS in f32 and f64, or bf16 inputs
-//!   with f32 accumulation on AMX tile units (or AVX-512 BF16) inside a [`precision::enter`]`(Precision::Bf16)`
-//!   scope (f32 elsewhere, and always f32 where the processor has no AMX).
-//! - **Threads**: matrix products use OpenBLAS's own threads; the attention's row softmax (and its
+//! - **Matrix products** all go through [`gemm::mat_mul`]: f32 on AVX-512 where the processor
+//!   has it ([`gemm::f32_mat_mul`]) and BLAS elsewhere, f64 on BLAS, or bf16 inputs with f32
+//!   accumulation on AMX tile units (or AVX-512 BF16) inside a
+//!   [`precision::enter`]`(Precision::Bf16)` scope (f32 where the processor has neither).
+//! - **Threads**: BLAS products use OpenBLAS's own threads, the AVX-512 and bf16 ones the
+//!   calling thread; the attention's row softmax (and its
 //!   backward) runs on rayon's pool between BLAS calls; everything else runs on the calling
 //!   thread. A caller that parallelises over independent work with rayon first sets BLAS to one
 //!   thread ([`threads::set_blas_threads`]) so the two pools never nest.

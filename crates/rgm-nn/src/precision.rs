@@ -1,4 +1,4 @@
-//! The precision of the f32 matrix products: exact f32 (the default) or bf16 inputs with f32
+//! The precision of the f32 matrix products: f32 (the default) or bf16 inputs with f32
 //! accumulation on the processor's AMX tile units or AVX-512 BF16 dot products
 //! ([`crate::gemm`]).
 //!
@@ -16,11 +16,11 @@ use std::str::FromStr;
 /// How an f32 matrix product is computed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum Precision {
-    /// f32 inputs, f32 products (BLAS). Bit for bit what rgm computed before the choice existed.
+    /// f32 inputs, f32 products (on AVX-512 where the processor has it, BLAS elsewhere).
     #[default]
     F32,
     /// Inputs rounded to bfloat16 (round to nearest even), products accumulated in f32, on AMX
-    /// or AVX-512 BF16 where the processor has either; f32 (BLAS) elsewhere.
+    /// or AVX-512 BF16 where the processor has either; f32 elsewhere.
     Bf16,
 }
 

@@ -1,6 +1,7 @@
-//! The matrix product every op calls, [`mat_mul`]: BLAS in f32 and f64, or bf16 on the
-//! processor's AMX tile units (or its AVX-512 BF16 dot products where it has no AMX) when the
-//! calling thread asked for [`Precision::Bf16`].
+//! The matrix product every op calls, [`mat_mul`]: f32 on AVX-512 where the processor has it
+//! ([`f32_mat_mul`]) and BLAS elsewhere, f64 on BLAS, or bf16 on the processor's AMX tile units
+//! (or its AVX-512 BF16 dot products where it has no AMX) when the calling thread asked for
+//! [`Precision::Bf16`].
 //!
 //! The bf16 product ([`bf16_mat_mul`]) takes and returns f32: both inputs are rounded to bf16
 //! (nearest even) while they are packed, the products are accumulated in f32. It runs on the
@@ -63,8 +64,9 @@ pub fn mat_mul<T, S1, S2, S3>(
     T::mat_mul(alpha, a.view(), b.view(), beta, c.view_mut());
 }
 
-/// [`mat_mul`] for f32: bf16 when the thread's precision is bf16 and [`bf16_available`], BLAS
-/// otherwise.
+/// [`mat_mul`] for f32: bf16 when the thread's precision is bf16 and [`bf16_available`];
+/// otherwise the f32 product, on AVX-512 where the processor has it ([`f32_mat_mul`]: the
+/// BLAS this workspace builds runs AVX2 kernels only), BLAS elsewhere.
 pub(crate) fn mat_mul_f32(
     alpha: f32,
     a: ArrayView2<'_, f32>,
@@ -88,6 +90,9 @@ fn mat_mul_f32_in(
 ) {
     if precision == Precision::Bf16 && bf16_here {
         bf16_mat_mul(alpha, a, b, beta, c);
+    } else if f32_avx512_available() {
+        #[cfg(target_arch = "x86_64")]
+        f32_mat_mul(alpha, a, b, beta, c);
     } else {
         general_mat_mul(alpha, &a, &b, beta, &mut c);
     }
@@ -587,19 +592,34 @@ mod tests {
     }
 
     #[test]
-    fn mat_mul_is_exact_f32_by_default_and_bf16_in_a_bf16_scope() {
+    fn mat_mul_is_the_f32_product_by_default_and_bf16_in_a_bf16_scope() {
         let (a, b) = (uniform(50, 70, 5), uniform(70, 30, 6));
         let mut blas = Array2::zeros((50, 30));
         general_mat_mul(1.0, &a, &b, 0.0, &mut blas);
         let mut f32_out = Array2::zeros((50, 30));
         mat_mul(1.0, &a, &b, 0.0, &mut f32_out);
-        assert_eq!(f32_out, blas);
+        if f32_avx512_available() {
+            let mut direct = Array2::zeros((50, 30));
+            #[cfg(target_arch = "x86_64")]
+            f32_mat_mul(1.0, a.view(), b.view(), 0.0, direct.view_mut());
+            assert_eq!(
+                f32_out, direct,
+                "the AVX-512 kernel where the processor has it"
+            );
+        } else {
+            assert_eq!(f32_out, blas, "BLAS elsewhere, bit for bit");
+        }
+        assert_f32_product(
+            f32_out.view(),
+            (1.0, a.view(), b.view()),
+            (0.0, blas.view()),
+        );
         let mut bf16_out = Array2::zeros((50, 30));
         {
             let _bf16 = precision::enter(Precision::Bf16);
             mat_mul(1.0, &a, &b, 0.0, &mut bf16_out);
         }
-        // Without a bf16 kernel, bf16 is BLAS in f32, bit for bit (on every machine).
+        // Without a bf16 kernel, bf16 is the f32 product, bit for bit (on every machine).
         let mut fallback = Array2::zeros((50, 30));
         mat_mul_f32_in(
             Precision::Bf16,
@@ -610,14 +630,17 @@ mod tests {
             0.0,
             fallback.view_mut(),
         );
-        assert_eq!(fallback, blas);
+        assert_eq!(fallback, f32_out);
         if bf16_available() {
             let mut direct = Array2::zeros((50, 30));
             bf16_mat_mul(1.0, a.view(), b.view(), 0.0, direct.view_mut());
             assert_eq!(bf16_out, direct);
-            assert_ne!(bf16_out, blas);
+            assert_ne!(bf16_out, f32_out);
         } else {
-            assert_eq!(bf16_out, blas, "the fallback is BLAS in f32, bit for bit");
+            assert_eq!(
+                bf16_out, f32_out,
+                "the fallback is the f32 product, bit for bit"
+            );
         }
         // f64 ignores the setting.
         let (a64, b64) = (a.mapv(f64::from), b.mapv(f64::from));
