@@ -44,7 +44,7 @@ use rgm_geom::metrics::PairMetrics;
 use rgm_geom::refine::{refine, RefineConfig};
 use rgm_geom::RigidTransform;
 use rgm_match::{bce_forward, Correspondences};
-use rgm_nn::optim::{Adam, MultiStepLr, Sgd};
+use rgm_nn::optim::{Adam, MultiStepLr, Optimizer, Sgd};
 use rgm_nn::{Parameters, Precision, Scalar};
 use serde::{Deserialize, Serialize};
 
@@ -390,51 +390,25 @@ pub enum Event {
     Logged(LogRecord),
 }
 
-enum Optimizer {
-    Sgd(Sgd<f32>),
-    Adam(Adam<f32>),
-}
-
-impl Optimizer {
-    fn new(config: &TrainConfig) -> Self {
-        match config.optimizer {
-            OptimizerKind::Sgd => {
+impl OptimizerKind {
+    /// A fresh optimiser of this kind with `config`'s hyper-parameters.
+    fn fresh(self, config: &TrainConfig) -> Box<dyn Optimizer<f32>> {
+        match self {
+            Self::Sgd => {
                 let mut sgd = Sgd::new(config.lr, config.momentum, config.weight_decay);
                 sgd.nesterov = true; // as the reference sets it (spec §3)
-                Self::Sgd(sgd)
+                Box::new(sgd)
             }
-            OptimizerKind::Adam => Self::Adam(Adam::new(config.lr, config.weight_decay)),
+            Self::Adam => Box::new(Adam::new(config.lr, config.weight_decay)),
         }
     }
 
-    fn load(kind: OptimizerKind, path: &Path) -> Result<Self> {
-        Ok(match kind {
-            OptimizerKind::Sgd => Self::Sgd(Sgd::load(path)?),
-            OptimizerKind::Adam => Self::Adam(Adam::load(path)?),
+    /// The optimiser of this kind saved at `path`.
+    fn load(self, path: &Path) -> Result<Box<dyn Optimizer<f32>>> {
+        Ok(match self {
+            Self::Sgd => Box::new(Sgd::<f32>::load(path)?),
+            Self::Adam => Box::new(Adam::<f32>::load(path)?),
         })
-    }
-
-    fn set_lr(&mut self, lr: f64) {
-        match self {
-            Self::Sgd(o) => o.lr = lr,
-            Self::Adam(o) => o.lr = lr,
-        }
-    }
-
-    fn step(&mut self, model: &mut Rgm<f32>) -> Result<()> {
-        match self {
-            Self::Sgd(o) => o.step(model)?,
-            Self::Adam(o) => o.step(model)?,
-        }
-        Ok(())
-    }
-
-    fn save(&self, path: &Path) -> Result<()> {
-        match self {
-            Self::Sgd(o) => o.save(path)?,
-            Self::Adam(o) => o.save(path)?,
-        }
-        Ok(())
     }
 }
 
@@ -479,7 +453,7 @@ pub struct Trainer {
     config: TrainConfig,
     dir: PathBuf,
     network: Rgm<f32>,
-    optimizer: Optimizer,
+    optimizer: Box<dyn Optimizer<f32>>,
     state: TrainState,
     workers: Vec<Worker>,
     /// The run folder's lock, held as long as the trainer lives.
@@ -642,9 +616,9 @@ impl Trainer {
             // needed by no resume until the run is extended): it then goes on with a fresh one.
             let optim = dir.join("last.optim.safetensors");
             let optimizer = if optim.exists() {
-                Optimizer::load(config.optimizer, &optim)?
+                config.optimizer.load(&optim)?
             } else {
-                Optimizer::new(&config)
+                config.optimizer.fresh(&config)
             };
             (network, optimizer, state)
         } else {
@@ -652,7 +626,11 @@ impl Trainer {
                 Some(init) => Rgm::load(config.network.clone(), init)?,
                 None => Rgm::new(config.network.clone(), config.seed)?,
             };
-            (network, Optimizer::new(&config), TrainState::default())
+            (
+                network,
+                config.optimizer.fresh(&config),
+                TrainState::default(),
+            )
         };
         let mut network = network;
         network.set_precision(config.precision); // the workers' copies inherit it
@@ -864,7 +842,7 @@ impl Trainer {
             let mut grads = Vec::new();
             worker
                 .network
-                .visit_params("", &mut |_, p| grads.push(p.grad.to_owned()));
+                .visit_params_ref("", &mut |_, p| grads.push(p.grad));
             let mut grads = grads.into_iter();
             self.network.visit_params("", &mut |_, mut p| {
                 let g = grads.next().expect("same network layout");
@@ -881,9 +859,9 @@ impl Trainer {
     fn average_buffers(&mut self) {
         let scale = 1.0 / self.workers.len() as f32;
         let mut sums = Vec::new();
-        for (k, worker) in self.workers.iter_mut().enumerate() {
+        for (k, worker) in self.workers.iter().enumerate() {
             let mut n = 0;
-            worker.network.visit_buffers("", &mut |_, b| {
+            worker.network.visit_buffers_ref("", &mut |_, b| {
                 if k == 0 {
                     sums.push(b.mapv(|v| v * scale));
                 } else {
@@ -1026,13 +1004,13 @@ impl Trainer {
         }
         fs::create_dir(&staging).map_err(io_err(&staging))?;
         self.file_operation()?;
-        rgm_nn::io::save_params(&staging.join("last.safetensors"), &mut self.network)?;
+        rgm_nn::io::save_params(&staging.join("last.safetensors"), &self.network)?;
         self.file_operation()?;
         self.optimizer
             .save(&staging.join("last.optim.safetensors"))?;
         if new_best {
             self.file_operation()?;
-            rgm_nn::io::save_params(&staging.join("best.safetensors"), &mut self.network)?;
+            rgm_nn::io::save_params(&staging.join("best.safetensors"), &self.network)?;
         }
         self.file_operation()?;
         write_json(&staging.join("state.json"), &self.state)?;
