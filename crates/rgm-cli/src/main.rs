@@ -218,13 +218,19 @@ pub fn register_files(
             bar.set_position((100.0 * p.done) as u64);
             bar.set_message(p.step);
         })
-        .with_context(|| {
-            format!(
-                "{} failed on {} → {}",
+        .map_err(|err| {
+            let hint = match err {
+                rgm_model::MethodError::TooMuchMemory { .. } => {
+                    " (--match-points N matches on fewer points)"
+                }
+                _ => "",
+            };
+            anyhow::Error::new(err).context(format!(
+                "{} failed on {} → {}{hint}",
                 method.name(),
                 source_path.display(),
                 target_path.display()
-            )
+            ))
         });
     bar.finish_and_clear();
     registration
