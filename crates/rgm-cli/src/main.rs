@@ -12,6 +12,8 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::{Parser, Subcommand, ValueEnum};
 use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
+use rgm_geom::refine::RefineConfig;
+use rgm_model::network::TestStatistics;
 use rgm_model::{Method, MethodName, MethodOptions};
 
 /// Robust point-cloud registration (RGM, CVPR 2021) and classical baselines.
@@ -98,24 +100,6 @@ impl PrecisionArg {
     }
 }
 
-/// Batch-norm statistics of RGM's feature extractor at test time.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum StatisticsArg {
-    /// Each cloud's own statistics, as rgm trains (one cloud per batch-norm batch).
-    Cloud,
-    /// The running averages gathered in training (PyTorch's eval(); the authors' weights).
-    Running,
-}
-
-impl From<StatisticsArg> for rgm_model::network::TestStatistics {
-    fn from(arg: StatisticsArg) -> Self {
-        match arg {
-            StatisticsArg::Cloud => Self::Cloud,
-            StatisticsArg::Running => Self::Running,
-        }
-    }
-}
-
 /// The method and, for RGM, its weights and test-time options.
 #[derive(clap::Args, Debug, Clone)]
 pub struct MethodArgs {
@@ -135,7 +119,7 @@ pub struct MethodArgs {
     /// Batch-norm statistics for --weights: cloud for weights trained by `rgm train`, running
     /// for the authors' PyTorch weights [default: running; the built-in model's own otherwise].
     #[arg(long, value_enum, value_name = "WHICH", requires = "weights")]
-    test_statistics: Option<StatisticsArg>,
+    test_statistics: Option<TestStatistics>,
     /// RGM matches on at most N randomly drawn points of each cloud (fixed seed) and applies
     /// the transform to the full clouds; 0 matches on every point. The network's memory grows
     /// with the square of N (about 0.7 GB at 1,024 points, 2.7 GB at 2,048 for the paper's
@@ -147,13 +131,8 @@ pub struct MethodArgs {
     /// before [default: 2, as in the paper's tables].
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
     passes: Option<u16>,
-    /// Refine the transform of RGM or FGR (both with auto) with ICP on the full clouds: trimmed
-    /// point-to-plane with pairs closer than 0.2, then 0.1, then 0.05, and point-to-point at
-    /// 0.05, then 0.03 (RGM and auto measure them in the unit-sphere frame, FGR alone in the
-    /// clouds' own units, like its own radii, which suit unit-sized shapes). On by default in
-    /// `rgm register` and `rgm render`; `rgm eval` follows the paper's protocol and refines only
-    /// when asked.
-    #[arg(long, overrides_with = "no_refine")]
+    // Help from `refine_help`: the distances are RefineConfig's defaults.
+    #[arg(long, overrides_with = "no_refine", help = refine_help())]
     refine: bool,
     /// Report the method's own transform, unrefined (as the paper's tables do).
     #[arg(long, overrides_with = "refine")]
@@ -162,6 +141,24 @@ pub struct MethodArgs {
     /// BF16; the rest of the network stays f32).
     #[arg(long, value_enum, default_value = "f32")]
     precision: PrecisionArg,
+}
+
+/// The help of --refine, with the distances of [`RefineConfig::default`].
+fn refine_help() -> String {
+    let refine = RefineConfig::default();
+    let then = |distances: &[f64]| {
+        let d: Vec<String> = distances.iter().map(f64::to_string).collect();
+        d.join(", then ")
+    };
+    format!(
+        "Refine the transform of RGM or FGR (both with auto) with ICP on the full clouds: \
+         trimmed point-to-plane with pairs closer than {}, and point-to-point at {} (RGM and \
+         auto measure them in the unit-sphere frame, FGR alone in the clouds' own units, like \
+         its own radii, which suit unit-sized shapes). On by default in `rgm register` and \
+         `rgm render`; `rgm eval` follows the paper's protocol and refines only when asked",
+        then(&refine.distances),
+        then(&refine.point_distances)
+    )
 }
 
 /// What a command runs when the options leave it open.
@@ -195,7 +192,7 @@ impl MethodArgs {
             method,
             weights: self.weights.clone(),
             preset: self.preset.clone(),
-            test_statistics: self.test_statistics.map(Into::into),
+            test_statistics: self.test_statistics,
             match_points: self.match_points,
             passes: self.passes.map(usize::from),
             precision: self.precision.precision(),
@@ -395,10 +392,10 @@ fn main() -> ExitCode {
 }
 
 /// Denormals flushed to zero on every compute thread (the network's Sinkhorn underflows), and
-/// one OpenBLAS thread unless `OPENBLAS_NUM_THREADS` asks for more: on an idle 2-core machine two
-/// threads register a pair about 20 % faster (305 against 375 ms), but while other work holds
-/// the cores OpenBLAS's spinning threads make it about ten times slower (4.5–6.5 s against
-/// 0.58 s). `rgm eval` runs pairs on parallel workers instead.
+/// one OpenBLAS thread unless `OPENBLAS_NUM_THREADS` asks for more: more threads gain a little
+/// on an idle machine, but while other work holds the cores OpenBLAS's spinning threads make a
+/// registration many times slower (docs/speed.md, "The `rgm` command: threads"). `rgm eval`
+/// runs pairs on parallel workers instead.
 fn set_up_compute_threads() {
     rgm_nn::threads::flush_denormals_everywhere();
     if std::env::var_os("OPENBLAS_NUM_THREADS").is_none() {

@@ -16,6 +16,7 @@ use serde::{Deserialize, Serialize};
 
 /// Which statistics batch norm normalises with at test time ([`Mode::Eval`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum TestStatistics {
     /// The running statistics gathered in training (spec §3, PyTorch's `eval()`).

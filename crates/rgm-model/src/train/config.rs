@@ -12,6 +12,7 @@ use crate::network::{Config, TestStatistics};
 
 /// The optimiser of a run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum OptimizerKind {
     /// SGD with Nesterov momentum, as the reference code (spec §3).
@@ -184,6 +185,7 @@ impl TrainConfig {
 
 /// Which validation shapes a run validates on when it takes fewer than all of them.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum ValSample {
     /// The first N of the split. The split is ordered by category, so these are a few
