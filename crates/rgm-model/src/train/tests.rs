@@ -373,7 +373,7 @@ fn training_lowers_the_validation_loss() {
     let curve = validations(&dir);
     assert_eq!(curve.len(), 8);
     let (first, last) = (curve[0], curve[7]);
-    // Deterministic run: loss 2.38 → 2.21 and matching accuracy 5 % → 13 % when written.
+    // The run is deterministic: the loss falls by more than 5 % and the accuracy rises.
     assert!(last.loss < 0.95 * first.loss, "{first:?} → {last:?}");
     assert!(
         last.match_accuracy > first.match_accuracy,

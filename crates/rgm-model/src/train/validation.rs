@@ -39,7 +39,7 @@ pub struct Validation {
     /// Fraction of pairs registered (spec §5: MAE(R) < 1° and MAE(t) < 0.1).
     pub recall: f64,
     /// Fraction registered once `refined_with` refines the procedure's transform on the full
-    /// pair (what `--refine` does); 0 in validations logged before it was measured.
+    /// pair (what `--refine` does); 0 in logs that lack the field.
     #[serde(default)]
     pub recall_refined: f64,
     /// The refinement behind `recall_refined`.
@@ -57,9 +57,10 @@ pub enum Refinement {
     /// Point-to-point ICP (0.1, 30 iterations): what logs without the field measured.
     #[default]
     PointToPointIcp,
-    /// [`rgm_geom::refine`] before session 6: trimmed point-to-plane ICP, coarse to fine.
+    /// [`rgm_geom::refine`]'s trimmed point-to-plane ICP stages alone, coarse to fine.
     TrimmedPointToPlane,
-    /// [`rgm_geom::refine`] since session 6: the same, then point-to-point ICP at 0.05 and 0.03.
+    /// [`rgm_geom::refine`] with its defaults: the point-to-plane stages, then point-to-point
+    /// ICP stages (what validation measures).
     PlaneThenPoint,
 }
 
