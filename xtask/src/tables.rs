@@ -18,9 +18,9 @@ use rayon::prelude::*;
 use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
 use rgm_geom::refine::RefineConfig;
 use rgm_model::evaluate::{evaluate_pair, table_header, table_row};
-use rgm_model::render::{correct_fraction, correspondence_figure, registration_figure};
 use rgm_model::weights::{weights_dir, Manifest, ModelEntry};
 use rgm_model::{Method, MethodOptions, PairRecord, Summary};
+use rgm_viz::{correct_fraction, correspondence_figure, registration_figure};
 
 use crate::project_root;
 

@@ -15,6 +15,7 @@ use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
 use rgm_geom::refine::RefineConfig;
 use rgm_model::network::TestStatistics;
 use rgm_model::{Method, MethodName, MethodOptions};
+use rgm_nn::Precision;
 
 /// Robust point-cloud registration (RGM, CVPR 2021) and classical baselines.
 #[derive(Parser, Debug)]
@@ -73,31 +74,15 @@ pub enum MethodArg {
     Auto,
 }
 
-/// How RGM's matrix products run.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
-pub enum PrecisionArg {
-    /// f32, exact (the default).
-    #[default]
-    F32,
-    /// Inputs rounded to bfloat16, f32 accumulation, on the processor's AMX tile units (Intel
-    /// Xeon since Sapphire Rapids) or AVX-512 BF16 (AMD Zen 4 and later); f32 on others.
-    Bf16,
-}
-
-impl PrecisionArg {
-    /// The library's precision; says on stderr when bf16 falls back to f32 on this processor.
-    pub fn precision(self) -> rgm_nn::Precision {
-        if self == Self::Bf16 && !rgm_nn::gemm::bf16_available() {
-            eprintln!(
-                "--precision bf16: this processor has neither AMX nor AVX-512 BF16; products \
-                 run in f32"
-            );
-        }
-        match self {
-            Self::F32 => rgm_nn::Precision::F32,
-            Self::Bf16 => rgm_nn::Precision::Bf16,
-        }
+/// `precision`, after saying on stderr when bf16 falls back to f32 on this processor.
+pub fn checked_precision(precision: Precision) -> Precision {
+    if precision == Precision::Bf16 && !rgm_nn::gemm::bf16_available() {
+        eprintln!(
+            "--precision bf16: this processor has neither AMX nor AVX-512 BF16; products run in \
+             f32"
+        );
     }
+    precision
 }
 
 /// The method and, for RGM, its weights and test-time options.
@@ -137,10 +122,11 @@ pub struct MethodArgs {
     /// Report the method's own transform, unrefined (as the paper's tables do).
     #[arg(long, overrides_with = "refine")]
     no_refine: bool,
-    /// RGM's matrix products: f32, or bf16 (faster where the processor has AMX or AVX-512
-    /// BF16; the rest of the network stays f32).
-    #[arg(long, value_enum, default_value = "f32")]
-    precision: PrecisionArg,
+    /// RGM's matrix products: f32, or bf16 (inputs rounded to bfloat16, f32 accumulation:
+    /// faster where the processor has AMX tile units or AVX-512 BF16; the rest of the network
+    /// stays f32).
+    #[arg(long, value_name = "f32|bf16", default_value_t = MethodOptions::default().precision)]
+    precision: Precision,
 }
 
 /// The help of --refine, with the distances of [`RefineConfig::default`].
@@ -195,7 +181,7 @@ impl MethodArgs {
             test_statistics: self.test_statistics,
             match_points: self.match_points,
             passes: self.passes.map(usize::from),
-            precision: self.precision.precision(),
+            precision: checked_precision(self.precision),
             refine,
         };
         Ok(options.build()?)
@@ -233,17 +219,6 @@ pub fn register_files(
     registration
 }
 
-/// The test-pair protocols of the paper (spec §1).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum SettingArg {
-    /// Same points, random pose.
-    Clean,
-    /// Gaussian jitter (σ 0.01, clipped at 0.05) on both clouds.
-    Noise,
-    /// Each cloud cropped to 70 % of its points by a random plane, then jittered.
-    Partial,
-}
-
 /// Where the ModelNet40 data is: `--data DIR` or `$RGM_DATA`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct DataArgs {
@@ -251,8 +226,8 @@ pub struct DataArgs {
     #[arg(long, env = "RGM_DATA", value_name = "DIR")]
     data: PathBuf,
     /// The paper's test protocol to use.
-    #[arg(long, value_enum, default_value = "partial")]
-    setting: SettingArg,
+    #[arg(long, value_enum, default_value_t = Setting::Partial)]
+    setting: Setting,
     /// Unseen categories: test on categories 20–39 only.
     #[arg(long)]
     unseen: bool,
@@ -266,44 +241,21 @@ pub struct DataArgs {
     every: u64,
     /// The shapes the pairs are made of: the official test split, or the validation part of
     /// the training split (for choosing settings without looking at the test pairs).
-    #[arg(long, value_enum, default_value = "test")]
-    split: SplitArg,
-}
-
-/// The dataset splits a benchmark can run on.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum SplitArg {
-    /// The official test split (every table of the paper).
-    Test,
-    /// The last 20 % of the official training split, per category (what `rgm train` validates on).
-    Validation,
-}
-
-impl From<SettingArg> for Setting {
-    fn from(arg: SettingArg) -> Self {
-        match arg {
-            SettingArg::Clean => Setting::Clean,
-            SettingArg::Noise => Setting::Noise,
-            SettingArg::Partial => Setting::Partial,
-        }
-    }
+    #[arg(long, value_enum, default_value_t = Split::Test)]
+    split: Split,
 }
 
 impl DataArgs {
     /// The dataset and the pair generator these options select.
     fn open(&self) -> anyhow::Result<(ModelNet40, PairGenerator)> {
         let dataset = ModelNet40::open(&self.data)?;
-        Ok((dataset, PairGenerator::new(self.setting.into())))
+        Ok((dataset, PairGenerator::new(self.setting)))
     }
 
     /// The shapes of the selected split (and categories), and the indices of the pairs that
     /// `--every` and `--limit` select among them.
     fn shapes<'a>(&self, dataset: &'a ModelNet40) -> (Vec<&'a Shape>, Vec<usize>) {
-        let split = match self.split {
-            SplitArg::Test => Split::Test,
-            SplitArg::Validation => Split::Validation,
-        };
-        let shapes = dataset.split(split, self.unseen);
+        let shapes = dataset.split(self.split, self.unseen);
         let indices = (0..shapes.len())
             .step_by(self.every as usize)
             .take(self.limit.map_or(usize::MAX, |n| n as usize))
@@ -314,12 +266,11 @@ impl DataArgs {
     /// The name of the selected pairs in tables: `partial`, `partial-unseen`, and
     /// `(validation)` after it for the validation split.
     fn pairs_name(&self) -> String {
-        let setting: Setting = self.setting.into();
         format!(
             "{}{}{}",
-            setting.name(),
+            self.setting.name(),
             if self.unseen { "-unseen" } else { "" },
-            if self.split == SplitArg::Validation {
+            if self.split == Split::Validation {
                 " (validation)"
             } else {
                 ""

@@ -482,7 +482,7 @@ mod tests {
         let loaded = Adam::<f32>::load(&bf16_path).unwrap();
         assert_eq!((loaded.step, loaded.lr, loaded.beta2), (2, 0.01, 0.999));
         let (exact, _) = read_tensors::<f32>(&f32_path).unwrap();
-        let round = |t: &ArrayD<f32>| t.mapv(|v| crate::bf16::round_to_bf16(v));
+        let round = |t: &ArrayD<f32>| t.mapv(crate::bf16::round_to_bf16);
         let m = &loaded.moments.tensors[0][0];
         assert_eq!(m, &round(&exact["m.weight"]));
         assert_ne!(m, &exact["m.weight"], "0.37 w is not a bf16 value");

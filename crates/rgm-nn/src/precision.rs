@@ -16,7 +16,7 @@ use std::str::FromStr;
 /// How an f32 matrix product is computed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum Precision {
-    /// f32 inputs, f32 products (BLAS). Bit for bit what rgm computed before the choice existed.
+    /// f32 inputs, f32 products (BLAS): exact.
     #[default]
     F32,
     /// Inputs rounded to bfloat16 (round to nearest even), products accumulated in f32, on AMX

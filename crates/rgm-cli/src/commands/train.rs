@@ -4,17 +4,17 @@ use std::ops::ControlFlow;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use rgm_data::ModelNet40;
+use rgm_data::{ModelNet40, Setting};
 use rgm_model::network::{Config, TestStatistics};
 use rgm_model::train::{Event, LogRecord, OptimizerKind, TrainConfig, Trainer, ValSample};
 use rgm_model::weights::Variant;
 
-use crate::{progress, PrecisionArg, SettingArg};
+use crate::{checked_precision, progress};
 
 /// The paper's schedule (spec §3, [`TrainConfig::paper`]): the defaults of the options below
 /// that it sets.
 fn paper() -> TrainConfig {
-    TrainConfig::paper(rgm_data::Setting::Partial, Config::fast())
+    TrainConfig::paper(Setting::Partial, Config::fast())
 }
 
 /// Options of `rgm train`. Defaults are the paper's schedule (spec §3) on the `fast` preset,
@@ -29,8 +29,8 @@ pub struct Args {
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
     /// The pair protocol to train on.
-    #[arg(long, value_enum, default_value = "partial")]
-    setting: SettingArg,
+    #[arg(long, value_enum, default_value_t = Setting::Partial)]
+    setting: Setting,
     /// Train and validate on categories 0–19 only (the unseen-categories protocol).
     #[arg(long)]
     unseen: bool,
@@ -108,8 +108,8 @@ pub struct Args {
     /// The network's matrix products in training and validation: f32, or bf16 on the
     /// processor's AMX or AVX-512 BF16 units (weights, optimiser, reductions and loss stay
     /// f32). May change when resuming.
-    #[arg(long, value_enum, default_value = "f32")]
-    precision: PrecisionArg,
+    #[arg(long, value_name = "f32|bf16", default_value_t = paper().precision)]
+    precision: rgm_nn::Precision,
     /// Start a new run from these weights (a .safetensors of the same network) instead of
     /// the seeded initialisation: fine-tuning, e.g. the noise model from the partial one.
     /// A resumed run loads its own checkpoint; give the same --init again.
@@ -124,7 +124,7 @@ impl Args {
             .workers
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
         Ok(TrainConfig {
-            setting: rgm_data::Setting::from(self.setting).name().to_string(),
+            setting: self.setting.name().to_string(),
             unseen: self.unseen,
             network,
             match_points: (self.match_points > 0).then_some(self.match_points),
@@ -143,7 +143,7 @@ impl Args {
             checkpoint_every: self.checkpoint_every,
             seed: self.seed,
             test_statistics: self.test_statistics,
-            precision: self.precision.precision(),
+            precision: checked_precision(self.precision),
             init: self.init.clone(),
         })
     }

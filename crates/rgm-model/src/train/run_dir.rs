@@ -29,6 +29,9 @@ const CHECKPOINT_FILES: [&str; 4] = [
 ];
 const LOG: &str = "log.jsonl";
 
+/// A file of a checkpoint: its name and what writes it to a given path.
+pub(super) type CheckpointFile<'a> = (&'a str, &'a dyn Fn(&Path) -> Result<()>);
+
 /// A run folder held by this process: its lock lives as long as the value.
 pub(super) struct RunDir {
     path: PathBuf,
@@ -88,7 +91,7 @@ impl RunDir {
     pub(super) fn checkpoint(
         &mut self,
         state: &mut TrainState,
-        files: &[(&str, &dyn Fn(&Path) -> Result<()>)],
+        files: &[CheckpointFile<'_>],
     ) -> Result<()> {
         let log = self.file(LOG);
         state.log_bytes = Some(fs::metadata(&log).map_err(io_err(&log))?.len());

@@ -16,7 +16,7 @@ use rgm_match::Correspondences;
 use rgm_nn::optim::{MultiStepLr, Optimizer};
 use rgm_nn::{Parameters, Scalar};
 
-use super::run_dir::{read_json, write_json, RunDir};
+use super::run_dir::{read_json, write_json, CheckpointFile, RunDir};
 use super::{Event, LogRecord, Result, TrainConfig, TrainError, TrainState};
 use crate::network::{Rgm, RgmCache};
 use crate::pipeline::as_rows;
@@ -351,7 +351,7 @@ impl Trainer {
         let optimizer = &self.optimizer;
         let weights = |path: &Path| Ok(rgm_nn::io::save_params(path, network)?);
         let optimizer_state = |path: &Path| Ok(optimizer.save(path)?);
-        let mut files: Vec<(&str, &dyn Fn(&Path) -> Result<()>)> = vec![
+        let mut files: Vec<CheckpointFile<'_>> = vec![
             ("last.safetensors", &weights),
             ("last.optim.safetensors", &optimizer_state),
         ];
