@@ -73,7 +73,8 @@ pub struct TrainConfig {
     pub val_shapes: Option<usize>,
     /// Which `val_shapes` shapes validate. Only validation depends on it: it may change on
     /// resume (the first validation on a new sample then becomes the best, see
-    /// [`Validation::beats`]). Runs saved before the field validated on the first ones.
+    /// how a [`super::Validation`] beats another). Runs saved before the field validated on
+    /// the first ones.
     #[serde(default)]
     pub val_sample: ValSample,
     /// Threads, each working on its own pairs of a batch.

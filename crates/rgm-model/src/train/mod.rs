@@ -21,7 +21,7 @@
 //! commit left it, with the log it had then. The checkpoint's files are flushed to the disk
 //! before the commit, so it also survives a power cut.
 //!
-//! Pairs are made on the fly ([`PairGenerator::train_pair`], a new random pose, crop and noise
+//! Pairs are made on the fly ([`rgm_data::PairGenerator::train_pair`], a new random pose, crop and noise
 //! every epoch), optionally cut to [`TrainConfig::match_points`] points per cloud. A batch is
 //! spread over [`TrainConfig::workers`] threads, each with its own copy of the network; their
 //! gradients are summed into the main network, which takes the step and hands its weights back.
