@@ -68,10 +68,19 @@ pub enum MethodArg {
     Fgr,
     /// The RGM network: the model built into rgm, or --weights.
     Rgm,
-    /// RGM and FGR on the same pair, each refined, and the result that overlaps better (both
-    /// clouds' share of points within 0.02 of the other, in the unit-sphere frame): `rgm
-    /// register`'s default.
+    // Help from `auto_help`: the scoring distance is the library's.
+    #[value(help = auto_help())]
     Auto,
+}
+
+/// The help of `--method auto`, with [`rgm_model::combined::SCORE_DISTANCE`].
+fn auto_help() -> String {
+    format!(
+        "RGM and FGR on the same pair, each refined, and the result that overlaps better (both \
+         clouds' share of points within {} of the other, in the unit-sphere frame): `rgm \
+         register`'s default",
+        rgm_model::combined::SCORE_DISTANCE
+    )
 }
 
 /// `precision`, after saying on stderr when bf16 falls back to f32 on this processor.
