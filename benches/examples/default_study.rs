@@ -1,4 +1,4 @@
-//! The measurements behind `rgm register`'s default (issue 17), on validation pairs: how the
+//! The measurements behind `rgm register`'s default, on validation pairs: how the
 //! refinement ends, which score picks between RGM and FGR, and what the network's frame does.
 //!
 //! ```text
@@ -39,8 +39,8 @@ fn arg(args: &[String], name: &str) -> Option<String> {
         .and_then(|i| args.get(i + 1).cloned())
 }
 
-/// The refinements compared: `rgm_geom::refine`'s point-to-plane stages (session 4), then
-/// point-to-point stages at these distances (the default since session 6: 0.05, 0.03).
+/// The refinements compared: `rgm_geom::refine`'s point-to-plane stages alone, then with
+/// point-to-point stages at these distances (`RefineConfig::point_distances`).
 const REFINEMENTS: [(&str, &[f64]); 4] = [
     ("plane", &[]),
     ("plane + point 0.05", &[0.05]),

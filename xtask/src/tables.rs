@@ -18,9 +18,9 @@ use rayon::prelude::*;
 use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
 use rgm_geom::refine::RefineConfig;
 use rgm_model::evaluate::{evaluate_pair, table_header, table_row};
-use rgm_model::render::{correct_fraction, correspondence_figure, registration_figure};
 use rgm_model::weights::{weights_dir, Manifest, ModelEntry};
 use rgm_model::{Method, MethodOptions, PairRecord, Summary};
+use rgm_viz::{correct_fraction, correspondence_figure, registration_figure};
 
 use crate::project_root;
 
@@ -240,7 +240,8 @@ fn test_shapes(dataset: &ModelNet40, set: TestSet, limit: Option<usize>) -> Vec<
 
 /// The methods of the tables of `set`: ICP and FGR (identity initialisation, Open3D's
 /// settings; spec §6), on partial pairs also FGR refined by `rgm_geom::refine` (the classical
-/// pipeline RGM competes with there; on clean and noisy pairs FGR alone registers 97–100 %),
+/// pipeline RGM competes with there; on clean and noisy pairs FGR alone registers nearly every
+/// pair, docs/results.md),
 /// `rgm register`'s default (`auto+icp`: RGM with the built-in model and FGR, both refined, the
 /// better by its score), then every model of the manifest trained for `set`, as the paper runs
 /// it (unrefined; [`run`] adds each model refined, `<name>+icp`, from its own transforms).

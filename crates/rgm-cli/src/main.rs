@@ -12,7 +12,10 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::{Parser, Subcommand, ValueEnum};
 use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
+use rgm_geom::refine::RefineConfig;
+use rgm_model::network::TestStatistics;
 use rgm_model::{Method, MethodName, MethodOptions};
+use rgm_nn::Precision;
 
 /// Robust point-cloud registration (RGM, CVPR 2021) and classical baselines.
 #[derive(Parser, Debug)]
@@ -65,55 +68,30 @@ pub enum MethodArg {
     Fgr,
     /// The RGM network: the model built into rgm, or --weights.
     Rgm,
-    /// RGM and FGR on the same pair, each refined, and the result that overlaps better (both
-    /// clouds' share of points within 0.02 of the other, in the unit-sphere frame): `rgm
-    /// register`'s default.
+    // Help from `auto_help`: the scoring distance is the library's.
+    #[value(help = auto_help())]
     Auto,
 }
 
-/// How RGM's matrix products run.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
-pub enum PrecisionArg {
-    /// f32, exact (the default).
-    #[default]
-    F32,
-    /// Inputs rounded to bfloat16, f32 accumulation, on the processor's AMX tile units (Intel
-    /// Xeon since Sapphire Rapids) or AVX-512 BF16 (AMD Zen 4 and later); f32 on others.
-    Bf16,
+/// The help of `--method auto`, with [`rgm_model::combined::SCORE_DISTANCE`].
+fn auto_help() -> String {
+    format!(
+        "RGM and FGR on the same pair, each refined, and the result that overlaps better (both \
+         clouds' share of points within {} of the other, in the unit-sphere frame): `rgm \
+         register`'s default",
+        rgm_model::combined::SCORE_DISTANCE
+    )
 }
 
-impl PrecisionArg {
-    /// The library's precision; says on stderr when bf16 falls back to f32 on this processor.
-    pub fn precision(self) -> rgm_nn::Precision {
-        if self == Self::Bf16 && !rgm_nn::gemm::bf16_available() {
-            eprintln!(
-                "--precision bf16: this processor has neither AMX nor AVX-512 BF16; products \
-                 run in f32"
-            );
-        }
-        match self {
-            Self::F32 => rgm_nn::Precision::F32,
-            Self::Bf16 => rgm_nn::Precision::Bf16,
-        }
+/// `precision`, after saying on stderr when bf16 falls back to f32 on this processor.
+pub fn checked_precision(precision: Precision) -> Precision {
+    if precision == Precision::Bf16 && !rgm_nn::gemm::bf16_available() {
+        eprintln!(
+            "--precision bf16: this processor has neither AMX nor AVX-512 BF16; products run in \
+             f32"
+        );
     }
-}
-
-/// Batch-norm statistics of RGM's feature extractor at test time.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum StatisticsArg {
-    /// Each cloud's own statistics, as rgm trains (one cloud per batch-norm batch).
-    Cloud,
-    /// The running averages gathered in training (PyTorch's eval(); the authors' weights).
-    Running,
-}
-
-impl From<StatisticsArg> for rgm_model::network::TestStatistics {
-    fn from(arg: StatisticsArg) -> Self {
-        match arg {
-            StatisticsArg::Cloud => Self::Cloud,
-            StatisticsArg::Running => Self::Running,
-        }
-    }
+    precision
 }
 
 /// The method and, for RGM, its weights and test-time options.
@@ -135,7 +113,7 @@ pub struct MethodArgs {
     /// Batch-norm statistics for --weights: cloud for weights trained by `rgm train`, running
     /// for the authors' PyTorch weights [default: running; the built-in model's own otherwise].
     #[arg(long, value_enum, value_name = "WHICH", requires = "weights")]
-    test_statistics: Option<StatisticsArg>,
+    test_statistics: Option<TestStatistics>,
     /// RGM matches on at most N randomly drawn points of each cloud (fixed seed) and applies
     /// the transform to the full clouds; 0 matches on every point. The network's memory grows
     /// with the square of N (about 0.7 GB at 1,024 points, 2.7 GB at 2,048 for the paper's
@@ -147,21 +125,35 @@ pub struct MethodArgs {
     /// before [default: 2, as in the paper's tables].
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
     passes: Option<u16>,
-    /// Refine the transform of RGM or FGR (both with auto) with ICP on the full clouds: trimmed
-    /// point-to-plane with pairs closer than 0.2, then 0.1, then 0.05, and point-to-point at
-    /// 0.05, then 0.03 (RGM and auto measure them in the unit-sphere frame, FGR alone in the
-    /// clouds' own units, like its own radii, which suit unit-sized shapes). On by default in
-    /// `rgm register` and `rgm render`; `rgm eval` follows the paper's protocol and refines only
-    /// when asked.
-    #[arg(long, overrides_with = "no_refine")]
+    // Help from `refine_help`: the distances are RefineConfig's defaults.
+    #[arg(long, overrides_with = "no_refine", help = refine_help())]
     refine: bool,
     /// Report the method's own transform, unrefined (as the paper's tables do).
     #[arg(long, overrides_with = "refine")]
     no_refine: bool,
-    /// RGM's matrix products: f32, or bf16 (faster where the processor has AMX or AVX-512
-    /// BF16; the rest of the network stays f32).
-    #[arg(long, value_enum, default_value = "f32")]
-    precision: PrecisionArg,
+    /// RGM's matrix products: f32, or bf16 (inputs rounded to bfloat16, f32 accumulation:
+    /// faster where the processor has AMX tile units or AVX-512 BF16; the rest of the network
+    /// stays f32).
+    #[arg(long, value_name = "f32|bf16", default_value_t = MethodOptions::default().precision)]
+    precision: Precision,
+}
+
+/// The help of --refine, with the distances of [`RefineConfig::default`].
+fn refine_help() -> String {
+    let refine = RefineConfig::default();
+    let then = |distances: &[f64]| {
+        let d: Vec<String> = distances.iter().map(f64::to_string).collect();
+        d.join(", then ")
+    };
+    format!(
+        "Refine the transform of RGM or FGR (both with auto) with ICP on the full clouds: \
+         trimmed point-to-plane with pairs closer than {}, and point-to-point at {} (RGM and \
+         auto measure them in the unit-sphere frame, FGR alone in the clouds' own units, like \
+         its own radii, which suit unit-sized shapes). On by default in `rgm register` and \
+         `rgm render`; `rgm eval` follows the paper's protocol and refines only when asked",
+        then(&refine.distances),
+        then(&refine.point_distances)
+    )
 }
 
 /// What a command runs when the options leave it open.
@@ -195,10 +187,10 @@ impl MethodArgs {
             method,
             weights: self.weights.clone(),
             preset: self.preset.clone(),
-            test_statistics: self.test_statistics.map(Into::into),
+            test_statistics: self.test_statistics,
             match_points: self.match_points,
             passes: self.passes.map(usize::from),
-            precision: self.precision.precision(),
+            precision: checked_precision(self.precision),
             refine,
         };
         Ok(options.build()?)
@@ -218,27 +210,22 @@ pub fn register_files(
             bar.set_position((100.0 * p.done) as u64);
             bar.set_message(p.step);
         })
-        .with_context(|| {
-            format!(
-                "{} failed on {} → {}",
+        .map_err(|err| {
+            let hint = match err {
+                rgm_model::MethodError::TooMuchMemory { .. } => {
+                    " (--match-points N matches on fewer points)"
+                }
+                _ => "",
+            };
+            anyhow::Error::new(err).context(format!(
+                "{} failed on {} → {}{hint}",
                 method.name(),
                 source_path.display(),
                 target_path.display()
-            )
+            ))
         });
     bar.finish_and_clear();
     registration
-}
-
-/// The test-pair protocols of the paper (spec §1).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum SettingArg {
-    /// Same points, random pose.
-    Clean,
-    /// Gaussian jitter (σ 0.01, clipped at 0.05) on both clouds.
-    Noise,
-    /// Each cloud cropped to 70 % of its points by a random plane, then jittered.
-    Partial,
 }
 
 /// Where the ModelNet40 data is: `--data DIR` or `$RGM_DATA`.
@@ -248,8 +235,8 @@ pub struct DataArgs {
     #[arg(long, env = "RGM_DATA", value_name = "DIR")]
     data: PathBuf,
     /// The paper's test protocol to use.
-    #[arg(long, value_enum, default_value = "partial")]
-    setting: SettingArg,
+    #[arg(long, value_enum, default_value_t = Setting::Partial)]
+    setting: Setting,
     /// Unseen categories: test on categories 20–39 only.
     #[arg(long)]
     unseen: bool,
@@ -263,44 +250,21 @@ pub struct DataArgs {
     every: u64,
     /// The shapes the pairs are made of: the official test split, or the validation part of
     /// the training split (for choosing settings without looking at the test pairs).
-    #[arg(long, value_enum, default_value = "test")]
-    split: SplitArg,
-}
-
-/// The dataset splits a benchmark can run on.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum SplitArg {
-    /// The official test split (every table of the paper).
-    Test,
-    /// The last 20 % of the official training split, per category (what `rgm train` validates on).
-    Validation,
-}
-
-impl From<SettingArg> for Setting {
-    fn from(arg: SettingArg) -> Self {
-        match arg {
-            SettingArg::Clean => Setting::Clean,
-            SettingArg::Noise => Setting::Noise,
-            SettingArg::Partial => Setting::Partial,
-        }
-    }
+    #[arg(long, value_enum, default_value_t = Split::Test)]
+    split: Split,
 }
 
 impl DataArgs {
     /// The dataset and the pair generator these options select.
     fn open(&self) -> anyhow::Result<(ModelNet40, PairGenerator)> {
         let dataset = ModelNet40::open(&self.data)?;
-        Ok((dataset, PairGenerator::new(self.setting.into())))
+        Ok((dataset, PairGenerator::new(self.setting)))
     }
 
     /// The shapes of the selected split (and categories), and the indices of the pairs that
     /// `--every` and `--limit` select among them.
     fn shapes<'a>(&self, dataset: &'a ModelNet40) -> (Vec<&'a Shape>, Vec<usize>) {
-        let split = match self.split {
-            SplitArg::Test => Split::Test,
-            SplitArg::Validation => Split::Validation,
-        };
-        let shapes = dataset.split(split, self.unseen);
+        let shapes = dataset.split(self.split, self.unseen);
         let indices = (0..shapes.len())
             .step_by(self.every as usize)
             .take(self.limit.map_or(usize::MAX, |n| n as usize))
@@ -311,12 +275,11 @@ impl DataArgs {
     /// The name of the selected pairs in tables: `partial`, `partial-unseen`, and
     /// `(validation)` after it for the validation split.
     fn pairs_name(&self) -> String {
-        let setting: Setting = self.setting.into();
         format!(
             "{}{}{}",
-            setting.name(),
+            self.setting.name(),
             if self.unseen { "-unseen" } else { "" },
-            if self.split == SplitArg::Validation {
+            if self.split == Split::Validation {
                 " (validation)"
             } else {
                 ""
@@ -389,10 +352,10 @@ fn main() -> ExitCode {
 }
 
 /// Denormals flushed to zero on every compute thread (the network's Sinkhorn underflows), and
-/// one OpenBLAS thread unless `OPENBLAS_NUM_THREADS` asks for more: on an idle 2-core machine two
-/// threads register a pair about 20 % faster (305 against 375 ms), but while other work holds
-/// the cores OpenBLAS's spinning threads make it about ten times slower (4.5–6.5 s against
-/// 0.58 s). `rgm eval` runs pairs on parallel workers instead.
+/// one OpenBLAS thread unless `OPENBLAS_NUM_THREADS` asks for more: more threads gain a little
+/// on an idle machine, but while other work holds the cores OpenBLAS's spinning threads make a
+/// registration many times slower (docs/speed.md, "The `rgm` command: threads"). `rgm eval`
+/// runs pairs on parallel workers instead.
 fn set_up_compute_threads() {
     rgm_nn::threads::flush_denormals_everywhere();
     if std::env::var_os("OPENBLAS_NUM_THREADS").is_none() {

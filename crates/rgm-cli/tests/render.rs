@@ -7,7 +7,7 @@ use rgm_data::{read_point_cloud, write_point_cloud};
 use rgm_geom::euler::rotation_xyz_intrinsic;
 use rgm_geom::{RigidTransform, Vector3};
 
-use rgm_model::render::{registration_figure, PANEL_SIZE as PANEL, WHITE};
+use rgm_viz::{registration_figure, PANEL_SIZE as PANEL, WHITE};
 
 fn rgm(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_rgm"))

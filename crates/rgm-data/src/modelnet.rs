@@ -33,12 +33,15 @@ pub struct Shape {
 
 /// Which part of the protocol a shape list is for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum Split {
     /// First 80 % (per category) of the official train split.
+    #[cfg_attr(feature = "clap", value(skip))]
     Train,
-    /// Last 20 % (per category) of the official train split.
+    /// The last 20 % of the official training split, per category (what `rgm train` validates
+    /// on).
     Validation,
-    /// The official test split.
+    /// The official test split (every table of the paper).
     Test,
 }
 

@@ -621,8 +621,8 @@ mod tests {
         }
     }
 
-    /// Issue 14, case 8: FGR matched every point of large clouds with every other (30,000
-    /// points: 11 s, 100,000: 118 s) and said nothing meanwhile.
+    /// Issue 14, case 8: FGR matched every point of large clouds with every other (time
+    /// quadratic in the points) and said nothing meanwhile.
     #[test]
     fn large_clouds_are_downsampled_and_scored_whole() {
         let target = box_surface(20_000, 21);

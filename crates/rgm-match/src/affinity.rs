@@ -4,7 +4,7 @@ use crate::error::{check_shape, MatchError, Result};
 use ndarray::{Array2, ArrayView2, ArrayViewMut2, Ix2};
 use rand::Rng;
 use rgm_nn::gemm::mat_mul;
-use rgm_nn::param::{join_name, ParamViewMut};
+use rgm_nn::param::{join_name, ParamView, ParamViewMut};
 use rgm_nn::{Param, Parameters, Scalar};
 
 /// Settings of the affinity layer.
@@ -129,6 +129,10 @@ impl<T: Scalar> Affinity<T> {
 }
 
 impl<T: Scalar> Parameters<T> for Affinity<T> {
+    fn visit_params_ref<'a>(&'a self, prefix: &str, f: &mut dyn FnMut(&str, ParamView<'a, T>)) {
+        f(&join_name(prefix, "A"), self.w.view());
+    }
+
     fn visit_params(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ParamViewMut<'_, T>)) {
         f(&join_name(prefix, "A"), self.w.view_mut());
     }

@@ -3,7 +3,7 @@
 
 use crate::error::{check_shape, Result};
 use ndarray::{arr1, ArrayView2, ArrayViewMut2, Ix1, Zip};
-use rgm_nn::param::{join_name, ParamViewMut};
+use rgm_nn::param::{join_name, ParamView, ParamViewMut};
 use rgm_nn::{Param, Parameters, Scalar};
 
 /// Settings of the instance normalisation.
@@ -111,6 +111,11 @@ impl<T: Scalar> InstNorm<T> {
 }
 
 impl<T: Scalar> Parameters<T> for InstNorm<T> {
+    fn visit_params_ref<'a>(&'a self, prefix: &str, f: &mut dyn FnMut(&str, ParamView<'a, T>)) {
+        f(&join_name(prefix, "weight"), self.weight.view());
+        f(&join_name(prefix, "bias"), self.bias.view());
+    }
+
     fn visit_params(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ParamViewMut<'_, T>)) {
         f(&join_name(prefix, "weight"), self.weight.view_mut());
         f(&join_name(prefix, "bias"), self.bias.view_mut());

@@ -34,7 +34,7 @@ pub enum MethodError {
     /// memory grows with the square of the matched points).
     #[error(
         "rgm: matching {} × {} points would need about {:.1} GiB, more than the {:.1} GiB \
-         available; match on fewer points (--match-points, or PipelineConfig::match_points)",
+         available; match on fewer points (the `match_points` setting)",
         points.0, points.1, *estimate as f64 / (1u64 << 30) as f64, *available as f64 / (1u64 << 30) as f64
     )]
     TooMuchMemory {

@@ -11,11 +11,11 @@
 pub mod combined;
 pub mod error;
 pub mod evaluate;
+pub mod memory;
 pub mod method;
 pub mod network;
 pub mod options;
 pub mod pipeline;
-pub mod render;
 pub mod train;
 pub mod weights;
 

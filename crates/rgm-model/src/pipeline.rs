@@ -258,40 +258,6 @@ pub(crate) fn as_rows(cloud: &PointCloud) -> Array2<f32> {
     Array2::from_shape_fn((cloud.len(), 3), |(i, c)| cloud.points[i][c] as f32) // (N, 3)
 }
 
-/// The peak memory, in bytes, of registering N source and M target matched points with a
-/// network of `config` holding `params` parameters (both chains when `cycle_consistency`).
-///
-/// The part that grows with N·M is counted from the buffers a pass keeps (f32): per block,
-/// each side's six R×R adjacency buffers, the edge transformer's attention weights
-/// (H·(2N² + 2M² + 2NM)) and seven N×M matrices of scoring and Sinkhorn; one such pass cache per
-/// chain. The part linear in the points (60 bytes per point, neighbour and DGCNN channel) and
-/// the constant (64 MiB and the weights) are fitted to measured peaks: the estimate is 2–26 %
-/// above the peaks measured for the `fast` and `paper` presets at 384 to 2,048 points
-/// (docs/speed.md).
-pub fn estimated_peak_bytes(
-    config: &crate::network::Config,
-    params: usize,
-    n: usize,
-    m: usize,
-    cycle_consistency: bool,
-) -> u64 {
-    let (n, m) = (n as u64, m as u64);
-    let (h, blocks) = (config.heads as u64, config.blocks as u64);
-    let per_pass = 4 * blocks * ((6 + 2 * h) * (n * n + m * m) + (7 + 2 * h) * n * m);
-    let chains = if cycle_consistency { 2 } else { 1 };
-    let channels: u64 = config.dgcnn.iter().map(|&c| c as u64).sum();
-    let features = 60 * (n + m) * config.k as u64 * channels;
-    chains * per_pass + features + (64 << 20) + 4 * params as u64
-}
-
-/// The memory the system can give this process now (Linux's MemAvailable), if known.
-fn available_memory() -> Option<u64> {
-    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024)
-}
-
 /// The two chains of spec §4.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Chain {
@@ -451,23 +417,12 @@ impl RgmRegistrar {
                 });
             }
         }
-        let params = self.network.num_params();
-        let estimate = estimated_peak_bytes(
+        crate::memory::check_fits(
             self.network.config(),
-            params,
-            x.len(),
-            y.len(),
+            self.network.num_params(),
+            (x.len(), y.len()),
             self.config.cycle_consistency,
-        );
-        if estimate > 1 << 30 {
-            if let Some(available) = available_memory().filter(|&a| estimate > a) {
-                return Err(MethodError::TooMuchMemory {
-                    points: (x.len(), y.len()),
-                    estimate,
-                    available,
-                });
-            }
-        }
+        )?;
         let (x_rows, y_rows) = (as_rows(&x), as_rows(&y)); // (N, 3), (M, 3)
         add_since(&mut self.times.prepare, start);
         let start = Instant::now();
@@ -606,21 +561,6 @@ mod tests {
         assert!(!mapped.is_empty());
         assert_eq!(whole.correspondences(), &mapped[..]);
         assert_eq!(a.fitness, mapped.len() as f64 / 30.0);
-    }
-
-    #[test]
-    fn the_memory_estimate_counts_the_pass_buffers() {
-        // fast preset, 1,024 × 1,024 points, both chains: 2 × 4·2·(14·2N² + 15N²) bytes of pass
-        // buffers, 60·2N·20·128 of features, 64 MiB and the weights (measured peak: 910 MiB).
-        let fast = crate::network::Config::fast();
-        let n = 1024u64;
-        let expected = 2 * 8 * 43 * n * n + 60 * 2 * n * 20 * 128 + (64 << 20) + 4 * 1_572_324;
-        assert_eq!(
-            estimated_peak_bytes(&fast, 1_572_324, 1024, 1024, true),
-            expected
-        );
-        let one_chain = estimated_peak_bytes(&fast, 1_572_324, 1024, 1024, false);
-        assert_eq!(expected - one_chain, 8 * 43 * n * n);
     }
 
     #[test]

@@ -34,6 +34,7 @@ pub fn weights_dir() -> PathBuf {
 
 /// The network's structure: the full model or one of the ablations of spec §2.7.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum Variant {
     /// AIS scoring and transformer edges.

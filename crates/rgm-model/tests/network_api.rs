@@ -14,10 +14,34 @@ fn cloud(n: usize, seed: u64) -> Array2<f64> {
 }
 
 fn counts(config: Config) -> (usize, usize) {
-    let mut rgm = Rgm::<f32>::new(config, 0).unwrap();
+    let rgm = Rgm::<f32>::new(config, 0).unwrap();
     let mut buffers = 0;
-    rgm.visit_buffers("", &mut |_, b| buffers += b.len());
+    rgm.visit_buffers_ref("", &mut |_, b| buffers += b.len());
     (rgm.num_params(), buffers)
+}
+
+/// The read-only visitors name the same tensors, of the same shapes, in the same order as the
+/// mutating ones that optimisers and loading use.
+#[test]
+fn both_visitors_walk_the_same_tensors_in_the_same_order() {
+    for preset in ["paper", "small", "fast", "tiny"] {
+        let mut rgm = Rgm::<f32>::new(Config::preset(preset).unwrap(), 0).unwrap();
+        let (mut read, mut written) = (Vec::new(), Vec::new());
+        rgm.visit_params_ref("", &mut |name, p| {
+            read.push((name.to_string(), p.value.shape().to_vec()))
+        });
+        rgm.visit_buffers_ref("", &mut |name, b| {
+            read.push((name.to_string(), b.shape().to_vec()))
+        });
+        rgm.visit_params("", &mut |name, p| {
+            written.push((name.to_string(), p.value.shape().to_vec()))
+        });
+        rgm.visit_buffers("", &mut |name, b| {
+            written.push((name.to_string(), b.shape().to_vec()))
+        });
+        assert_eq!(read, written, "{preset}");
+        assert!(read.len() > 20, "{preset}: {}", read.len());
+    }
 }
 
 #[test]
@@ -88,7 +112,7 @@ fn weights_round_trip_through_a_file_and_name_their_errors() {
     trained
         .forward(x.view(), y.view(), Mode::Train, &mut cache)
         .unwrap(); // moves the running stats
-    rgm_nn::io::save_params(&path, &mut trained).unwrap();
+    rgm_nn::io::save_params(&path, &trained).unwrap();
     let mut loaded = Rgm::<f64>::load(Config::tiny(), &path).unwrap();
     trained
         .forward(x.view(), y.view(), Mode::Eval, &mut cache)

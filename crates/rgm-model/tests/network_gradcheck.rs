@@ -15,8 +15,8 @@ use std::collections::HashMap;
 const STEP: f64 = 1e-5;
 /// Largest accepted |analytic − numeric| / max |analytic gradient of the tensor|.
 const TOL: f64 = 1e-5;
-/// The rounding noise of a central difference of this loss at this step (|L| ~ 1, about
-/// 1e-15 / STEP measured): entries whose gradient is a millionth of the loss scale (the query
+/// The rounding noise of a central difference of this loss at this step (|L| ~ 1: f64's
+/// rounding of L, about 1e-15, over STEP): entries whose gradient is a millionth of the loss scale (the query
 /// and key maps of the second block) cannot be checked more finely than this in f64. A larger
 /// step would cross ReLU and max-over-K kinks in the feature extractor.
 const NOISE: f64 = 1e-9;

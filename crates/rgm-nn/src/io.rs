@@ -1,6 +1,7 @@
 //! Weight files in safetensors (readable by PyTorch, numpy, candle): every parameter and buffer
 //! under its state-dict name, in the element type of the model (F32 or F64).
 
+use crate::bf16::{bf16_bits, bf16_to_f32};
 use crate::{NnError, Parameters, Result, Scalar};
 use ndarray::{ArrayD, ArrayViewD, IxDyn};
 use safetensors::tensor::{Dtype, TensorView};
@@ -22,24 +23,6 @@ fn dtype_of<T: Scalar>() -> Dtype {
     } else {
         Dtype::F64
     }
-}
-
-/// `x` rounded to the nearest bfloat16 (ties to even), as its bits: the upper half of the f32
-/// bits after rounding. NaN stays a (quiet) NaN; values beyond bf16's range round to ±inf.
-pub fn f32_to_bf16(x: f32) -> u16 {
-    let bits = x.to_bits();
-    if x.is_nan() {
-        return (bits >> 16) as u16 | 0x0040;
-    }
-    // Adding 0x7FFF, plus 1 when the kept part is odd, carries into bit 16 exactly when the
-    // dropped half is above one half, or one half and the kept part odd.
-    let rounded = bits.wrapping_add(0x7FFF + ((bits >> 16) & 1));
-    (rounded >> 16) as u16
-}
-
-/// The f32 whose upper half is the bfloat16 `bits` (exact).
-pub fn bf16_to_f32(bits: u16) -> f32 {
-    f32::from_bits(u32::from(bits) << 16)
 }
 
 /// How a tensor is stored in a file.
@@ -108,7 +91,7 @@ fn le_bytes<T: Scalar>(t: &ArrayViewD<'_, T>, dtype: Dtype) -> Vec<u8> {
         let v = Scalar::to_f64(v);
         match dtype {
             Dtype::F64 => out.extend_from_slice(&v.to_le_bytes()),
-            Dtype::BF16 => out.extend_from_slice(&f32_to_bf16(v as f32).to_le_bytes()),
+            Dtype::BF16 => out.extend_from_slice(&bf16_bits(v as f32).to_le_bytes()),
             _ => out.extend_from_slice(&(v as f32).to_le_bytes()),
         }
     }
@@ -335,15 +318,10 @@ pub fn read_tensors_from_bytes<T: Scalar>(
 }
 
 /// Saves every parameter and buffer of `model` under its name.
-pub fn save_params<T: Scalar>(path: &Path, model: &mut dyn Parameters<T>) -> Result<()> {
-    let mut owned: Vec<(String, ArrayD<T>)> = Vec::new();
-    model.visit_params("", &mut |name, p| {
-        owned.push((name.to_string(), p.value.to_owned()))
-    });
-    model.visit_buffers("", &mut |name, b| {
-        owned.push((name.to_string(), b.to_owned()))
-    });
-    let views: Vec<_> = owned.iter().map(|(n, t)| (n.clone(), t.view())).collect();
+pub fn save_params<T: Scalar>(path: &Path, model: &dyn Parameters<T>) -> Result<()> {
+    let mut views: NamedViews<'_, T> = Vec::new();
+    model.visit_params_ref("", &mut |name, p| views.push((name.to_string(), p.value)));
+    model.visit_buffers_ref("", &mut |name, b| views.push((name.to_string(), b)));
     write_tensors(path, &views, HashMap::new())
 }
 
@@ -413,7 +391,7 @@ mod tests {
         let mut bn = BatchNorm::<f64>::new(3);
         bn.weight.value = ndarray::array![1.5, 2.5, 3.5];
         bn.running_var = ndarray::array![0.25, 0.5, 4.0];
-        save_params(&path, &mut bn).unwrap();
+        save_params(&path, &bn).unwrap();
         let (tensors, _) = read_tensors::<f64>(&path).unwrap();
         let mut names: Vec<_> = tensors.keys().cloned().collect();
         names.sort();
@@ -472,7 +450,7 @@ mod tests {
         let path = temp("errors");
         save_params(
             &path,
-            &mut Linear::<f32>::new(3, 2, false, &mut StdRng::seed_from_u64(0)),
+            &Linear::<f32>::new(3, 2, false, &mut StdRng::seed_from_u64(0)),
         )
         .unwrap();
         let err = load_params(
@@ -518,6 +496,14 @@ mod tests {
         let mut conv = Linear::<f64>::new(3, 2, false, &mut StdRng::seed_from_u64(0));
         struct Conv<'a>(&'a mut Linear<f64>);
         impl Parameters<f64> for Conv<'_> {
+            fn visit_params_ref<'a>(
+                &'a self,
+                prefix: &str,
+                f: &mut dyn FnMut(&str, crate::param::ParamView<'a, f64>),
+            ) {
+                self.0
+                    .visit_params_ref(&crate::param::join_name(prefix, "conv"), f);
+            }
             fn visit_params(
                 &mut self,
                 prefix: &str,
@@ -540,7 +526,7 @@ mod tests {
         let path = temp("bytes");
         let mut bn = BatchNorm::<f32>::new(2);
         bn.running_mean = ndarray::array![0.5f32, -1.0];
-        save_params(&path, &mut bn).unwrap();
+        save_params(&path, &bn).unwrap();
         let (from_file, _) = read_tensors::<f32>(&path).unwrap();
         let bytes = std::fs::read(&path).unwrap();
         let (from_bytes, _) = read_tensors_from_bytes::<f32>(&bytes, Path::new("memory")).unwrap();
@@ -555,36 +541,18 @@ mod tests {
     }
 
     #[test]
-    fn bf16_rounds_to_nearest_even() {
-        let one = 1.0f32;
-        let ulp = 2f32.powi(-7); // bf16's spacing at 1
-        assert_eq!(f32_to_bf16(one), 0x3F80);
-        assert_eq!(f32_to_bf16(-2.5), 0xC020);
-        // Halfway between 1 and 1 + ulp: to the even 1; between 1 + ulp and 1 + 2 ulp: up.
-        assert_eq!(f32_to_bf16(one + ulp / 2.0), 0x3F80);
-        assert_eq!(f32_to_bf16(one + 1.5 * ulp), 0x3F82);
-        // Just above half: up.
-        assert_eq!(f32_to_bf16(one + ulp / 2.0 + 2f32.powi(-20)), 0x3F81);
-        assert_eq!(f32_to_bf16(f32::MAX), 0x7F80); // rounds to +inf
-        assert_eq!(f32_to_bf16(f32::NEG_INFINITY), 0xFF80);
-        assert!(bf16_to_f32(f32_to_bf16(f32::NAN)).is_nan());
-        assert_eq!(bf16_to_f32(f32_to_bf16(1e-45)), 0.0);
-        assert_eq!(bf16_to_f32(0x3F81), one + ulp);
-    }
-
-    #[test]
     fn chosen_tensors_are_written_as_bf16_and_read_back_upcast() {
         let path = temp("bf16");
         let mut bn = BatchNorm::<f32>::new(3);
         bn.weight.value = ndarray::array![1.0f32 + 2f32.powi(-8), -3.0, 0.1];
         bn.running_var = ndarray::array![0.1f32, 2.0, 3.0];
-        let rounded = bn.weight.value.mapv(|v| bf16_to_f32(f32_to_bf16(v)));
+        let rounded = bn.weight.value.mapv(|v| bf16_to_f32(bf16_bits(v)));
         // 0.1 rounds up to 0x3DCD, 0.10009765625.
         assert_eq!(
             rounded,
             ndarray::array![1.0f32, -3.0, f32::from_bits(0x3DCD_0000)]
         );
-        save_params(&path, &mut bn).unwrap();
+        save_params(&path, &bn).unwrap();
         let bf16_path = temp("bf16-rewritten");
         rewrite_with_bf16(&path, &bf16_path, &|name| name == "weight").unwrap();
         let bytes = std::fs::read(&bf16_path).unwrap();
@@ -620,7 +588,7 @@ mod tests {
         );
         // Cut short: the header promises more data than the file holds.
         let mut bn = BatchNorm::<f32>::new(2);
-        save_params(&path, &mut bn).unwrap();
+        save_params(&path, &bn).unwrap();
         let bytes = std::fs::read(&path).unwrap();
         std::fs::write(&path, &bytes[..bytes.len() - 3]).unwrap();
         let err = load_params(&path, &mut bn).unwrap_err().to_string();

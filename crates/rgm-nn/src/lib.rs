@@ -48,6 +48,7 @@
 // Links the statically built OpenBLAS that ndarray's `blas` feature calls into.
 extern crate openblas_src;
 
+pub mod bf16;
 pub mod error;
 pub mod exp;
 pub mod gemm;
@@ -79,6 +80,7 @@ pub use ops::normalize::{
 };
 pub use ops::relu::{relu_backward, relu_forward};
 pub use ops::softmax::{softmax_rows_backward, softmax_rows_forward};
+pub use optim::Optimizer;
 pub use param::{Param, Parameters};
 pub use precision::Precision;
 pub use scalar::Scalar;

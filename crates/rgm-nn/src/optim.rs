@@ -118,6 +118,25 @@ impl<T: Scalar> Slots<T> {
     }
 }
 
+/// An optimiser: one update of a model's parameters from their accumulated gradients per
+/// [`Optimizer::step`], as burn's `Optimizer`, so a trainer holds any of them. Its state (the
+/// per-parameter buffers, kept in the model's visiting order) saves to a safetensors file;
+/// each optimiser's own `load` reads it back.
+pub trait Optimizer<T: Scalar>: Send {
+    /// One update of every parameter from its accumulated gradient. Errors if the model's
+    /// parameters are not the ones the state was made for.
+    fn step(&mut self, model: &mut dyn Parameters<T>) -> Result<()>;
+
+    /// The learning rate of the next steps.
+    fn lr(&self) -> f64;
+
+    /// Sets the learning rate of the next steps (a schedule's).
+    fn set_lr(&mut self, lr: f64);
+
+    /// Writes the state and hyper-parameters to a safetensors file.
+    fn save(&self, path: &Path) -> Result<()>;
+}
+
 fn metadata_number(meta: &HashMap<String, String>, key: &str, path: &Path) -> Result<f64> {
     meta.get(key)
         .and_then(|v| v.parse().ok())
@@ -154,8 +173,22 @@ impl<T: Scalar> Sgd<T> {
         }
     }
 
-    /// One update of every parameter from its accumulated gradient.
-    pub fn step(&mut self, model: &mut dyn Parameters<T>) -> Result<()> {
+    /// Reads a state written by [`Optimizer::save`] (plain momentum when it names none).
+    pub fn load(path: &Path) -> Result<Self> {
+        let (velocity, meta) = Slots::read(&["velocity"], &[], path)?;
+        let num = |k| metadata_number(&meta, k, path);
+        Ok(Self {
+            lr: num("lr")?,
+            momentum: num("momentum")?,
+            weight_decay: num("weight_decay")?,
+            nesterov: meta.get("nesterov").is_some_and(|v| v == "true"),
+            velocity,
+        })
+    }
+}
+
+impl<T: Scalar> Optimizer<T> for Sgd<T> {
+    fn step(&mut self, model: &mut dyn Parameters<T>) -> Result<()> {
         let (lr, mu, wd) = (
             T::from_f64(self.lr),
             T::from_f64(self.momentum),
@@ -174,8 +207,16 @@ impl<T: Scalar> Sgd<T> {
         })
     }
 
-    /// Writes the momentum buffers and hyper-parameters to a safetensors file.
-    pub fn save(&self, path: &Path) -> Result<()> {
+    fn lr(&self) -> f64 {
+        self.lr
+    }
+
+    fn set_lr(&mut self, lr: f64) {
+        self.lr = lr;
+    }
+
+    /// Writes the momentum buffers and hyper-parameters.
+    fn save(&self, path: &Path) -> Result<()> {
         let (tensors, order) = self.velocity.named();
         let meta = HashMap::from([
             ("optimizer".to_string(), "sgd".to_string()),
@@ -186,19 +227,6 @@ impl<T: Scalar> Sgd<T> {
             order,
         ]);
         write_tensors(path, &tensors, meta)
-    }
-
-    /// Reads a state written by [`Sgd::save`] (plain momentum when it names none).
-    pub fn load(path: &Path) -> Result<Self> {
-        let (velocity, meta) = Slots::read(&["velocity"], &[], path)?;
-        let num = |k| metadata_number(&meta, k, path);
-        Ok(Self {
-            lr: num("lr")?,
-            momentum: num("momentum")?,
-            weight_decay: num("weight_decay")?,
-            nesterov: meta.get("nesterov").is_some_and(|v| v == "true"),
-            velocity,
-        })
     }
 }
 
@@ -230,8 +258,26 @@ impl<T: Scalar> Adam<T> {
         }
     }
 
-    /// One update of every parameter from its accumulated gradient.
-    pub fn step(&mut self, model: &mut dyn Parameters<T>) -> Result<()> {
+    /// Reads a state written by [`Optimizer::save`]. The first moments may be missing (a
+    /// snapshot kept small for git): they restart from zero, and after n steps hold all but
+    /// 0.9ⁿ of the gradient history they would have had.
+    pub fn load(path: &Path) -> Result<Self> {
+        let (moments, meta) = Slots::read(&["m", "v"], &["m"], path)?;
+        let num = |k| metadata_number(&meta, k, path);
+        Ok(Self {
+            lr: num("lr")?,
+            beta1: num("beta1")?,
+            beta2: num("beta2")?,
+            eps: num("eps")?,
+            weight_decay: num("weight_decay")?,
+            step: num("step")? as u64,
+            moments,
+        })
+    }
+}
+
+impl<T: Scalar> Optimizer<T> for Adam<T> {
+    fn step(&mut self, model: &mut dyn Parameters<T>) -> Result<()> {
         self.step += 1;
         let t = self.step as i32;
         let (b1, b2) = (T::from_f64(self.beta1), T::from_f64(self.beta2));
@@ -255,8 +301,16 @@ impl<T: Scalar> Adam<T> {
         })
     }
 
-    /// Writes both moments, the step count and the hyper-parameters to a safetensors file.
-    pub fn save(&self, path: &Path) -> Result<()> {
+    fn lr(&self) -> f64 {
+        self.lr
+    }
+
+    fn set_lr(&mut self, lr: f64) {
+        self.lr = lr;
+    }
+
+    /// Writes both moments, the step count and the hyper-parameters.
+    fn save(&self, path: &Path) -> Result<()> {
         let (tensors, order) = self.moments.named();
         let meta = HashMap::from([
             ("optimizer".to_string(), "adam".to_string()),
@@ -269,23 +323,6 @@ impl<T: Scalar> Adam<T> {
             order,
         ]);
         write_tensors(path, &tensors, meta)
-    }
-
-    /// Reads a state written by [`Adam::save`]. The first moments may be missing (a snapshot
-    /// kept small for git): they restart from zero, and after n steps hold all but 0.9ⁿ of
-    /// the gradient history they would have had.
-    pub fn load(path: &Path) -> Result<Self> {
-        let (moments, meta) = Slots::read(&["m", "v"], &["m"], path)?;
-        let num = |k| metadata_number(&meta, k, path);
-        Ok(Self {
-            lr: num("lr")?,
-            beta1: num("beta1")?,
-            beta2: num("beta2")?,
-            eps: num("eps")?,
-            weight_decay: num("weight_decay")?,
-            step: num("step")? as u64,
-            moments,
-        })
     }
 }
 
@@ -380,7 +417,7 @@ mod tests {
             set_grads(&mut first, t);
             step(&mut opt, &mut first).unwrap();
         }
-        crate::io::save_params(&dir.join("model.safetensors"), &mut first).unwrap();
+        crate::io::save_params(&dir.join("model.safetensors"), &first).unwrap();
         let mut opt = reload(&opt, &dir.join("optimiser.safetensors")).unwrap();
         let mut resumed = Linear::<f32>::new(3, 2, true, &mut StdRng::seed_from_u64(99));
         crate::io::load_params(&dir.join("model.safetensors"), &mut resumed).unwrap();
@@ -445,7 +482,7 @@ mod tests {
         let loaded = Adam::<f32>::load(&bf16_path).unwrap();
         assert_eq!((loaded.step, loaded.lr, loaded.beta2), (2, 0.01, 0.999));
         let (exact, _) = read_tensors::<f32>(&f32_path).unwrap();
-        let round = |t: &ArrayD<f32>| t.mapv(|v| crate::io::bf16_to_f32(crate::io::f32_to_bf16(v)));
+        let round = |t: &ArrayD<f32>| t.mapv(crate::bf16::round_to_bf16);
         let m = &loaded.moments.tensors[0][0];
         assert_eq!(m, &round(&exact["m.weight"]));
         assert_ne!(m, &exact["m.weight"], "0.37 w is not a bf16 value");

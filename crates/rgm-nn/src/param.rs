@@ -2,7 +2,7 @@
 //! tensors that optimisers and weight files use.
 
 use crate::Scalar;
-use ndarray::{Array, ArrayViewMutD, Dimension};
+use ndarray::{Array, ArrayViewD, ArrayViewMutD, Dimension};
 
 /// A trainable tensor with its gradient of the same shape. Backward passes add into `grad`;
 /// [`Parameters::zero_grad`] clears it once per step.
@@ -21,13 +21,29 @@ impl<T: Scalar, D: Dimension> Param<T, D> {
         Self { value, grad }
     }
 
-    /// A dynamic-dimensional view of value and gradient, as [`Parameters`] hands it out.
+    /// A read-only dynamic-dimensional view of value and gradient, as
+    /// [`Parameters::visit_params_ref`] hands it out.
+    pub fn view(&self) -> ParamView<'_, T> {
+        ParamView {
+            value: self.value.view().into_dyn(),
+            grad: self.grad.view().into_dyn(),
+        }
+    }
+
+    /// A dynamic-dimensional view of value and gradient, as [`Parameters::visit_params`] hands
+    /// it out.
     pub fn view_mut(&mut self) -> ParamViewMut<'_, T> {
         ParamViewMut {
             value: self.value.view_mut().into_dyn(),
             grad: self.grad.view_mut().into_dyn(),
         }
     }
+}
+
+/// Views of one parameter's value and gradient, any dimensionality.
+pub struct ParamView<'a, T> {
+    pub value: ArrayViewD<'a, T>,
+    pub grad: ArrayViewD<'a, T>,
 }
 
 /// Mutable views of one parameter's value and gradient, any dimensionality.
@@ -38,12 +54,23 @@ pub struct ParamViewMut<'a, T> {
 
 /// A layer or model that exposes its tensors by name (PyTorch state-dict style: `prefix.name`).
 /// The visiting order must be fixed: optimisers keep their state in that order.
+///
+/// Two visitors, as burn's `ModuleVisitor` and `ModuleMapper`: the read-only `*_ref` ones for
+/// counting, saving and reading gradients (`&self`), the mutating ones for updates and loading.
+/// Both must give the same names in the same order.
 pub trait Parameters<T: Scalar> {
-    /// Calls `f(name, param)` for every trainable parameter.
+    /// Calls `f(name, param)` for every trainable parameter, read-only.
+    fn visit_params_ref<'a>(&'a self, prefix: &str, f: &mut dyn FnMut(&str, ParamView<'a, T>));
+
+    /// Calls `f(name, param)` for every trainable parameter, to change it.
     fn visit_params(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ParamViewMut<'_, T>));
 
     /// Calls `f(name, tensor)` for every saved, non-trained tensor (batch-norm running
-    /// statistics). None by default.
+    /// statistics), read-only. None by default.
+    fn visit_buffers_ref<'a>(&'a self, _prefix: &str, _f: &mut dyn FnMut(&str, ArrayViewD<'a, T>)) {
+    }
+
+    /// [`Parameters::visit_buffers_ref`], to change them.
     fn visit_buffers(&mut self, _prefix: &str, _f: &mut dyn FnMut(&str, ArrayViewMutD<'_, T>)) {}
 
     /// Sets every parameter gradient to zero (once per step, before the backward pass).
@@ -52,9 +79,9 @@ pub trait Parameters<T: Scalar> {
     }
 
     /// The total number of trainable values.
-    fn num_params(&mut self) -> usize {
+    fn num_params(&self) -> usize {
         let mut n = 0;
-        self.visit_params("", &mut |_, p| n += p.value.len());
+        self.visit_params_ref("", &mut |_, p| n += p.value.len());
         n
     }
 }

@@ -214,6 +214,13 @@ fn optimisers_match_pytorch_over_three_steps() {
     // A one-tensor model whose gradient at step t is pinned((2, 3), 41 + t).
     struct One(Param<f64, ndarray::Ix2>);
     impl Parameters<f64> for One {
+        fn visit_params_ref<'a>(
+            &'a self,
+            prefix: &str,
+            f: &mut dyn FnMut(&str, param::ParamView<'a, f64>),
+        ) {
+            f(&param::join_name(prefix, "p"), self.0.view());
+        }
         fn visit_params(
             &mut self,
             prefix: &str,

@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use rgm_data::{read_point_cloud, Correspondence};
 use rgm_geom::{Matrix4, RigidTransform};
-use rgm_model::render::{correct_fraction, correspondence_figure, registration_figure};
 use rgm_model::Method;
+use rgm_viz::{correct_fraction, correspondence_figure, registration_figure};
 
 use crate::MethodArgs;
 

@@ -4,15 +4,21 @@ use std::ops::ControlFlow;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use rgm_data::ModelNet40;
-use rgm_model::network::Config;
+use rgm_data::{ModelNet40, Setting};
+use rgm_model::network::{Config, TestStatistics};
 use rgm_model::train::{Event, LogRecord, OptimizerKind, TrainConfig, Trainer, ValSample};
 use rgm_model::weights::Variant;
 
-use crate::{progress, PrecisionArg, SettingArg, StatisticsArg};
+use crate::{checked_precision, progress};
+
+/// The paper's schedule (spec §3, [`TrainConfig::paper`]): the defaults of the options below
+/// that it sets.
+fn paper() -> TrainConfig {
+    TrainConfig::paper(Setting::Partial, Config::fast())
+}
 
 /// Options of `rgm train`. Defaults are the paper's schedule (spec §3) on the `fast` preset,
-/// matching on 384-point clouds.
+/// matching on 384-point clouds, validating with each cloud's own batch-norm statistics.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The ModelNet40 `.npy` tree (e.g. ../shared/data/modelnet40_npy1024).
@@ -23,8 +29,8 @@ pub struct Args {
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
     /// The pair protocol to train on.
-    #[arg(long, value_enum, default_value = "partial")]
-    setting: SettingArg,
+    #[arg(long, value_enum, default_value_t = Setting::Partial)]
+    setting: Setting,
     /// Train and validate on categories 0–19 only (the unseen-categories protocol).
     #[arg(long)]
     unseen: bool,
@@ -34,13 +40,13 @@ pub struct Args {
     /// The network: rgm, or one of the paper's ablations (spec §2.7): var1 scores pairs by
     /// feature distance (no affinity matrix, no instance norm), var2 connects every point to
     /// every other (no transformer edges).
-    #[arg(long, value_enum, default_value = "rgm")]
-    variant: VariantArg,
+    #[arg(long, value_enum, default_value_t = Variant::Rgm)]
+    variant: Variant,
     /// Cut each cloud of a pair to at most N points for matching (0: the whole clouds).
     #[arg(long, default_value_t = 384, value_name = "N")]
     match_points: usize,
     /// Epochs in all.
-    #[arg(long, default_value_t = 200)]
+    #[arg(long, default_value_t = paper().epochs)]
     epochs: usize,
     /// Stop once epoch N is validated and saved, leaving the run's schedule (--epochs,
     /// --milestones) as it is; running again with a larger N goes on. The training queue
@@ -48,30 +54,30 @@ pub struct Args {
     #[arg(long, value_name = "N")]
     until_epoch: Option<usize>,
     /// Pairs per optimiser step.
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = paper().batch)]
     batch: usize,
-    /// sgd (Nesterov momentum, as the reference code) or adam.
-    #[arg(long, value_enum, default_value = "sgd")]
-    optimizer: OptimizerArg,
+    /// The optimiser.
+    #[arg(long, value_enum, default_value_t = paper().optimizer)]
+    optimizer: OptimizerKind,
     /// Learning rate before the first milestone.
-    #[arg(long, default_value_t = 1e-3)]
+    #[arg(long, default_value_t = paper().lr)]
     lr: f64,
     /// SGD momentum.
-    #[arg(long, default_value_t = 0.9)]
+    #[arg(long, default_value_t = paper().momentum)]
     momentum: f64,
     /// L2 weight decay.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = paper().weight_decay)]
     weight_decay: f64,
     /// Epochs at which the learning rate is multiplied by --gamma.
     #[arg(
         long,
         value_delimiter = ',',
-        default_value = "120,140",
+        default_values_t = paper().milestones,
         value_name = "E,E"
     )]
     milestones: Vec<usize>,
     /// Learning-rate factor at each milestone.
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(long, default_value_t = paper().gamma)]
     gamma: f64,
     /// Use only the first N training shapes per epoch.
     #[arg(long, value_name = "N")]
@@ -84,26 +90,26 @@ pub struct Args {
     /// first (the split's first N, which is ordered by category: a few categories only; what
     /// runs started before this option validated on). May change when resuming: the first
     /// validation on the new sample then becomes the best.
-    #[arg(long, value_enum, default_value = "spread")]
-    val_sample: ValSampleArg,
+    #[arg(long, value_enum, default_value_t = paper().val_sample)]
+    val_sample: ValSample,
     /// Worker threads (default: one per core).
     #[arg(long, value_name = "N")]
     workers: Option<usize>,
     /// Save the last checkpoint every N batches.
-    #[arg(long, default_value_t = 50, value_name = "N")]
+    #[arg(long, default_value_t = paper().checkpoint_every, value_name = "N")]
     checkpoint_every: usize,
     /// Seed of the initial weights and of the shape order.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = paper().seed)]
     seed: u64,
     /// Batch-norm statistics at validation: cloud (each cloud's own, as rgm trains) or running
     /// (the running averages, PyTorch's eval()). May change when resuming.
-    #[arg(long, value_enum, default_value = "cloud")]
-    test_statistics: StatisticsArg,
+    #[arg(long, value_enum, default_value_t = TestStatistics::Cloud)]
+    test_statistics: TestStatistics,
     /// The network's matrix products in training and validation: f32, or bf16 on the
     /// processor's AMX or AVX-512 BF16 units (weights, optimiser, reductions and loss stay
     /// f32). May change when resuming.
-    #[arg(long, value_enum, default_value = "f32")]
-    precision: PrecisionArg,
+    #[arg(long, value_name = "f32|bf16", default_value_t = paper().precision)]
+    precision: rgm_nn::Precision,
     /// Start a new run from these weights (a .safetensors of the same network) instead of
     /// the seeded initialisation: fine-tuning, e.g. the noise model from the partial one.
     /// A resumed run loads its own checkpoint; give the same --init again.
@@ -111,52 +117,20 @@ pub struct Args {
     init: Option<PathBuf>,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-enum VariantArg {
-    Rgm,
-    Var1,
-    Var2,
-}
-
-impl From<VariantArg> for Variant {
-    fn from(arg: VariantArg) -> Self {
-        match arg {
-            VariantArg::Rgm => Variant::Rgm,
-            VariantArg::Var1 => Variant::Var1,
-            VariantArg::Var2 => Variant::Var2,
-        }
-    }
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-enum ValSampleArg {
-    Spread,
-    First,
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-enum OptimizerArg {
-    Sgd,
-    Adam,
-}
-
 impl Args {
     fn config(&self) -> Result<TrainConfig> {
-        let network = Variant::from(self.variant).apply(Config::preset(&self.preset)?);
+        let network = self.variant.apply(Config::preset(&self.preset)?);
         let workers = self
             .workers
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
         Ok(TrainConfig {
-            setting: rgm_data::Setting::from(self.setting).name().to_string(),
+            setting: self.setting.name().to_string(),
             unseen: self.unseen,
             network,
             match_points: (self.match_points > 0).then_some(self.match_points),
             epochs: self.epochs,
             batch: self.batch,
-            optimizer: match self.optimizer {
-                OptimizerArg::Sgd => OptimizerKind::Sgd,
-                OptimizerArg::Adam => OptimizerKind::Adam,
-            },
+            optimizer: self.optimizer,
             lr: self.lr,
             momentum: self.momentum,
             weight_decay: self.weight_decay,
@@ -164,15 +138,12 @@ impl Args {
             gamma: self.gamma,
             train_shapes: self.train_shapes,
             val_shapes: self.val_shapes,
-            val_sample: match self.val_sample {
-                ValSampleArg::First => ValSample::First,
-                ValSampleArg::Spread => ValSample::Spread,
-            },
+            val_sample: self.val_sample,
             workers,
             checkpoint_every: self.checkpoint_every,
             seed: self.seed,
-            test_statistics: self.test_statistics.into(),
-            precision: self.precision.precision(),
+            test_statistics: self.test_statistics,
+            precision: checked_precision(self.precision),
             init: self.init.clone(),
         })
     }

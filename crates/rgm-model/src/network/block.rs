@@ -12,7 +12,7 @@ use rgm_match::{
     Var1Config,
 };
 use rgm_nn::gemm::mat_mul;
-use rgm_nn::param::{join_name, ParamViewMut};
+use rgm_nn::param::{join_name, ParamView, ParamViewMut};
 use rgm_nn::{
     l1_normalize_columns_backward, l1_normalize_columns_forward, matmul_backward, matmul_forward,
     relu_backward, relu_forward, softmax_rows_backward, softmax_rows_forward, L1NormalizeCache,
@@ -481,6 +481,27 @@ impl<T: Element> Block<T> {
 }
 
 impl<T: Element> Parameters<T> for Block<T> {
+    fn visit_params_ref<'a>(&'a self, prefix: &str, f: &mut dyn FnMut(&str, ParamView<'a, T>)) {
+        let b = self.index;
+        if let Some(tf) = &self.transformer {
+            tf.visit_params_ref(&join_name(prefix, &format!("gmattend{b}.model")), f);
+        }
+        let gconv = join_name(prefix, &format!("gnn_layer_{b}.gconv"));
+        self.a_fc.visit_params_ref(&join_name(&gconv, "a_fc"), f);
+        self.u_fc.visit_params_ref(&join_name(&gconv, "u_fc"), f);
+        if let Scorer::Ais {
+            affinity,
+            inst_norm,
+        } = &self.scorer
+        {
+            affinity.visit_params_ref(&join_name(prefix, &format!("affinity_{b}")), f);
+            inst_norm.visit_params_ref(&join_name(prefix, &format!("InstNorm_layer_{b}")), f);
+        }
+        if let Some(cross) = &self.cross {
+            cross.visit_params_ref(&join_name(prefix, &format!("cross_graph_{b}")), f);
+        }
+    }
+
     fn visit_params(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ParamViewMut<'_, T>)) {
         let b = self.index;
         if let Some(tf) = &mut self.transformer {

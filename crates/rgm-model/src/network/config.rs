@@ -81,7 +81,8 @@ impl Config {
 
     /// The preset rgm trains and ships: every stage a quarter of the paper's width — DGCNN
     /// 16-16-32-64, edge 128 (C = 256), Q 128, H 4, FF 256, K 20, L 2 — 1,572,324 parameters.
-    /// Sized so that a training step on a 384-point partial pair takes about 0.3 s on one core.
+    /// Sized so that a model trains in days on two cores (docs/training/README.md has the step
+    /// times).
     pub fn fast() -> Self {
         Self {
             dgcnn: [16, 16, 32, 64],

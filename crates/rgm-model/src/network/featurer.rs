@@ -7,7 +7,7 @@ use super::{zeroed, Element, Mode, Result};
 use ndarray::{s, Array2, ArrayView2};
 use rand::Rng;
 use rgm_geom::{knn_graph, Point3};
-use rgm_nn::param::{join_name, ParamViewMut};
+use rgm_nn::param::{join_name, ParamView, ParamViewMut};
 use rgm_nn::{
     edge_features_forward, max_k_backward, max_k_forward, relu_backward, relu_forward, BatchNorm,
     BatchNormCache, Linear, MaxKCache, Parameters,
@@ -16,6 +16,7 @@ use serde::{Deserialize, Serialize};
 
 /// Which statistics batch norm normalises with at test time ([`Mode::Eval`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum TestStatistics {
     /// The running statistics gathered in training (spec §3, PyTorch's `eval()`).
@@ -225,6 +226,23 @@ impl<T: Element> PointFeaturer<T> {
 }
 
 impl<T: Element> Parameters<T> for PointFeaturer<T> {
+    fn visit_params_ref<'a>(&'a self, prefix: &str, f: &mut dyn FnMut(&str, ParamView<'a, T>)) {
+        for (i, (conv, bn)) in self.convs.iter().zip(&self.bns).enumerate() {
+            conv.visit_params_ref(&join_name(prefix, &format!("conv{}", i + 1)), f);
+            bn.visit_params_ref(&join_name(prefix, &format!("bn{}", i + 1)), f);
+        }
+    }
+
+    fn visit_buffers_ref<'a>(
+        &'a self,
+        prefix: &str,
+        f: &mut dyn FnMut(&str, ndarray::ArrayViewD<'a, T>),
+    ) {
+        for (i, bn) in self.bns.iter().enumerate() {
+            bn.visit_buffers_ref(&join_name(prefix, &format!("bn{}", i + 1)), f);
+        }
+    }
+
     fn visit_params(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ParamViewMut<'_, T>)) {
         for (i, (conv, bn)) in self.convs.iter_mut().zip(&mut self.bns).enumerate() {
             conv.visit_params(&join_name(prefix, &format!("conv{}", i + 1)), f);

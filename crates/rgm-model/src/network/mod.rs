@@ -30,10 +30,10 @@ pub use error::{NetworkError, Result};
 pub use featurer::{FeaturerCache, PointFeaturer, TestStatistics};
 pub use transformer::{EdgeTransformer, EdgeTransformerCache, Stack, StackCache};
 
-use ndarray::{Array2, ArrayD, ArrayView2, ArrayViewMutD};
+use ndarray::{Array2, ArrayD, ArrayView2, ArrayViewD, ArrayViewMutD};
 use rand::{rngs::StdRng, SeedableRng};
 use rgm_match::{bce_backward, bce_forward, Correspondences};
-use rgm_nn::param::{join_name, ParamViewMut};
+use rgm_nn::param::{join_name, ParamView, ParamViewMut};
 use rgm_nn::precision::{self, Precision};
 use rgm_nn::{Parameters, Scalar};
 use std::collections::HashMap;
@@ -373,6 +373,19 @@ impl<T: Element> Rgm<T> {
 }
 
 impl<T: Element> Parameters<T> for Rgm<T> {
+    fn visit_params_ref<'a>(&'a self, prefix: &str, f: &mut dyn FnMut(&str, ParamView<'a, T>)) {
+        self.featurer
+            .visit_params_ref(&join_name(prefix, "pointfeaturer"), f);
+        for block in &self.blocks {
+            block.visit_params_ref(prefix, f);
+        }
+    }
+
+    fn visit_buffers_ref<'a>(&'a self, prefix: &str, f: &mut dyn FnMut(&str, ArrayViewD<'a, T>)) {
+        self.featurer
+            .visit_buffers_ref(&join_name(prefix, "pointfeaturer"), f);
+    }
+
     fn visit_params(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ParamViewMut<'_, T>)) {
         self.featurer
             .visit_params(&join_name(prefix, "pointfeaturer"), f);

@@ -5,7 +5,7 @@
 use super::{zeroed, Element, Result};
 use ndarray::{Array2, ArrayView2, ArrayViewMut2};
 use rand::Rng;
-use rgm_nn::param::{join_name, ParamViewMut};
+use rgm_nn::param::{join_name, ParamView, ParamViewMut};
 use rgm_nn::{
     AttentionCache, FeedForward, FeedForwardCache, LayerNorm, LayerNormCache, MultiHeadAttention,
     Parameters,
@@ -188,6 +188,21 @@ impl<T: Element> Stack<T> {
 }
 
 impl<T: Element> Parameters<T> for Stack<T> {
+    fn visit_params_ref<'a>(&'a self, prefix: &str, f: &mut dyn FnMut(&str, ParamView<'a, T>)) {
+        let layer = join_name(prefix, "layers.0");
+        self.self_attn
+            .visit_params_ref(&join_name(&layer, "self_attn"), f);
+        if let Some(src) = &self.src_attn {
+            src.visit_params_ref(&join_name(&layer, "src_attn"), f);
+        }
+        self.feed_forward
+            .visit_params_ref(&join_name(&layer, "feed_forward"), f);
+        for (i, norm) in self.sublayer_norms.iter().enumerate() {
+            norm.visit_params_ref(&join_name(&layer, &format!("sublayer.{i}.norm")), f);
+        }
+        self.norm.visit_params_ref(&join_name(prefix, "norm"), f);
+    }
+
     fn visit_params(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ParamViewMut<'_, T>)) {
         let layer = join_name(prefix, "layers.0");
         self.self_attn
@@ -306,6 +321,13 @@ impl<T: Element> EdgeTransformer<T> {
 }
 
 impl<T: Element> Parameters<T> for EdgeTransformer<T> {
+    fn visit_params_ref<'a>(&'a self, prefix: &str, f: &mut dyn FnMut(&str, ParamView<'a, T>)) {
+        self.encoder
+            .visit_params_ref(&join_name(prefix, "encoder"), f);
+        self.decoder
+            .visit_params_ref(&join_name(prefix, "decoder"), f);
+    }
+
     fn visit_params(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ParamViewMut<'_, T>)) {
         self.encoder.visit_params(&join_name(prefix, "encoder"), f);
         self.decoder.visit_params(&join_name(prefix, "decoder"), f);

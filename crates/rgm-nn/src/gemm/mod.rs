@@ -40,6 +40,7 @@ pub fn f32_avx512_available() -> bool {
     }
 }
 
+use crate::bf16::bf16_bits;
 use crate::precision::{self, Precision};
 use crate::Scalar;
 use ndarray::linalg::general_mat_mul;
@@ -103,21 +104,6 @@ fn mat_mul_f32_in(
 /// AVX-512 BF16. [`backend`] says which.
 pub fn bf16_available() -> bool {
     backend().is_some()
-}
-
-/// `x` rounded to the nearest bfloat16 (ties to even; NaN stays NaN), as the bf16 bits.
-pub fn bf16_bits(x: f32) -> u16 {
-    let bits = x.to_bits();
-    if x.is_nan() {
-        return ((bits >> 16) | 0x40) as u16; // quiet, sign kept
-    }
-    let round = 0x7fff + ((bits >> 16) & 1);
-    (bits.wrapping_add(round) >> 16) as u16
-}
-
-/// `x` rounded to the nearest bfloat16, as an f32 (what the bf16 product multiplies).
-pub fn round_to_bf16(x: f32) -> f32 {
-    f32::from_bits(u32::from(bf16_bits(x)) << 16)
 }
 
 /// The packed operands and the result block, kept per thread so that repeated products of
@@ -334,6 +320,7 @@ fn for_each_in_memory_order(v: ArrayView2<'_, f32>, mut f: impl FnMut(usize, usi
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::bf16::round_to_bf16;
     use ndarray::Array2;
     use rand::{rngs::StdRng, Rng, SeedableRng};
 
@@ -464,23 +451,6 @@ mod tests {
             mul(-0.5, a.view(), b.view(), 1.0, ct.view_mut().reversed_axes());
             check(ct.t(), (-0.5, a.view(), b.view()), (1.0, c0.view()));
         }
-    }
-
-    #[test]
-    fn rounding_to_bf16_is_to_nearest_even() {
-        let one_plus = |ulps: f32| round_to_bf16(1.0 + ulps * 2f32.powi(-8));
-        assert_eq!(round_to_bf16(1.0), 1.0);
-        assert_eq!(one_plus(1.0), 1.0); // halfway from 1 (even) to 1 + 2⁻⁷: down
-        assert_eq!(one_plus(3.0), 1.0 + 2f32.powi(-6)); // halfway from an odd one: up
-        assert_eq!(one_plus(1.0 + 2f32.powi(-12)), 1.0 + 2f32.powi(-7)); // past halfway: up
-        assert_eq!(
-            round_to_bf16(-1.0 - 3.0 * 2f32.powi(-8)),
-            -1.0 - 2f32.powi(-6)
-        );
-        assert_eq!(round_to_bf16(f32::MAX), f32::INFINITY); // beyond bf16's largest
-        assert_eq!(round_to_bf16(f32::NEG_INFINITY), f32::NEG_INFINITY);
-        assert!(round_to_bf16(f32::NAN).is_nan());
-        assert_eq!(bf16_bits(0.15625), 0x3e20); // 0.15625 = 1.25 · 2⁻³ is exact
     }
 
     #[test]

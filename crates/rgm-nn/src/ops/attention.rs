@@ -6,7 +6,7 @@ use super::linear::Linear;
 use super::softmax::{softmax_backward_in_place, softmax_slice};
 use crate::error::check_shape;
 use crate::gemm::mat_mul;
-use crate::param::{join_name, ParamViewMut};
+use crate::param::{join_name, ParamView, ParamViewMut};
 use crate::{NnError, Parameters, Result, Scalar};
 use ndarray::{s, Array2, Array3, ArrayView1, ArrayView2, ArrayViewMut1, ArrayViewMut2, Axis};
 use rand::Rng;
@@ -220,6 +220,15 @@ impl<T: Scalar> MultiHeadAttention<T> {
 }
 
 impl<T: Scalar> Parameters<T> for MultiHeadAttention<T> {
+    fn visit_params_ref<'a>(&'a self, prefix: &str, f: &mut dyn FnMut(&str, ParamView<'a, T>)) {
+        for (i, lin) in [&self.query, &self.key, &self.value, &self.output]
+            .into_iter()
+            .enumerate()
+        {
+            lin.visit_params_ref(&join_name(prefix, &format!("linears.{i}")), f);
+        }
+    }
+
     fn visit_params(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ParamViewMut<'_, T>)) {
         for (i, lin) in [
             &mut self.query,

@@ -2,9 +2,9 @@
 //! rows are points × neighbours, or points, of every cloud in the batch).
 
 use crate::error::{check_shape, check_shapes};
-use crate::param::{join_name, ParamViewMut};
+use crate::param::{join_name, ParamView, ParamViewMut};
 use crate::{NnError, Param, Parameters, Result, Scalar};
-use ndarray::{Array1, ArrayView2, ArrayViewMut2, ArrayViewMutD, Ix1, Zip};
+use ndarray::{Array1, ArrayView2, ArrayViewD, ArrayViewMut2, ArrayViewMutD, Ix1, Zip};
 
 /// Batch norm with PyTorch's semantics: training mode normalises with the batch mean and
 /// *biased* variance and updates the running statistics with `momentum` using the *unbiased*
@@ -192,6 +192,22 @@ impl<T: Scalar> BatchNorm<T> {
 }
 
 impl<T: Scalar> Parameters<T> for BatchNorm<T> {
+    fn visit_params_ref<'a>(&'a self, prefix: &str, f: &mut dyn FnMut(&str, ParamView<'a, T>)) {
+        f(&join_name(prefix, "weight"), self.weight.view());
+        f(&join_name(prefix, "bias"), self.bias.view());
+    }
+
+    fn visit_buffers_ref<'a>(&'a self, prefix: &str, f: &mut dyn FnMut(&str, ArrayViewD<'a, T>)) {
+        f(
+            &join_name(prefix, "running_mean"),
+            self.running_mean.view().into_dyn(),
+        );
+        f(
+            &join_name(prefix, "running_var"),
+            self.running_var.view().into_dyn(),
+        );
+    }
+
     fn visit_params(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ParamViewMut<'_, T>)) {
         f(&join_name(prefix, "weight"), self.weight.view_mut());
         f(&join_name(prefix, "bias"), self.bias.view_mut());

@@ -2,7 +2,7 @@
 
 use super::linear::Linear;
 use super::relu::{relu_backward, relu_forward};
-use crate::param::{join_name, ParamViewMut};
+use crate::param::{join_name, ParamView, ParamViewMut};
 use crate::{Parameters, Result, Scalar};
 use ndarray::{Array2, ArrayView2, ArrayViewMut2};
 use rand::Rng;
@@ -77,6 +77,11 @@ impl<T: Scalar> FeedForward<T> {
 }
 
 impl<T: Scalar> Parameters<T> for FeedForward<T> {
+    fn visit_params_ref<'a>(&'a self, prefix: &str, f: &mut dyn FnMut(&str, ParamView<'a, T>)) {
+        self.w_1.visit_params_ref(&join_name(prefix, "w_1"), f);
+        self.w_2.visit_params_ref(&join_name(prefix, "w_2"), f);
+    }
+
     fn visit_params(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ParamViewMut<'_, T>)) {
         self.w_1.visit_params(&join_name(prefix, "w_1"), f);
         self.w_2.visit_params(&join_name(prefix, "w_2"), f);

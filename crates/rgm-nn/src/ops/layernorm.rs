@@ -3,7 +3,7 @@
 //! the std (not `torch.nn.LayerNorm`, which uses the biased variance inside the square root).
 
 use crate::error::{check_shape, check_shapes};
-use crate::param::{join_name, ParamViewMut};
+use crate::param::{join_name, ParamView, ParamViewMut};
 use crate::{NnError, Param, Parameters, Result, Scalar};
 use ndarray::{Array1, ArrayView2, ArrayViewMut2, Ix1, Zip};
 
@@ -147,6 +147,11 @@ impl<T: Scalar> LayerNorm<T> {
 }
 
 impl<T: Scalar> Parameters<T> for LayerNorm<T> {
+    fn visit_params_ref<'a>(&'a self, prefix: &str, f: &mut dyn FnMut(&str, ParamView<'a, T>)) {
+        f(&join_name(prefix, "a_2"), self.scale.view());
+        f(&join_name(prefix, "b_2"), self.shift.view());
+    }
+
     fn visit_params(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ParamViewMut<'_, T>)) {
         f(&join_name(prefix, "a_2"), self.scale.view_mut());
         f(&join_name(prefix, "b_2"), self.shift.view_mut());

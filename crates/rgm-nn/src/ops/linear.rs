@@ -3,7 +3,7 @@
 use crate::error::check_shape;
 use crate::gemm::mat_mul;
 use crate::init;
-use crate::param::{join_name, ParamViewMut};
+use crate::param::{join_name, ParamView, ParamViewMut};
 use crate::{Param, Parameters, Result, Scalar};
 use ndarray::{Array1, Array2, ArrayView2, ArrayViewMut2, Ix1, Ix2};
 use rand::Rng;
@@ -99,6 +99,13 @@ impl<T: Scalar> Linear<T> {
 }
 
 impl<T: Scalar> Parameters<T> for Linear<T> {
+    fn visit_params_ref<'a>(&'a self, prefix: &str, f: &mut dyn FnMut(&str, ParamView<'a, T>)) {
+        f(&join_name(prefix, "weight"), self.weight.view());
+        if let Some(b) = &self.bias {
+            f(&join_name(prefix, "bias"), b.view());
+        }
+    }
+
     fn visit_params(&mut self, prefix: &str, f: &mut dyn FnMut(&str, ParamViewMut<'_, T>)) {
         f(&join_name(prefix, "weight"), self.weight.view_mut());
         if let Some(b) = &mut self.bias {

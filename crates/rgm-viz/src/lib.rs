@@ -1,8 +1,12 @@
-//! Figures of a registration, as RGB pictures written to PNG:
+//! rgm-viz — figures of a registration, as RGB pictures written to PNG:
 //! - [`registration_figure`]: source and target from a fixed oblique view (orthographic), before
 //!   the transform (left) and after it (right), the source orange, the target blue;
 //! - [`correspondence_figure`]: the hard correspondence matrix in blocks, black where the
 //!   correspondences are correct and red where they are not (the paper's Figure 5).
+//!
+//! Layering rule: builds on rgm-geom (clouds, transforms) and rgm-data (correspondences) only, so
+//! anyone holding clouds and a transform can draw them, without BLAS or the network; the `rgm
+//! render` command is its one user in the workspace.
 
 use std::path::{Path, PathBuf};
 
