@@ -139,6 +139,11 @@ class RegistrationResult:
             than 1,024 points a cloud both again on a second thinning, ``rgm+icp/cells`` and
             ``fgr+icp/cells``), each with its score; empty for the other methods.
         chosen: the method of the candidate returned, or ``None`` for the other methods.
+        registered: ``False`` when the result is not credible (the default method's best
+            candidate overlaps too little: fewer than one point in twenty of each cloud lies on
+            the other), ``reason`` says why; ``transformation`` is then the best guess, not to
+            be used as a registration.
+        reason: why ``registered`` is ``False``, or ``None``.
     """
 
     transformation: np.ndarray
@@ -151,6 +156,8 @@ class RegistrationResult:
     converged: bool
     candidates: list = dataclasses.field(default_factory=list)
     chosen: Optional[str] = None
+    registered: bool = True
+    reason: Optional[str] = None
 
     @property
     def rotation(self) -> np.ndarray:
@@ -264,6 +271,7 @@ class Registrar:
             converged,
             candidates,
             chosen,
+            reason,
         ) = self._native.register(source, target)
         return RegistrationResult(
             transformation=transformation,
@@ -276,6 +284,8 @@ class Registrar:
             converged=converged,
             candidates=[Candidate(*fields) for fields in candidates],
             chosen=chosen,
+            registered=reason is None,
+            reason=reason,
         )
 
     def __reduce__(self):

@@ -126,6 +126,7 @@ type Outcome<'py> = (
     bool,                      // converged
     Vec<CandidateFields<'py>>, // the combined method's candidates (empty for the others)
     Option<&'static str>,      // the chosen candidate's method
+    Option<String>,            // why the result is not credible (not registered)
 );
 
 #[pymethods]
@@ -224,6 +225,7 @@ impl Registrar {
             registration
                 .chosen
                 .map(|k| registration.candidates[k].method),
+            registration.doubt,
         ))
     }
 }

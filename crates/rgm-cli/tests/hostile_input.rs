@@ -172,3 +172,92 @@ fn an_endless_device_is_refused() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// An airplane of the test split and its copy at the pose (20°, 10°, 30°), t (0.2, −0.1, 0.3),
+/// one point of each replaced by `far` (none when `None`), as `.npy` files in `dir`.
+fn airplane_pair(dir: &Path, far: Option<f64>) -> (String, String, rgm_geom::RigidTransform) {
+    use rgm_geom::{euler::rotation_xyz_intrinsic, Point3, RigidTransform, Vector3};
+    let path = Path::new(&data_dir()).join("airplane/test/airplane_0627.npy");
+    let source = rgm_data::read_point_cloud(path).unwrap();
+    let r = rotation_xyz_intrinsic(20f64.to_radians(), 10f64.to_radians(), 30f64.to_radians());
+    let truth = RigidTransform::new(r, Vector3::new(0.2, -0.1, 0.3));
+    let (mut s, mut t) = (source.clone(), source.transformed(&truth));
+    if let Some(far) = far {
+        s.points[3] = Point3::new(far, far, -far);
+        t.points[500] = Point3::new(-far, 0.0, far);
+    }
+    let (src, tgt) = (dir.join("src.npy"), dir.join("tgt.npy"));
+    rgm_data::write_point_cloud(&src, &s).unwrap();
+    rgm_data::write_point_cloud(&tgt, &t).unwrap();
+    let name = |p: PathBuf| p.to_string_lossy().into_owned();
+    (name(src), name(tgt), truth)
+}
+
+/// The JSON object `rgm register --json` printed.
+fn json(out: &Output) -> serde_json::Value {
+    serde_json::from_slice(&out.stdout).expect("one JSON object")
+}
+
+/// Issue 27, case 1: a stray point at 1e5 in each cloud gave a rotation 152° wrong with
+/// fitness 0.999.
+#[test]
+fn a_far_outlier_in_each_cloud_is_registered_right() {
+    let dir = scratch("outlier");
+    let (src, tgt, truth) = airplane_pair(&dir, Some(1e5));
+    let out = rgm(&["register", &src, &tgt, "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let value = json(&out);
+    assert_eq!(value["registered"], true);
+    let rows = value["transform"].as_array().unwrap();
+    let r = rgm_geom::Matrix3::from_fn(|i, j| rows[i][j].as_f64().unwrap());
+    let error = rgm_geom::RigidTransform::new(truth.rotation.transpose() * r, Default::default());
+    assert!(error.rotation_angle_deg() < 2.0, "{value}");
+    assert!(value["fitness"].as_f64().unwrap() < 1.0, "{value}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Issue 27: clouds without overlap got a transform reported as right; now `registered: false`
+/// with the reason, a failure status, and no `--out` written.
+#[test]
+fn clouds_without_overlap_are_not_registered() {
+    let dir = scratch("no-overlap");
+    let (src, _, _) = airplane_pair(&dir, None);
+    // A 10 × 10 × 10 grid 0.2 apart: nowhere within 0.02 of the airplane's surface but by chance.
+    let grid: String = (0..1000)
+        .map(|i| {
+            format!(
+                "{} {} {}\n",
+                (i % 10) as f64 * 0.2,
+                (i / 10 % 10) as f64 * 0.2,
+                (i / 100) as f64 * 0.2
+            )
+        })
+        .collect();
+    let tgt = dir.join("grid.xyz");
+    std::fs::write(&tgt, grid).unwrap();
+    let moved = dir.join("moved.ply");
+    let out = rgm(&[
+        "register",
+        &src,
+        tgt.to_str().unwrap(),
+        "--json",
+        "--out",
+        moved.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let value = json(&out);
+    assert_eq!(value["registered"], false);
+    let reason = value["reason"].as_str().unwrap();
+    assert!(reason.contains("overlaps too little"), "{reason}");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.starts_with("rgm: error: not registered: the best candidate"),
+        "{err}"
+    );
+    assert!(!moved.exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
