@@ -51,6 +51,15 @@ fn off_reader_survives_fuzzing() {
 #[test]
 fn xyz_and_csv_readers_survive_fuzzing() {
     let seeds = corpus(&[".xyz", ".csv"]);
+    // The seeds with a byte-order mark read every point (a spreadsheet's "CSV UTF-8").
+    let first = |name: &str| {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("fuzz_corpus")
+            .join(name);
+        xyz::parse(&std::fs::read(&path).unwrap(), &path).unwrap()[0]
+    };
+    assert_eq!(first("bom.csv"), rgm_geom::Point3::new(0.5, -1.0, 2.0));
+    assert_eq!(first("bom.xyz"), rgm_geom::Point3::new(1.0, 2.0, 3.0));
     fuzz().run("xyz", &seeds, |b| read_points(xyz::parse, b, "f.xyz"));
 }
 

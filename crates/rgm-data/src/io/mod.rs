@@ -155,8 +155,9 @@ fn format_error(path: &Path, format: &'static str, why: impl Into<String>) -> Da
     }
 }
 
-/// `bytes` as UTF-8 text, or an error naming the first bad byte.
+/// `bytes` as UTF-8 text without its byte-order mark, or an error naming the first bad byte.
 fn text<'a>(bytes: &'a [u8], path: &Path, format: &'static str) -> Result<&'a str> {
+    let bytes = bytes.strip_prefix(b"\xef\xbb\xbf").unwrap_or(bytes);
     std::str::from_utf8(bytes).map_err(|e| {
         format_error(
             path,
@@ -185,11 +186,16 @@ fn parse_xyz<'a>(
             )
         })?;
         *value = token.trim().parse().map_err(|_| {
+            let hint = if token.contains('\u{2212}') {
+                " (U+2212 is a minus sign; write -)"
+            } else {
+                ""
+            };
             line_error(
                 path,
                 line,
                 text,
-                format!("`{}` is not a number", token.trim()),
+                format!("`{}` is not a number{hint}", token.trim()),
             )
         })?;
     }
