@@ -261,3 +261,40 @@ fn clouds_without_overlap_are_not_registered() {
     assert!(!moved.exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 27, cases 10 and 12: `--gamma nan` was accepted (saved as `null`: the run could never
+/// be resumed); `--until-epoch 0` reported best weights that did not exist.
+#[test]
+fn training_options_out_of_range_are_refused_by_name() {
+    let dir = scratch("train");
+    let run = dir.join("run");
+    let run = run.to_str().unwrap();
+    let data = data_dir();
+    let train = |extra: &[&str]| {
+        let mut args = vec!["train", "--data", &data, "--out", run];
+        args.extend_from_slice(extra);
+        rgm(&args)
+    };
+    for (extra, expected) in [
+        (&["--until-epoch", "0"][..], "'0' for '--until-epoch <N>'"),
+        (
+            &["--gamma", "nan"][..],
+            "gamma must be a positive number, got NaN",
+        ),
+        (
+            &["--gamma=-0.5"][..],
+            "gamma must be a positive number, got -0.5",
+        ),
+        (
+            &["--momentum", "nan"][..],
+            "momentum must be a number from 0 up to 1 (1 excluded), got NaN",
+        ),
+    ] {
+        let out = train(extra);
+        assert!(!out.status.success(), "{extra:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(expected), "{extra:?}: {err}");
+        assert!(!Path::new(run).join("config.json").exists(), "{extra:?}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
