@@ -298,3 +298,60 @@ fn training_options_out_of_range_are_refused_by_name() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 27, case 13: scoring zero pairs said "needs at least 1 point", a 5-row transform
+/// "trailing characters", a time of -1e300 was printed with 300 digits (`render --matrix` with
+/// a method without correspondences: `tests/render.rs`).
+#[test]
+fn scores_of_the_wrong_shape_say_what_is_wrong() {
+    let dir = scratch("score");
+    airplane_pair(&dir, None);
+    let identity = "[[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]";
+    let manifest =
+        |pairs: &str| format!(r#"{{"setting": "clean", "unseen": false, "pairs": [{pairs}]}}"#);
+    let entry = format!(
+        r#"{{"index": 0, "label": 0, "source": "src.npy", "target": "tgt.npy", "t_target_source": {identity}}}"#
+    );
+    let transforms = dir.join("found.json");
+    let score = |pairs_json: &str, found: &str| {
+        std::fs::write(dir.join("pairs.json"), pairs_json).unwrap();
+        std::fs::write(
+            &transforms,
+            format!(r#"{{"method": "x", "pairs": [{found}]}}"#),
+        )
+        .unwrap();
+        let out = rgm(&[
+            "score",
+            transforms.to_str().unwrap(),
+            "--pairs",
+            dir.to_str().unwrap(),
+        ]);
+        assert!(!out.status.success());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let err = score(&manifest(""), "");
+    assert!(
+        err.contains("pairs.json lists no pairs: nothing to score"),
+        "{err}"
+    );
+    let five = "[[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1],[0,0,0,1]]";
+    let err = score(
+        &manifest(&entry),
+        &format!(r#"{{"index": 0, "transform": {five}, "time_ms": 1}}"#),
+    );
+    assert!(
+        err.contains(
+            "transform of pair 0 has rows of [4, 4, 4, 4, 4] numbers; a transform is 4 rows of 4"
+        ),
+        "{err}"
+    );
+    let err = score(
+        &manifest(&entry),
+        &format!(r#"{{"index": 0, "transform": {identity}, "time_ms": -1e300}}"#),
+    );
+    assert!(
+        err.contains("pair 0 has time_ms -1e300; a time is a number of milliseconds from 0 up"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

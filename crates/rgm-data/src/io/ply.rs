@@ -164,9 +164,13 @@ fn parse_header(bytes: &[u8], path: &Path) -> Result<Header> {
                 });
             }
             ["element", name, count] => {
-                let count = count
-                    .parse()
-                    .map_err(|_| bad("the element count is not a number"))?;
+                let count = count.parse().map_err(|_| {
+                    bad(if count.bytes().all(|b| b.is_ascii_digit()) {
+                        "the element count is larger than any file can hold"
+                    } else {
+                        "the element count is not a whole number"
+                    })
+                })?;
                 elements.push(Element {
                     name: name.to_string(),
                     count,
@@ -640,6 +644,13 @@ mod tests {
         assert_eq!(
             err(short_list.as_bytes()),
             "s.ply:10: the row ends after 5 values; the header declares more: `1 1 1 2 5`"
+        );
+        // Issue 27, case 13: a count too large for memory was called "not a number".
+        let huge = "ply\nformat ascii 1.0\nelement vertex 99999999999999999999999\nend_header\n";
+        assert_eq!(
+            err(huge.as_bytes()),
+            "s.ply:3: the element count is larger than any file can hold: \
+             `element vertex 99999999999999999999999`"
         );
         let bad_number = format!("{header}0 0 0\n1 one 1\n2 2 2\n");
         assert_eq!(
