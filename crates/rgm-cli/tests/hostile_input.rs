@@ -355,3 +355,88 @@ fn scores_of_the_wrong_shape_say_what_is_wrong() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Waits for `child`, killing it (and failing) if it has not ended after a minute: a guard
+/// against a hang, not a timing.
+fn wait_or_kill(mut child: std::process::Child) -> Output {
+    for _ in 0..600 {
+        if child.try_wait().unwrap().is_some() {
+            return child.wait_with_output().unwrap();
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    child.kill().unwrap();
+    panic!("rgm hangs: {:?}", child.wait_with_output().unwrap());
+}
+
+/// Issue 27, case 4: `--out` a FIFO hung for good (the writability check opened it, its reader
+/// got an empty file, and the real write then waited for a second reader).
+#[test]
+fn a_fifo_out_gets_the_moved_cloud_once() {
+    let dir = scratch("fifo");
+    let (a, b) = clouds(&dir);
+    let fifo = dir.join("moved.xyz");
+    let made = Command::new("mkfifo").arg(&fifo).status().unwrap();
+    assert!(made.success());
+    let child = Command::new(env!("CARGO_BIN_EXE_rgm"))
+        .args(["register", &a, &b, "--method", "icp", "--out"])
+        .arg(&fifo)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let reader = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || std::fs::read_to_string(fifo).unwrap())
+    };
+    let out = wait_or_kill(child);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = reader.join().unwrap();
+    assert_eq!(text.lines().count(), 125, "{text}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Issue 27, case 8: `--out` a dangling symbolic link, and the run fails: the link was deleted
+/// and an empty file left at its target. On success the link became a regular file.
+#[test]
+fn a_symbolic_link_out_stays_a_link() {
+    let dir = scratch("link");
+    let (a, b) = clouds(&dir);
+    let link = dir.join("link.xyz");
+    std::os::unix::fs::symlink("moved.xyz", &link).unwrap();
+    let link_str = link.to_str().unwrap();
+    let broken = dir.join("broken.xyz");
+    std::fs::write(&broken, "1 2 three\n").unwrap();
+    let out = rgm(&[
+        "register",
+        &a,
+        broken.to_str().unwrap(),
+        "--method",
+        "icp",
+        "--out",
+        link_str,
+    ]);
+    assert!(!out.status.success());
+    let is_link = |p: &Path| {
+        std::fs::symlink_metadata(p)
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    };
+    assert!(is_link(&link));
+    assert!(!dir.join("moved.xyz").exists());
+    let out = rgm(&["register", &a, &b, "--method", "icp", "--out", link_str]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(is_link(&link));
+    let moved = std::fs::read_to_string(dir.join("moved.xyz")).unwrap();
+    assert_eq!(moved.lines().count(), 125);
+    std::fs::remove_dir_all(&dir).unwrap();
+}

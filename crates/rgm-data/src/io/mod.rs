@@ -6,10 +6,11 @@
 
 pub mod npy;
 pub mod off;
+pub mod output;
 pub mod ply;
 pub mod xyz;
 
-use std::io::{Read, Write};
+use std::io::Read;
 use std::path::Path;
 
 use rgm_geom::{Point3, PointCloud};
@@ -92,7 +93,8 @@ pub fn read_regular_file(path: &Path) -> Result<Vec<u8>> {
 }
 
 /// Writes a point cloud, choosing the format by extension: PLY binary little-endian float32,
-/// OFF and XYZ text, CSV with an `x,y,z` header, `.npy` float64 (lossless).
+/// OFF and XYZ text, CSV with an `x,y,z` header, `.npy` float64 (lossless); as
+/// [`output::write_file`] writes (a failed write leaves the path as it was).
 pub fn write_point_cloud(path: impl AsRef<Path>, cloud: &PointCloud) -> Result<()> {
     let path = path.as_ref();
     let format = Format::from_path(path)?;
@@ -100,16 +102,13 @@ pub fn write_point_cloud(path: impl AsRef<Path>, cloud: &PointCloud) -> Result<(
         path: path.to_path_buf(),
         source,
     };
-    let file = std::fs::File::create(path).map_err(io_error)?;
-    let mut out = std::io::BufWriter::new(file);
-    match format {
+    output::write_file(path, |mut out| match format {
         Format::Ply => ply::write(&mut out, cloud),
         Format::Off => off::write(&mut out, cloud),
         Format::Xyz => xyz::write(&mut out, cloud, xyz::Separator::Space),
         Format::Csv => xyz::write(&mut out, cloud, xyz::Separator::Comma),
         Format::Npy => npy::write(&mut out, cloud, npy::Dtype::F64),
-    }
-    .and_then(|()| out.flush())
+    })
     .map_err(io_error)
 }
 
