@@ -20,7 +20,8 @@ use crate::{DataError, Result};
 /// The file formats rgm reads and writes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Format {
-    /// Stanford PLY: ASCII, binary little- or big-endian; written binary little-endian float.
+    /// Stanford PLY: ASCII, binary little- or big-endian; written binary little-endian float
+    /// (double for clouds float cannot hold).
     Ply,
     /// OFF (Object File Format): vertices only, faces ignored.
     Off,
@@ -92,7 +93,8 @@ pub fn read_regular_file(path: &Path) -> Result<Vec<u8>> {
     Ok(bytes)
 }
 
-/// Writes a point cloud, choosing the format by extension: PLY binary little-endian float32,
+/// Writes a point cloud, choosing the format by extension: PLY binary little-endian float32 (double
+/// when float32 would lose precision, [`ply::write`]),
 /// OFF and XYZ text, CSV with an `x,y,z` header, `.npy` float64 (lossless); as
 /// [`output::write_file`] writes (a failed write leaves the path as it was).
 pub fn write_point_cloud(path: impl AsRef<Path>, cloud: &PointCloud) -> Result<()> {
