@@ -93,10 +93,10 @@ pub fn read_regular_file(path: &Path) -> Result<Vec<u8>> {
     Ok(bytes)
 }
 
-/// Writes a point cloud, choosing the format by extension: PLY binary little-endian float32 (double
-/// when float32 would lose precision, [`ply::write`]),
-/// OFF and XYZ text, CSV with an `x,y,z` header, `.npy` float64 (lossless); as
-/// [`output::write_file`] writes (a failed write leaves the path as it was).
+/// Writes a point cloud, choosing the format by extension: PLY binary little-endian float32
+/// (double when float32 would lose precision, [`ply::write`]), OFF and XYZ text, CSV with an
+/// `x,y,z` header, `.npy` float64 (lossless); as [`output::write_file`] writes (a failed write
+/// leaves the path as it was).
 pub fn write_point_cloud(path: impl AsRef<Path>, cloud: &PointCloud) -> Result<()> {
     let path = path.as_ref();
     let format = Format::from_path(path)?;
