@@ -440,3 +440,28 @@ fn a_symbolic_link_out_stays_a_link() {
     assert_eq!(moved.lines().count(), 125);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 27, case 5: under `ulimit -v 400000` RGM spun at 100 % CPU for good (OpenBLAS retrying
+/// its allocations); the estimate checked only the system's free memory.
+#[test]
+fn a_memory_limit_is_respected_with_the_estimate() {
+    let dir = scratch("ulimit");
+    let (src, tgt, _) = airplane_pair(&dir, None);
+    let child = Command::new("sh")
+        .args(["-c", "ulimit -v 400000 && exec \"$0\" \"$@\""])
+        .arg(env!("CARGO_BIN_EXE_rgm"))
+        .args(["register", &src, &tgt, "--method", "rgm"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let out = wait_or_kill(child);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("rgm: matching 384 × 384 points would need about")
+            && err.contains("this process may take (free memory, ulimit -v, cgroup limit)"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

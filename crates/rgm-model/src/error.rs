@@ -30,11 +30,13 @@ pub enum MethodError {
         points: usize,
         needed: usize,
     },
-    /// Matching this many points would need more memory than the machine has (the network's
-    /// memory grows with the square of the matched points).
+    /// Matching this many points would need more memory than this process may take
+    /// ([`rgm_data::memory::available`]; the network's memory grows with the square of the
+    /// matched points).
     #[error(
         "rgm: matching {} × {} points would need about {:.1} GiB, more than the {:.1} GiB \
-         available; match on fewer points (--match-points, or PipelineConfig::match_points)",
+         this process may take (free memory, ulimit -v, cgroup limit); match on fewer points \
+         (--match-points, or PipelineConfig::match_points)",
         points.0, points.1, *estimate as f64 / (1u64 << 30) as f64, *available as f64 / (1u64 << 30) as f64
     )]
     TooMuchMemory {

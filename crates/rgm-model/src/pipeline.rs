@@ -300,14 +300,6 @@ pub fn estimated_peak_bytes(
     chains * per_pass + features + (64 << 20) + 4 * params as u64
 }
 
-/// The memory the system can give this process now (Linux's MemAvailable), if known.
-fn available_memory() -> Option<u64> {
-    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024)
-}
-
 /// The two chains of spec §4.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Chain {
@@ -478,14 +470,14 @@ impl RgmRegistrar {
             y.len(),
             self.config.cycle_consistency,
         );
-        if estimate > 1 << 30 {
-            if let Some(available) = available_memory().filter(|&a| estimate > a) {
-                return Err(MethodError::TooMuchMemory {
-                    points: (x.len(), y.len()),
-                    estimate,
-                    available,
-                });
-            }
+        // Checked against the process's limits too (`ulimit -v`, cgroups): past them OpenBLAS
+        // spins on its failed allocations and Rust aborts on its own.
+        if let Some(available) = rgm_data::memory::available().filter(|&a| estimate > a) {
+            return Err(MethodError::TooMuchMemory {
+                points: (x.len(), y.len()),
+                estimate,
+                available,
+            });
         }
         let (x_rows, y_rows) = (as_rows(&x), as_rows(&y)); // (N, 3), (M, 3)
         add_since(&mut self.times.prepare, start);

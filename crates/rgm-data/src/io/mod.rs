@@ -88,7 +88,20 @@ pub fn read_regular_file(path: &Path) -> Result<Vec<u8>> {
     }
     let file = std::fs::File::open(path).map_err(io_error)?;
     let len = file.metadata().map_err(io_error)?.len();
-    let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0));
+    // Sized from the metadata before anything is read: a sparse 40 GB file is refused at once.
+    let too_large = |available| DataError::TooLarge {
+        path: path.to_path_buf(),
+        bytes: len,
+        available,
+    };
+    if let Some(available) = crate::memory::available().filter(|&a| len > a) {
+        return Err(too_large(Some(available)));
+    }
+    let mut bytes = Vec::new();
+    usize::try_from(len)
+        .ok()
+        .and_then(|n| bytes.try_reserve_exact(n).ok())
+        .ok_or_else(|| too_large(None))?;
     file.take(len).read_to_end(&mut bytes).map_err(io_error)?;
     Ok(bytes)
 }
