@@ -12,8 +12,9 @@ result that overlaps better (``result.candidates`` holds both, with their scores
 loads a method once for many pairs; ``rgm.metrics`` and ``rgm.modelnet_pairs`` give the
 paper's metrics and the benchmark's pairs, to evaluate any method on exactly rgm's pairs.
 
-The work runs in Rust with the GIL released: Python threads register pairs in parallel, and a
-``Registrar`` pickles (as its settings) for process pools.
+The work runs in Rust with the GIL released: Python threads register pairs in parallel, Ctrl-C
+interrupts a registration at once, and a ``Registrar`` pickles (as its settings) for process
+pools of any start method (a process forked after a registration starts its own threads).
 """
 
 from __future__ import annotations
@@ -319,8 +320,9 @@ def register(
     """The rigid transform that maps ``source`` onto ``target``, as ``rgm register`` finds it.
 
     With no option this runs exactly what ``rgm register SRC TGT`` runs (both take their
-    defaults from one place in rgm): today the RGM network with the model built into rgm,
-    refined by ICP on the full clouds. The method is loaded once per distinct set of options
+    defaults from one place in rgm): the RGM network with the model built into rgm and FGR,
+    each refined by ICP on the full clouds, and the result that overlaps better
+    (``result.candidates`` holds both). The method is loaded once per distinct set of options
     and reused by later calls; ``rgm.Registrar`` does the same explicitly.
 
     Args:
@@ -349,7 +351,8 @@ def register(
 
     Returns:
         A RegistrationResult: ``transformation`` ((4, 4) float64, target ← source),
-        ``fitness``, ``inlier_rmse``, ``correspondences`` ((K, 2) int64), ``time_ms``.
+        ``fitness``, ``inlier_rmse``, ``correspondences`` ((K, 2) int64), ``time_ms``, and
+        ``registered`` (``False``, with a ``reason``, when no candidate is credible).
 
     Raises:
         ValueError: a cloud that is not a float32/float64 (N, 3) array or holds NaN or
