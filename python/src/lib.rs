@@ -244,7 +244,9 @@ impl Registrar {
                 Ok(finished) => break finished,
                 Err(std::sync::mpsc::RecvTimeoutError::Timeout) => py.check_signals()?,
                 Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
-                    return Err(PyRuntimeError::new_err("rgm's worker thread ended unexpectedly"))
+                    return Err(PyRuntimeError::new_err(
+                        "rgm's worker thread ended unexpectedly",
+                    ))
                 }
             }
         };
