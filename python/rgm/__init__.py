@@ -259,6 +259,9 @@ class Registrar:
                 that holds NaN or infinity (the message names it, its shape and dtype).
             RuntimeError: the method found no transform (e.g. too few points for RGM's
                 neighbour graph, or no correspondence survived).
+            MemoryError: RGM would need more memory than this process may take (free memory,
+                ``ulimit -v``, cgroup limit), checked before it starts; fewer ``match_points``
+                fit.
         """
         source = _points("source", source)
         target = _points("target", target)

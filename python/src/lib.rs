@@ -15,7 +15,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
-use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyMemoryError, PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use rgm_data::{DataError, ModelNet40, PairGenerator, Setting, Shape, Split};
@@ -255,7 +255,11 @@ impl Registrar {
             PyRuntimeError::new_err(format!("{} panicked (a bug in rgm)", self.prototype.name()))
         })?;
         let (registration, pairs) = outcome.map_err(|e| {
-            PyRuntimeError::new_err(format!("{} failed: {e}", self.prototype.name()))
+            let message = format!("{} failed: {e}", self.prototype.name());
+            match e {
+                MethodError::TooMuchMemory { .. } => PyMemoryError::new_err(message),
+                _ => PyRuntimeError::new_err(message),
+            }
         })?;
         let result = registration.result;
         let candidates = registration

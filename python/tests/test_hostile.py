@@ -84,3 +84,11 @@ def test_the_docs_name_the_default_method():
     assert "the RGM network with the model built into rgm and FGR" in " ".join(rgm.register.__doc__.split())
     example = pathlib.Path(__file__).resolve().parents[1] / "examples" / "map_pairs.py"
     assert "RGM with the built-in model and FGR" in example.read_text()
+
+
+def test_a_registration_beyond_the_memory_raises_memory_error(airplane):
+    # Case 5: the interpreter aborted instead of raising MemoryError. Every point of 60,000
+    # matched would need terabytes: refused before it starts.
+    big = np.repeat(airplane.astype(np.float64), 60, axis=0) + np.linspace(0, 1e-3, 60 * len(airplane))[:, None]
+    with pytest.raises(MemoryError, match="would need about"):
+        rgm.Registrar(method="rgm", match_points=0).register(big, big)
