@@ -369,34 +369,48 @@ fn wait_or_kill(mut child: std::process::Child) -> Output {
     panic!("rgm hangs: {:?}", child.wait_with_output().unwrap());
 }
 
-/// Issue 27, case 4: `--out` a FIFO hung for good (the writability check opened it, its reader
-/// got an empty file, and the real write then waited for a second reader).
-#[test]
-fn a_fifo_out_gets_the_moved_cloud_once() {
-    let dir = scratch("fifo");
-    let (a, b) = clouds(&dir);
-    let fifo = dir.join("moved.xyz");
+/// Runs rgm with `args` and then a FIFO named `name` (in `dir`) as its last argument, reading
+/// the FIFO meanwhile: rgm's output and what the FIFO carried.
+fn through_fifo(dir: &Path, name: &str, args: &[&str]) -> (Output, String) {
+    let fifo = dir.join(name);
     let made = Command::new("mkfifo").arg(&fifo).status().unwrap();
     assert!(made.success());
     let child = Command::new(env!("CARGO_BIN_EXE_rgm"))
-        .args(["register", &a, &b, "--method", "icp", "--out"])
+        .args(args)
         .arg(&fifo)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let reader = {
-        let fifo = fifo.clone();
-        std::thread::spawn(move || std::fs::read_to_string(fifo).unwrap())
-    };
+    let reader = std::thread::spawn(move || std::fs::read_to_string(fifo).unwrap());
     let out = wait_or_kill(child);
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let text = reader.join().unwrap();
-    assert_eq!(text.lines().count(), 125, "{text}");
+    (out, reader.join().unwrap())
+}
+
+/// Issue 27, case 4: `--out` a FIFO hung for good (the writability check opened it, its reader
+/// got an empty file, and the real write then waited for a second reader); so did `eval --json`.
+#[test]
+fn a_fifo_output_gets_its_content_once() {
+    let dir = scratch("fifo");
+    let (a, b) = clouds(&dir);
+    let (_, moved) = through_fifo(
+        &dir,
+        "moved.xyz",
+        &["register", &a, &b, "--method", "icp", "--out"],
+    );
+    assert_eq!(moved.lines().count(), 125, "{moved}");
+    let data = data_dir();
+    let eval = [
+        "eval", "--method", "icp", "--limit", "1", "--data", &data, "--json",
+    ];
+    let (_, json) = through_fifo(&dir, "eval.json", &eval);
+    let value: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert_eq!(value["pairs"].as_array().unwrap().len(), 1);
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
