@@ -479,3 +479,35 @@ fn a_memory_limit_is_respected_with_the_estimate() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `--json /dev/stdout` with stdout redirected to a file: written into that file, not through a
+/// temporary file renamed over it (the redirection would keep writing to the replaced one).
+#[test]
+fn json_to_dev_stdout_reaches_a_redirected_stdout() {
+    let dir = scratch("stdout");
+    let log = dir.join("log.txt");
+    let status = Command::new(env!("CARGO_BIN_EXE_rgm"))
+        .args([
+            "eval",
+            "--method",
+            "icp",
+            "--limit",
+            "1",
+            "--data",
+            &data_dir(),
+        ])
+        .args(["--json", "/dev/stdout"])
+        .stdout(std::fs::File::create(&log).unwrap())
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let text = std::fs::read_to_string(&log).unwrap();
+    // The table first, then the JSON, then the line that says so: nothing overwritten.
+    let (table, json) = (
+        text.find("| method").unwrap(),
+        text.find("\"pairs\"").unwrap(),
+    );
+    let said = text.find("wrote per-pair results to /dev/stdout").unwrap();
+    assert!(table < json && json < said, "{text}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

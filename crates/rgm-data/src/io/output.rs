@@ -32,9 +32,13 @@ fn resolved(path: &Path) -> std::io::Result<PathBuf> {
     )))
 }
 
-/// Whether `path` (links followed) is a FIFO, a device or a socket: written directly.
+/// Whether `path` is written directly: a FIFO, a device or a socket (links followed), or a name
+/// under `/dev` or `/proc` (`/dev/stdout` redirected to a file names that file: replacing it
+/// would leave the shell's redirection writing to the old one).
 fn is_special(path: &Path) -> bool {
-    std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir())
+    path.starts_with("/dev")
+        || path.starts_with("/proc")
+        || std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir())
 }
 
 /// The temporary file beside `target` that [`write_file`] writes first.
@@ -52,7 +56,7 @@ fn temporary(target: &Path) -> PathBuf {
 /// not opened (a FIFO would block, and its reader would see an empty file).
 pub fn check_writable(path: &Path) -> std::io::Result<()> {
     let target = resolved(path)?;
-    if is_special(&target) {
+    if is_special(path) || is_special(&target) {
         return Ok(());
     }
     if target.is_dir() {
@@ -70,15 +74,25 @@ pub fn check_writable(path: &Path) -> std::io::Result<()> {
 }
 
 /// Writes `path` with `write`, as the module says: through a temporary file renamed over the
-/// (link-resolved) target, keeping an existing file's permissions; FIFOs and devices directly.
+/// (link-resolved) target, keeping an existing file's permissions; FIFOs and devices directly;
+/// `/dev/stdout` through the standard output.
 pub fn write_file(
     path: &Path,
     write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
 ) -> std::io::Result<()> {
+    if ["/dev/stdout", "/dev/fd/1", "/proc/self/fd/1"]
+        .iter()
+        .any(|name| path == Path::new(name))
+    {
+        // Through the process's own standard output, which keeps its place in a file it is
+        // redirected to (a second descriptor of that file would write over what was printed).
+        let mut out = std::io::stdout().lock();
+        write(&mut out)?;
+        return out.flush();
+    }
     let target = resolved(path)?;
-    if is_special(&target) {
-        let mut out =
-            std::io::BufWriter::new(std::fs::OpenOptions::new().write(true).open(&target)?);
+    if is_special(path) || is_special(&target) {
+        let mut out = std::io::BufWriter::new(std::fs::OpenOptions::new().write(true).open(path)?);
         write(&mut out)?;
         return out.flush();
     }
