@@ -1,9 +1,9 @@
 //! Output files written without harm to what is there: a regular file through a temporary file
 //! beside it, renamed over it once complete (a failed or interrupted write leaves the path as it
 //! was, never a truncated file); a symbolic link followed to the file it names (the link stays
-//! a link); anything else — a FIFO, a terminal, `/dev/null` — written directly, as a shell
-//! redirection would. Nothing is opened before the write but regular files, so a FIFO sees
-//! exactly one writer.
+//! a link); anything else — a FIFO, a terminal, any name under `/dev` or `/proc` — written
+//! directly, as a shell redirection would (`/dev/stdout` through the standard output itself).
+//! Nothing is opened before the write but regular files, so a FIFO sees exactly one writer.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
