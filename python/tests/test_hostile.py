@@ -92,3 +92,30 @@ def test_a_registration_beyond_the_memory_raises_memory_error(airplane):
     big = np.repeat(airplane.astype(np.float64), 60, axis=0) + np.linspace(0, 1e-3, 60 * len(airplane))[:, None]
     with pytest.raises(MemoryError, match="would need about"):
         rgm.Registrar(method="rgm", match_points=0).register(big, big)
+
+
+def _scan(name: str) -> np.ndarray:
+    """The (N, 3) points of a Stanford bunny range scan (gzipped ASCII PLY), or a skip."""
+    import gzip
+
+    path = pathlib.Path(__file__).resolve().parents[3] / "shared" / "data" / "stanford" / "bunny" / name
+    if not path.is_file():
+        pytest.skip(f"no Stanford scan at {path}")
+    lines = gzip.open(path, "rt").read().splitlines()
+    count = next(int(line.split()[2]) for line in lines if line.startswith("element vertex"))
+    start = lines.index("end_header") + 1
+    return np.array([[float(v) for v in line.split()[:3]] for line in lines[start : start + count]])
+
+
+def test_a_far_outlier_in_a_real_scan_leaves_the_transform_right():
+    # Case 1 beside a real scan: the bunny's first scan (metres, about 40,000 points) and its
+    # moved copy, one stray return at 1e5 in each.
+    source = _scan("bun000.ply.gz")
+    truth = pose((20, 10, 30), (0.02, -0.01, 0.03))
+    target = moved(source, truth)
+    source[7] = (1e5, -1e5, 1e5)
+    target[100] = (0, 1e5, -1e5)
+    result = rgm.register(source, target)
+    assert result.registered, result.reason
+    angle, shift = errors(result.transformation, truth)
+    assert angle < 2.0 and shift < 0.002, (angle, shift)
