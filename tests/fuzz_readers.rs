@@ -7,7 +7,7 @@
 use std::path::Path;
 
 use rgm_data::io::{checked_cloud, npy, off, ply, xyz};
-use rgm_tests::mutation::{corpus, CountingAllocator, Fuzz};
+use rgm_tests::mutation::{corpus, peak_bytes, CountingAllocator, Fuzz};
 
 #[global_allocator]
 static ALLOC: CountingAllocator = CountingAllocator;
@@ -51,6 +51,15 @@ fn off_reader_survives_fuzzing() {
 #[test]
 fn xyz_and_csv_readers_survive_fuzzing() {
     let seeds = corpus(&[".xyz", ".csv"]);
+    // The seeds with a byte-order mark read every point (a spreadsheet's "CSV UTF-8").
+    let first = |name: &str| {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("fuzz_corpus")
+            .join(name);
+        xyz::parse(&std::fs::read(&path).unwrap(), &path).unwrap()[0]
+    };
+    assert_eq!(first("bom.csv"), rgm_geom::Point3::new(0.5, -1.0, 2.0));
+    assert_eq!(first("bom.xyz"), rgm_geom::Point3::new(1.0, 2.0, 3.0));
     fuzz().run("xyz", &seeds, |b| read_points(xyz::parse, b, "f.xyz"));
 }
 
@@ -90,4 +99,53 @@ fn the_memory_bound_catches_an_allocation_from_a_count() {
         })
     });
     assert!(caught.is_err());
+}
+
+/// A fresh folder for one test's files.
+fn scratch(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("rgm-fuzz-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Issue 27, case 7: a 40 GB sparse `.ply` aborted rgm (an allocation of its size). A sparse
+/// file larger than any memory, of every format, is refused from its size, before a byte is
+/// read or allocated.
+#[test]
+fn sparse_files_larger_than_memory_are_refused_from_their_size() {
+    let dir = scratch("sparse");
+    for name in ["huge.ply", "huge.npy", "huge.xyz", "huge.off"] {
+        let path = dir.join(name);
+        let file = std::fs::File::create(&path).unwrap();
+        file.set_len(1 << 42).unwrap(); // 4.4 TB, holding nothing
+        let (peak, read) = peak_bytes(|| rgm_data::read_point_cloud(&path));
+        let err = read.unwrap_err().to_string();
+        assert!(peak < 1 << 20, "{peak} bytes");
+        assert!(
+            err.starts_with(&format!("{}: 4398.0 GB, more than the ", path.display())),
+            "{err}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// FIFOs, folders and devices are refused without being opened (a FIFO would block).
+#[test]
+fn fifos_and_devices_are_refused_unopened() {
+    let dir = scratch("fifo");
+    let fifo = dir.join("pipe.ply");
+    assert!(std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    let (zero, folder) = (dir.join("zero.ply"), dir.join("folder.ply"));
+    std::os::unix::fs::symlink("/dev/zero", &zero).unwrap();
+    std::fs::create_dir(&folder).unwrap();
+    for path in [&fifo, &zero, &folder] {
+        let err = rgm_data::read_point_cloud(path).unwrap_err().to_string();
+        assert!(err.contains(", not a file"), "{err}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
 }

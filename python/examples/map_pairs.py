@@ -3,8 +3,10 @@
     python examples/map_pairs.py DATA_DIR [PAIRS]     # ModelNet40 .npy tree, e.g. ../shared/data/modelnet40_npy1024
 
 Threads share one Registrar (rgm releases the GIL while it works); processes each unpickle
-the Registrar once and load the network once. The same ``map`` works with Dask, Ray or Spark,
-which pickle the function and its arguments the same way.
+the Registrar once and load the network once. Any start method works: "spawn" (used here, the
+default on macOS and Windows) starts clean processes, Linux's default "fork" copies this one
+(rgm starts its threads again in each). The same ``map`` works with Dask, Ray or Spark, which
+pickle the function and its arguments the same way.
 """
 
 import concurrent.futures
@@ -24,7 +26,8 @@ def main():
     pairs = rgm.modelnet_pairs(sys.argv[1], setting="partial", limit=limit)
     sources = [pair.source for pair in pairs]
     targets = [pair.target for pair in pairs]
-    registrar = rgm.Registrar()  # rgm register's defaults: RGM with the built-in model, refined
+    # rgm register's defaults: RGM with the built-in model and FGR, each refined, the better kept
+    registrar = rgm.Registrar()
 
     pools = {
         "threads": concurrent.futures.ThreadPoolExecutor(max_workers=2),

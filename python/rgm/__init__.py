@@ -12,8 +12,9 @@ result that overlaps better (``result.candidates`` holds both, with their scores
 loads a method once for many pairs; ``rgm.metrics`` and ``rgm.modelnet_pairs`` give the
 paper's metrics and the benchmark's pairs, to evaluate any method on exactly rgm's pairs.
 
-The work runs in Rust with the GIL released: Python threads register pairs in parallel, and a
-``Registrar`` pickles (as its settings) for process pools.
+The work runs in Rust with the GIL released: Python threads register pairs in parallel, Ctrl-C
+interrupts a registration at once, and a ``Registrar`` pickles (as its settings) for process
+pools of any start method (a process forked after a registration starts its own threads).
 """
 
 from __future__ import annotations
@@ -139,6 +140,11 @@ class RegistrationResult:
             than 1,024 points a cloud both again on a second thinning, ``rgm+icp/cells`` and
             ``fgr+icp/cells``), each with its score; empty for the other methods.
         chosen: the method of the candidate returned, or ``None`` for the other methods.
+        registered: ``False`` when the result is not credible (the default method's best
+            candidate overlaps too little: fewer than one point in twenty of each cloud lies on
+            the other), ``reason`` says why; ``transformation`` is then the best guess, not to
+            be used as a registration.
+        reason: why ``registered`` is ``False``, or ``None``.
     """
 
     transformation: np.ndarray
@@ -151,6 +157,8 @@ class RegistrationResult:
     converged: bool
     candidates: list = dataclasses.field(default_factory=list)
     chosen: Optional[str] = None
+    registered: bool = True
+    reason: Optional[str] = None
 
     @property
     def rotation(self) -> np.ndarray:
@@ -251,6 +259,9 @@ class Registrar:
                 that holds NaN or infinity (the message names it, its shape and dtype).
             RuntimeError: the method found no transform (e.g. too few points for RGM's
                 neighbour graph, or no correspondence survived).
+            MemoryError: RGM would need more memory than this process may take (free memory,
+                ``ulimit -v``, cgroup limit), checked before it starts; fewer ``match_points``
+                fit.
         """
         source = _points("source", source)
         target = _points("target", target)
@@ -264,6 +275,7 @@ class Registrar:
             converged,
             candidates,
             chosen,
+            reason,
         ) = self._native.register(source, target)
         return RegistrationResult(
             transformation=transformation,
@@ -276,6 +288,8 @@ class Registrar:
             converged=converged,
             candidates=[Candidate(*fields) for fields in candidates],
             chosen=chosen,
+            registered=reason is None,
+            reason=reason,
         )
 
     def __reduce__(self):
@@ -309,8 +323,9 @@ def register(
     """The rigid transform that maps ``source`` onto ``target``, as ``rgm register`` finds it.
 
     With no option this runs exactly what ``rgm register SRC TGT`` runs (both take their
-    defaults from one place in rgm): today the RGM network with the model built into rgm,
-    refined by ICP on the full clouds. The method is loaded once per distinct set of options
+    defaults from one place in rgm): the RGM network with the model built into rgm and FGR,
+    each refined by ICP on the full clouds, and the result that overlaps better
+    (``result.candidates`` holds both). The method is loaded once per distinct set of options
     and reused by later calls; ``rgm.Registrar`` does the same explicitly.
 
     Args:
@@ -339,7 +354,8 @@ def register(
 
     Returns:
         A RegistrationResult: ``transformation`` ((4, 4) float64, target ← source),
-        ``fitness``, ``inlier_rmse``, ``correspondences`` ((K, 2) int64), ``time_ms``.
+        ``fitness``, ``inlier_rmse``, ``correspondences`` ((K, 2) int64), ``time_ms``, and
+        ``registered`` (``False``, with a ``reason``, when no candidate is credible).
 
     Raises:
         ValueError: a cloud that is not a float32/float64 (N, 3) array or holds NaN or

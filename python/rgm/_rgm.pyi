@@ -36,6 +36,7 @@ class Registrar:
             tuple[str, Optional[float], npt.NDArray[np.float64], Optional[str]]
         ],  # candidates: method, score, (4, 4) transformation, failure
         Optional[str],  # the chosen candidate's method
+        Optional[str],  # why the result is not credible (not registered)
     ]: ...
 
 class ModelNetPairs:

@@ -6,14 +6,16 @@
 //! The GIL is released while Rust works ([`Python::detach`]), so Python threads register pairs
 //! in parallel. Each call runs with denormals flushed on its thread (the network's Sinkhorn
 //! underflows) and the thread's flags restored afterwards; OpenBLAS runs single-threaded unless
-//! `OPENBLAS_NUM_THREADS` asks for more, as in the `rgm` command.
+//! `OPENBLAS_NUM_THREADS` asks for more, as in the `rgm` command. Parallel work runs on a rayon
+//! pool of this process ([`pool`]), so a process forked from one that registered (a process
+//! pool's workers under Linux's default start method) registers too.
 
 use std::path::PathBuf;
-use std::sync::{Mutex, MutexGuard};
+use std::sync::{Arc, Mutex, MutexGuard};
 
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
-use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyMemoryError, PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use rgm_data::{DataError, ModelNet40, PairGenerator, Setting, Shape, Split};
@@ -24,6 +26,31 @@ use rgm_nn::threads::with_denormals_flushed;
 
 /// How far from rigid a given 4×4 transform may be (as `rgm score` reads outside transforms).
 const RIGID_TOLERANCE: f64 = 1e-4;
+
+/// The rayon pool of this process, its workers flushing denormals, built on first use and again
+/// in a forked child: a fork copies only the forking thread, so a child forked after a
+/// registration holds the parent's pool without its workers, and its first parallel step would
+/// wait for them for good. The parent's pool is forgotten in the child, not dropped (dropping it
+/// would signal workers that do not exist, under locks they may have held).
+fn pool() -> PyResult<Arc<rayon::ThreadPool>> {
+    static POOL: Mutex<Option<(u32, Arc<rayon::ThreadPool>)>> = Mutex::new(None);
+    let pid = std::process::id();
+    let mut slot = POOL.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    if let Some((owner, pool)) = slot.as_ref() {
+        if *owner == pid {
+            return Ok(pool.clone());
+        }
+    }
+    let pool = rayon::ThreadPoolBuilder::new()
+        .start_handler(|_| {
+            rgm_nn::threads::flush_denormals_to_zero();
+        })
+        .build()
+        .map_err(|e| PyRuntimeError::new_err(format!("cannot start rgm's threads: {e}")))?;
+    let pool = Arc::new(pool);
+    std::mem::forget(slot.replace((pid, pool.clone())));
+    Ok(pool)
+}
 
 fn value_error(err: impl std::fmt::Display) -> PyErr {
     PyValueError::new_err(err.to_string())
@@ -126,6 +153,7 @@ type Outcome<'py> = (
     bool,                      // converged
     Vec<CandidateFields<'py>>, // the combined method's candidates (empty for the others)
     Option<&'static str>,      // the chosen candidate's method
+    Option<String>,            // why the result is not credible (not registered)
 );
 
 #[pymethods]
@@ -165,7 +193,10 @@ impl Registrar {
             refine,
             ..MethodOptions::default()
         };
-        let prototype = py.detach(|| options.build()).map_err(value_error)?;
+        let pool = pool()?;
+        let prototype = py
+            .detach(|| pool.install(|| options.build()))
+            .map_err(value_error)?;
         Ok(Self {
             prototype,
             idle: Mutex::new(Vec::new()),
@@ -188,16 +219,47 @@ impl Registrar {
         let (source, target) = (cloud(&source, "source")?, cloud(&target, "target")?);
         let popped = self.idle().pop();
         let mut method = popped.unwrap_or_else(|| self.prototype.clone());
-        let outcome = py.detach(|| {
-            with_denormals_flushed(|| -> Result<_, MethodError> {
-                let registration = method.register(&source, &target)?;
-                let pairs = method.correspondences(&source, &target, &registration.result);
-                Ok((registration, pairs))
-            })
+        // The work runs on the pool while this thread waits for it, GIL released, and looks
+        // at Python's signals ten times a second: Ctrl-C raises KeyboardInterrupt at once
+        // (the abandoned work ends in the background, and its copy of the method is dropped).
+        let (done, mut result) = std::sync::mpsc::channel();
+        pool()?.spawn(move || {
+            let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                with_denormals_flushed(|| -> Result<_, MethodError> {
+                    let registration = method.register(&source, &target)?;
+                    let pairs = method.correspondences(&source, &target, &registration.result);
+                    Ok((registration, pairs))
+                })
+            }));
+            let _ = done.send((method, outcome)); // the caller is gone after a Ctrl-C
         });
+        let (method, outcome) = loop {
+            // The receiver goes into the GIL-free closure and back (it may not be shared).
+            let got;
+            (result, got) = py.detach(move || {
+                let got = result.recv_timeout(std::time::Duration::from_millis(100));
+                (result, got)
+            });
+            match got {
+                Ok(finished) => break finished,
+                Err(std::sync::mpsc::RecvTimeoutError::Timeout) => py.check_signals()?,
+                Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
+                    return Err(PyRuntimeError::new_err(
+                        "rgm's worker thread ended unexpectedly",
+                    ))
+                }
+            }
+        };
         self.idle().push(method);
+        let outcome = outcome.map_err(|_| {
+            PyRuntimeError::new_err(format!("{} panicked (a bug in rgm)", self.prototype.name()))
+        })?;
         let (registration, pairs) = outcome.map_err(|e| {
-            PyRuntimeError::new_err(format!("{} failed: {e}", self.prototype.name()))
+            let message = format!("{} failed: {e}", self.prototype.name());
+            match e {
+                MethodError::TooMuchMemory { .. } => PyMemoryError::new_err(message),
+                _ => PyRuntimeError::new_err(message),
+            }
         })?;
         let result = registration.result;
         let candidates = registration
@@ -224,6 +286,7 @@ impl Registrar {
             registration
                 .chosen
                 .map(|k| registration.candidates[k].method),
+            registration.doubt,
         ))
     }
 }

@@ -303,20 +303,18 @@ pub fn progress(len: usize, what: &str) -> indicatif::ProgressBar {
 }
 
 /// Fails now, before the work, when `path` cannot be written (its folder is missing, it is a
-/// folder, permission is denied), so a long command does not lose its result at the end. The
-/// file is left as it was: opened without truncation, removed again if this created it.
+/// folder, permission is denied), so a long command does not lose its result at the end;
+/// nothing changes at `path` ([`rgm_data::io::output::check_writable`]).
 pub fn check_writable(path: &Path) -> anyhow::Result<()> {
-    let existed = path.exists();
-    std::fs::OpenOptions::new()
-        .write(true)
-        .create(true)
-        .truncate(false)
-        .open(path)
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    if !existed {
-        std::fs::remove_file(path).with_context(|| format!("removing {}", path.display()))?;
-    }
-    Ok(())
+    rgm_data::io::output::check_writable(path)
+        .with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Writes `text` to `path` as every output is written ([`rgm_data::io::output::write_file`]:
+/// a failed write leaves the path as it was).
+pub fn write_text(path: &Path, text: &str) -> anyhow::Result<()> {
+    rgm_data::io::output::write_file(path, |out| out.write_all(text.as_bytes()))
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// Gives SIGPIPE its default action back (Rust ignores it, so `println!` to a closed pipe

@@ -27,8 +27,7 @@ pub fn report(
             "setting": setting,
             "pairs": records,
         });
-        std::fs::write(path, serde_json::to_string_pretty(&value)?)
-            .map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))?;
+        crate::write_text(path, &serde_json::to_string_pretty(&value)?)?;
         println!("wrote per-pair results to {}", path.display());
     }
     Ok(summary)

@@ -184,8 +184,8 @@ fn the_matrix_needs_rgm_and_says_so() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("--method rgm"), "{err}");
-    // The clouds were still drawn, with FGR's transform; no matrix was.
-    assert!(dir.join("clouds.png").exists());
+    // Refused before the work: neither image is drawn (issue 27, case 13: the clouds were).
+    assert!(!dir.join("clouds.png").exists());
     assert!(!dir.join("matrix.png").exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }

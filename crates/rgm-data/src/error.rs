@@ -14,6 +14,18 @@ pub enum DataError {
     /// The path names a folder, device, FIFO or socket (`/dev/zero` would never end).
     #[error("{}: is {kind}, not a file", path.display())]
     NotAFile { path: PathBuf, kind: &'static str },
+    /// A file larger than the memory this process may take (`None`: the allocation failed).
+    #[error(
+        "{}: {:.1} GB, more than the {} this process may allocate",
+        path.display(),
+        *bytes as f64 / 1e9,
+        available.map_or("memory".to_string(), |a| format!("{:.1} GB of memory", a as f64 / 1e9))
+    )]
+    TooLarge {
+        path: PathBuf,
+        bytes: u64,
+        available: Option<u64>,
+    },
     /// A line of a text file (XYZ/CSV, OFF, ASCII PLY) could not be read.
     #[error("{}:{line}: {why}: `{text}`", path.display())]
     Line {

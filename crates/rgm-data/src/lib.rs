@@ -8,6 +8,7 @@
 pub mod correspondence;
 pub mod error;
 pub mod io;
+pub mod memory;
 pub mod modelnet;
 pub mod pairs;
 

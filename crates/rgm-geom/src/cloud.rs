@@ -53,6 +53,28 @@ impl PointCloud {
         Point3::from(sum / self.points.len() as f64)
     }
 
+    /// The indices, in order, of the points that are not far outliers: those within `factor`
+    /// times the median distance from the coordinate-wise median. A few stray points anywhere
+    /// (a scanner's returns at 1e5) move neither median, so they cannot shrink or shift what
+    /// is kept; every point is kept when that median distance is 0 or not finite.
+    pub fn near_indices(&self, factor: f64) -> Vec<usize> {
+        let n = self.points.len();
+        if n == 0 {
+            return Vec::new();
+        }
+        let middle = Point3::from(Vector3::from_fn(|c, _| {
+            median(self.points.iter().map(|p| p[c]).collect())
+        }));
+        let distances: Vec<f64> = self.points.iter().map(|p| length(&(p - middle))).collect(); // (N,)
+        let typical = median(distances.clone());
+        if !(typical > 0.0 && typical.is_finite()) {
+            return (0..n).collect();
+        }
+        (0..n)
+            .filter(|&i| distances[i] <= factor * typical)
+            .collect()
+    }
+
     /// The cloud moved by `transform`.
     pub fn transformed(&self, transform: &RigidTransform) -> Self {
         Self::new(self.points.iter().map(|p| transform.apply(p)).collect())
@@ -137,6 +159,25 @@ impl PointCloud {
     }
 }
 
+/// The median of `values` (the upper one of an even count); NaN for none.
+fn median(mut values: Vec<f64>) -> f64 {
+    if values.is_empty() {
+        return f64::NAN;
+    }
+    let middle = values.len() / 2;
+    *values.select_nth_unstable_by(middle, f64::total_cmp).1
+}
+
+/// The length of `v` at any finite scale: divided by its largest coordinate before squaring,
+/// which overflows to infinity beyond about 1e154 and underflows to 0 below about 1e-162.
+pub fn length(v: &Vector3<f64>) -> f64 {
+    let largest = v.amax();
+    if largest == 0.0 || !largest.is_finite() {
+        return largest;
+    }
+    largest * (v / largest).norm()
+}
+
 impl From<Vec<Point3<f64>>> for PointCloud {
     fn from(points: Vec<Point3<f64>>) -> Self {
         Self::new(points)
@@ -146,6 +187,37 @@ impl From<Vec<Point3<f64>>> for PointCloud {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn lengths_hold_at_any_scale() {
+        for k in [1e-200, 1e-3, 1.0, 1e200] {
+            let v = Vector3::new(3.0, -4.0, 12.0) * k;
+            assert!((length(&v) / (13.0 * k) - 1.0).abs() < 1e-15, "{k}");
+        }
+        assert_eq!(length(&Vector3::zeros()), 0.0);
+    }
+
+    #[test]
+    fn far_points_are_not_near_and_do_not_move_what_is() {
+        // A 10 × 10 × 10 grid of unit spacing, then one point at 1e5 and one at -1e9.
+        let grid: Vec<Point3<f64>> = (0..1000)
+            .map(|i| Point3::new((i % 10) as f64, (i / 10 % 10) as f64, (i / 100) as f64))
+            .collect();
+        let mut cloud = PointCloud::new(grid);
+        let all: Vec<usize> = (0..1000).collect();
+        assert_eq!(cloud.near_indices(4.0), all);
+        cloud.points.push(Point3::new(1e5, 0.0, 0.0));
+        cloud.points.push(Point3::new(0.0, -1e9, 3.0));
+        assert_eq!(cloud.near_indices(4.0), all);
+        // The median is (5, 5, 5), the median distance from it 5: a factor of 1.5 keeps the
+        // points within 7.5, leaving out the corner (0, 0, 0) at 8.66.
+        let tight = cloud.near_indices(1.5);
+        assert!(!tight.contains(&0) && tight.contains(&555) && tight.len() < 1000);
+        // Mostly coincident points: all kept.
+        let same = PointCloud::new(vec![Point3::new(1.0, 2.0, 3.0); 5]);
+        assert_eq!(same.near_indices(4.0), vec![0, 1, 2, 3, 4]);
+        assert!(PointCloud::default().near_indices(4.0).is_empty());
+    }
 
     #[test]
     fn cell_means_average_each_seeds_nearest_points() {

@@ -28,7 +28,7 @@ pub mod transform;
 #[cfg(test)]
 mod testing;
 
-pub use cloud::PointCloud;
+pub use cloud::{length, PointCloud};
 pub use error::{GeomError, Result};
 pub use kabsch::kabsch;
 pub use knn::{knn_graph, KnnIndex, Neighbourhoods};

@@ -20,15 +20,20 @@ use std::borrow::Cow;
 
 use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::refine::{self, RefineConfig};
-use rgm_geom::registration::score;
+use rgm_geom::registration::{score, Score};
 use rgm_geom::{KnnIndex, PointCloud, RegistrationResult, RigidTransform};
 
 use crate::error::MethodError;
-use crate::pipeline::{Normalisation, RgmRegistrar, DENSITY_POINTS};
+use crate::pipeline::{near, Normalisation, RgmRegistrar, DENSITY_POINTS};
 
 /// Distance (unit-sphere units) within which a moved point counts as overlapping the other
 /// cloud in the score.
 pub const SCORE_DISTANCE: f64 = 0.02;
+
+/// The least [`overlap_score`] of a credible result: below it, fewer than one point in twenty of
+/// each cloud lies on the other after the best transform, and the pair is reported as not
+/// registered ([`CombinedRegistrar::doubt`]) rather than with a transform nothing supports.
+pub const MIN_OVERLAP: f64 = 0.1;
 
 /// One candidate's outcome on the last pair.
 #[derive(Clone, Debug, PartialEq)]
@@ -56,6 +61,7 @@ pub struct CombinedRegistrar {
     candidates: Vec<Candidate>, // of the last registration: RGM's, FGR's, per thinning
     chosen: Option<usize>,      // the winner among them
     scoring_distance: f64,      // of the last result's fitness, in the caller's units
+    pairs: Vec<(usize, usize)>, // behind the last result's fitness (source, target)
 }
 
 /// Voxel of the first thinning step of a cloud denser than [`DENSITY_POINTS`], in unit-sphere
@@ -128,6 +134,7 @@ impl CombinedRegistrar {
             candidates: Vec::new(),
             chosen: None,
             scoring_distance: SCORE_DISTANCE,
+            pairs: Vec::new(),
         }
     }
 
@@ -160,10 +167,12 @@ impl CombinedRegistrar {
     ) -> Result<RegistrationResult, MethodError> {
         self.candidates.clear();
         self.chosen = None;
+        self.pairs.clear();
         let frame = Normalisation::of_pair(source, target);
-        // (N, 3) and (M, 3) in the network's frame, at the caller's density: what every
-        // candidate is scored on.
-        let (fs, ft) = (frame.source(source), frame.target(target));
+        // (N, 3) and (M, 3) in the network's frame, at the caller's density, far outliers left
+        // out: what every candidate runs on and is scored on.
+        let fs = frame.source(&source.select(&near(source)));
+        let ft = frame.target(&target.select(&near(target)));
         let (fsi, fti) = (KnnIndex::new(&fs.points), KnnIndex::new(&ft.points));
         let thinnings: &[Thinning] = if fs.len().max(ft.len()) > DENSITY_POINTS {
             &[Thinning::Voxels, Thinning::Cells]
@@ -220,26 +229,56 @@ impl CombinedRegistrar {
                 .collect();
             return Err(MethodError::AllCandidatesFailed(why.join("; ")));
         };
-        let total = frame.undo(&transform);
-        self.scoring_distance = self
+        // Scored in the network's frame (squared distances at the caller's scale may overflow),
+        // on every point given.
+        let distance = self
             .refine
             .as_ref()
-            .map_or(SCORE_DISTANCE, RefineConfig::finest_distance)
-            * frame.scale;
+            .map_or(SCORE_DISTANCE, RefineConfig::finest_distance);
+        self.scoring_distance = distance * frame.scale;
         let scored = score(
-            &source.points,
-            &KnnIndex::new(&target.points),
-            &total,
-            self.scoring_distance,
-            None,
+            &frame.source(source).points,
+            &KnnIndex::new(&frame.target(target).points),
+            &transform,
+            distance,
+            Some(&mut self.pairs),
         );
-        Ok(RegistrationResult::scored(total, iterations, true, scored))
+        let scored = Score {
+            inlier_rmse: scored.inlier_rmse * frame.scale,
+            ..scored
+        };
+        Ok(RegistrationResult::scored(
+            frame.undo(&transform),
+            iterations,
+            true,
+            scored,
+        ))
+    }
+
+    /// The (source index, target index) pairs behind the last result's fitness: each source
+    /// point moved within the scoring distance of its nearest target point.
+    pub fn correspondences(&self) -> &[(usize, usize)] {
+        &self.pairs
     }
 
     /// The distance at which the last result's fitness and inlier RMSE were scored, in the
     /// caller's units.
     pub fn scoring_distance(&self) -> f64 {
         self.scoring_distance
+    }
+
+    /// Why the last result is not credible, if it is not: its overlap score is below
+    /// [`MIN_OVERLAP`].
+    pub fn doubt(&self) -> Option<String> {
+        let best = &self.candidates[self.chosen?];
+        let score = best.score?;
+        (score < MIN_OVERLAP).then(|| {
+            format!(
+                "the best candidate, {}, overlaps too little (score {score:.3} < {MIN_OVERLAP}): \
+                 the clouds may not overlap, or every method failed on them",
+                best.method
+            )
+        })
     }
 
     /// The index in [`CombinedRegistrar::candidates`] of the last registration's winner.

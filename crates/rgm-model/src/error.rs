@@ -30,11 +30,13 @@ pub enum MethodError {
         points: usize,
         needed: usize,
     },
-    /// Matching this many points would need more memory than the machine has (the network's
-    /// memory grows with the square of the matched points).
+    /// Matching this many points would need more memory than this process may take
+    /// ([`rgm_data::memory::available`]; the network's memory grows with the square of the
+    /// matched points).
     #[error(
         "rgm: matching {} × {} points would need about {:.1} GiB, more than the {:.1} GiB \
-         available; match on fewer points (the `match_points` setting)",
+         this process may take (free memory, ulimit -v, cgroup limit); match on fewer points \
+         (the `match_points` setting)",
         points.0, points.1, *estimate as f64 / (1u64 << 30) as f64, *available as f64 / (1u64 << 30) as f64
     )]
     TooMuchMemory {
@@ -45,6 +47,10 @@ pub enum MethodError {
     /// Every candidate of the combined method failed; each one's cause, `method: why; …`.
     #[error("every candidate failed ({0})")]
     AllCandidatesFailed(String),
+    /// The method's transform or score is not a finite number (a degenerate pair, or clouds
+    /// at a scale the method cannot work at): reported as an error, never as a result.
+    #[error("{method} found no finite transform (found {found})")]
+    NotFinite { method: &'static str, found: String },
     /// Options that do not fit the method ([`crate::options::MethodOptions`]).
     #[error("{0}")]
     InvalidOptions(String),

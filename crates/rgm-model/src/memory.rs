@@ -1,17 +1,17 @@
 //! Whether the network's registration of N × M matched points fits in memory: its peak,
-//! estimated from the sizes, against what the system can give now. The network's memory grows
-//! with N·M, so a large request is refused before it starts rather than killed half-way.
+//! estimated from the sizes, against what this process may still take
+//! ([`rgm_data::memory::available`]: free memory, `ulimit -v`, the cgroup's limit). The
+//! network's memory grows with N·M, so a large request is refused before it starts rather than
+//! killed half-way (past a process limit OpenBLAS spins on its failed allocations and Rust
+//! aborts on its own).
 
 use crate::error::MethodError;
 use crate::network::Config;
 
-/// Estimates below this are not checked: any machine that runs the network has them.
-const ALWAYS_FITS: u64 = 1 << 30;
-
 /// Refuses ([`MethodError::TooMuchMemory`]) a registration of `points` (source, target)
 /// matched points by a network of `config` with `params` parameters (both chains when
-/// `cycle_consistency`) when its estimated peak exceeds the memory available now; an
-/// estimate under 1 GiB, or a system that does not say, passes.
+/// `cycle_consistency`) when its estimated peak exceeds the memory available now; a system
+/// that does not say passes.
 pub fn check_fits(
     config: &Config,
     params: usize,
@@ -19,10 +19,7 @@ pub fn check_fits(
     cycle_consistency: bool,
 ) -> Result<(), MethodError> {
     let estimate = estimated_peak_bytes(config, params, points.0, points.1, cycle_consistency);
-    if estimate <= ALWAYS_FITS {
-        return Ok(());
-    }
-    match available_memory() {
+    match rgm_data::memory::available() {
         Some(available) if estimate > available => Err(MethodError::TooMuchMemory {
             points,
             estimate,
@@ -55,14 +52,6 @@ pub fn estimated_peak_bytes(
     let channels: u64 = config.dgcnn.iter().map(|&c| c as u64).sum();
     let features = 60 * (n + m) * config.k as u64 * channels;
     chains * per_pass + features + (64 << 20) + 4 * params as u64
-}
-
-/// The memory the system can give this process now (Linux's MemAvailable), if known.
-fn available_memory() -> Option<u64> {
-    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024)
 }
 
 #[cfg(test)]

@@ -45,6 +45,10 @@ pub struct Registration {
     /// and the index of the one returned.
     pub candidates: Vec<Candidate>,
     pub chosen: Option<usize>,
+    /// Why the result is not to be trusted, when it is not (the combined method's best
+    /// candidate overlaps too little, [`crate::combined::MIN_OVERLAP`]): the caller reports the
+    /// pair as not registered, with this reason.
+    pub doubt: Option<String>,
 }
 
 impl Method {
@@ -143,15 +147,31 @@ impl Method {
             Self::Rgm(registrar) => registrar.register(source, target)?,
             Self::Combined(combined) => combined.register(source, target)?,
         };
-        let (candidates, chosen) = match self {
-            Self::Combined(combined) => (combined.candidates().to_vec(), combined.chosen()),
-            _ => (Vec::new(), None),
+        let t = &result.t_target_source;
+        let values = t.rotation.iter().chain(t.translation.iter());
+        if !values
+            .chain([&result.fitness, &result.inlier_rmse])
+            .all(|v| v.is_finite())
+        {
+            return Err(MethodError::NotFinite {
+                method: self.name(),
+                found: format!("{:?}", t.to_rows()),
+            });
+        }
+        let (candidates, chosen, doubt) = match self {
+            Self::Combined(combined) => (
+                combined.candidates().to_vec(),
+                combined.chosen(),
+                combined.doubt(),
+            ),
+            _ => (Vec::new(), None, None),
         };
         Ok(Registration {
             result,
             time_ms: start.elapsed().as_secs_f64() * 1e3,
             candidates,
             chosen,
+            doubt,
         })
     }
 
@@ -167,10 +187,10 @@ impl Method {
     ) -> Vec<(usize, usize)> {
         let max_distance = match self {
             Self::Rgm(registrar) => return registrar.correspondences().to_vec(),
+            Self::Combined(combined) => return combined.correspondences().to_vec(),
             Self::Icp(config) => config.max_correspondence_distance,
             Self::Fgr(config) => config.maximum_correspondence_distance,
             Self::FgrRefined { refine, .. } => refine.finest_distance(),
-            Self::Combined(combined) => combined.scoring_distance(),
         };
         let mut pairs = Vec::new();
         score(

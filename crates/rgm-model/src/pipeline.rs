@@ -80,6 +80,11 @@ const TARGET_SEED: u64 = 1;
 /// scaled by one common factor so that the farthest point of either cloud lies on the unit
 /// sphere ([`Normalisation::centred`]): the same pair at half or twice the size reaches the
 /// network as the same clouds, centred.
+///
+/// All of it is measured on each cloud's [`near`] points: a far outlier (a stray return of a
+/// scanner) neither decides the frame nor shrinks the pair to a dot in it, and the methods
+/// leave it out. Lengths are taken at any scale ([`rgm_geom::length`]): a pair at 1e200 or
+/// 1e-200 reaches the network as it does at 1.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Normalisation {
     pub source_centre: Vector3<f64>,
@@ -87,12 +92,22 @@ pub struct Normalisation {
     pub scale: f64,
 }
 
+/// A point farther from its cloud's coordinate-wise median than this many times the median
+/// distance from it is a far outlier ([`PointCloud::near_indices`]); no ModelNet40 shape has one
+/// (`docs/geom.md`, "Far outliers").
+pub const FAR_OUTLIER: f64 = 12.0;
+
+/// The indices of `cloud`'s points that are not far outliers ([`FAR_OUTLIER`]), in order.
+pub fn near(cloud: &PointCloud) -> Vec<usize> {
+    cloud.near_indices(FAR_OUTLIER)
+}
+
 /// The largest distance of `cloud`'s points from `centre`; 0 for an empty cloud.
 fn radius(cloud: &PointCloud, centre: &Point3<f64>) -> f64 {
     cloud
         .points
         .iter()
-        .map(|p| (p - centre).norm())
+        .map(|p| rgm_geom::length(&(p - centre)))
         .fold(0.0, f64::max)
 }
 
@@ -115,12 +130,13 @@ impl Normalisation {
 
     /// The normalisation of the pair (`source`, `target`), as described on the type.
     pub fn of_pair(source: &PointCloud, target: &PointCloud) -> Self {
-        let extent = radius(source, &source.centroid()).max(radius(target, &target.centroid()));
-        let reach = radius(source, &Point3::origin()).max(radius(target, &Point3::origin()));
+        let (source, target) = (source.select(&near(source)), target.select(&near(target)));
+        let extent = radius(&source, &source.centroid()).max(radius(&target, &target.centroid()));
+        let reach = radius(&source, &Point3::origin()).max(radius(&target, &Point3::origin()));
         if reach <= Self::FRAME_RADIUS && Self::FRAME_EXTENT.contains(&extent) || extent == 0.0 {
             return Self::identity();
         }
-        Self::centred(source, target)
+        Self::centred(&source, &target)
     }
 
     /// Each cloud centred on its centroid, both scaled by one factor so that the farthest point
@@ -403,7 +419,10 @@ impl RgmRegistrar {
         self.network.set_precision(self.config.precision);
         let start = Instant::now();
         let frame = Normalisation::of_pair(source, target);
-        let (source_n, target_n) = (frame.source(source), frame.target(target));
+        // The points that are not far outliers, in the network's frame: all the method sees.
+        let (source_near, target_near) = (near(source), near(target));
+        let source_n = frame.source(&source.select(&source_near));
+        let target_n = frame.target(&target.select(&target_near));
         let source_idx = matched_indices(&source_n, self.config.match_points, SOURCE_SEED);
         let target_idx = matched_indices(&target_n, self.config.match_points, TARGET_SEED);
         let (x, y) = (source_n.select(&source_idx), target_n.select(&target_idx));
@@ -476,23 +495,30 @@ impl RgmRegistrar {
             add_since(&mut self.times.refine, start);
             total = refined.t_target_source;
             iterations += refined.iterations;
-            refined_score = Some((refined.fitness, refined.inlier_rmse * frame.scale));
+            // Far outliers count as source points without a partner.
+            let near_share = source_n.len() as f64 / source.len() as f64;
+            refined_score = Some((
+                refined.fitness * near_share,
+                refined.inlier_rmse * frame.scale,
+            ));
         }
+        // Unrefined, the score is the final correspondences' own, taken in the network's frame
+        // (squared distances at the caller's scale may overflow).
+        let (fitness, inlier_rmse) = refined_score.unwrap_or_else(|| {
+            let sum_d2: f64 = found
+                .pairs()
+                .iter()
+                .map(|&(i, j)| (total.apply(&x.points[i]) - y.points[j]).norm_squared())
+                .sum();
+            let rmse = (sum_d2 / found.pairs().len() as f64).sqrt() * frame.scale;
+            (found.pairs().len() as f64 / x.len() as f64, rmse)
+        });
         let total = frame.undo(&total);
         self.pairs = found
             .pairs()
             .iter()
-            .map(|&(i, j)| (source_idx[i], target_idx[j]))
+            .map(|&(i, j)| (source_near[source_idx[i]], target_near[target_idx[j]]))
             .collect();
-        let (fitness, inlier_rmse) = refined_score.unwrap_or_else(|| {
-            let sum_d2: f64 = self
-                .pairs
-                .iter()
-                .map(|&(i, j)| (total.apply(&source.points[i]) - target.points[j]).norm_squared())
-                .sum();
-            let rmse = (sum_d2 / self.pairs.len() as f64).sqrt();
-            (self.pairs.len() as f64 / x.len() as f64, rmse)
-        });
         Ok(RegistrationResult {
             t_target_source: total,
             iterations,

@@ -192,3 +192,120 @@ fn a_dense_pair_gets_both_methods_on_two_thinnings_scored_alike() {
     .unwrap();
     assert!(metrics.recall, "{metrics:?}");
 }
+
+/// The rotation error of `found` against `truth`, in degrees, and its translation error
+/// relative to the clouds' size `size`.
+fn errors(found: &RigidTransform, truth: &RigidTransform, size: f64) -> (f64, f64) {
+    let angle = RigidTransform::new(
+        truth.rotation.transpose() * found.rotation,
+        Default::default(),
+    )
+    .rotation_angle_deg();
+    let off = (found.translation - truth.translation) / size;
+    (angle, rgm_geom::length(&off))
+}
+
+/// `rgm register`'s default, and RGM alone (refined), as the command line builds them.
+fn both_methods() -> [Method; 2] {
+    let rgm = MethodOptions {
+        method: rgm_model::MethodName::Rgm,
+        ..MethodOptions::default()
+    };
+    [
+        MethodOptions::default().build().unwrap(),
+        rgm.build().unwrap(),
+    ]
+}
+
+#[test]
+fn a_far_outlier_in_each_cloud_leaves_the_transform_right() {
+    // Issue 27, case 1: one point of each cloud replaced by a stray return at 1e5 shrank the
+    // pair to a dot in the network's frame (152° wrong, fitness 0.999, overlap score 1.998); at
+    // 100 RGM alone failed ("kabsch: needs at least 3 points").
+    let pair = clean_pair();
+    for far in [100.0, 1e5, 1e9] {
+        let mut source = pair.source.clone();
+        source.points[17] = Point3::new(far, -far, 0.5 * far);
+        let mut target = pair.target.clone();
+        target.points[800] = Point3::new(-far, 0.3 * far, far);
+        for mut method in both_methods() {
+            let found = method.register(&source, &target).unwrap();
+            let (angle, off) = errors(&found.result.t_target_source, &pair.t_target_source, 1.0);
+            assert!(
+                angle < 2.0 && off < 0.02,
+                "{} at {far}: {angle}° {off}",
+                method.name()
+            );
+            // The outlier is no inlier: the fitness is at most 1,023 of 1,024.
+            assert!(
+                found.result.fitness <= 1023.0 / 1024.0,
+                "{:?}",
+                found.result
+            );
+            assert_eq!(found.doubt, None);
+        }
+    }
+}
+
+#[test]
+fn a_pair_at_1e200_or_1e_minus_200_gets_the_right_transform_and_no_nan() {
+    // Issue 27, case 3: at 1e200 the translation was NaN (reported with "overlap score 2.0"),
+    // at 1e-200 the identity with fitness 1.0 (the truth is 38.6° away).
+    let pair = clean_pair();
+    for k in [1e200, 1e-200] {
+        let scaled = |c: &PointCloud| {
+            PointCloud::new(
+                c.points
+                    .iter()
+                    .map(|p| Point3::from(p.coords * k))
+                    .collect(),
+            )
+        };
+        let truth = RigidTransform::new(
+            pair.t_target_source.rotation,
+            pair.t_target_source.translation * k,
+        );
+        for mut method in both_methods() {
+            let found = method
+                .register(&scaled(&pair.source), &scaled(&pair.target))
+                .unwrap();
+            let (angle, off) = errors(&found.result.t_target_source, &truth, k);
+            assert!(
+                angle < 2.0 && off < 0.02,
+                "{} at {k}: {angle}° {off}",
+                method.name()
+            );
+            let r = &found.result;
+            assert!(r.fitness > 0.9 && r.inlier_rmse.is_finite(), "{r:?}");
+            assert!(r.inlier_rmse / k < 0.05, "{r:?}");
+            assert_eq!(found.doubt, None);
+        }
+    }
+}
+
+#[test]
+fn clouds_that_do_not_overlap_are_reported_as_not_registered() {
+    // A shape and 1,024 points of noise in a cube: whatever the best transform, almost no
+    // point of either lies on the other, and the result says so instead of a confident
+    // transform.
+    use rand::{Rng, SeedableRng};
+    let pair = clean_pair();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+    let noise = PointCloud::new(
+        (0..1024)
+            .map(|_| {
+                Point3::new(
+                    rng.gen_range(-1.0..1.0),
+                    rng.gen_range(-1.0..1.0),
+                    rng.gen_range(-1.0..1.0),
+                )
+            })
+            .collect(),
+    );
+    let mut method = MethodOptions::default().build().unwrap();
+    let found = method.register(&pair.source, &noise).unwrap();
+    let why = found.doubt.expect("not registered");
+    assert!(why.contains("overlaps too little"), "{why}");
+    let best = found.candidates[found.chosen.unwrap()].score.unwrap();
+    assert!(best < rgm_model::combined::MIN_OVERLAP, "{best}");
+}

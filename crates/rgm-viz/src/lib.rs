@@ -114,9 +114,12 @@ impl Image {
     /// Writes the picture as a PNG file.
     pub fn write_png(&self, path: impl AsRef<Path>) -> Result<()> {
         let path = path.as_ref();
-        std::fs::write(path, self.to_png()?).map_err(|source| RenderError::Write {
-            path: path.to_path_buf(),
-            source,
+        let png = self.to_png()?;
+        rgm_data::io::output::write_file(path, |out| out.write_all(&png)).map_err(|source| {
+            RenderError::Write {
+                path: path.to_path_buf(),
+                source,
+            }
         })
     }
 }

@@ -52,8 +52,7 @@ pub fn run(args: Args) -> Result<()> {
         "pairs": entries,
     });
     let path = args.out.join("pairs.json");
-    fs::write(&path, serde_json::to_string(&manifest)?)
-        .with_context(|| format!("writing {}", path.display()))?;
+    crate::write_text(&path, &serde_json::to_string(&manifest)?)?;
     println!("wrote {} pairs to {}", indices.len(), args.out.display());
     Ok(())
 }

@@ -41,7 +41,8 @@ pub fn run(args: Args) -> Result<()> {
     // RGM's correspondences are the network's matches of the last pass; ICP refinement may
     // have moved the transform after them.
     let refined = method.is_refined();
-    if let Some(out) = &args.out {
+    let doubt = registration.doubt.as_deref();
+    if let (Some(out), None) = (&args.out, doubt) {
         write_point_cloud(out, &source.transformed(&result.t_target_source))?;
     }
     let rows = result.t_target_source.to_rows();
@@ -75,10 +76,13 @@ pub fn run(args: Args) -> Result<()> {
             "target_points": target.len(),
             "candidates": candidates,
             "chosen": chosen,
+            "registered": doubt.is_none(),
+            "reason": doubt,
         });
         println!("{value}");
-        return Ok(());
+        return not_registered(doubt);
     }
+    not_registered(doubt)?;
     println!(
         "# transform target ← source ({}), y = R x + t",
         method.name()
@@ -121,4 +125,13 @@ pub fn run(args: Args) -> Result<()> {
         println!("# wrote the moved source to {}", out.display());
     }
     Ok(())
+}
+
+/// The error of a result that is not credible ([`rgm_model::Registration::doubt`]): the pair is
+/// reported as not registered, with the reason, and rgm exits with a failure.
+fn not_registered(doubt: Option<&str>) -> Result<()> {
+    match doubt {
+        Some(why) => anyhow::bail!("not registered: {why}"),
+        None => Ok(()),
+    }
 }

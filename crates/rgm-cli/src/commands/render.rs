@@ -66,6 +66,12 @@ pub fn run(args: Args) -> Result<()> {
         (Some(_), None) => None, // nothing to find
         _ => {
             let mut method = args.method.build(crate::Defaults::Register)?;
+            if args.matrix.is_some() && !matches!(method, Method::Rgm(_)) {
+                bail!(
+                    "--matrix shows RGM's correspondences; {} has none (use --method rgm)",
+                    method.name()
+                );
+            }
             let registration = crate::register_files(
                 &mut method,
                 (&source, &target),
@@ -81,10 +87,7 @@ pub fn run(args: Args) -> Result<()> {
     println!("wrote {}", args.out.display());
     if let (Some(path), Some(truth), Some((method, _))) = (&args.matrix, &args.truth, &found) {
         let Method::Rgm(registrar) = method else {
-            bail!(
-                "--matrix shows RGM's correspondences; {} has none (use --method rgm)",
-                method.name()
-            );
+            unreachable!("refused before the registration");
         };
         let moved = source.transformed(&read_transform(truth)?);
         let correct = Correspondence::rebuild(&moved.points, &target.points);

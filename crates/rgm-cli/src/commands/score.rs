@@ -37,7 +37,7 @@ struct Transforms {
 #[derive(Deserialize)]
 struct Found {
     index: usize,
-    transform: [[f64; 4]; 4],
+    transform: Vec<Vec<f64>>, // (4, 4), checked by `rigid`
     time_ms: f64,
 }
 
@@ -103,8 +103,13 @@ fn check_one_per_pair(found: &Transforms, manifest: &Manifest, args: &Args) -> R
     Ok(())
 }
 
-fn rigid(rows: &[[f64; 4]; 4], what: &str) -> Result<RigidTransform> {
-    let m = Matrix4::from_fn(|r, c| rows[r][c]);
+/// The rigid transform of `rows`, which must be 4 rows of 4 numbers; `what` names it in errors.
+fn rigid<R: AsRef<[f64]>>(rows: &[R], what: &str) -> Result<RigidTransform> {
+    let lengths: Vec<usize> = rows.iter().map(|r| r.as_ref().len()).collect();
+    if lengths != [4; 4] {
+        bail!("{what} has rows of {lengths:?} numbers; a transform is 4 rows of 4 numbers");
+    }
+    let m = Matrix4::from_fn(|r, c| rows[r].as_ref()[c]);
     RigidTransform::from_matrix4(&m, 1e-4).map_err(|e| anyhow!("{what}: {e}"))
 }
 
@@ -114,7 +119,25 @@ pub fn run(args: Args) -> Result<()> {
     }
     let found: Transforms = read_json(&args.transforms)?;
     let manifest: Manifest = read_json(&args.pairs.join("pairs.json"))?;
+    if manifest.pairs.is_empty() {
+        bail!(
+            "{} lists no pairs: nothing to score",
+            args.pairs.join("pairs.json").display()
+        );
+    }
     check_one_per_pair(&found, &manifest, &args)?;
+    if let Some(f) = found
+        .pairs
+        .iter()
+        .find(|f| !(f.time_ms >= 0.0 && f.time_ms.is_finite()))
+    {
+        bail!(
+            "{}: pair {} has time_ms {:e}; a time is a number of milliseconds from 0 up",
+            args.transforms.display(),
+            f.index,
+            f.time_ms
+        );
+    }
     let mut records = Vec::with_capacity(found.pairs.len());
     for f in &found.pairs {
         let entry = manifest

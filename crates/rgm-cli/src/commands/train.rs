@@ -51,8 +51,8 @@ pub struct Args {
     /// Stop once epoch N is validated and saved, leaving the run's schedule (--epochs,
     /// --milestones) as it is; running again with a larger N goes on. The training queue
     /// (runs/train.sh) uses it to share the cores between runs.
-    #[arg(long, value_name = "N")]
-    until_epoch: Option<usize>,
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    until_epoch: Option<u64>,
     /// Pairs per optimiser step.
     #[arg(long, default_value_t = paper().batch)]
     batch: usize,
@@ -166,7 +166,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     let mut bar: Option<indicatif::ProgressBar> = None;
     let epochs = trainer.config().epochs;
-    let until = args.until_epoch.unwrap_or(epochs);
+    let until = args.until_epoch.map_or(epochs, |n| n as usize);
     if trainer.state().epoch < until {
         trainer.run(&dataset, &mut |event| {
             report(&event, &mut bar, epochs);
@@ -183,14 +183,19 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(bar) = bar.take() {
         bar.finish_and_clear();
     }
-    let best = trainer.state().best;
-    eprintln!(
-        "done: {} epochs; best weights {} (recall {:.1}%, refined {:.1}%)",
-        trainer.state().epoch,
-        args.out.join("best.safetensors").display(),
-        100.0 * best.map_or(0.0, |b| b.recall),
-        100.0 * best.map_or(0.0, |b| b.recall_refined)
-    );
+    match trainer.state().best {
+        Some(best) => eprintln!(
+            "done: {} epochs; best weights {} (recall {:.1}%, refined {:.1}%)",
+            trainer.state().epoch,
+            args.out.join("best.safetensors").display(),
+            100.0 * best.recall,
+            100.0 * best.recall_refined
+        ),
+        None => eprintln!(
+            "done: {} epochs; no validation yet, so no best weights",
+            trainer.state().epoch
+        ),
+    }
     Ok(())
 }
 

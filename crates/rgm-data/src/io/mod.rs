@@ -6,10 +6,11 @@
 
 pub mod npy;
 pub mod off;
+pub mod output;
 pub mod ply;
 pub mod xyz;
 
-use std::io::{Read, Write};
+use std::io::Read;
 use std::path::Path;
 
 use rgm_geom::{Point3, PointCloud};
@@ -19,7 +20,8 @@ use crate::{DataError, Result};
 /// The file formats rgm reads and writes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Format {
-    /// Stanford PLY: ASCII, binary little- or big-endian; written binary little-endian float.
+    /// Stanford PLY: ASCII, binary little- or big-endian; written binary little-endian float
+    /// (double for clouds float cannot hold).
     Ply,
     /// OFF (Object File Format): vertices only, faces ignored.
     Off,
@@ -86,13 +88,28 @@ pub fn read_regular_file(path: &Path) -> Result<Vec<u8>> {
     }
     let file = std::fs::File::open(path).map_err(io_error)?;
     let len = file.metadata().map_err(io_error)?.len();
-    let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0));
+    // Sized from the metadata before anything is read: a sparse 40 GB file is refused at once.
+    let too_large = |available| DataError::TooLarge {
+        path: path.to_path_buf(),
+        bytes: len,
+        available,
+    };
+    if let Some(available) = crate::memory::available().filter(|&a| len > a) {
+        return Err(too_large(Some(available)));
+    }
+    let mut bytes = Vec::new();
+    usize::try_from(len)
+        .ok()
+        .and_then(|n| bytes.try_reserve_exact(n).ok())
+        .ok_or_else(|| too_large(None))?;
     file.take(len).read_to_end(&mut bytes).map_err(io_error)?;
     Ok(bytes)
 }
 
-/// Writes a point cloud, choosing the format by extension: PLY binary little-endian float32,
-/// OFF and XYZ text, CSV with an `x,y,z` header, `.npy` float64 (lossless).
+/// Writes a point cloud, choosing the format by extension: PLY binary little-endian float32
+/// (double when float32 would lose precision, [`ply::write`]), OFF and XYZ text, CSV with an
+/// `x,y,z` header, `.npy` float64 (lossless); as [`output::write_file`] writes (a failed write
+/// leaves the path as it was).
 pub fn write_point_cloud(path: impl AsRef<Path>, cloud: &PointCloud) -> Result<()> {
     let path = path.as_ref();
     let format = Format::from_path(path)?;
@@ -100,16 +117,13 @@ pub fn write_point_cloud(path: impl AsRef<Path>, cloud: &PointCloud) -> Result<(
         path: path.to_path_buf(),
         source,
     };
-    let file = std::fs::File::create(path).map_err(io_error)?;
-    let mut out = std::io::BufWriter::new(file);
-    match format {
+    output::write_file(path, |mut out| match format {
         Format::Ply => ply::write(&mut out, cloud),
         Format::Off => off::write(&mut out, cloud),
         Format::Xyz => xyz::write(&mut out, cloud, xyz::Separator::Space),
         Format::Csv => xyz::write(&mut out, cloud, xyz::Separator::Comma),
         Format::Npy => npy::write(&mut out, cloud, npy::Dtype::F64),
-    }
-    .and_then(|()| out.flush())
+    })
     .map_err(io_error)
 }
 
@@ -155,8 +169,9 @@ fn format_error(path: &Path, format: &'static str, why: impl Into<String>) -> Da
     }
 }
 
-/// `bytes` as UTF-8 text, or an error naming the first bad byte.
+/// `bytes` as UTF-8 text without its byte-order mark, or an error naming the first bad byte.
 fn text<'a>(bytes: &'a [u8], path: &Path, format: &'static str) -> Result<&'a str> {
+    let bytes = bytes.strip_prefix(b"\xef\xbb\xbf").unwrap_or(bytes);
     std::str::from_utf8(bytes).map_err(|e| {
         format_error(
             path,
@@ -185,11 +200,16 @@ fn parse_xyz<'a>(
             )
         })?;
         *value = token.trim().parse().map_err(|_| {
+            let hint = if token.contains('\u{2212}') {
+                " (U+2212 is a minus sign; write -)"
+            } else {
+                ""
+            };
             line_error(
                 path,
                 line,
                 text,
-                format!("`{}` is not a number", token.trim()),
+                format!("`{}` is not a number{hint}", token.trim()),
             )
         })?;
     }

@@ -9,7 +9,7 @@
 use std::io::Write;
 use std::path::Path;
 
-use rgm_geom::{Point3, PointCloud};
+use rgm_geom::{Point3, PointCloud, Vector3};
 
 use super::{format_error, line_error};
 use crate::{DataError, Result};
@@ -164,9 +164,13 @@ fn parse_header(bytes: &[u8], path: &Path) -> Result<Header> {
                 });
             }
             ["element", name, count] => {
-                let count = count
-                    .parse()
-                    .map_err(|_| bad("the element count is not a number"))?;
+                let count = count.parse().map_err(|_| {
+                    bad(if count.bytes().all(|b| b.is_ascii_digit()) {
+                        "the element count is larger than any file can hold"
+                    } else {
+                        "the element count is not a whole number"
+                    })
+                })?;
                 elements.push(Element {
                     name: name.to_string(),
                     count,
@@ -491,17 +495,51 @@ fn read_row(
     values.end_row(element)
 }
 
-/// Writes a binary little-endian PLY with float32 x, y, z.
+/// The largest loss, relative to the cloud's size, that float32 output may cause: about 16
+/// times float32's own rounding of a cloud about the origin, so that clouds read from float32
+/// files, or in a unit frame, stay float32, and clouds far from the origin (map coordinates at
+/// 1e6, where float32's steps are 1/16) are written in double precision.
+const FLOAT32_LOSS: f64 = 1e-6;
+
+/// Whether float32 holds `cloud` to within [`FLOAT32_LOSS`] of its bounding box's diagonal.
+fn float32_suffices(cloud: &PointCloud) -> bool {
+    let (mut low, mut high) = (
+        Vector3::repeat(f64::INFINITY),
+        Vector3::repeat(f64::NEG_INFINITY),
+    );
+    let mut loss: f64 = 0.0;
+    for p in &cloud.points {
+        low = low.inf(&p.coords);
+        high = high.sup(&p.coords);
+        for v in [p.x, p.y, p.z] {
+            loss = loss.max((v - (v as f32) as f64).abs());
+        }
+    }
+    let size = rgm_geom::length(&(high - low));
+    loss <= FLOAT32_LOSS * size || cloud.is_empty()
+}
+
+/// Writes a binary little-endian PLY with float32 x, y, z, or double where float32 would move
+/// the points by more than [`FLOAT32_LOSS`] of the cloud's size.
 pub fn write(out: &mut impl Write, cloud: &PointCloud) -> std::io::Result<()> {
+    let float = if float32_suffices(cloud) {
+        "float"
+    } else {
+        "double"
+    };
     write!(
         out,
         "ply\nformat binary_little_endian 1.0\nelement vertex {}\n\
-         property float x\nproperty float y\nproperty float z\nend_header\n",
+         property {float} x\nproperty {float} y\nproperty {float} z\nend_header\n",
         cloud.len()
     )?;
     for p in &cloud.points {
         for v in [p.x, p.y, p.z] {
-            out.write_all(&(v as f32).to_le_bytes())?;
+            if float == "float" {
+                out.write_all(&(v as f32).to_le_bytes())?;
+            } else {
+                out.write_all(&v.to_le_bytes())?;
+            }
         }
     }
     Ok(())
@@ -518,6 +556,38 @@ mod tests {
 
     fn err(b: &[u8]) -> String {
         parse_bytes(b).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn clouds_far_from_the_origin_are_written_in_double_precision() {
+        // Issue 27, case 9: map coordinates near 1e6 lost up to 0.25 in float32.
+        let near = PointCloud::new(vec![
+            Point3::new(0.1, -0.7, 1.0 / 3.0),
+            Point3::new(1.0, 0.5, 0.0),
+        ]);
+        let far = PointCloud::new(
+            near.points
+                .iter()
+                .map(|p| p + Vector3::new(1e6 + 0.123456789, 4e6, -2e6))
+                .collect(),
+        );
+        for (cloud, exact, kind) in [(&near, false, "float"), (&far, true, "double")] {
+            let mut bytes = Vec::new();
+            write(&mut bytes, cloud).unwrap();
+            let text = String::from_utf8_lossy(&bytes);
+            assert!(text.contains(&format!("property {kind} x\n")), "{text}");
+            let back = parse_bytes(&bytes).unwrap();
+            let error = back
+                .iter()
+                .zip(&cloud.points)
+                .map(|(a, b)| (a - b).abs().max())
+                .fold(0.0, f64::max);
+            if exact {
+                assert_eq!(error, 0.0);
+            } else {
+                assert!(error > 0.0 && error < 1e-7, "{error}");
+            }
+        }
     }
 
     #[test]
@@ -640,6 +710,13 @@ mod tests {
         assert_eq!(
             err(short_list.as_bytes()),
             "s.ply:10: the row ends after 5 values; the header declares more: `1 1 1 2 5`"
+        );
+        // Issue 27, case 13: a count too large for memory was called "not a number".
+        let huge = "ply\nformat ascii 1.0\nelement vertex 99999999999999999999999\nend_header\n";
+        assert_eq!(
+            err(huge.as_bytes()),
+            "s.ply:3: the element count is larger than any file can hold: \
+             `element vertex 99999999999999999999999`"
         );
         let bad_number = format!("{header}0 0 0\n1 one 1\n2 2 2\n");
         assert_eq!(

@@ -2,7 +2,9 @@
 //!
 //! Columns are separated by commas (when the line has one) or by whitespace; extra columns are
 //! ignored; blank lines and lines starting with `#` are skipped; the first remaining line is a
-//! header, and skipped, when its first column is not a number.
+//! header, and skipped, when none of its columns is a number (a first line with a number in it
+//! is a point, and an error if it does not parse: a point is never dropped as a header). A
+//! byte-order mark (spreadsheets' "CSV UTF-8") is skipped.
 
 use std::io::Write;
 use std::path::Path;
@@ -35,7 +37,8 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<Vec<Point3<f64>>> {
         } else {
             trimmed.split_whitespace().collect()
         };
-        if std::mem::take(&mut first) && columns[0].trim().parse::<f64>().is_err() {
+        let header = columns.iter().all(|c| c.trim().parse::<f64>().is_err());
+        if std::mem::take(&mut first) && header {
             continue; // header line
         }
         points.push(parse_xyz(columns, path, i + 1, line)?);
@@ -106,6 +109,24 @@ mod tests {
         assert_eq!(err, "pts.csv:3: expected 3 coordinates, found 2: `4 5`");
         let err = parse_str("1,,3\n").unwrap_err().to_string();
         assert_eq!(err, "pts.csv:1: `` is not a number: `1,,3`");
+    }
+
+    #[test]
+    fn a_byte_order_mark_is_skipped_and_a_first_line_with_a_number_is_a_point() {
+        // Issue 27, case 6: both dropped the first point as a header.
+        let points = parse_str("\u{feff}1,2,3\n4,5,6\n").unwrap();
+        assert_eq!(points[0], Point3::new(1.0, 2.0, 3.0));
+        assert_eq!(points.len(), 2);
+        let points = parse_str("\u{feff}x,y,z\n4,5,6\n").unwrap();
+        assert_eq!(points, vec![Point3::new(4.0, 5.0, 6.0)]);
+        let err = parse_str("\u{2212}1.5 2 3\n4 5 6\n")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            err,
+            "pts.csv:1: `\u{2212}1.5` is not a number (U+2212 is a minus sign; write -): \
+             `\u{2212}1.5 2 3`"
+        );
     }
 
     #[test]

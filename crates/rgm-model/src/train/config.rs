@@ -160,14 +160,42 @@ impl TrainConfig {
             "workers must be positive"
         } else if self.checkpoint_every == 0 {
             "checkpoint_every must be positive"
-        } else if !(self.lr > 0.0 && self.lr.is_finite()) {
-            "lr must be a positive number"
         } else if self.match_points.is_some_and(|p| p <= self.network.k) {
             "match_points must exceed the network's K"
         } else {
-            return Ok(());
+            return self.validate_numbers();
         };
         Err(TrainError::Config { why: why.into() })
+    }
+
+    /// The real-valued settings in their ranges; NaN and infinity are refused by name (a NaN
+    /// would be saved in `config.json` as `null`, which no run can resume from).
+    fn validate_numbers(&self) -> Result<()> {
+        let checks: [(&str, f64, bool, &str); 4] = [
+            ("lr", self.lr, self.lr > 0.0, "a positive number"),
+            ("gamma", self.gamma, self.gamma > 0.0, "a positive number"),
+            (
+                "momentum",
+                self.momentum,
+                (0.0..1.0).contains(&self.momentum),
+                "a number from 0 up to 1 (1 excluded)",
+            ),
+            (
+                "weight_decay",
+                self.weight_decay,
+                self.weight_decay >= 0.0,
+                "a number from 0 up",
+            ),
+        ];
+        match checks
+            .iter()
+            .find(|(_, value, in_range, _)| !(value.is_finite() && *in_range))
+        {
+            Some((name, value, _, what)) => Err(TrainError::Config {
+                why: format!("{name} must be {what}, got {value}"),
+            }),
+            None => Ok(()),
+        }
     }
 
     /// Whether a run saved with `saved` can go on under `self`: everything equal but the

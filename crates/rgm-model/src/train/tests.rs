@@ -583,3 +583,55 @@ fn a_run_of_no_epoch_is_refused() {
         "training configuration: epochs must be positive"
     );
 }
+
+#[test]
+fn numeric_settings_out_of_range_are_refused_by_name() {
+    // Issue 27, case 10: a NaN gamma was accepted and saved as `null` in config.json (the run
+    // could never be resumed); a NaN momentum was refused by Sinkhorn's check.
+    let cases = [
+        (
+            TrainConfig {
+                gamma: f64::NAN,
+                ..config()
+            },
+            "gamma must be a positive number, got NaN",
+        ),
+        (
+            TrainConfig {
+                gamma: -0.2,
+                ..config()
+            },
+            "gamma must be a positive number, got -0.2",
+        ),
+        (
+            TrainConfig {
+                momentum: f64::NAN,
+                ..config()
+            },
+            "momentum must be a number from 0 up to 1 (1 excluded), got NaN",
+        ),
+        (
+            TrainConfig {
+                weight_decay: f64::INFINITY,
+                ..config()
+            },
+            "weight_decay must be a number from 0 up, got inf",
+        ),
+        (
+            TrainConfig {
+                lr: 0.0,
+                ..config()
+            },
+            "lr must be a positive number, got 0",
+        ),
+    ];
+    for (k, (bad, expected)) in cases.into_iter().enumerate() {
+        let dir = run_dir(&format!("numbers-{k}"));
+        let err = Trainer::open(bad, &dir).err().expect("refused");
+        assert_eq!(
+            err.to_string(),
+            format!("training configuration: {expected}")
+        );
+        assert!(!dir.join("config.json").exists(), "nothing saved");
+    }
+}
