@@ -11,7 +11,9 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use clap::{Parser, Subcommand, ValueEnum};
-use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
+use rgm_data::{
+    ModelNet40, PairGenerator, ScanFolder, ScanPair, ScanPairConfig, Setting, Shape, Split,
+};
 use rgm_model::{Method, MethodName, MethodOptions};
 
 /// Robust point-cloud registration (RGM, CVPR 2021) and classical baselines.
@@ -37,9 +39,11 @@ enum Command {
     /// and the transform is reported for the clouds as given.
     /// Reads PLY (ascii or binary), OFF, XYZ/CSV text and .npy files.
     Register(commands::register::Args),
-    /// Run a method over the ModelNet40 test pairs and print the paper's metrics.
+    /// Run a method over the ModelNet40 test pairs and print the paper's metrics, or over real
+    /// scan pairs (--scans) and print successes, median errors and time.
     Eval(commands::eval::Args),
-    /// Write the ModelNet40 test pairs (PLY + ground-truth JSON) for outside tools.
+    /// Write the ModelNet40 test pairs, or real scan pairs (--scans), as PLY files and
+    /// ground-truth JSON for outside tools.
     Pairs(commands::pairs::Args),
     /// Score transforms produced by an outside tool on the pairs written by `rgm pairs`.
     ///
@@ -246,7 +250,15 @@ pub enum SettingArg {
 pub struct DataArgs {
     /// The ModelNet40 `.npy` tree (e.g. ../shared/data/modelnet40_npy1024).
     #[arg(long, env = "RGM_DATA", value_name = "DIR")]
-    data: PathBuf,
+    data: Option<PathBuf>,
+    /// Real range scans instead of ModelNet40: folders in the Stanford layout (`.ply` or
+    /// `.ply.gz` scans and one `.conf` pose file, e.g. ../shared/data/stanford/bunny). The pairs
+    /// are the scans that overlap by ≥ 45 % (the share of each scan's points within 3 median
+    /// point spacings of the other under the ground truth, the smaller of the two), the source
+    /// turned by up to 45° about a random axis and shifted by up to half the object's radius
+    /// (seeded per pair); --setting, --unseen and --split do not apply.
+    #[arg(long, value_name = "DIR", num_args = 1..)]
+    scans: Vec<PathBuf>,
     /// The paper's test protocol to use.
     #[arg(long, value_enum, default_value = "partial")]
     setting: SettingArg,
@@ -289,8 +301,36 @@ impl From<SettingArg> for Setting {
 impl DataArgs {
     /// The dataset and the pair generator these options select.
     fn open(&self) -> anyhow::Result<(ModelNet40, PairGenerator)> {
-        let dataset = ModelNet40::open(&self.data)?;
+        let data = self
+            .data
+            .as_ref()
+            .context("--data DIR (or the RGM_DATA variable) names the ModelNet40 tree; --scans DIR names real scans")?;
+        let dataset = ModelNet40::open(data)?;
         Ok((dataset, PairGenerator::new(self.setting.into())))
+    }
+
+    /// The pairs of each --scans folder that `--every` and `--limit` select, with the folder's
+    /// name; the folders' reading warnings go to stderr.
+    fn scan_pairs(&self) -> anyhow::Result<Vec<(String, Vec<ScanPair>)>> {
+        let mut folders = Vec::new();
+        for dir in &self.scans {
+            let folder = ScanFolder::open(dir)?;
+            for warning in &folder.warnings {
+                eprintln!("rgm: {warning}");
+            }
+            let pairs: Vec<ScanPair> = folder
+                .pairs(&ScanPairConfig::default())
+                .into_iter()
+                .step_by(self.every as usize)
+                .take(self.limit.map_or(usize::MAX, |n| n as usize))
+                .collect();
+            let name = dir.file_name().map_or_else(
+                || dir.display().to_string(),
+                |n| n.to_string_lossy().into_owned(),
+            );
+            folders.push((name, pairs));
+        }
+        Ok(folders)
     }
 
     /// The shapes of the selected split (and categories), and the indices of the pairs that
@@ -323,6 +363,15 @@ impl DataArgs {
             }
         )
     }
+}
+
+/// The point cloud in `path`, the reading's warnings (stray PLY header lines) shown on stderr.
+pub fn read_cloud(path: &Path) -> anyhow::Result<rgm_geom::PointCloud> {
+    let (cloud, warnings) = rgm_data::read_point_cloud_warned(path)?;
+    for warning in warnings {
+        eprintln!("rgm: {warning}");
+    }
+    Ok(cloud)
 }
 
 /// A progress bar on stderr for `len` steps of `what` (hidden when stderr is not a terminal).
