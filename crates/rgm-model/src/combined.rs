@@ -19,7 +19,7 @@
 use std::borrow::Cow;
 
 use rgm_geom::fgr::{self, FgrConfig};
-use rgm_geom::refine::{self, RefineConfig};
+use rgm_geom::refine::{self, RefineConfig, ResolutionConfig};
 use rgm_geom::registration::score;
 use rgm_geom::{KnnIndex, PointCloud, RegistrationResult, RigidTransform};
 
@@ -150,7 +150,8 @@ impl CombinedRegistrar {
         }
     }
 
-    /// The best-scoring candidate's transform, scored as Open3D scores ICP on the clouds as
+    /// The best-scoring candidate's transform (refined, when the candidates are, by
+    /// [`refine::refine_at_resolution`] on the clouds as given), scored as Open3D scores ICP on the clouds as
     /// given (the refinement's finest distance, or [`SCORE_DISTANCE`], times the frame's
     /// scale); an error only when both candidates failed (naming both causes).
     pub fn register(
@@ -212,7 +213,7 @@ impl CombinedRegistrar {
                 }
             }
         }
-        let Some((_, transform, iterations)) = best else {
+        let Some((_, mut transform, mut iterations)) = best else {
             let why: Vec<String> = self
                 .candidates
                 .iter()
@@ -220,6 +221,21 @@ impl CombinedRegistrar {
                 .collect();
             return Err(MethodError::AllCandidatesFailed(why.join("; ")));
         };
+        if let Some(config) = &self.refine {
+            // The candidates were refined on the thinned clouds; the winner is refined further
+            // on the clouds as given, at their own point spacing (a no-op on clouds as sparse
+            // as the thinned ones).
+            let (fine, more) = refine::refine_at_resolution(
+                &fs,
+                &ft,
+                &fti,
+                &transform,
+                config.finest_distance(),
+                &ResolutionConfig::default(),
+            )?;
+            transform = fine;
+            iterations += more;
+        }
         let total = frame.undo(&transform);
         self.scoring_distance = self
             .refine
