@@ -150,8 +150,9 @@ impl CombinedRegistrar {
         }
     }
 
-    /// The best-scoring candidate's transform (refined, when the candidates are, by
-    /// [`refine::refine_at_resolution`] on the clouds as given), scored as Open3D scores ICP on the clouds as
+    /// The best-scoring candidate's transform (when the candidates are refined and the pair
+    /// was thinned, refined further by [`refine::refine_at_resolution`] on the clouds as
+    /// given), scored as Open3D scores ICP on the clouds as
     /// given (the refinement's finest distance, or [`SCORE_DISTANCE`], times the frame's
     /// scale); an error only when both candidates failed (naming both causes).
     pub fn register(
@@ -166,7 +167,8 @@ impl CombinedRegistrar {
         // candidate is scored on.
         let (fs, ft) = (frame.source(source), frame.target(target));
         let (fsi, fti) = (KnnIndex::new(&fs.points), KnnIndex::new(&ft.points));
-        let thinnings: &[Thinning] = if fs.len().max(ft.len()) > DENSITY_POINTS {
+        let dense = fs.len().max(ft.len()) > DENSITY_POINTS;
+        let thinnings: &[Thinning] = if dense {
             &[Thinning::Voxels, Thinning::Cells]
         } else {
             &[Thinning::Voxels] // leaves the clouds as they are
@@ -221,10 +223,11 @@ impl CombinedRegistrar {
                 .collect();
             return Err(MethodError::AllCandidatesFailed(why.join("; ")));
         };
-        if let Some(config) = &self.refine {
+        if let (Some(config), true) = (&self.refine, dense) {
             // The candidates were refined on the thinned clouds; the winner is refined further
-            // on the clouds as given, at their own point spacing (a no-op on clouds as sparse
-            // as the thinned ones).
+            // on the clouds as given, at their own point spacing. Clouds that were not thinned
+            // had that refinement already (their noise, as ModelNet40's, may exceed their
+            // spacing: stages finer than the coarse ones would fit noise).
             let (fine, more) = refine::refine_at_resolution(
                 &fs,
                 &ft,
