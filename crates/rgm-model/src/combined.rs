@@ -13,8 +13,9 @@
 //! radii and the refinement's distances, set for unit-sphere shapes, fit inputs of any size and
 //! density. A pair denser than the training clouds can be thinned many ways, none of them the
 //! sampling the benchmark's pairs share; both methods run on two thinnings of it
-//! ([`Thinning`]), four candidates scored alike on the dense clouds. The transform is reported
-//! for the clouds as given.
+//! ([`Thinning`]), four candidates scored alike on the dense clouds — unless the two agree on
+//! the first thinning ([`agree`]), which leaves nothing for the second to fix. The transform is
+//! reported for the clouds as given.
 
 use std::borrow::Cow;
 
@@ -96,6 +97,19 @@ pub fn thinned(cloud: &PointCloud, how: Thinning) -> Cow<'_, PointCloud> {
     })
 }
 
+/// Two transforms (in the unit-sphere frame) within [`AGREEMENT`] of each other: rotations
+/// less than its degrees apart, and moving the frame's centre to points less than its
+/// distance apart.
+pub fn agree(a: &RigidTransform, b: &RigidTransform) -> bool {
+    let (degrees, distance) = AGREEMENT;
+    a.inverse().compose(b).rotation_angle_deg() < degrees
+        && (a.translation - b.translation).norm() < distance
+}
+
+/// How close RGM's and FGR's transforms on a dense pair's first thinning must be for the
+/// second thinning to be skipped: (degrees, unit-sphere distance).
+pub const AGREEMENT: (f64, f64) = (1.0, 0.02);
+
 /// Share of the points of each cloud that the transform brings within [`SCORE_DISTANCE`] of
 /// the other cloud, source → target plus target → source (0 to 2). Counting both ways rewards
 /// an overlap that both clouds agree on, where a one-way fitness is fooled by a small cloud
@@ -176,6 +190,7 @@ impl CombinedRegistrar {
         let mut best: Option<(f64, RigidTransform, usize)> = None; // score, transform, iterations
         for &how in thinnings {
             let (s, t) = (thinned(&fs, how), thinned(&ft, how));
+            let mut found = Vec::with_capacity(2); // this thinning's transforms, in the frame
             let starts = [
                 self.rgm.register(&s, &t).map(|r| r.t_target_source),
                 fgr::register(&s, &t, &self.fgr)
@@ -184,15 +199,16 @@ impl CombinedRegistrar {
             ];
             for (k, start) in starts.into_iter().enumerate() {
                 let method = self.candidate_name(k == 0, how);
-                let found = start.and_then(|start| match &self.refine {
+                let outcome = start.and_then(|start| match &self.refine {
                     Some(config) => {
                         let refined = refine::refine(&s, &t, &start, config)?;
                         Ok((refined.t_target_source, refined.iterations))
                     }
                     None => Ok((start, 0)),
                 });
-                match found {
+                match outcome {
                     Ok((transform, iterations)) => {
+                        found.push(transform);
                         let value = overlap_score((&fs, &fsi), (&ft, &fti), &transform);
                         // Ties go to the earlier candidate: RGM, and the first thinning.
                         if best.is_none_or(|(b, _, _)| value > b) {
@@ -212,6 +228,13 @@ impl CombinedRegistrar {
                         score: None,
                         failure: Some(err.to_string()),
                     }),
+                }
+            }
+            // Two independent methods landing on one transform leave nothing for a second
+            // thinning to fix: a dense pair is thinned the second way only when they disagree.
+            if let [a, b] = found.as_slice() {
+                if agree(a, b) {
+                    break;
                 }
             }
         }
