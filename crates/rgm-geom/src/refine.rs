@@ -294,7 +294,7 @@ pub struct ResolutionConfig {
     /// Most iterations per stage (default 30).
     pub iterations: usize,
     /// A stage ends once a step moves no point by more than this share of a point spacing
-    /// (default 1e-3, for a cloud within distance 1 of the origin).
+    /// (default 1e-2, for a cloud within distance 1 of the origin).
     pub negligible: f64,
     /// Points sampled to measure the spacing (default 2,000).
     pub spacing_sample: usize,
@@ -306,7 +306,7 @@ impl Default for ResolutionConfig {
             spacings: vec![4.0, 2.0],
             noise_sigmas: 3.0,
             iterations: 30,
-            negligible: 1e-3,
+            negligible: 1e-2,
             spacing_sample: 2000,
         }
     }
