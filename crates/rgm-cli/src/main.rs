@@ -37,7 +37,9 @@ enum Command {
     /// are thinned to 1,024 (two ways by default, each method running on both: four candidates,
     /// those of the second thinning named …/cells), RGM matches on 384 random points of each,
     /// and the transform is reported for the clouds as given.
-    /// Reads PLY (ascii or binary), OFF, XYZ/CSV text and .npy files.
+    /// The winner on a thinned pair is refined further on the clouds as given, point to plane
+    /// at their own point spacing. Reads PLY (ascii or binary), OFF, XYZ/CSV text and .npy
+    /// files, gzip-compressed ones too (`scan.ply.gz`).
     Register(commands::register::Args),
     /// Run a method over the ModelNet40 test pairs and print the paper's metrics, or over real
     /// scan pairs (--scans) and print successes, median errors and time.
@@ -154,7 +156,9 @@ pub struct MethodArgs {
     /// Refine the transform of RGM or FGR (both with auto) with ICP on the full clouds: trimmed
     /// point-to-plane with pairs closer than 0.2, then 0.1, then 0.05, and point-to-point at
     /// 0.05, then 0.03 (RGM and auto measure them in the unit-sphere frame, FGR alone in the
-    /// clouds' own units, like its own radii, which suit unit-sized shapes). On by default in
+    /// clouds' own units, like its own radii, which suit unit-sized shapes); with auto on clouds
+    /// denser than 1,024 points, then point-to-plane on the clouds as given at 4 and 2 point
+    /// spacings and at 3 noise σ (rgm_geom::refine::refine_at_resolution). On by default in
     /// `rgm register` and `rgm render`; `rgm eval` follows the paper's protocol and refines only
     /// when asked.
     #[arg(long, overrides_with = "no_refine")]
