@@ -320,7 +320,7 @@ pub struct ResolutionConfig {
     pub negligible: f64,
     /// Points sampled to measure the spacing (default 2,000).
     pub spacing_sample: usize,
-    /// Most source points fitted, taken at an even stride (default 20,000).
+    /// Most source points fitted, taken at an even stride (default 50,000: a whole scan).
     pub max_source_points: usize,
 }
 
@@ -332,7 +332,7 @@ impl Default for ResolutionConfig {
             iterations: 30,
             negligible: 1e-2,
             spacing_sample: 2000,
-            max_source_points: 20_000,
+            max_source_points: 50_000,
         }
     }
 }
