@@ -303,8 +303,8 @@ pub fn median_spacing(points: &[Point3<f64>], index: &KnnIndex, sample: usize) -
 }
 
 /// Settings of [`refine_at_resolution`]: every distance is a multiple of the clouds' own
-/// point spacing (the target's median nearest-neighbour distance), so the stages fit a scan
-/// whose points lie 0.2 % of its size apart as they fit a sparse synthetic cloud.
+/// point spacing (the target's median nearest-neighbour distance), so the stages fit a dense
+/// scan as they fit a sparse synthetic cloud.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ResolutionConfig {
     /// Correspondence distance of each point-to-plane stage, in point spacings (default 4, 2).
