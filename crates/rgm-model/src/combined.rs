@@ -296,6 +296,21 @@ mod tests {
     use rgm_geom::{Point3, Vector3};
 
     #[test]
+    fn transforms_agree_within_a_degree_and_a_fiftieth() {
+        let turn = |deg: f64, shift: f64| {
+            RigidTransform::new(
+                rgm_geom::euler::rotation_xyz_intrinsic(0.0, 0.0, deg.to_radians()),
+                Vector3::new(shift, 0.0, 0.0),
+            )
+        };
+        let a = turn(10.0, 0.1);
+        assert!(agree(&a, &turn(10.9, 0.1)));
+        assert!(agree(&a, &turn(10.0, 0.119)));
+        assert!(!agree(&a, &turn(11.1, 0.1)));
+        assert!(!agree(&a, &turn(10.0, 0.121)));
+    }
+
+    #[test]
     fn overlap_counts_both_ways() {
         // 10 points 0.1 apart on a line, and its first 4 points.
         let line = PointCloud::new(
