@@ -11,7 +11,9 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use clap::{Parser, Subcommand, ValueEnum};
-use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
+use rgm_data::{
+    ModelNet40, PairGenerator, ScanFolder, ScanPair, ScanPairConfig, Setting, Shape, Split,
+};
 use rgm_geom::refine::RefineConfig;
 use rgm_model::network::TestStatistics;
 use rgm_model::{Method, MethodName, MethodOptions};
@@ -38,11 +40,15 @@ enum Command {
     /// are thinned to 1,024 (two ways by default, each method running on both: four candidates,
     /// those of the second thinning named …/cells), RGM matches on 384 random points of each,
     /// and the transform is reported for the clouds as given.
-    /// Reads PLY (ascii or binary), OFF, XYZ/CSV text and .npy files.
+    /// The winner on a thinned pair is refined further on the clouds as given, point to plane
+    /// at their own point spacing. Reads PLY (ascii or binary), OFF, XYZ/CSV text and .npy
+    /// files, gzip-compressed ones too (`scan.ply.gz`).
     Register(commands::register::Args),
-    /// Run a method over the ModelNet40 test pairs and print the paper's metrics.
+    /// Run a method over the ModelNet40 test pairs and print the paper's metrics, or over real
+    /// scan pairs (--scans) and print successes, median errors and time.
     Eval(commands::eval::Args),
-    /// Write the ModelNet40 test pairs (PLY + ground-truth JSON) for outside tools.
+    /// Write the ModelNet40 test pairs, or real scan pairs (--scans), as PLY files and
+    /// ground-truth JSON for outside tools.
     Pairs(commands::pairs::Args),
     /// Score transforms produced by an outside tool on the pairs written by `rgm pairs`.
     ///
@@ -149,7 +155,9 @@ fn refine_help() -> String {
         "Refine the transform of RGM or FGR (both with auto) with ICP on the full clouds: \
          trimmed point-to-plane with pairs closer than {}, and point-to-point at {} (RGM and \
          auto measure them in the unit-sphere frame, FGR alone in the clouds' own units, like \
-         its own radii, which suit unit-sized shapes). On by default in `rgm register` and \
+         its own radii, which suit unit-sized shapes); with auto on clouds denser than 1,024 \
+         points, then point-to-plane on the clouds as given at a few point spacings and at 3 \
+         noise σ (rgm_geom::refine::refine_at_resolution). On by default in `rgm register` and \
          `rgm render`; `rgm eval` follows the paper's protocol and refines only when asked",
         then(&refine.distances),
         then(&refine.point_distances)
@@ -233,7 +241,15 @@ pub fn register_files(
 pub struct DataArgs {
     /// The ModelNet40 `.npy` tree (e.g. ../shared/data/modelnet40_npy1024).
     #[arg(long, env = "RGM_DATA", value_name = "DIR")]
-    data: PathBuf,
+    data: Option<PathBuf>,
+    /// Real range scans instead of ModelNet40: folders in the Stanford layout (`.ply` or
+    /// `.ply.gz` scans and one `.conf` pose file, e.g. ../shared/data/stanford/bunny). The pairs
+    /// are the scans that overlap by ≥ 45 % (the share of each scan's points within 3 median
+    /// point spacings of the other under the ground truth, the smaller of the two), the source
+    /// turned by up to 45° about a random axis and shifted by up to half the object's radius
+    /// (seeded per pair); --setting, --unseen and --split do not apply.
+    #[arg(long, value_name = "DIR", num_args = 1..)]
+    scans: Vec<PathBuf>,
     /// The paper's test protocol to use.
     #[arg(long, value_enum, default_value_t = Setting::Partial)]
     setting: Setting,
@@ -257,8 +273,36 @@ pub struct DataArgs {
 impl DataArgs {
     /// The dataset and the pair generator these options select.
     fn open(&self) -> anyhow::Result<(ModelNet40, PairGenerator)> {
-        let dataset = ModelNet40::open(&self.data)?;
+        let data = self.data.as_ref().context(
+            "--data DIR (or the RGM_DATA variable) names the ModelNet40 tree; --scans DIR names \
+             real scans",
+        )?;
+        let dataset = ModelNet40::open(data)?;
         Ok((dataset, PairGenerator::new(self.setting)))
+    }
+
+    /// The pairs of each --scans folder that `--every` and `--limit` select, with the folder's
+    /// name; the folders' reading warnings go to stderr.
+    fn scan_pairs(&self) -> anyhow::Result<Vec<(String, Vec<ScanPair>)>> {
+        let mut folders = Vec::new();
+        for dir in &self.scans {
+            let folder = ScanFolder::open(dir)?;
+            for warning in &folder.warnings {
+                eprintln!("rgm: {warning}");
+            }
+            let pairs: Vec<ScanPair> = folder
+                .pairs(&ScanPairConfig::default())
+                .into_iter()
+                .step_by(self.every as usize)
+                .take(self.limit.map_or(usize::MAX, |n| n as usize))
+                .collect();
+            let name = dir.file_name().map_or_else(
+                || dir.display().to_string(),
+                |n| n.to_string_lossy().into_owned(),
+            );
+            folders.push((name, pairs));
+        }
+        Ok(folders)
     }
 
     /// The shapes of the selected split (and categories), and the indices of the pairs that
@@ -286,6 +330,15 @@ impl DataArgs {
             }
         )
     }
+}
+
+/// The point cloud in `path`, the reading's warnings (stray PLY header lines) shown on stderr.
+pub fn read_cloud(path: &Path) -> anyhow::Result<rgm_geom::PointCloud> {
+    let (cloud, warnings) = rgm_data::read_point_cloud_warned(path)?;
+    for warning in warnings {
+        eprintln!("rgm: {warning}");
+    }
+    Ok(cloud)
 }
 
 /// A progress bar on stderr for `len` steps of `what` (hidden when stderr is not a terminal).

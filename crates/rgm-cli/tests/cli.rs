@@ -484,3 +484,136 @@ fn eval_of_rgm_without_weights_uses_the_built_in_model() {
     let cells: Vec<&str> = row.split('|').map(str::trim).collect();
     assert_eq!((cells[2], cells[3]), ("partial", "2"), "{row}");
 }
+
+/// A scan folder in the Stanford layout: the surface of a cube seen three ways (each scan the
+/// points with one coordinate ≥ −0.3), each in its own frame, one gzip-compressed.
+fn cube_scans(dir: &Path) {
+    let grid: Vec<f64> = (0..=12).map(|i| -0.5 + i as f64 / 12.0).collect();
+    let mut cube = Vec::new();
+    for axis in 0..3 {
+        for side in [-0.5, 0.5] {
+            for &u in &grid {
+                for &v in &grid {
+                    let mut p = [u, v, u];
+                    p[axis] = side;
+                    p[(axis + 1) % 3] = u;
+                    p[(axis + 2) % 3] = v;
+                    cube.push(rgm_geom::Point3::new(p[0], p[1], p[2]));
+                }
+            }
+        }
+    }
+    let mut conf = String::from("camera 0 0 0 0 0 0 1\n");
+    for k in 0..3 {
+        // Pose: p_world = R(q)ᵀ p + t with q = (0, 0, sin θ/2, cos θ/2), θ = 30° k.
+        let half = (15.0 * k as f64).to_radians();
+        let t = Vector3::new(0.1 * k as f64, -0.2, 0.05);
+        let rt = rgm_geom::Matrix3::new(
+            half.cos().powi(2) - half.sin().powi(2),
+            2.0 * half.sin() * half.cos(),
+            0.0,
+            -2.0 * half.sin() * half.cos(),
+            half.cos().powi(2) - half.sin().powi(2),
+            0.0,
+            0.0,
+            0.0,
+            1.0,
+        ); // R(q)ᵀ
+        let pose = RigidTransform::new(rt, t);
+        let seen: Vec<_> = cube
+            .iter()
+            .filter(|p| p[k] >= -0.3)
+            .map(|p| pose.inverse().apply(p))
+            .collect();
+        let name = format!("view{k}.ply");
+        let file = if k == 1 {
+            format!("{name}.gz")
+        } else {
+            name.clone()
+        };
+        write_point_cloud(dir.join(file), &rgm_geom::PointCloud::new(seen)).unwrap();
+        conf += &format!(
+            "bmesh {name} {} {} {} 0 0 {} {}\n",
+            t.x,
+            t.y,
+            t.z,
+            half.sin(),
+            half.cos()
+        );
+    }
+    std::fs::write(dir.join("cube.conf"), conf).unwrap();
+}
+
+#[test]
+fn scan_pairs_are_written_scored_and_evaluated() {
+    let dir = scratch("scans");
+    let scans = dir.join("cube");
+    std::fs::create_dir_all(&scans).unwrap();
+    cube_scans(&scans);
+    let out = dir.join("pairs");
+    let text = stdout(&rgm(&[
+        "pairs",
+        "--scans",
+        scans.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]));
+    assert!(text.contains("wrote 3 pairs"), "{text}");
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("cube/pairs.json")).unwrap())
+            .unwrap();
+    let pairs = manifest["pairs"].as_array().unwrap();
+    assert_eq!(pairs[0]["source_scan"], "view0.ply");
+    assert_eq!(pairs[0]["target_scan"], "view1.ply");
+    // The cube's diagonal, √3, up to the float32 of the files.
+    let diagonal = pairs[0]["diagonal"].as_f64().unwrap();
+    assert!((diagonal - 3f64.sqrt()).abs() < 1e-6, "{diagonal}");
+    // The ground truth scores perfectly; a transform 1.5° off succeeds at 2° only.
+    let off = RigidTransform::new(
+        rotation_xyz_intrinsic(1.5f64.to_radians(), 0.0, 0.0),
+        Vector3::zeros(),
+    );
+    for (name, tilt, at_2, at_1) in [
+        ("truth", RigidTransform::identity(), "3 / 3", "3 / 3"),
+        ("tilted", off, "3 / 3", "0 / 3"),
+    ] {
+        let found: Vec<serde_json::Value> = pairs
+            .iter()
+            .map(|p| {
+                let truth =
+                    parse_transform(&serde_json::json!({"transform": p["t_target_source"]}));
+                let moved = truth.compose(&tilt).to_rows();
+                serde_json::json!({"index": p["index"], "transform": moved, "time_ms": 1.0})
+            })
+            .collect();
+        let file = dir.join(format!("{name}.json"));
+        let json = serde_json::json!({"method": name, "pairs": found});
+        std::fs::write(&file, json.to_string()).unwrap();
+        let pairs_dir = out.join("cube");
+        let text = stdout(&rgm(&[
+            "score",
+            file.to_str().unwrap(),
+            "--pairs",
+            pairs_dir.to_str().unwrap(),
+        ]));
+        let row = text
+            .lines()
+            .find(|l| l.starts_with(&format!("| {name}")))
+            .unwrap();
+        let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+        assert_eq!(&cells[2..6], ["cube", "3", at_2, at_1], "{row}");
+    }
+    let text = stdout(&rgm(&[
+        "eval",
+        "--scans",
+        scans.to_str().unwrap(),
+        "--method",
+        "icp",
+    ]));
+    let row = text
+        .lines()
+        .find(|l| l.starts_with("| icp"))
+        .expect("a row");
+    let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+    assert_eq!(&cells[2..4], ["cube", "3"], "{row}");
+}

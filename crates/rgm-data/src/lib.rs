@@ -11,9 +11,13 @@ pub mod io;
 pub mod memory;
 pub mod modelnet;
 pub mod pairs;
+pub mod scans;
 
 pub use correspondence::Correspondence;
 pub use error::{DataError, Result};
-pub use io::{read_point_cloud, read_regular_file, write_point_cloud};
+pub use io::{
+    read_point_cloud, read_point_cloud_warned, read_regular_file, write_point_cloud, Warning,
+};
 pub use modelnet::{ModelNet40, Shape, Split};
 pub use pairs::{Pair, PairConfig, PairGenerator, Setting};
+pub use scans::{ScanFolder, ScanPair, ScanPairConfig};

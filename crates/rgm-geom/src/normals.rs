@@ -66,6 +66,19 @@ pub fn normals_from_neighbourhoods(
         .collect()
 }
 
+/// The unit normal at `points[i]` as [`estimate_normals`] finds it, but unoriented (a sign
+/// that point-to-plane fitting does not see): for the few points of a large cloud that need
+/// one. `index` must index `points`.
+pub fn normal_at(
+    points: &[Point3<f64>],
+    index: &KnnIndex,
+    i: usize,
+    config: &NormalsConfig,
+) -> Vector3<f64> {
+    let around = index.hybrid(&points[i], config.radius, config.max_nn);
+    pca_normal(points, &around).unwrap_or_else(Vector3::z)
+}
+
 /// The unit eigenvector of the smallest eigenvalue of the neighbours' covariance; `None` with
 /// fewer than 3 neighbours or a zero covariance (Open3D then uses (0, 0, 1)). Computed as Open3D
 /// does, operation for operation (one-pass covariance in neighbour order, then the closed-form
@@ -227,6 +240,25 @@ fn eigenvector_in_complement(a: &Matrix3<f64>, e: &Vector3<f64>, lambda: f64) ->
 mod tests {
     use super::*;
     use crate::testing::box_surface;
+
+    #[test]
+    fn a_normal_at_one_point_is_the_estimated_one_up_to_sign() {
+        let cloud = box_surface(2000, 6);
+        let index = KnnIndex::new(&cloud.points);
+        let config = NormalsConfig {
+            radius: 0.1,
+            max_nn: 20,
+        };
+        let normals = estimate_normals(&cloud.points, &index, &config);
+        for i in (0..cloud.len()).step_by(37) {
+            let one = normal_at(&cloud.points, &index, i, &config);
+            assert!(
+                one == normals[i] || one == -normals[i],
+                "{i}: {one} vs {}",
+                normals[i]
+            );
+        }
+    }
 
     #[test]
     fn box_faces_get_their_outward_axis() {

@@ -13,13 +13,14 @@
 //! radii and the refinement's distances, set for unit-sphere shapes, fit inputs of any size and
 //! density. A pair denser than the training clouds can be thinned many ways, none of them the
 //! sampling the benchmark's pairs share; both methods run on two thinnings of it
-//! ([`Thinning`]), four candidates scored alike on the dense clouds. The transform is reported
-//! for the clouds as given.
+//! ([`Thinning`]), four candidates scored alike on the dense clouds — unless the two agree on
+//! the first thinning ([`agree`]), which leaves nothing for the second to fix. The transform is
+//! reported for the clouds as given.
 
 use std::borrow::Cow;
 
 use rgm_geom::fgr::{self, FgrConfig};
-use rgm_geom::refine::{self, RefineConfig};
+use rgm_geom::refine::{self, RefineConfig, ResolutionConfig};
 use rgm_geom::registration::{score, Score};
 use rgm_geom::{KnnIndex, PointCloud, RegistrationResult, RigidTransform};
 
@@ -102,6 +103,19 @@ pub fn thinned(cloud: &PointCloud, how: Thinning) -> Cow<'_, PointCloud> {
     })
 }
 
+/// Two transforms (in the unit-sphere frame) within [`AGREEMENT`] of each other: rotations
+/// less than its degrees apart, and moving the frame's centre to points less than its
+/// distance apart.
+pub fn agree(a: &RigidTransform, b: &RigidTransform) -> bool {
+    let (degrees, distance) = AGREEMENT;
+    a.inverse().compose(b).rotation_angle_deg() < degrees
+        && (a.translation - b.translation).norm() < distance
+}
+
+/// How close RGM's and FGR's transforms on a dense pair's first thinning must be for the
+/// second thinning to be skipped: (degrees, unit-sphere distance).
+pub const AGREEMENT: (f64, f64) = (1.0, 0.02);
+
 /// Share of the points of each cloud that the transform brings within [`SCORE_DISTANCE`] of
 /// the other cloud, source → target plus target → source (0 to 2). Counting both ways rewards
 /// an overlap that both clouds agree on, where a one-way fitness is fooled by a small cloud
@@ -157,7 +171,9 @@ impl CombinedRegistrar {
         }
     }
 
-    /// The best-scoring candidate's transform, scored as Open3D scores ICP on the clouds as
+    /// The best-scoring candidate's transform (when the candidates are refined and the pair
+    /// was thinned, refined further by [`refine::refine_at_resolution`] on the clouds as
+    /// given), scored as Open3D scores ICP on the clouds as
     /// given (the refinement's finest distance, or [`SCORE_DISTANCE`], times the frame's
     /// scale); an error only when both candidates failed (naming both causes).
     pub fn register(
@@ -174,7 +190,8 @@ impl CombinedRegistrar {
         let fs = frame.source(&source.select(&near(source)));
         let ft = frame.target(&target.select(&near(target)));
         let (fsi, fti) = (KnnIndex::new(&fs.points), KnnIndex::new(&ft.points));
-        let thinnings: &[Thinning] = if fs.len().max(ft.len()) > DENSITY_POINTS {
+        let dense = fs.len().max(ft.len()) > DENSITY_POINTS;
+        let thinnings: &[Thinning] = if dense {
             &[Thinning::Voxels, Thinning::Cells]
         } else {
             &[Thinning::Voxels] // leaves the clouds as they are
@@ -182,6 +199,7 @@ impl CombinedRegistrar {
         let mut best: Option<(f64, RigidTransform, usize)> = None; // score, transform, iterations
         for &how in thinnings {
             let (s, t) = (thinned(&fs, how), thinned(&ft, how));
+            let mut found = Vec::with_capacity(2); // this thinning's transforms, in the frame
             let starts = [
                 self.rgm.register(&s, &t).map(|r| r.t_target_source),
                 fgr::register(&s, &t, &self.fgr)
@@ -190,15 +208,16 @@ impl CombinedRegistrar {
             ];
             for (k, start) in starts.into_iter().enumerate() {
                 let method = self.candidate_name(k == 0, how);
-                let found = start.and_then(|start| match &self.refine {
+                let outcome = start.and_then(|start| match &self.refine {
                     Some(config) => {
                         let refined = refine::refine(&s, &t, &start, config)?;
                         Ok((refined.t_target_source, refined.iterations))
                     }
                     None => Ok((start, 0)),
                 });
-                match found {
+                match outcome {
                     Ok((transform, iterations)) => {
+                        found.push(transform);
                         let value = overlap_score((&fs, &fsi), (&ft, &fti), &transform);
                         // Ties go to the earlier candidate: RGM, and the first thinning.
                         if best.is_none_or(|(b, _, _)| value > b) {
@@ -220,8 +239,15 @@ impl CombinedRegistrar {
                     }),
                 }
             }
+            // Two independent methods landing on one transform leave nothing for a second
+            // thinning to fix: a dense pair is thinned the second way only when they disagree.
+            if let [a, b] = found.as_slice() {
+                if agree(a, b) {
+                    break;
+                }
+            }
         }
-        let Some((_, transform, iterations)) = best else {
+        let Some((_, mut transform, mut iterations)) = best else {
             let why: Vec<String> = self
                 .candidates
                 .iter()
@@ -229,6 +255,22 @@ impl CombinedRegistrar {
                 .collect();
             return Err(MethodError::AllCandidatesFailed(why.join("; ")));
         };
+        if let (Some(config), true) = (&self.refine, dense) {
+            // The candidates were refined on the thinned clouds; the winner is refined further
+            // on the clouds as given, at their own point spacing. Clouds that were not thinned
+            // had that refinement already (their noise, as ModelNet40's, may exceed their
+            // spacing: stages finer than the coarse ones would fit noise).
+            let (fine, more) = refine::refine_at_resolution(
+                &fs,
+                &ft,
+                &fti,
+                &transform,
+                config.finest_distance(),
+                &ResolutionConfig::default(),
+            )?;
+            transform = fine;
+            iterations += more;
+        }
         // Scored in the network's frame (squared distances at the caller's scale may overflow),
         // on every point given.
         let distance = self
@@ -291,6 +333,21 @@ impl CombinedRegistrar {
 mod tests {
     use super::*;
     use rgm_geom::{Point3, Vector3};
+
+    #[test]
+    fn transforms_agree_within_a_degree_and_a_fiftieth() {
+        let turn = |deg: f64, shift: f64| {
+            RigidTransform::new(
+                rgm_geom::euler::rotation_xyz_intrinsic(0.0, 0.0, deg.to_radians()),
+                Vector3::new(shift, 0.0, 0.0),
+            )
+        };
+        let a = turn(10.0, 0.1);
+        assert!(agree(&a, &turn(10.9, 0.1)));
+        assert!(agree(&a, &turn(10.0, 0.119)));
+        assert!(!agree(&a, &turn(11.1, 0.1)));
+        assert!(!agree(&a, &turn(10.0, 0.121)));
+    }
 
     #[test]
     fn overlap_counts_both_ways() {

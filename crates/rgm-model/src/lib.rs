@@ -21,7 +21,7 @@ pub mod weights;
 
 pub use combined::{Candidate, CombinedRegistrar};
 pub use error::MethodError;
-pub use evaluate::{PairRecord, Summary};
+pub use evaluate::{PairRecord, ScanRecord, Summary};
 pub use method::{Method, Registration};
 pub use options::{MethodName, MethodOptions};
 pub use pipeline::{Normalisation, PipelineConfig, RgmRegistrar, StageTimes};

@@ -142,10 +142,10 @@ fn a_pair_at_half_and_at_twice_the_size_gets_the_same_transform() {
 }
 
 #[test]
-fn a_dense_pair_gets_both_methods_on_two_thinnings_scored_alike() {
+fn a_dense_pair_whose_methods_agree_is_thinned_once_and_refined_at_its_resolution() {
     // Each point of the clean pair made four, 0.003 apart along fixed directions: 4,096 points
-    // a cloud, more than the training clouds' 1,024, so both methods run on the voxel and on
-    // the cell thinning.
+    // a cloud, more than the training clouds' 1,024, so both methods run on the voxel
+    // thinning; they agree on this clean pair, so the cell thinning is skipped.
     let pair = clean_pair();
     let dense = |c: &PointCloud| {
         let offsets = [
@@ -170,19 +170,17 @@ fn a_dense_pair_gets_both_methods_on_two_thinnings_scored_alike() {
     let mut method = MethodOptions::default().build().unwrap();
     let found = method.register(&source, &target).unwrap();
     let names: Vec<&str> = found.candidates.iter().map(|c| c.method).collect();
-    assert_eq!(
-        names,
-        ["rgm+icp", "fgr+icp", "rgm+icp/cells", "fgr+icp/cells"]
-    );
+    assert_eq!(names, ["rgm+icp", "fgr+icp"]);
     let scores: Vec<f64> = found.candidates.iter().map(|c| c.score.unwrap()).collect();
     let chosen = found.chosen.unwrap();
     assert!(scores.iter().all(|&s| s <= scores[chosen]), "{scores:?}");
     // Scored on the dense clouds: the right transform overlaps nearly every point both ways.
     assert!(scores[chosen] > 1.9, "{scores:?}");
-    assert_eq!(
-        found.result.t_target_source,
-        found.candidates[chosen].t_target_source
-    );
+    // The winner, refined further on the dense clouds: moved, but by little.
+    let result = found.result.t_target_source;
+    let winner = found.candidates[chosen].t_target_source;
+    assert_ne!(result, winner);
+    assert!(winner.inverse().compose(&result).rotation_angle_deg() < 1.0);
     let metrics = PairMetrics::compute(
         &found.result.t_target_source,
         &pair.t_target_source,

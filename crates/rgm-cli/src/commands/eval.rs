@@ -1,4 +1,5 @@
-//! `rgm eval`: a method over the ModelNet40 test pairs, scored with the paper's metrics.
+//! `rgm eval`: a method over the ModelNet40 test pairs, scored with the paper's metrics, or
+//! over real scan pairs (`--scans`), scored by success rates, median errors and time.
 
 use std::path::PathBuf;
 
@@ -6,7 +7,10 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::Result;
 use rayon::prelude::*;
-use rgm_model::evaluate::{evaluate_pair, PairRecord};
+use rgm_model::evaluate::{
+    evaluate_pair, evaluate_scan_pair, scan_table_header, scan_table_row, PairRecord, ScanRecord,
+};
+use rgm_model::Method;
 
 use crate::{progress, table, DataArgs, MethodArgs};
 
@@ -26,21 +30,29 @@ pub struct Args {
     workers: Option<u16>,
 }
 
-pub fn run(args: Args) -> Result<()> {
-    if let Some(json) = &args.json {
-        crate::check_writable(json)?;
-    }
-    let (dataset, generator) = args.data.open()?;
-    let (shapes, indices) = args.data.shapes(&dataset);
-    let method = args.method.build(crate::Defaults::Paper)?;
-    let bar = progress(indices.len(), method.name());
-    let recalled = AtomicUsize::new(0);
-    let pool = rayon::ThreadPoolBuilder::new()
+/// The pool of `--workers` threads.
+fn pool(args: &Args) -> Result<rayon::ThreadPool> {
+    Ok(rayon::ThreadPoolBuilder::new()
         .num_threads(args.workers.map_or(0, usize::from))
         .start_handler(|_| {
             rgm_nn::threads::flush_denormals_to_zero();
         })
-        .build()?;
+        .build()?)
+}
+
+pub fn run(args: Args) -> Result<()> {
+    if let Some(json) = &args.json {
+        crate::check_writable(json)?;
+    }
+    let method = args.method.build(crate::Defaults::Paper)?;
+    if !args.data.scans.is_empty() {
+        return run_scans(&args, &method);
+    }
+    let (dataset, generator) = args.data.open()?;
+    let (shapes, indices) = args.data.shapes(&dataset);
+    let bar = progress(indices.len(), method.name());
+    let recalled = AtomicUsize::new(0);
+    let pool = pool(&args)?;
     let records: Vec<PairRecord> = pool.install(|| {
         indices
             .par_iter()
@@ -69,5 +81,61 @@ pub fn run(args: Args) -> Result<()> {
         &records,
         args.json.as_deref(),
     )?;
+    Ok(())
+}
+
+/// `rgm eval --scans`: one table row per folder, and one for all when there are several.
+fn run_scans(args: &Args, method: &Method) -> Result<()> {
+    let folders = args.data.scan_pairs()?;
+    let total: usize = folders.iter().map(|(_, pairs)| pairs.len()).sum();
+    let bar = progress(total, method.name());
+    let pool = pool(args)?;
+    let mut results: Vec<(String, Vec<ScanRecord>)> = Vec::new();
+    for (name, pairs) in folders {
+        let records: Vec<ScanRecord> = pool.install(|| {
+            pairs
+                .par_iter()
+                .map_init(
+                    || method.clone(),
+                    |method, pair| {
+                        let record = evaluate_scan_pair(method, pair);
+                        bar.inc(1);
+                        record
+                    },
+                )
+                .collect()
+        });
+        results.push((name, records));
+    }
+    bar.finish_and_clear();
+    println!("{}", scan_table_header());
+    for (name, records) in &results {
+        if let Some(row) = scan_table_row(method.name(), name, records) {
+            println!("{row}");
+        }
+    }
+    if results.len() > 1 {
+        let all: Vec<ScanRecord> = results.iter().flat_map(|(_, r)| r.clone()).collect();
+        if let Some(row) = scan_table_row(method.name(), "all", &all) {
+            println!("{row}");
+        }
+    }
+    let failures: usize = results
+        .iter()
+        .map(|(_, r)| r.iter().filter(|r| r.failure.is_some()).count())
+        .sum();
+    if failures > 0 {
+        println!("({failures} of {total} pairs failed and were scored as the identity)");
+    }
+    if let Some(path) = &args.json {
+        let folders: Vec<serde_json::Value> = results
+            .iter()
+            .map(|(name, records)| serde_json::json!({"scans": name, "pairs": records}))
+            .collect();
+        let value = serde_json::json!({"method": method.name(), "folders": folders});
+        std::fs::write(path, serde_json::to_string_pretty(&value)?)
+            .map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))?;
+        println!("wrote per-pair results to {}", path.display());
+    }
     Ok(())
 }

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
-use rgm_data::{read_point_cloud, write_point_cloud};
+use rgm_data::write_point_cloud;
 
 use crate::MethodArgs;
 
@@ -29,8 +29,8 @@ pub fn run(args: Args) -> Result<()> {
         rgm_data::io::Format::from_path(out)?;
         crate::check_writable(out)?;
     }
-    let source = read_point_cloud(&args.source)?;
-    let target = read_point_cloud(&args.target)?;
+    let source = crate::read_cloud(&args.source)?;
+    let target = crate::read_cloud(&args.target)?;
     let mut method = args.method.build(crate::Defaults::Register)?;
     let registration = crate::register_files(
         &mut method,

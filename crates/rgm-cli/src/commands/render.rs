@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use rgm_data::{read_point_cloud, Correspondence};
+use rgm_data::Correspondence;
 use rgm_geom::{Matrix4, RigidTransform};
 use rgm_model::Method;
 use rgm_viz::{correct_fraction, correspondence_figure, registration_figure};
@@ -59,8 +59,8 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(matrix) = &args.matrix {
         check_png(matrix, "--matrix")?;
     }
-    let source = read_point_cloud(&args.source)?;
-    let target = read_point_cloud(&args.target)?;
+    let source = crate::read_cloud(&args.source)?;
+    let target = crate::read_cloud(&args.target)?;
     let given = args.transform.as_deref().map(read_transform).transpose()?;
     let found = match (&given, &args.matrix) {
         (Some(_), None) => None, // nothing to find

@@ -2,15 +2,17 @@
 //! `rgm pairs` wrote, so any method is scored by the same code as rgm's own.
 //!
 //! The transforms file: `{"method": NAME, "pairs": [{"index": i, "transform": 4×4 rows,
-//! "time_ms": t}, …]}`.
+//! "time_ms": t}, …]}`. On a folder of real scan pairs (`rgm pairs --scans`), the scores are
+//! those of `rgm eval --scans`.
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
-use rgm_data::{read_point_cloud, Correspondence, Pair};
+use rgm_data::{read_point_cloud, Correspondence, Pair, ScanPair};
 use rgm_geom::{Matrix4, RigidTransform};
-use rgm_model::PairRecord;
+use rgm_model::evaluate::{scan_table_header, scan_table_row};
+use rgm_model::{PairRecord, ScanRecord};
 use serde::Deserialize;
 
 use crate::table;
@@ -43,18 +45,33 @@ struct Found {
 
 #[derive(Deserialize)]
 struct Manifest {
-    setting: String,
-    unseen: bool,
+    /// ModelNet40 pairs only.
+    setting: Option<String>,
+    unseen: Option<bool>,
+    /// Real scan pairs only: the scan folder's name.
+    scans: Option<String>,
     pairs: Vec<Entry>,
 }
 
 #[derive(Deserialize)]
 struct Entry {
     index: usize,
-    label: usize,
+    /// ModelNet40 pairs only.
+    label: Option<usize>,
     source: String,
     target: String,
     t_target_source: [[f64; 4]; 4],
+    /// Real scan pairs only.
+    #[serde(flatten)]
+    scan: Option<ScanEntry>,
+}
+
+#[derive(Deserialize)]
+struct ScanEntry {
+    source_scan: String,
+    target_scan: String,
+    overlap: f64,
+    diagonal: f64,
 }
 
 fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T> {
@@ -138,6 +155,9 @@ pub fn run(args: Args) -> Result<()> {
             f.time_ms
         );
     }
+    if let Some(scans) = &manifest.scans {
+        return score_scans(&args, &found, &manifest, scans);
+    }
     let mut records = Vec::with_capacity(found.pairs.len());
     for f in &found.pairs {
         let entry = manifest
@@ -160,7 +180,7 @@ pub fn run(args: Args) -> Result<()> {
                 &format!("ground truth of pair {}", entry.index),
             )?,
             shape_index: entry.index,
-            label: entry.label,
+            label: entry.label.unwrap_or_default(),
         };
         let transform = rigid(
             &f.transform,
@@ -176,10 +196,64 @@ pub fn run(args: Args) -> Result<()> {
     }
     let setting = format!(
         "{}{}",
-        manifest.setting,
-        if manifest.unseen { "-unseen" } else { "" }
+        manifest.setting.as_deref().unwrap_or("?"),
+        if manifest.unseen == Some(true) {
+            "-unseen"
+        } else {
+            ""
+        }
     );
     table::report(&found.method, &setting, &records, args.json.as_deref())?;
+    Ok(())
+}
+
+/// `rgm score` on real scan pairs: the row `rgm eval --scans` prints.
+fn score_scans(args: &Args, found: &Transforms, manifest: &Manifest, scans: &str) -> Result<()> {
+    let mut records = Vec::with_capacity(found.pairs.len());
+    for f in &found.pairs {
+        let entry = manifest
+            .pairs
+            .iter()
+            .find(|e| e.index == f.index)
+            .expect("checked above");
+        let scan = entry.scan.as_ref().with_context(|| {
+            format!(
+                "{}: pair {} lacks source_scan, target_scan, overlap or diagonal",
+                args.pairs.join("pairs.json").display(),
+                entry.index
+            )
+        })?;
+        let pair = ScanPair {
+            index: entry.index,
+            source_name: scan.source_scan.clone(),
+            target_name: scan.target_scan.clone(),
+            source: read_point_cloud(args.pairs.join(&entry.source))?,
+            target: read_point_cloud(args.pairs.join(&entry.target))?,
+            t_target_source: rigid(
+                &entry.t_target_source,
+                &format!("ground truth of pair {}", entry.index),
+            )?,
+            overlap: scan.overlap,
+            diagonal: scan.diagonal,
+        };
+        let what = format!(
+            "{}: transform of pair {}",
+            args.transforms.display(),
+            f.index
+        );
+        let transform = rigid(&f.transform, &what)?;
+        records.push(ScanRecord::score(&pair, &transform, f.time_ms, None));
+    }
+    println!("{}", scan_table_header());
+    if let Some(row) = scan_table_row(&found.method, scans, &records) {
+        println!("{row}");
+    }
+    if let Some(path) = &args.json {
+        let value = serde_json::json!({"method": found.method, "scans": scans, "pairs": records});
+        std::fs::write(path, serde_json::to_string_pretty(&value)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+        println!("wrote per-pair results to {}", path.display());
+    }
     Ok(())
 }
 

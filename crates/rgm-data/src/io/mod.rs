@@ -3,6 +3,10 @@
 //!
 //! Every reader parses bytes it is given (so the tests need no files) and hands its points to
 //! [`checked_cloud`], the one place that rejects empty clouds and non-finite coordinates.
+//!
+//! A name ending in `.gz` (`scan.ply.gz`, `cloud.xyz.gz`, ...) is a gzip-compressed file of the
+//! format its inner extension names: real scans are often shipped so. It is decompressed in
+//! memory and read as the plain file would be; written, it is compressed.
 
 pub mod npy;
 pub mod off;
@@ -10,8 +14,8 @@ pub mod output;
 pub mod ply;
 pub mod xyz;
 
-use std::io::Read;
-use std::path::Path;
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
 
 use rgm_geom::{Point3, PointCloud};
 
@@ -34,9 +38,15 @@ pub enum Format {
 }
 
 impl Format {
-    /// The format named by `path`'s extension (case-insensitive).
+    /// The format named by `path`'s extension (case-insensitive), the one before `.gz` for a
+    /// compressed file.
     pub fn from_path(path: &Path) -> Result<Self> {
-        let ext = path
+        let inner = if is_gzip(path) {
+            Path::new(path.file_stem().unwrap_or_default())
+        } else {
+            path
+        };
+        let ext = inner
             .extension()
             .and_then(|e| e.to_str())
             .map(str::to_ascii_lowercase);
@@ -53,18 +63,63 @@ impl Format {
     }
 }
 
-/// Reads a point cloud, choosing the format by extension.
+/// Whether `path` names a gzip-compressed file (its extension is `.gz`, in any case).
+pub fn is_gzip(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("gz"))
+}
+
+/// Something odd in a file that does not stop it being read (a PLY header line of no keyword
+/// the format knows); the caller decides whether to show it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Warning {
+    pub path: PathBuf,
+    /// Line number, from 1.
+    pub line: usize,
+    /// The line's text, trimmed.
+    pub text: String,
+    pub why: String,
+}
+
+impl std::fmt::Display for Warning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (path, line, why, text) = (self.path.display(), self.line, &self.why, &self.text);
+        write!(f, "{path}:{line}: warning: {why}: `{text}`")
+    }
+}
+
+/// Reads a point cloud, choosing the format by extension; what [`read_point_cloud_warned`]
+/// warns of is not shown.
 pub fn read_point_cloud(path: impl AsRef<Path>) -> Result<PointCloud> {
+    read_point_cloud_warned(path).map(|(cloud, _)| cloud)
+}
+
+/// Reads a point cloud, choosing the format by extension (decompressing a `.gz` file first),
+/// with the warnings of the reading.
+pub fn read_point_cloud_warned(path: impl AsRef<Path>) -> Result<(PointCloud, Vec<Warning>)> {
     let path = path.as_ref();
     let format = Format::from_path(path)?;
-    let bytes = read_regular_file(path)?;
+    let mut bytes = read_regular_file(path)?;
+    if is_gzip(path) {
+        bytes = gunzip(&bytes, path)?;
+    }
+    let mut warnings = Vec::new();
     let points = match format {
-        Format::Ply => ply::parse(&bytes, path)?,
+        Format::Ply => ply::parse(&bytes, path, &mut warnings)?,
         Format::Off => off::parse(&bytes, path)?,
         Format::Xyz | Format::Csv => xyz::parse(&bytes, path)?,
         Format::Npy => npy::parse(&bytes, path)?,
     };
-    checked_cloud(points, path)
+    Ok((checked_cloud(points, path)?, warnings))
+}
+
+/// The decompressed content of the gzip data `bytes` (every member of a multi-member file).
+fn gunzip(bytes: &[u8], path: &Path) -> Result<Vec<u8>> {
+    let mut out = Vec::new();
+    flate2::read::MultiGzDecoder::new(bytes)
+        .read_to_end(&mut out)
+        .map_err(|e| format_error(path, "gzip", e.to_string()))?;
+    Ok(out)
 }
 
 /// The bytes of the regular file at `path`, read up to the size it had when opened. Folders,
@@ -117,14 +172,30 @@ pub fn write_point_cloud(path: impl AsRef<Path>, cloud: &PointCloud) -> Result<(
         path: path.to_path_buf(),
         source,
     };
-    output::write_file(path, |mut out| match format {
+    output::write_file(path, |out| {
+        if is_gzip(path) {
+            let mut gz = flate2::write::GzEncoder::new(out, flate2::Compression::default());
+            write_format(&mut gz, format, cloud)?;
+            gz.finish().map(|_| ())
+        } else {
+            write_format(out, format, cloud)
+        }
+    })
+    .map_err(io_error)
+}
+
+fn write_format(
+    mut out: &mut dyn Write,
+    format: Format,
+    cloud: &PointCloud,
+) -> std::io::Result<()> {
+    match format {
         Format::Ply => ply::write(&mut out, cloud),
         Format::Off => off::write(&mut out, cloud),
         Format::Xyz => xyz::write(&mut out, cloud, xyz::Separator::Space),
         Format::Csv => xyz::write(&mut out, cloud, xyz::Separator::Comma),
         Format::Npy => npy::write(&mut out, cloud, npy::Dtype::F64),
-    })
-    .map_err(io_error)
+    }
 }
 
 /// The cloud of `points`, rejecting an empty one and any non-finite coordinate.
@@ -245,12 +316,16 @@ mod tests {
 
     #[test]
     fn every_extension_round_trips_through_a_file() {
-        for ext in ["ply", "off", "xyz", "txt", "pts", "csv", "npy", "PLY"] {
+        let compressed = ["ply.gz", "off.gz", "xyz.gz", "csv.gz", "npy.GZ"];
+        for ext in ["ply", "off", "xyz", "txt", "pts", "csv", "npy", "PLY"]
+            .into_iter()
+            .chain(compressed)
+        {
             let path = scratch_path(&format!("round_trip.{ext}"));
             write_point_cloud(&path, &sample()).unwrap();
             let back = read_point_cloud(&path).unwrap();
             // PLY is written as float32; the others keep f64 exactly.
-            let tol = if ext.eq_ignore_ascii_case("ply") {
+            let tol = if ext.to_ascii_lowercase().starts_with("ply") {
                 1e-7
             } else {
                 0.0
@@ -260,6 +335,41 @@ mod tests {
             }
             assert_eq!(back.len(), 2, "{ext}");
         }
+    }
+
+    /// A Stanford scan as shipped: an ASCII PLY with stray header lines, gzip-compressed.
+    #[test]
+    fn a_compressed_ply_is_read_with_its_warnings() {
+        let text = "ply\nformat ascii 1.0\nobj_info scanner\nbye\nelement vertex 2\n\
+                    property float x\nproperty float y\nproperty float z\nend_header\n\
+                    0.5 1 2\n-3 4 5\n";
+        let path = scratch_path("scan.ply.gz");
+        let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+        gz.write_all(text.as_bytes()).unwrap();
+        std::fs::write(&path, gz.finish().unwrap()).unwrap();
+        let (cloud, warnings) = read_point_cloud_warned(&path).unwrap();
+        assert_eq!(
+            cloud.points,
+            vec![Point3::new(0.5, 1.0, 2.0), Point3::new(-3.0, 4.0, 5.0)]
+        );
+        assert_eq!(warnings.len(), 1);
+        assert_eq!(
+            warnings[0].to_string(),
+            format!(
+                "{}:4: warning: `bye` is no PLY header keyword; line skipped: `bye`",
+                path.display()
+            )
+        );
+        // Not gzip data behind a `.gz` name: an error naming the file, not a panic.
+        let plain = scratch_path("plain.xyz.gz");
+        std::fs::write(&plain, "1 2 3\n").unwrap();
+        let err = read_point_cloud(&plain).unwrap_err().to_string();
+        assert!(
+            err.starts_with(&format!("{}: gzip: ", plain.display())),
+            "{err}"
+        );
+        let err = read_point_cloud("cloud.gz").unwrap_err();
+        assert!(matches!(err, DataError::UnknownExtension { .. }), "{err}");
     }
 
     #[test]

@@ -11,7 +11,7 @@ use std::path::Path;
 
 use rgm_geom::{Point3, PointCloud, Vector3};
 
-use super::{format_error, line_error};
+use super::{format_error, line_error, Warning};
 use crate::{DataError, Result};
 
 const FORMAT: &str = "PLY";
@@ -127,7 +127,10 @@ struct Header {
     lines: usize,
 }
 
-fn parse_header(bytes: &[u8], path: &Path) -> Result<Header> {
+/// The header of a PLY file. A line that starts with no keyword of the format (six of the
+/// Stanford dragon's scans carry `bye` lines) is skipped with a warning in `warnings`; a
+/// keyword line that is malformed is an error.
+fn parse_header(bytes: &[u8], path: &Path, warnings: &mut Vec<Warning>) -> Result<Header> {
     let mut encoding = None;
     let mut elements: Vec<Element> = Vec::new();
     let mut offset = 0;
@@ -216,7 +219,20 @@ fn parse_header(bytes: &[u8], path: &Path) -> Result<Header> {
                     lines: line_no,
                 });
             }
-            _ => return Err(bad("unknown header line")),
+            [keyword, ..]
+                if !matches!(
+                    *keyword,
+                    "format" | "element" | "property" | "end_header" | "ply"
+                ) =>
+            {
+                warnings.push(Warning {
+                    path: path.to_path_buf(),
+                    line: line_no,
+                    text: line.to_string(),
+                    why: format!("`{keyword}` is no PLY header keyword; line skipped"),
+                });
+            }
+            _ => return Err(bad("malformed header line")),
         }
     }
     Err(format_error(
@@ -372,9 +388,9 @@ impl Values for BinaryValues<'_> {
     }
 }
 
-/// The x, y, z of every vertex of a PLY file.
-pub fn parse(bytes: &[u8], path: &Path) -> Result<Vec<Point3<f64>>> {
-    let header = parse_header(bytes, path)?;
+/// The x, y, z of every vertex of a PLY file; what is odd but readable goes to `warnings`.
+pub fn parse(bytes: &[u8], path: &Path, warnings: &mut Vec<Warning>) -> Result<Vec<Point3<f64>>> {
+    let header = parse_header(bytes, path, warnings)?;
     let vertex_index = header
         .elements
         .iter()
@@ -551,7 +567,10 @@ mod tests {
     use crate::io::random_bytes;
 
     fn parse_bytes(b: &[u8]) -> Result<Vec<Point3<f64>>> {
-        parse(b, Path::new("s.ply"))
+        let mut warnings = Vec::new();
+        let points = parse(b, Path::new("s.ply"), &mut warnings)?;
+        assert_eq!(warnings, []);
+        Ok(points)
     }
 
     fn err(b: &[u8]) -> String {
@@ -694,6 +713,40 @@ mod tests {
             err(no_format),
             "s.ply: PLY: the header has no `format` line"
         );
+    }
+
+    /// The Stanford dragon's scans: `bye` lines in the header, between `obj_info` lines.
+    #[test]
+    fn a_header_line_of_no_keyword_is_skipped_with_a_warning() {
+        let text = "ply\nformat ascii 1.0\nobj_info num_cols 2\nbye\nbye now\nelement vertex 2\n\
+                    property float x\nproperty float y\nproperty float z\nend_header\n0 1 2\n3 4 5\n";
+        let mut warnings = Vec::new();
+        let points = parse(text.as_bytes(), Path::new("d.ply"), &mut warnings).unwrap();
+        assert_eq!(
+            points,
+            vec![Point3::new(0.0, 1.0, 2.0), Point3::new(3.0, 4.0, 5.0)]
+        );
+        let shown: Vec<String> = warnings.iter().map(ToString::to_string).collect();
+        assert_eq!(
+            shown,
+            [
+                "d.ply:4: warning: `bye` is no PLY header keyword; line skipped: `bye`",
+                "d.ply:5: warning: `bye` is no PLY header keyword; line skipped: `bye now`"
+            ]
+        );
+        // A malformed line of a keyword the format has is still refused.
+        for bad in [
+            "element vertex",
+            "format ascii",
+            "end_header now",
+            "ply again",
+        ] {
+            let text = format!("ply\nformat ascii 1.0\n{bad}\nend_header\n");
+            assert_eq!(
+                err(text.as_bytes()),
+                format!("s.ply:3: malformed header line: `{bad}`")
+            );
+        }
     }
 
     #[test]
