@@ -258,7 +258,7 @@ mod tests {
         let (last, _) = read(&dir.join("last.safetensors")).unwrap();
         assert_eq!(
             last["w"].as_slice().unwrap(),
-            &[1.0, -0.30078125, 0.00099945068359375]
+            &[1.0, -0.30078125, 131.0 / 131_072.0] // bf16 of 1e-3: 131 · 2⁻¹⁷
         );
         let bytes = |name: &str| fs::read(dir.join(name)).unwrap();
         assert_eq!(bytes("last.safetensors"), bytes("best.safetensors"));

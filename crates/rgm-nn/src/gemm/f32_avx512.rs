@@ -61,14 +61,8 @@ pub fn f32_mat_mul(
     beta: f32,
     mut c: ArrayViewMut2<'_, f32>,
 ) {
-    let ((m, k), n) = (a.dim(), b.ncols());
-    assert!(
-        b.nrows() == k && c.dim() == (m, n),
-        "f32_mat_mul: a {:?} · b {:?} into c {:?}",
-        a.shape(),
-        b.shape(),
-        c.shape()
-    );
+    let (m, n) = super::check_shapes("f32_mat_mul", &a, &b, &c);
+    let k = a.ncols();
     assert!(available(), "f32_mat_mul needs AVX-512 F");
     if m == 0 || n == 0 {
         return;

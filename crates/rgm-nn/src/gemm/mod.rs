@@ -123,6 +123,24 @@ thread_local! {
 /// Bytes of B's packed columns one pass keeps in L2 while every A strip meets them.
 const B_PANEL_BYTES: usize = 256 * 1024;
 
+/// (M, N) of `c = a · b`; panics, naming `op`, unless `a` is (M, K), `b` (K, N), `c` (M, N).
+fn check_shapes(
+    op: &str,
+    a: &ArrayView2<'_, f32>,
+    b: &ArrayView2<'_, f32>,
+    c: &ArrayViewMut2<'_, f32>,
+) -> (usize, usize) {
+    let ((m, k), n) = (a.dim(), b.ncols());
+    assert!(
+        b.nrows() == k && c.dim() == (m, n),
+        "{op}: a {:?} · b {:?} into c {:?}",
+        a.shape(),
+        b.shape(),
+        c.shape()
+    );
+    (m, n)
+}
+
 /// `c = alpha · a · b + beta · c` with a and b rounded to bf16 and f32 accumulation, on AMX (or
 /// AVX-512 BF16). `a`: (M, K), `b`: (K, N), `c`: (M, N), any strides. Panics if the shapes
 /// disagree or bf16 is not [`bf16_available`].
@@ -133,14 +151,7 @@ pub fn bf16_mat_mul(
     beta: f32,
     mut c: ArrayViewMut2<'_, f32>,
 ) {
-    let ((m, k), n) = (a.dim(), b.ncols());
-    assert!(
-        b.nrows() == k && c.dim() == (m, n),
-        "bf16_mat_mul: a {:?} · b {:?} into c {:?}",
-        a.shape(),
-        b.shape(),
-        c.shape()
-    );
+    let (m, n) = check_shapes("bf16_mat_mul", &a, &b, &c);
     if m == 0 || n == 0 {
         return;
     }
@@ -349,14 +360,23 @@ mod tests {
     /// within (K + 2) units of roundoff of Σ|a·b| (plus beta's share) of the f64 product.
     fn assert_bf16_product(
         got: ArrayView2<'_, f32>,
+        product: (f32, ArrayView2<'_, f32>, ArrayView2<'_, f32>),
+        accumulated: (f32, ArrayView2<'_, f32>),
+    ) {
+        assert_product_of(|x| round_to_bf16(x) as f64, got, product, accumulated);
+    }
+
+    /// Checks `got` = alpha · r(a) · r(b) + beta · c0 up to f32 accumulation, `r` the inputs'
+    /// rounding: each entry within (K + 2) units of roundoff of Σ|r(a)·r(b)| (plus beta's
+    /// share) of the f64 product.
+    fn assert_product_of(
+        r: impl Fn(f32) -> f64,
+        got: ArrayView2<'_, f32>,
         (alpha, a, b): (f32, ArrayView2<'_, f32>, ArrayView2<'_, f32>),
         (beta, c0): (f32, ArrayView2<'_, f32>),
     ) {
         let k = a.ncols();
-        let (ra, rb) = (
-            a.mapv(|x| round_to_bf16(x) as f64),
-            b.mapv(|x| round_to_bf16(x) as f64),
-        );
+        let (ra, rb) = (a.mapv(&r), b.mapv(&r));
         let exact = ra.dot(&rb) * alpha as f64 + c0.mapv(|x| x as f64) * beta as f64;
         let size = ra.mapv(f64::abs).dot(&rb.mapv(f64::abs)) * (alpha as f64).abs()
             + c0.mapv(|x| (x as f64).abs()) * (beta as f64).abs();
@@ -398,26 +418,13 @@ mod tests {
         check_cases_with(mul, assert_bf16_product);
     }
 
-    /// Checks `got` = alpha · a · b + beta · c0 in f32 arithmetic: each entry within (K + 2)
-    /// units of roundoff of Σ|a·b| (plus beta's share) of the f64 product.
+    /// Checks `got` = alpha · a · b + beta · c0 in f32 arithmetic (see [`assert_product_of`]).
     fn assert_f32_product(
         got: ArrayView2<'_, f32>,
-        (alpha, a, b): (f32, ArrayView2<'_, f32>, ArrayView2<'_, f32>),
-        (beta, c0): (f32, ArrayView2<'_, f32>),
+        product: (f32, ArrayView2<'_, f32>, ArrayView2<'_, f32>),
+        accumulated: (f32, ArrayView2<'_, f32>),
     ) {
-        let k = a.ncols();
-        let (a, b) = (a.mapv(f64::from), b.mapv(f64::from));
-        let exact = a.dot(&b) * alpha as f64 + c0.mapv(|x| x as f64) * beta as f64;
-        let size = a.mapv(f64::abs).dot(&b.mapv(f64::abs)) * (alpha as f64).abs()
-            + c0.mapv(|x| (x as f64).abs()) * (beta as f64).abs();
-        let u = f32::EPSILON as f64 / 2.0;
-        for ((ij, &g), (&e, &s)) in got.indexed_iter().zip(exact.iter().zip(&size)) {
-            let tol = (k + 2) as f64 * u * s + f32::MIN_POSITIVE as f64;
-            assert!(
-                (g as f64 - e).abs() <= tol,
-                "entry {ij:?}: got {g}, exact {e} (tolerance {tol:e}, K = {k})"
-            );
-        }
+        assert_product_of(f64::from, got, product, accumulated);
     }
 
     /// Every case of [`SHAPES`] through `mul`: plain, both operands transposed views, strided
