@@ -32,10 +32,11 @@ QUEUE=(
   "var2-fast|7|--setting partial --variant var2 --val-sample first"
   "unseen-fast|9|--setting partial --unseen --val-sample first"
   "var1-fast|7|--setting partial --variant var1 --val-sample first"
+  "partial-fast|40|--setting partial --val-sample spread"
   "unseen-fast|20|--setting partial --unseen --val-sample spread"
+  "partial-fast|100|--setting partial --val-sample spread"
   "noise-fast|3|--setting noise --init $PARTIAL25 --val-sample spread"
   "clean-fast|3|--setting clean --init $PARTIAL25 --val-sample spread"
-  "partial-fast|100|--setting partial --val-sample spread"
 )
 
 status() {
