@@ -119,7 +119,11 @@ fn sparse_files_larger_than_memory_are_refused_from_their_size() {
     let dir = scratch("sparse");
     for name in ["huge.ply", "huge.npy", "huge.xyz", "huge.off"] {
         let path = dir.join(name);
-        let file = std::fs::File::create(&path).unwrap();
+        let mut file = std::fs::File::create(&path).unwrap();
+        if name.ends_with(".npy") {
+            // A `.npy` whose magic string is right, so that its size is what refuses it.
+            std::io::Write::write_all(&mut file, b"\x93NUMPY").unwrap();
+        }
         file.set_len(1 << 42).unwrap(); // 4.4 TB, holding nothing
         let (peak, read) = peak_bytes(|| rgm_data::read_point_cloud(&path));
         let err = read.unwrap_err().to_string();
@@ -129,6 +133,24 @@ fn sparse_files_larger_than_memory_are_refused_from_their_size() {
             "{err}"
         );
     }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Issue 27, case 7: a garbage `.npy` was read whole before its magic string was checked. Its
+/// first bytes are read first: a sparse 4.4 TB file of zeros is refused for its magic string,
+/// reading nothing else.
+#[test]
+fn a_garbage_npy_is_refused_for_its_magic_string_unread() {
+    let dir = scratch("garbage-npy");
+    let path = dir.join("garbage.npy");
+    std::fs::File::create(&path)
+        .unwrap()
+        .set_len(1 << 42)
+        .unwrap();
+    let (peak, read) = peak_bytes(|| rgm_data::read_point_cloud(&path));
+    let err = read.unwrap_err().to_string();
+    assert!(peak < 1 << 20, "{peak} bytes");
+    assert!(err.contains("missing the magic string"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -99,6 +99,18 @@ pub fn read_point_cloud(path: impl AsRef<Path>) -> Result<PointCloud> {
 pub fn read_point_cloud_warned(path: impl AsRef<Path>) -> Result<(PointCloud, Vec<Warning>)> {
     let path = path.as_ref();
     let format = Format::from_path(path)?;
+    if format == Format::Npy && !is_gzip(path) && std::fs::metadata(path).is_ok_and(|m| m.is_file())
+    {
+        // The magic string first: a large file that is not `.npy` is refused unread.
+        let mut prefix = Vec::with_capacity(npy::MAGIC.len());
+        std::fs::File::open(path)
+            .and_then(|f| f.take(npy::MAGIC.len() as u64).read_to_end(&mut prefix))
+            .map_err(|source| DataError::Io {
+                path: path.to_path_buf(),
+                source,
+            })?;
+        npy::check_magic(&prefix, path)?;
+    }
     let mut bytes = read_regular_file(path)?;
     if is_gzip(path) {
         bytes = gunzip(&bytes, path)?;

@@ -12,7 +12,7 @@ use super::format_error;
 use crate::Result;
 
 const FORMAT: &str = "npy";
-const MAGIC: &[u8] = b"\x93NUMPY";
+pub(crate) const MAGIC: &[u8] = b"\x93NUMPY";
 
 /// The element type of an array.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -48,12 +48,23 @@ fn dict_value<'a>(header: &'a str, key: &str) -> Option<&'a str> {
     Some(rest.strip_prefix(':')?.trim_start())
 }
 
+/// Refuses `bytes` that do not start with the `.npy` magic string.
+pub(crate) fn check_magic(bytes: &[u8], path: &Path) -> Result<()> {
+    if bytes.starts_with(MAGIC) {
+        Ok(())
+    } else {
+        Err(format_error(
+            path,
+            FORMAT,
+            "missing the magic string \\x93NUMPY",
+        ))
+    }
+}
+
 /// The points of a `.npy` file.
 pub fn parse(bytes: &[u8], path: &Path) -> Result<Vec<Point3<f64>>> {
     let fail = |why: String| format_error(path, FORMAT, why);
-    if !bytes.starts_with(MAGIC) {
-        return Err(fail("missing the magic string \\x93NUMPY".into()));
-    }
+    check_magic(bytes, path)?;
     // Magic (6), version (2), header length (2 bytes in version 1, 4 in versions 2 and 3).
     let (len_size, major) = match bytes.get(6) {
         Some(1) => (2, 1),
