@@ -133,8 +133,7 @@ fn run_scans(args: &Args, method: &Method) -> Result<()> {
             .map(|(name, records)| serde_json::json!({"scans": name, "pairs": records}))
             .collect();
         let value = serde_json::json!({"method": method.name(), "folders": folders});
-        std::fs::write(path, serde_json::to_string_pretty(&value)?)
-            .map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))?;
+        crate::write_text(path, &serde_json::to_string_pretty(&value)?)?;
         println!("wrote per-pair results to {}", path.display());
     }
     Ok(())

@@ -89,8 +89,7 @@ fn run_scans(args: &Args) -> Result<()> {
         }
         let manifest = serde_json::json!({"scans": name, "pairs": entries});
         let path = out.join("pairs.json");
-        fs::write(&path, serde_json::to_string(&manifest)?)
-            .with_context(|| format!("writing {}", path.display()))?;
+        crate::write_text(&path, &serde_json::to_string(&manifest)?)?;
         println!("wrote {} pairs to {}", pairs.len(), out.display());
     }
     Ok(())

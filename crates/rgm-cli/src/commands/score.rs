@@ -159,12 +159,7 @@ pub fn run(args: Args) -> Result<()> {
         return score_scans(&args, &found, &manifest, scans);
     }
     let mut records = Vec::with_capacity(found.pairs.len());
-    for f in &found.pairs {
-        let entry = manifest
-            .pairs
-            .iter()
-            .find(|e| e.index == f.index)
-            .expect("checked above");
+    for (f, entry, transform) in matched(&args, &found, &manifest)? {
         let source = read_point_cloud(args.pairs.join(&entry.source))?;
         let target = read_point_cloud(args.pairs.join(&entry.target))?;
         let pair = Pair {
@@ -182,14 +177,6 @@ pub fn run(args: Args) -> Result<()> {
             shape_index: entry.index,
             label: entry.label.unwrap_or_default(),
         };
-        let transform = rigid(
-            &f.transform,
-            &format!(
-                "{}: transform of pair {}",
-                args.transforms.display(),
-                f.index
-            ),
-        )?;
         records.push(PairRecord::score(
             f.index, &pair, transform, f.time_ms, 0, None,
         )?);
@@ -207,15 +194,36 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
+/// Each found transform, checked as rigid, with its manifest entry ([`check_one_per_pair`]
+/// has made sure there is one).
+fn matched<'a>(
+    args: &Args,
+    found: &'a Transforms,
+    manifest: &'a Manifest,
+) -> Result<Vec<(&'a Found, &'a Entry, RigidTransform)>> {
+    found
+        .pairs
+        .iter()
+        .map(|f| {
+            let entry = manifest
+                .pairs
+                .iter()
+                .find(|e| e.index == f.index)
+                .expect("checked by check_one_per_pair");
+            let what = format!(
+                "{}: transform of pair {}",
+                args.transforms.display(),
+                f.index
+            );
+            Ok((f, entry, rigid(&f.transform, &what)?))
+        })
+        .collect()
+}
+
 /// `rgm score` on real scan pairs: the row `rgm eval --scans` prints.
 fn score_scans(args: &Args, found: &Transforms, manifest: &Manifest, scans: &str) -> Result<()> {
     let mut records = Vec::with_capacity(found.pairs.len());
-    for f in &found.pairs {
-        let entry = manifest
-            .pairs
-            .iter()
-            .find(|e| e.index == f.index)
-            .expect("checked above");
+    for (f, entry, transform) in matched(args, found, manifest)? {
         let scan = entry.scan.as_ref().with_context(|| {
             format!(
                 "{}: pair {} lacks source_scan, target_scan, overlap or diagonal",
@@ -236,12 +244,6 @@ fn score_scans(args: &Args, found: &Transforms, manifest: &Manifest, scans: &str
             overlap: scan.overlap,
             diagonal: scan.diagonal,
         };
-        let what = format!(
-            "{}: transform of pair {}",
-            args.transforms.display(),
-            f.index
-        );
-        let transform = rigid(&f.transform, &what)?;
         records.push(ScanRecord::score(&pair, &transform, f.time_ms, None));
     }
     println!("{}", scan_table_header());
@@ -250,8 +252,7 @@ fn score_scans(args: &Args, found: &Transforms, manifest: &Manifest, scans: &str
     }
     if let Some(path) = &args.json {
         let value = serde_json::json!({"method": found.method, "scans": scans, "pairs": records});
-        std::fs::write(path, serde_json::to_string_pretty(&value)?)
-            .with_context(|| format!("writing {}", path.display()))?;
+        crate::write_text(path, &serde_json::to_string_pretty(&value)?)?;
         println!("wrote per-pair results to {}", path.display());
     }
     Ok(())
