@@ -15,7 +15,7 @@ use rgm_geom::euler::rotation_xyz_intrinsic;
 use rgm_geom::{PointCloud, RigidTransform, Vector3};
 use rgm_match::Correspondences;
 use rgm_model::network::{Config, Mode, Rgm, RgmCache};
-use rgm_model::{PipelineConfig, RgmRegistrar};
+use rgm_model::{PipelineConfig, Registrar, RgmRegistrar};
 
 /// Points per cloud: the partial setting's crop of 1,024.
 const N: usize = 717;

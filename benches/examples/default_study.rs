@@ -27,11 +27,12 @@ use std::time::Instant;
 
 use rgm_data::{ModelNet40, PairGenerator, Setting, Split};
 use rgm_geom::fgr::{self, FgrConfig};
+use rgm_geom::frame::Normalisation;
 use rgm_geom::metrics::PairMetrics;
 use rgm_geom::refine::{self, RefineConfig};
 use rgm_geom::registration::score;
 use rgm_geom::{KnnIndex, PointCloud, RigidTransform};
-use rgm_model::{MethodOptions, Normalisation};
+use rgm_model::{MethodOptions, Registrar};
 
 fn arg(args: &[String], name: &str) -> Option<String> {
     args.iter()
@@ -354,7 +355,8 @@ fn robustness(
         }
         let (mut outcomes, mut ms) = (Vec::new(), 0.0);
         // Each candidate's outcomes, by its name (`rgm+icp`, `fgr+icp`, `…/cells`).
-        let mut per_candidate: std::collections::BTreeMap<&str, Vec<Outcome>> = Default::default();
+        let mut per_candidate: std::collections::BTreeMap<String, Vec<Outcome>> =
+            Default::default();
         for &i in indices {
             let pair = generator.test_pair(shapes, i)?;
             let (s, t) = match points {
@@ -374,7 +376,7 @@ fn robustness(
                     outcomes.push(back(&r.result.t_target_source));
                     for c in &r.candidates {
                         per_candidate
-                            .entry(c.method)
+                            .entry(c.method.clone())
                             .or_default()
                             .push(back(&c.t_target_source));
                     }

@@ -25,7 +25,7 @@ use rgm_geom::{PointCloud, RigidTransform, Vector3};
 use rgm_match::Correspondences;
 use rgm_model::network::{Config, Mode, Rgm, RgmCache};
 use rgm_model::pipeline::StageTimes;
-use rgm_model::{PipelineConfig, RgmRegistrar};
+use rgm_model::{PipelineConfig, Registrar, RgmRegistrar};
 use rgm_nn::Precision;
 
 /// `n` points uniform in the unit ball and their copy at a known pose in reverse order;
@@ -117,7 +117,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let start = Instant::now();
                 let result = registrar.register(&source, &target);
                 seconds.push(start.elapsed().as_secs_f64());
-                correspondences = result.map_or(0, |r| r.inlier_count);
+                correspondences = result.map_or(0, |r| r.result.inlier_count);
                 stages.push(registrar.stage_times());
             }
         }

@@ -17,9 +17,10 @@ use anyhow::{Context, Result};
 use rayon::prelude::*;
 use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
 use rgm_geom::refine::RefineConfig;
+use rgm_geom::registrar::Normalised;
 use rgm_model::evaluate::{evaluate_pair, table_header, table_row};
 use rgm_model::weights::{weights_dir, Manifest, ModelEntry};
-use rgm_model::{Method, MethodOptions, PairRecord, Summary};
+use rgm_model::{Method, MethodName, MethodOptions, PairRecord, Registrar, Summary};
 use rgm_viz::{correct_fraction, correspondence_figure, registration_figure};
 
 use crate::project_root;
@@ -238,6 +239,16 @@ fn test_shapes(dataset: &ModelNet40, set: TestSet, limit: Option<usize>) -> Vec<
     shapes
 }
 
+/// ICP or FGR (refined when `refine`) as `rgm register --method` builds it.
+fn classical(method: MethodName, refine: bool) -> Result<Method> {
+    Ok(MethodOptions {
+        method,
+        refine,
+        ..MethodOptions::default()
+    }
+    .build()?)
+}
+
 /// The methods of the tables of `set`: ICP and FGR (identity initialisation, Open3D's
 /// settings; spec §6), on partial pairs also FGR refined by `rgm_geom::refine` (the classical
 /// pipeline RGM competes with there; on clean and noisy pairs FGR alone registers nearly every
@@ -256,14 +267,14 @@ fn candidates(set: TestSet, manifest: &Manifest, only: &[String]) -> Result<Vec<
             stem: "icp".into(),
             variant: None,
             pairs_seen: None,
-            method: Method::icp(),
+            method: classical(MethodName::Icp, false)?,
         },
         Candidate {
             name: "fgr".into(),
             stem: "fgr".into(),
             variant: None,
             pairs_seen: None,
-            method: Method::fgr(),
+            method: classical(MethodName::Fgr, false)?,
         },
     ];
     if set.setting == Setting::Partial {
@@ -272,7 +283,7 @@ fn candidates(set: TestSet, manifest: &Manifest, only: &[String]) -> Result<Vec<
             stem: "fgr-icp".into(),
             variant: None,
             pairs_seen: None,
-            method: Method::fgr().refined(RefineConfig::default()),
+            method: classical(MethodName::Fgr, true)?,
         });
     }
     // `rgm register`'s default on every test set, named by the built-in model it runs.
@@ -287,7 +298,8 @@ fn candidates(set: TestSet, manifest: &Manifest, only: &[String]) -> Result<Vec<
     }
     for entry in models_for(manifest, set).filter(|e| wanted(&e.name)) {
         let method = from_history(entry)?
-            .method(&weights_dir())
+            .registrar(&weights_dir())
+            .map(|registrar| Method::new(Normalised { inner: registrar }))
             .with_context(|| format!("loading the model {}", entry.name))?;
         list.push(Candidate {
             name: entry.name.clone(),
@@ -506,20 +518,21 @@ impl Run {
         self.draw_clouds(set, &candidate.stem, records, shapes, generator, count)?;
         let mut matched = BTreeMap::new();
         // The network's correspondences; a refined model's are its plain twin's.
-        let Method::Rgm(registrar) = &candidate.method else {
-            return Ok(matched);
-        };
-        if candidate.method.is_refined() {
+        if candidate.method.id().base != rgm_model::pipeline::NAME || candidate.method.is_refined()
+        {
             return Ok(matched);
         }
         let dir = self.out.join("figures").join(set.key());
         for record in records.iter().take(count) {
             let i = record.index;
             let pair = generator.test_pair(shapes, i)?;
-            let mut registrar = registrar.clone();
+            let mut method = candidate.method.clone();
             // A failure leaves no correspondences: an empty matrix, 0 % correct.
-            let _ = registrar.register(&pair.source, &pair.target);
-            let found = registrar.correspondences();
+            let found = method
+                .register(&pair.source, &pair.target)
+                .map(|found| found.correspondences)
+                .unwrap_or_default();
+            let found = &found[..];
             correspondence_figure(&pair.correspondence, found, 36)?
                 .write_png(dir.join(format!("{}-matrix-pair{i}.png", candidate.stem)))?;
             matched.insert(i, correct_fraction(&pair.correspondence, found));
@@ -1043,15 +1056,13 @@ mod tests {
             let list = candidates(set, &manifest, &[]).unwrap();
             list.iter()
                 .map(|c| (c.name.clone(), c.method.name()))
+                .map(|(a, b)| format!("{a}={b}"))
                 .collect::<Vec<_>>()
         };
         let partial = names(TestSet::ALL[0]);
-        assert_eq!(partial.last().unwrap(), &("fgr+icp".to_string(), "fgr+icp"));
+        assert_eq!(partial.last().unwrap(), "fgr+icp=fgr+icp");
         assert_eq!(names(TestSet::ALL[1]), partial);
-        assert_eq!(
-            names(TestSet::ALL[2]),
-            [("icp".to_string(), "icp"), ("fgr".to_string(), "fgr")]
-        );
+        assert_eq!(names(TestSet::ALL[2]), ["icp=icp", "fgr=fgr"]);
     }
 
     #[test]

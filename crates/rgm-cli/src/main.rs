@@ -10,13 +10,13 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
-use clap::{Parser, Subcommand, ValueEnum};
+use clap::{Parser, Subcommand};
 use rgm_data::{
     ModelNet40, PairGenerator, ScanFolder, ScanPair, ScanPairConfig, Setting, Shape, Split,
 };
 use rgm_geom::refine::RefineConfig;
 use rgm_model::network::TestStatistics;
-use rgm_model::{Method, MethodName, MethodOptions};
+use rgm_model::{Method, MethodName, MethodOptions, Registrar};
 use rgm_nn::Precision;
 
 /// Robust point-cloud registration (RGM, CVPR 2021) and classical baselines.
@@ -65,30 +65,6 @@ enum Command {
     Render(commands::render::Args),
 }
 
-/// Registration methods selectable from the command line.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum MethodArg {
-    /// Point-to-point ICP from the identity.
-    Icp,
-    /// Fast Global Registration on FPFH features.
-    Fgr,
-    /// The RGM network: the model built into rgm, or --weights.
-    Rgm,
-    // Help from `auto_help`: the scoring distance is the library's.
-    #[value(help = auto_help())]
-    Auto,
-}
-
-/// The help of `--method auto`, with [`rgm_model::combined::SCORE_DISTANCE`].
-fn auto_help() -> String {
-    format!(
-        "RGM and FGR on the same pair, each refined, and the result that overlaps better (both \
-         clouds' share of points within {} of the other, in the unit-sphere frame): `rgm \
-         register`'s default",
-        rgm_model::combined::SCORE_DISTANCE
-    )
-}
-
 /// `precision`, after saying on stderr when bf16 falls back to f32 on this processor.
 pub fn checked_precision(precision: Precision) -> Precision {
     if precision == Precision::Bf16 && !rgm_nn::gemm::bf16_available() {
@@ -107,7 +83,7 @@ pub struct MethodArgs {
     /// paper's method, in `rgm eval`]. RGM uses the model built into rgm unless --weights names
     /// another.
     #[arg(long, value_enum)]
-    method: Option<MethodArg>,
+    method: Option<MethodName>,
     /// RGM weights: a safetensors file with the authors' parameter names
     /// (`tools/reference/rgm_reference.py` documents them). Without it, RGM uses the model
     /// built into rgm (crates/rgm-model/weights/manifest.json describes it).
@@ -180,12 +156,9 @@ impl MethodArgs {
     fn build(&self, defaults: Defaults) -> anyhow::Result<Method> {
         let refine_by_default = defaults == Defaults::Register;
         let method = match self.method {
+            Some(method) => method,
             None if refine_by_default => MethodOptions::default().method,
             None => MethodName::Rgm,
-            Some(MethodArg::Icp) => MethodName::Icp,
-            Some(MethodArg::Fgr) => MethodName::Fgr,
-            Some(MethodArg::Rgm) => MethodName::Rgm,
-            Some(MethodArg::Auto) => MethodName::Auto,
         };
         if method == MethodName::Icp && self.refine {
             anyhow::bail!("--refine adds ICP after RGM or FGR; --method icp is ICP already");
@@ -212,7 +185,7 @@ pub fn register_files(
     (source, target): (&rgm_geom::PointCloud, &rgm_geom::PointCloud),
     (source_path, target_path): (&std::path::Path, &std::path::Path),
 ) -> anyhow::Result<rgm_model::Registration> {
-    let bar = progress(100, method.name());
+    let bar = progress(100, &method.name());
     let registration = method
         .register_with_progress(source, target, &mut |p| {
             bar.set_position((100.0 * p.done) as u64);

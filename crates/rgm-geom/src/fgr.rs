@@ -97,6 +97,9 @@ impl Default for FgrConfig {
     }
 }
 
+/// The method's name ([`crate::registrar::MethodId`]).
+pub const NAME: &str = "fgr";
+
 /// Where [`register_with_progress`] is: a step and the fraction of the work done.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Progress {

@@ -13,6 +13,9 @@ use nalgebra::Point3;
 use crate::registration::{score, RegistrationResult};
 use crate::{kabsch, GeomError, KnnIndex, PointCloud, Result, RigidTransform};
 
+/// The method's name ([`crate::registrar::MethodId`]).
+pub const NAME: &str = "icp";
+
 /// Settings of [`register`]; `Default` gives Open3D's defaults and our correspondence distance.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct IcpConfig {

@@ -11,18 +11,22 @@
 // `!(x > 0.0)` is used on purpose: it also rejects NaN, which `x <= 0.0` would let through.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod best_of;
 pub mod cloud;
 pub mod error;
 pub mod euler;
 pub mod fgr;
 pub mod fpfh;
+pub mod frame;
 pub mod icp;
 pub mod kabsch;
 pub mod knn;
 pub mod metrics;
 pub mod normals;
 pub mod refine;
+pub mod registrar;
 pub mod registration;
+pub mod thinning;
 pub mod transform;
 
 #[cfg(test)]
@@ -33,6 +37,7 @@ pub use error::{GeomError, Result};
 pub use kabsch::kabsch;
 pub use knn::{knn_graph, KnnIndex, Neighbourhoods};
 pub use metrics::{MetricsSummary, PairMetrics};
+pub use registrar::{DynRegistrar, MethodId, Registrar, Registration};
 pub use registration::RegistrationResult;
 pub use transform::RigidTransform;
 

@@ -1,5 +1,4 @@
-//! Why a registration method found no transform (one error type for [`crate::method`] and
-//! [`crate::pipeline`], which both use it).
+//! Why a registration method found no transform (one error type for every method of this crate).
 
 use std::path::PathBuf;
 
@@ -44,13 +43,10 @@ pub enum MethodError {
         estimate: u64,
         available: u64,
     },
-    /// Every candidate of the combined method failed; each one's cause, `method: why; …`.
-    #[error("every candidate failed ({0})")]
-    AllCandidatesFailed(String),
     /// The method's transform or score is not a finite number (a degenerate pair, or clouds
     /// at a scale the method cannot work at): reported as an error, never as a result.
     #[error("{method} found no finite transform (found {found})")]
-    NotFinite { method: &'static str, found: String },
+    NotFinite { method: String, found: String },
     /// Options that do not fit the method ([`crate::options::MethodOptions`]).
     #[error("{0}")]
     InvalidOptions(String),

@@ -7,9 +7,11 @@ use rgm_geom::metrics::{MetricsSummary, PairMetrics};
 use rgm_geom::{Matrix4, RigidTransform};
 use serde::{Deserialize, Serialize};
 
+use rgm_geom::frame::Normalisation;
 use rgm_geom::refine::{self, RefineConfig};
+use rgm_geom::Registrar;
 
-use crate::{Method, Normalisation};
+use crate::Method;
 
 /// One test pair's outcome.
 #[derive(Clone, Debug)]
@@ -57,7 +59,7 @@ impl PairRecord {
         })
     }
 
-    /// This record's transform refined as [`Method::refined`] refines RGM's (in the network's
+    /// This record's transform refined as `rgm+icp` refines RGM's (in the network's
     /// frame, on the full clouds of `pair`), scored: the record `rgm eval --refine` would give,
     /// without running the network again. Its time adds the refinement's to this record's. A
     /// failed record stays as it is; a failed refinement is recorded as a failure (the identity),

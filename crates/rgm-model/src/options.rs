@@ -1,19 +1,40 @@
 //! A registration method chosen by name and options, as plain data. The `rgm` command and the
 //! Python package both take these from their users and build the [`Method`] here, so that the
 //! two run the same method with the same defaults: [`MethodOptions::default`] is what
-//! `rgm register` runs when given no option.
+//! `rgm register` runs when given no option. Every composition of registrars that users can
+//! name is written here, in [`MethodOptions::build`]:
+//!
+//! | name | composition |
+//! |---|---|
+//! | `icp` | [`IcpConfig`] (its own refinement) |
+//! | `fgr`, `fgr+icp` | [`FgrConfig`], [`Refined`]`<FgrConfig>` |
+//! | `rgm`, `rgm+icp` | [`Normalised`]`<RgmRegistrar>`, `Normalised<Refined<RgmRegistrar>>` |
+//! | `auto` | `Normalised<BestOf[Normalised<RgmRegistrar>, FgrConfig]>` |
+//! | `auto+icp` | `Normalised<AtResolution<BestOf[Refined<Normalised<RgmRegistrar>>, Refined<FgrConfig>]>>` |
+//!
+//! RGM refines in the network's frame (distances in unit-sphere units for any input); `auto`
+//! runs both methods in that frame, on two thinnings of a dense pair
+//! ([`rgm_geom::best_of::BestOf`]).
 
 use std::path::PathBuf;
 use std::str::FromStr;
 
-use rgm_geom::refine::RefineConfig;
+use rgm_geom::best_of::{BestOf, SCORE_DISTANCE};
+use rgm_geom::fgr::{self, FgrConfig};
+use rgm_geom::icp::{self, IcpConfig};
+use rgm_geom::refine::{RefineConfig, ResolutionConfig};
+use rgm_geom::registrar::{AtResolution, DynRegistrar, Normalised, Refined};
+use rgm_geom::thinning::Thinning;
 
 use rgm_nn::Precision;
 
-use crate::combined::CombinedRegistrar;
 use crate::error::MethodError;
 use crate::method::Method;
 use crate::network::{Config, TestStatistics};
+use crate::pipeline::{self, RgmRegistrar};
+
+/// The name of RGM and FGR side by side ([`MethodName::Auto`]).
+pub const AUTO: &str = "auto";
 
 /// The registration methods selectable by name.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -25,7 +46,7 @@ pub enum MethodName {
     /// The RGM network: the built-in model or given weights.
     Rgm,
     /// RGM and FGR, each refined, and the better by a score without ground truth
-    /// ([`crate::combined`]).
+    /// ([`rgm_geom::best_of`]).
     #[default]
     Auto,
 }
@@ -37,11 +58,37 @@ impl MethodName {
     /// The name as users spell it (`rgm`).
     pub fn name(self) -> &'static str {
         match self {
-            Self::Icp => "icp",
-            Self::Fgr => "fgr",
-            Self::Rgm => "rgm",
-            Self::Auto => "auto",
+            Self::Icp => icp::NAME,
+            Self::Fgr => fgr::NAME,
+            Self::Rgm => pipeline::NAME,
+            Self::Auto => AUTO,
         }
+    }
+
+    /// What the method does, for a command line's help.
+    pub fn help(self) -> String {
+        match self {
+            Self::Icp => "Point-to-point ICP from the identity".into(),
+            Self::Fgr => "Fast Global Registration on FPFH features".into(),
+            Self::Rgm => "The RGM network: the model built into rgm, or --weights".into(),
+            Self::Auto => format!(
+                "RGM and FGR on the same pair, each refined, and the result that overlaps \
+                 better (both clouds' share of points within {SCORE_DISTANCE} of the other, in \
+                 the unit-sphere frame): `rgm register`'s default"
+            ),
+        }
+    }
+}
+
+/// The names of [`MethodName::name`] and the help of [`MethodName::help`] on a command line.
+#[cfg(feature = "clap")]
+impl clap::ValueEnum for MethodName {
+    fn value_variants<'a>() -> &'a [Self] {
+        &Self::ALL
+    }
+
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        Some(clap::builder::PossibleValue::new(self.name()).help(self.help()))
     }
 }
 
@@ -115,25 +162,20 @@ impl MethodOptions {
     /// weights, zero passes or points), or the weight file that failed.
     pub fn build(&self) -> Result<Method, MethodError> {
         self.check()?;
-        let method = match self.method {
-            MethodName::Icp => Method::icp(),
-            MethodName::Fgr => Method::fgr(),
-            MethodName::Rgm => self.build_rgm()?,
-            MethodName::Auto => {
-                let Method::Rgm(rgm) = self.build_rgm()? else {
-                    unreachable!("build_rgm builds RGM")
-                };
-                Method::Combined(Box::new(CombinedRegistrar::new(
-                    *rgm,
-                    rgm_geom::fgr::FgrConfig::default(),
-                    None,
-                )))
+        let refine = self.refine.then(RefineConfig::default);
+        Ok(match (self.method, refine) {
+            (MethodName::Icp, _) => Method::new(IcpConfig::default()),
+            (MethodName::Fgr, None) => Method::new(FgrConfig::default()),
+            (MethodName::Fgr, Some(refine)) => {
+                Method::new(Refined::new(FgrConfig::default(), refine))
             }
-        };
-        Ok(if self.refine {
-            method.refined(RefineConfig::default())
-        } else {
-            method
+            (MethodName::Rgm, None) => Method::new(Normalised {
+                inner: self.build_rgm()?,
+            }),
+            (MethodName::Rgm, Some(refine)) => Method::new(Normalised {
+                inner: Refined::new(self.build_rgm()?, refine),
+            }),
+            (MethodName::Auto, refine) => auto(self.build_rgm()?, refine),
         })
     }
 
@@ -157,32 +199,63 @@ impl MethodOptions {
         Ok(())
     }
 
-    fn build_rgm(&self) -> Result<Method, MethodError> {
-        let mut method = match &self.weights {
+    /// The network with its weights and test-time settings.
+    fn build_rgm(&self) -> Result<RgmRegistrar, MethodError> {
+        let mut registrar = match &self.weights {
             Some(weights) => {
                 let config = Config::preset(self.preset.as_deref().unwrap_or("paper"))?;
-                Method::rgm(config, weights)?
-            }
-            None => crate::weights::builtin_method()?,
-        };
-        if let Method::Rgm(registrar) = &mut method {
-            if self.weights.is_some() {
+                let mut registrar = crate::weights::load_registrar(config, weights)?;
                 registrar.network.featurer.test_statistics =
                     self.test_statistics.unwrap_or_default();
-            }
-            if self.weights.is_some() {
                 registrar.config.match_points = Some(WEIGHTS_MATCH_POINTS);
+                registrar
             }
-            if let Some(points) = self.match_points {
-                registrar.config.match_points = (points > 0).then_some(points);
-            }
-            if let Some(passes) = self.passes {
-                registrar.config.passes = passes;
-            }
-            registrar.config.precision = self.precision;
+            None => crate::weights::builtin_registrar()?,
+        };
+        if let Some(points) = self.match_points {
+            registrar.config.match_points = (points > 0).then_some(points);
         }
-        Ok(method)
+        if let Some(passes) = self.passes {
+            registrar.config.passes = passes;
+        }
+        registrar.config.precision = self.precision;
+        Ok(registrar)
     }
+}
+
+/// `auto` (`auto+icp` with `refine`): RGM's candidate and FGR's in the network's frame, each
+/// refined with `refine`, the better by the overlap score on two thinnings of a dense pair, and
+/// the winner refined at a dense pair's own resolution.
+pub fn auto(rgm: RgmRegistrar, refine: Option<RefineConfig>) -> Method {
+    let rgm = Normalised { inner: rgm };
+    let fgr = FgrConfig::default();
+    let best_of = |candidates: [Box<dyn DynRegistrar<MethodError>>; 2], scoring_distance| BestOf {
+        base: AUTO,
+        candidates: candidates.into(),
+        thinnings: vec![Thinning::Voxels, Thinning::Cells],
+        scoring_distance,
+    };
+    let Some(refine) = refine else {
+        return Method::new(Normalised {
+            inner: best_of([Box::new(rgm), Box::new(fgr)], SCORE_DISTANCE),
+        });
+    };
+    let finest = refine.finest_distance();
+    let candidates = best_of(
+        [
+            Box::new(Refined::new(rgm, refine.clone())),
+            Box::new(Refined::new(fgr, refine)),
+        ],
+        finest,
+    );
+    Method::new(Normalised {
+        inner: AtResolution {
+            inner: candidates,
+            coarser_than: finest,
+            scoring_distance: finest,
+            config: ResolutionConfig::default(),
+        },
+    })
 }
 
 #[cfg(test)]
@@ -191,21 +264,13 @@ mod tests {
 
     #[test]
     fn the_default_is_the_built_in_rgm_and_fgr_refined() {
-        let method = MethodOptions::default().build().unwrap();
-        assert_eq!(method.name(), "auto+icp");
-        let Method::Combined(combined) = method else {
-            panic!("the combined method")
-        };
-        assert_eq!(combined.refine, Some(RefineConfig::default()));
-        assert_eq!(combined.fgr, rgm_geom::fgr::FgrConfig::default());
-        // RGM inside is the built-in model, unrefined (the combined method refines).
-        let registrar = combined.rgm;
-        assert!(registrar.config.refine.is_none());
-        let Method::Rgm(builtin) = crate::weights::builtin_method().unwrap() else {
-            panic!("an RGM method")
-        };
+        let options = MethodOptions::default();
+        assert_eq!(options.build().unwrap().name(), "auto+icp");
+        // RGM inside is the built-in model with its own settings.
+        let registrar = options.build_rgm().unwrap();
+        let builtin = crate::weights::builtin_registrar().unwrap();
         assert_eq!(registrar.network.config(), builtin.network.config());
-        assert_eq!(registrar.config.match_points, builtin.config.match_points);
+        assert_eq!(registrar.config, builtin.config);
         assert_eq!(
             registrar.network.featurer.test_statistics,
             builtin.network.featurer.test_statistics
@@ -226,9 +291,8 @@ mod tests {
             refine: false,
             ..MethodOptions::default()
         };
-        let Method::Rgm(registrar) = options.build().unwrap() else {
-            panic!("an RGM method")
-        };
+        assert_eq!(options.build().unwrap().name(), "rgm");
+        let registrar = options.build_rgm().unwrap();
         assert_eq!(registrar.network.config(), &Config::tiny());
         assert_eq!(
             registrar.network.featurer.test_statistics,
@@ -238,17 +302,18 @@ mod tests {
             (registrar.config.match_points, registrar.config.passes),
             (Some(30), 3)
         );
-        assert!(registrar.config.refine.is_none());
         // Given weights without statistics use the running ones (the authors' weights).
         let options = MethodOptions {
             test_statistics: None,
             ..options
         };
-        let Method::Rgm(registrar) = options.build().unwrap() else {
-            panic!("an RGM method")
-        };
         assert_eq!(
-            registrar.network.featurer.test_statistics,
+            options
+                .build_rgm()
+                .unwrap()
+                .network
+                .featurer
+                .test_statistics,
             TestStatistics::Running
         );
         for (name, options, expected) in [
@@ -262,6 +327,15 @@ mod tests {
                 "fgr",
             ),
             ("icp", MethodOptions::default(), "icp"),
+            ("rgm", MethodOptions::default(), "rgm+icp"),
+            (
+                "auto",
+                MethodOptions {
+                    refine: false,
+                    ..Default::default()
+                },
+                "auto",
+            ),
         ] {
             let options = MethodOptions {
                 method: name.parse().unwrap(),

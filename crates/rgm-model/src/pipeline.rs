@@ -4,9 +4,10 @@
 //! that moves the chain's cloud; then cycle consistency between the two chains' last hard
 //! correspondences, and ONE weighted Kabsch of the original clouds with what survives.
 //!
-//! Around it, what real inputs need: the clouds are brought into the frame the network was
-//! trained in ([`Normalisation`]), large clouds are subsampled for matching (the transform
-//! found applies to the full clouds), and a refinement may follow on the full clouds.
+//! Around it, what real inputs need: large clouds are subsampled for matching (the transform
+//! found applies to the full clouds). The network expects the unit-sphere frame of its training
+//! clouds: wrap the registrar in [`rgm_geom::registrar::Normalised`] for pairs of any size,
+//! and in [`rgm_geom::registrar::Refined`] for an ICP refinement.
 //!
 //! The local features of a cloud depend on that cloud alone at test time, so each is computed
 //! once per distinct cloud: X and Y once each, and each moved copy once (2 + 2(P − 1) feature
@@ -18,9 +19,11 @@ use std::time::Instant;
 
 use ndarray::Array2;
 use rand::{rngs::StdRng, SeedableRng};
+use rgm_geom::fgr::Progress;
 use rgm_geom::kabsch::kabsch;
-use rgm_geom::refine::{self, RefineConfig};
-use rgm_geom::{Point3, PointCloud, RegistrationResult, RigidTransform, Vector3};
+use rgm_geom::registrar::{MethodId, Registrar, Registration};
+use rgm_geom::thinning::DENSITY_POINTS;
+use rgm_geom::{Point3, PointCloud, RegistrationResult, RigidTransform};
 use rgm_match::{hard_match, Correspondences, MatchConfig};
 use rgm_nn::{Parameters, Precision};
 
@@ -43,10 +46,6 @@ pub struct PipelineConfig {
     /// is denser ([`matched_indices`]); `None` (the paper) matches on every point. A model
     /// trained on subsampled clouds matches best on as many points as it was trained on.
     pub match_points: Option<usize>,
-    /// Refine the result with [`rgm_geom::refine`] (trimmed point-to-plane ICP) on the full
-    /// clouds, in the network's frame (so distances are in unit-sphere units). `None` in the
-    /// paper.
-    pub refine: Option<RefineConfig>,
     /// The network's matrix products: f32, or bf16 where the processor has AMX or AVX-512 BF16.
     pub precision: Precision,
 }
@@ -58,141 +57,18 @@ impl Default for PipelineConfig {
             cycle_consistency: true,
             inlier_threshold: 0.5,
             match_points: None,
-            refine: None,
             precision: Precision::F32,
         }
     }
 }
 
+/// The method's name ([`MethodId`]).
+pub const NAME: &str = "rgm";
+
 /// Seeds of the matched subsets of source and target (different, so that clouds with related
 /// point orders do not get related subsets).
 const SOURCE_SEED: u64 = 0;
 const TARGET_SEED: u64 = 1;
-
-/// How a pair is moved into the frame the network was trained in: `p' = (p − centre) / scale`,
-/// each cloud about its own centre, both by one scale.
-///
-/// The benchmark's pairs (unit-sphere shapes, one moved by at most 0.5 per axis, jitter ≤ 0.05:
-/// every point within 1.95 of the origin) are already in that frame and are left as they are:
-/// the identity whenever both clouds lie within [`Normalisation::FRAME_RADIUS`] of the origin
-/// and the larger cloud's extent (its largest distance from its centroid) is within
-/// [`Normalisation::FRAME_EXTENT`]. Any other pair is centred (each cloud on its centroid) and
-/// scaled by one common factor so that the farthest point of either cloud lies on the unit
-/// sphere ([`Normalisation::centred`]): the same pair at half or twice the size reaches the
-/// network as the same clouds, centred.
-///
-/// All of it is measured on each cloud's [`near`] points: a far outlier (a stray return of a
-/// scanner) neither decides the frame nor shrinks the pair to a dot in it, and the methods
-/// leave it out. Lengths are taken at any scale ([`rgm_geom::length`]): a pair at 1e200 or
-/// 1e-200 reaches the network as it does at 1.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Normalisation {
-    pub source_centre: Vector3<f64>,
-    pub target_centre: Vector3<f64>,
-    pub scale: f64,
-}
-
-/// A point farther from its cloud's coordinate-wise median than this many times the median
-/// distance from it is a far outlier ([`PointCloud::near_indices`]); no ModelNet40 shape has one
-/// (`docs/geom.md`, "Far outliers").
-pub const FAR_OUTLIER: f64 = 12.0;
-
-/// The indices of `cloud`'s points that are not far outliers ([`FAR_OUTLIER`]), in order.
-pub fn near(cloud: &PointCloud) -> Vec<usize> {
-    cloud.near_indices(FAR_OUTLIER)
-}
-
-/// The largest distance of `cloud`'s points from `centre`; 0 for an empty cloud.
-fn radius(cloud: &PointCloud, centre: &Point3<f64>) -> f64 {
-    cloud
-        .points
-        .iter()
-        .map(|p| rgm_geom::length(&(p - centre)))
-        .fold(0.0, f64::max)
-}
-
-impl Normalisation {
-    /// Pairs within this radius of the origin are in the training frame…
-    pub const FRAME_RADIUS: f64 = 2.0;
-    /// …when the larger extent is in this range: a ModelNet40 shape reaches 1 from its centre,
-    /// a 70 % crop of it 0.80–1.11 (10th and 90th percentiles over 400 training shapes; the
-    /// larger of a test pair's two crops at most 1.38).
-    pub const FRAME_EXTENT: std::ops::RangeInclusive<f64> = 0.7..=1.7;
-
-    /// No change.
-    pub fn identity() -> Self {
-        Self {
-            source_centre: Vector3::zeros(),
-            target_centre: Vector3::zeros(),
-            scale: 1.0,
-        }
-    }
-
-    /// The normalisation of the pair (`source`, `target`), as described on the type.
-    pub fn of_pair(source: &PointCloud, target: &PointCloud) -> Self {
-        let (source, target) = (source.select(&near(source)), target.select(&near(target)));
-        let extent = radius(&source, &source.centroid()).max(radius(&target, &target.centroid()));
-        let reach = radius(&source, &Point3::origin()).max(radius(&target, &Point3::origin()));
-        if reach <= Self::FRAME_RADIUS && Self::FRAME_EXTENT.contains(&extent) || extent == 0.0 {
-            return Self::identity();
-        }
-        Self::centred(&source, &target)
-    }
-
-    /// Each cloud centred on its centroid, both scaled by one factor so that the farthest point
-    /// of either lies on the unit sphere (no scaling for clouds of coincident points).
-    pub fn centred(source: &PointCloud, target: &PointCloud) -> Self {
-        let (cx, cy) = (source.centroid(), target.centroid());
-        let extent = radius(source, &cx).max(radius(target, &cy));
-        Self {
-            source_centre: cx.coords,
-            target_centre: cy.coords,
-            scale: if extent > 0.0 { extent } else { 1.0 },
-        }
-    }
-
-    /// Whether the pair is used as it is.
-    pub fn is_identity(&self) -> bool {
-        *self == Self::identity()
-    }
-
-    fn apply(cloud: &PointCloud, centre: &Vector3<f64>, scale: f64) -> PointCloud {
-        PointCloud::new(cloud.points.iter().map(|p| (p - centre) / scale).collect())
-    }
-
-    /// The source in the network's frame.
-    pub fn source(&self, cloud: &PointCloud) -> PointCloud {
-        Self::apply(cloud, &self.source_centre, self.scale)
-    }
-
-    /// The target in the network's frame.
-    pub fn target(&self, cloud: &PointCloud) -> PointCloud {
-        Self::apply(cloud, &self.target_centre, self.scale)
-    }
-
-    /// The transform in the caller's frame of `t` (y' = R x' + t' in the network's frame):
-    /// y = s y' + c_Y = R x + (s t' + c_Y − R c_X).
-    pub fn undo(&self, t: &RigidTransform) -> RigidTransform {
-        let translation =
-            self.scale * t.translation + self.target_centre - t.rotation * self.source_centre;
-        RigidTransform::new(t.rotation, translation)
-    }
-
-    /// The transform in the network's frame of `t` (in the caller's frame): the inverse of
-    /// [`Normalisation::undo`], t' = (t − c_Y + R c_X) / s.
-    pub fn redo(&self, t: &RigidTransform) -> RigidTransform {
-        let translation =
-            (t.translation - self.target_centre + t.rotation * self.source_centre) / self.scale;
-        RigidTransform::new(t.rotation, translation)
-    }
-}
-
-/// Points of a training cloud (1,024 per ModelNet40 shape; 717 after the partial crop).
-/// Before the random cut to the matched points, a cloud with more points than this (and than
-/// the matched points) is thinned to this many by farthest-point sampling, so that the cut sees
-/// the training clouds' spacing: drawn from a dense scan, or from duplicated points, a random
-/// subset holds near-coincident points that the network never saw in training.
-pub const DENSITY_POINTS: usize = 1024;
 
 /// The indices of `cloud` that RGM matches on: at most `count` (all when `None`), drawn at
 /// random from `seed` after the thinning of [`DENSITY_POINTS`], sorted.
@@ -226,7 +102,7 @@ fn subsample(len: usize, count: Option<usize>, seed: u64) -> Vec<usize> {
 /// Wall time of each stage of one registration, in seconds (summed over passes).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct StageTimes {
-    /// Normalisation, subsampling and conversion of the clouds.
+    /// Subsampling and conversion of the clouds.
     pub prepare: f64,
     /// The local feature extractor (each cloud once, and each chain's moved cloud).
     pub features: f64,
@@ -237,14 +113,12 @@ pub struct StageTimes {
     pub matching: f64,
     /// Weighted Kabsch.
     pub kabsch: f64,
-    /// ICP refinement.
-    pub refine: f64,
 }
 
 impl StageTimes {
     /// The whole registration.
     pub fn total(&self) -> f64 {
-        self.prepare + self.features + self.blocks + self.matching + self.kabsch + self.refine
+        self.prepare + self.features + self.blocks + self.matching + self.kabsch
     }
 }
 
@@ -258,14 +132,13 @@ fn add_since(stage: &mut f64, start: Instant) {
 pub struct RgmRegistrar {
     /// The network, in evaluation mode at test time.
     pub network: Rgm<f32>,
-    /// Passes, cycle consistency, inlier threshold, subsampling, refinement.
+    /// Passes, cycle consistency, inlier threshold, subsampling, precision.
     pub config: PipelineConfig,
     source_features: FeaturerCache<f32>, // the matched source X's features (N, C), once per pair
     target_features: FeaturerCache<f32>, // the matched target Y's features (M, C), once per pair
     moved_features: FeaturerCache<f32>,  // a chain's moved cloud's features (N or M, C)
     forward: RgmCache<f32>,              // the forward chain's pass (X', Y)
     reverse: RgmCache<f32>,              // the reverse chain's pass (Y', X)
-    pairs: Vec<(usize, usize)>,          // the final correspondences, caller's indices
     times: StageTimes,                   // of the last registration
 }
 
@@ -303,17 +176,8 @@ impl RgmRegistrar {
             moved_features: FeaturerCache::default(),
             forward: RgmCache::default(),
             reverse: RgmCache::default(),
-            pairs: Vec::new(),
             times: StageTimes::default(),
         }
-    }
-
-    /// The final hard correspondences (source index, target index) of the last registration —
-    /// those both chains ended with (or the forward chain's, without cycle consistency) — as
-    /// indices into the clouds given to [`RgmRegistrar::register`]. Empty before any
-    /// registration and after a failed one.
-    pub fn correspondences(&self) -> &[(usize, usize)] {
-        &self.pairs
     }
 
     /// Where the time of the last registration went.
@@ -394,22 +258,16 @@ impl RgmRegistrar {
         Ok(solved)
     }
 
-    /// The transform that maps `source` onto `target` (spec §4): the weighted Kabsch of the
-    /// matched clouds with the correspondences both chains end with, then the refinement, if
-    /// configured, in the caller's frame. `inlier_count` is the number of those
-    /// correspondences ([`RgmRegistrar::correspondences`]); `iterations` counts the passes of a
-    /// chain and the refinement's iterations. Unrefined, `inlier_rmse` is those
-    /// correspondences' distance after the transform and `fitness` their share of the matched
-    /// source points; refined, both are the refinement's score (the share of all source points
-    /// with a target point closer than its finest distance, and their RMS distance, in the
-    /// caller's units): many of the network's correspondences are wrong even when its transform
-    /// is right, so their distances say little.
-    pub fn register(
+    /// The registration of `source` onto `target` (spec §4), both in the network's frame: the
+    /// weighted Kabsch of the matched clouds with the correspondences both chains end with.
+    /// Its correspondences are those (indices into the clouds given), `inlier_count` their
+    /// number, `fitness` their share of the matched source points and `inlier_rmse` their
+    /// distance after the transform; `iterations` counts the passes of a chain.
+    fn register_pair(
         &mut self,
         source: &PointCloud,
         target: &PointCloud,
-    ) -> Result<RegistrationResult, MethodError> {
-        self.pairs.clear();
+    ) -> Result<(RegistrationResult, Vec<(usize, usize)>), MethodError> {
         self.times = StageTimes::default();
         if self.config.passes == 0 {
             return Err(MethodError::InvalidConfig {
@@ -418,14 +276,9 @@ impl RgmRegistrar {
         }
         self.network.set_precision(self.config.precision);
         let start = Instant::now();
-        let frame = Normalisation::of_pair(source, target);
-        // The points that are not far outliers, in the network's frame: all the method sees.
-        let (source_near, target_near) = (near(source), near(target));
-        let source_n = frame.source(&source.select(&source_near));
-        let target_n = frame.target(&target.select(&target_near));
-        let source_idx = matched_indices(&source_n, self.config.match_points, SOURCE_SEED);
-        let target_idx = matched_indices(&target_n, self.config.match_points, TARGET_SEED);
-        let (x, y) = (source_n.select(&source_idx), target_n.select(&target_idx));
+        let source_idx = matched_indices(source, self.config.match_points, SOURCE_SEED);
+        let target_idx = matched_indices(target, self.config.match_points, TARGET_SEED);
+        let (x, y) = (source.select(&source_idx), target.select(&target_idx));
         let needed = self.network.config().k + 1;
         for (cloud, matched) in [("source", &x), ("target", &y)] {
             if matched.len() < needed {
@@ -453,7 +306,8 @@ impl RgmRegistrar {
         // The chains advance side by side: pass 0 of the reverse chain reuses pass 0 of the
         // forward chain. Only the last pass's correspondences leave a chain.
         let (mut moved_x, mut moved_y) = (x.clone(), y.clone());
-        let mut ends = (None, None); // (forward chain's H (N, M), reverse chain's H (M, N))
+        let mut forward_end = None; // the forward chain's last H (N, M)
+        let mut reverse_end = None; // the reverse chain's last H (M, N)
         for pass in 0..self.config.passes {
             let last = pass + 1 == self.config.passes;
             let found = self.chain_pass(Chain::Forward, pass, &moved_x)?;
@@ -461,72 +315,77 @@ impl RgmRegistrar {
                 let step = self.kabsch_of(&moved_x, &y, found.pairs())?;
                 moved_x = moved_x.transformed(&step);
             }
-            ends.0 = Some(found);
+            forward_end = Some(found);
             if self.config.cycle_consistency {
                 let found = self.chain_pass(Chain::Reverse, pass, &moved_y)?;
                 if !last {
                     let step = self.kabsch_of(&moved_y, &x, found.pairs())?;
                     moved_y = moved_y.transformed(&step);
                 }
-                ends.1 = Some(found);
+                reverse_end = Some(found);
             }
         }
-        let found = match ends {
-            (Some(forward), Some(reverse)) => {
+        let Some(forward) = forward_end else {
+            return Err(MethodError::InvalidConfig {
+                why: "passes must be at least 1".into(),
+            });
+        };
+        let found = match reverse_end {
+            Some(reverse) => {
                 let start = Instant::now();
                 let kept = forward.cycle_consistent(&reverse)?;
                 add_since(&mut self.times.matching, start);
                 kept
             }
-            (Some(forward), None) => forward,
-            (None, _) => unreachable!("passes ≥ 1 was checked"),
+            None => forward,
         };
         if found.pairs().is_empty() {
             return Err(MethodError::NoCorrespondences {
                 stage: "cycle consistency (the two chains end with no common pair)".into(),
             });
         }
-        let mut total = self.kabsch_of(&x, &y, found.pairs())?;
-        let mut iterations = self.config.passes;
-        let mut refined_score = None;
-        if let Some(config) = &self.config.refine {
-            let start = Instant::now();
-            let refined = refine::refine(&source_n, &target_n, &total, config)?;
-            add_since(&mut self.times.refine, start);
-            total = refined.t_target_source;
-            iterations += refined.iterations;
-            // Far outliers count as source points without a partner.
-            let near_share = source_n.len() as f64 / source.len() as f64;
-            refined_score = Some((
-                refined.fitness * near_share,
-                refined.inlier_rmse * frame.scale,
-            ));
-        }
-        // Unrefined, the score is the final correspondences' own, taken in the network's frame
-        // (squared distances at the caller's scale may overflow).
-        let (fitness, inlier_rmse) = refined_score.unwrap_or_else(|| {
-            let sum_d2: f64 = found
-                .pairs()
-                .iter()
-                .map(|&(i, j)| (total.apply(&x.points[i]) - y.points[j]).norm_squared())
-                .sum();
-            let rmse = (sum_d2 / found.pairs().len() as f64).sqrt() * frame.scale;
-            (found.pairs().len() as f64 / x.len() as f64, rmse)
-        });
-        let total = frame.undo(&total);
-        self.pairs = found
+        let total = self.kabsch_of(&x, &y, found.pairs())?;
+        let sum_d2: f64 = found
             .pairs()
             .iter()
-            .map(|&(i, j)| (source_near[source_idx[i]], target_near[target_idx[j]]))
-            .collect();
-        Ok(RegistrationResult {
+            .map(|&(i, j)| (total.apply(&x.points[i]) - y.points[j]).norm_squared())
+            .sum();
+        let count = found.pairs().len();
+        let result = RegistrationResult {
             t_target_source: total,
-            iterations,
+            iterations: self.config.passes,
             converged: true,
-            inlier_count: self.pairs.len(),
-            fitness,
-            inlier_rmse,
-        })
+            inlier_count: count,
+            fitness: count as f64 / x.len() as f64,
+            inlier_rmse: (sum_d2 / count as f64).sqrt(),
+        };
+        let pairs = found
+            .pairs()
+            .iter()
+            .map(|&(i, j)| (source_idx[i], target_idx[j]))
+            .collect();
+        Ok((result, pairs))
+    }
+}
+
+/// The network alone, on clouds in its frame.
+impl Registrar<MethodError> for RgmRegistrar {
+    fn id(&self) -> MethodId {
+        MethodId {
+            base: NAME,
+            refined: false,
+        }
+    }
+
+    fn register_with_progress(
+        &mut self,
+        source: &PointCloud,
+        target: &PointCloud,
+        _: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, MethodError> {
+        let start = Instant::now();
+        let (result, pairs) = self.register_pair(source, target)?;
+        Ok(Registration::single(result, pairs, start))
     }
 }
 
@@ -578,15 +437,15 @@ mod tests {
         let b = part
             .register(&source.select(&si), &target.select(&ti))
             .unwrap();
-        assert_eq!(a.t_target_source, b.t_target_source);
-        let mapped: Vec<_> = part
-            .correspondences()
+        assert_eq!(a.result.t_target_source, b.result.t_target_source);
+        let mapped: Vec<_> = b
+            .correspondences
             .iter()
             .map(|&(i, j)| (si[i], ti[j]))
             .collect();
         assert!(!mapped.is_empty());
-        assert_eq!(whole.correspondences(), &mapped[..]);
-        assert_eq!(a.fitness, mapped.len() as f64 / 30.0);
+        assert_eq!(a.correspondences, mapped);
+        assert_eq!(a.result.fitness, mapped.len() as f64 / 30.0);
     }
 
     #[test]

@@ -15,7 +15,6 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::error::MethodError;
-use crate::method::Method;
 use crate::network::{Config, Edges, Rgm, Scoring, TestStatistics};
 use crate::pipeline::{PipelineConfig, RgmRegistrar};
 
@@ -154,19 +153,26 @@ impl ModelEntry {
     }
 
     /// RGM with this model's weights, read from `dir` (the manifest's folder).
-    pub fn method(&self, dir: &Path) -> Result<Method, MethodError> {
+    pub fn registrar(&self, dir: &Path) -> Result<RgmRegistrar, MethodError> {
         let network = Rgm::load(self.config()?, &dir.join(&self.file))?;
-        Ok(self.registrar(network))
+        Ok(self.registrar_of(network))
     }
 
-    fn registrar(&self, mut network: Rgm<f32>) -> Method {
+    fn registrar_of(&self, mut network: Rgm<f32>) -> RgmRegistrar {
         network.featurer.test_statistics = self.test_statistics;
-        Method::Rgm(Box::new(RgmRegistrar::new(network, self.pipeline_config())))
+        RgmRegistrar::new(network, self.pipeline_config())
     }
 }
 
+/// RGM of `config`'s sizes with the weights in the safetensors file `weights` (the authors'
+/// parameter names), and the paper's test-time settings.
+pub fn load_registrar(config: Config, weights: &Path) -> Result<RgmRegistrar, MethodError> {
+    let network = Rgm::load(config, weights)?;
+    Ok(RgmRegistrar::new(network, PipelineConfig::default()))
+}
+
 /// RGM with the built-in model (weights embedded in the binary) and its test-time settings.
-pub fn builtin_method() -> Result<Method, MethodError> {
+pub fn builtin_registrar() -> Result<RgmRegistrar, MethodError> {
     let manifest = Manifest::builtin();
     let entry = manifest
         .builtin_entry()
@@ -179,7 +185,7 @@ pub fn builtin_method() -> Result<Method, MethodError> {
         .map_err(crate::network::NetworkError::from)?;
     let mut network = Rgm::new(entry.config()?, 0)?;
     network.load_tensors(&tensors)?;
-    Ok(entry.registrar(network))
+    Ok(entry.registrar_of(network))
 }
 
 #[cfg(test)]
@@ -217,9 +223,7 @@ mod tests {
         let mut entry = Manifest::builtin().builtin_entry().unwrap().clone();
         (entry.preset, entry.file) = ("tiny".into(), "rgm_tiny_state_dict.safetensors".into());
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
-        let Method::Rgm(registrar) = entry.method(&dir).unwrap() else {
-            panic!("an RGM method")
-        };
+        let registrar = entry.registrar(&dir).unwrap();
         let on_disk = Rgm::<f32>::load(Config::tiny(), &dir.join(&entry.file)).unwrap();
         assert_eq!(
             registrar.network.blocks[1].u_fc.weight.value,
@@ -228,13 +232,8 @@ mod tests {
         assert_eq!(registrar.config.match_points, entry.match_points);
         // The built-in model: the embedded bytes, the manifest's sizes and matching size.
         let builtin = Manifest::builtin().builtin_entry().unwrap().clone();
-        let Method::Rgm(registrar) = builtin_method().unwrap() else {
-            panic!("an RGM method")
-        };
-        let on_disk = builtin.method(&weights_dir()).unwrap();
-        let Method::Rgm(expected) = on_disk else {
-            panic!("an RGM method")
-        };
+        let registrar = builtin_registrar().unwrap();
+        let expected = builtin.registrar(&weights_dir()).unwrap();
         assert_eq!(registrar.network.config(), &builtin.config().unwrap());
         assert_eq!(registrar.config, expected.config);
         assert_eq!(

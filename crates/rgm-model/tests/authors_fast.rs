@@ -8,9 +8,10 @@ use std::path::{Path, PathBuf};
 
 use ndarray::Array2;
 use rgm_data::{ModelNet40, PairGenerator, Setting, Split};
+use rgm_geom::registrar::Normalised;
 use rgm_geom::{Matrix3, PointCloud, RigidTransform, Vector3};
 use rgm_model::network::{Config, Mode, Rgm, RgmCache};
-use rgm_model::{PipelineConfig, RgmRegistrar};
+use rgm_model::{PipelineConfig, Registrar, RgmRegistrar};
 use serde::Deserialize;
 
 fn shared() -> PathBuf {
@@ -138,25 +139,28 @@ fn the_first_pass_gives_the_authors_c_soft() {
 
 #[test]
 fn the_procedure_gives_the_authors_transforms_and_correspondences() {
-    let mut registrar = RgmRegistrar::new(network(), PipelineConfig::default());
+    let mut registrar = Normalised {
+        inner: RgmRegistrar::new(network(), PipelineConfig::default()),
+    };
     let expected = expected();
     assert_eq!(expected.pairs.len(), 21);
     let mut report = Vec::new();
     for pair in &expected.pairs {
         let (source, target) = partial_pair(pair.index);
         let found = registrar.register(&source, &target).unwrap();
+        let found_t = found.result.t_target_source;
         let theirs = transform(&pair.t_target_source);
         // The angle of R_theirsᵀ R_ours from its antisymmetric part (sin θ), which stays exact
         // near 0 where acos of the trace loses half the digits.
-        let r = theirs.rotation.transpose() * found.t_target_source.rotation;
+        let r = theirs.rotation.transpose() * found_t.rotation;
         let axis = Vector3::new(
             r[(2, 1)] - r[(1, 2)],
             r[(0, 2)] - r[(2, 0)],
             r[(1, 0)] - r[(0, 1)],
         );
         let angle_deg = (axis.norm() / 2.0).asin().to_degrees();
-        let offset = (found.t_target_source.translation - theirs.translation).norm();
-        let mut ours = registrar.correspondences().to_vec();
+        let offset = (found_t.translation - theirs.translation).norm();
+        let mut ours = found.correspondences;
         ours.sort_unstable();
         let mut authors = pair.correspondences.clone();
         authors.sort_unstable();

@@ -4,13 +4,11 @@
 use std::path::PathBuf;
 
 use rgm_data::{ModelNet40, PairGenerator, Setting, Split};
-use rgm_geom::fgr::FgrConfig;
+use rgm_geom::best_of::MIN_OVERLAP;
 use rgm_geom::refine::RefineConfig;
-use rgm_geom::{PairMetrics, Point3, PointCloud, RigidTransform};
+use rgm_geom::{GeomError, PairMetrics, Point3, PointCloud, RigidTransform};
 use rgm_model::network::{Config, Rgm};
-use rgm_model::{
-    CombinedRegistrar, Method, MethodError, MethodOptions, PipelineConfig, RgmRegistrar,
-};
+use rgm_model::{Method, MethodError, MethodOptions, PipelineConfig, Registrar, RgmRegistrar};
 
 /// The tiny network of `tests/fixtures` (random weights: its transforms are poor).
 fn tiny_rgm() -> RgmRegistrar {
@@ -38,11 +36,7 @@ fn clean_pair() -> rgm_data::Pair {
 }
 
 fn combined() -> Method {
-    Method::Combined(Box::new(CombinedRegistrar::new(
-        tiny_rgm(),
-        FgrConfig::default(),
-        Some(RefineConfig::default()),
-    )))
+    rgm_model::options::auto(tiny_rgm(), Some(RefineConfig::default()))
 }
 
 #[test]
@@ -53,7 +47,7 @@ fn the_candidate_that_overlaps_better_wins() {
     let mut method = MethodOptions::default().build().unwrap();
     assert_eq!(method.name(), "auto+icp");
     let found = method.register(&pair.source, &pair.target).unwrap();
-    let names: Vec<&str> = found.candidates.iter().map(|c| c.method).collect();
+    let names: Vec<&str> = found.candidates.iter().map(|c| c.method.as_str()).collect();
     assert_eq!(names, ["rgm+icp", "fgr+icp"]);
     let scores: Vec<f64> = found.candidates.iter().map(|c| c.score.unwrap()).collect();
     let chosen = found.chosen.unwrap();
@@ -75,8 +69,7 @@ fn the_candidate_that_overlaps_better_wins() {
     assert!(metrics.recall && metrics.mie_r_deg < 0.05, "{metrics:?}");
     // Scored as Open3D scores ICP at the refinement's finest distance: every point.
     assert_eq!(found.result.fitness, 1.0);
-    let pairs = method.correspondences(&pair.source, &pair.target, &found.result);
-    assert_eq!(pairs.len(), pair.source.len());
+    assert_eq!(found.correspondences.len(), pair.source.len());
 }
 
 #[test]
@@ -102,7 +95,7 @@ fn a_failed_candidate_leaves_the_other_and_both_failing_names_both() {
     // Empty clouds: neither can run.
     let empty = PointCloud::default();
     match method.register(&empty, &empty) {
-        Err(MethodError::AllCandidatesFailed(why)) => {
+        Err(MethodError::Geom(GeomError::AllCandidatesFailed(why))) => {
             assert!(
                 why.contains("rgm+icp: ") && why.contains("fgr+icp: "),
                 "{why}"
@@ -169,7 +162,7 @@ fn a_dense_pair_whose_methods_agree_is_thinned_once_and_refined_at_its_resolutio
     assert_eq!(source.len(), 4096);
     let mut method = MethodOptions::default().build().unwrap();
     let found = method.register(&source, &target).unwrap();
-    let names: Vec<&str> = found.candidates.iter().map(|c| c.method).collect();
+    let names: Vec<&str> = found.candidates.iter().map(|c| c.method.as_str()).collect();
     assert_eq!(names, ["rgm+icp", "fgr+icp"]);
     let scores: Vec<f64> = found.candidates.iter().map(|c| c.score.unwrap()).collect();
     let chosen = found.chosen.unwrap();
@@ -305,5 +298,5 @@ fn clouds_that_do_not_overlap_are_reported_as_not_registered() {
     let why = found.doubt.expect("not registered");
     assert!(why.contains("overlaps too little"), "{why}");
     let best = found.candidates[found.chosen.unwrap()].score.unwrap();
-    assert!(best < rgm_model::combined::MIN_OVERLAP, "{best}");
+    assert!(best < MIN_OVERLAP, "{best}");
 }

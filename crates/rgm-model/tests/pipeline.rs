@@ -8,13 +8,21 @@
 use std::path::PathBuf;
 
 use ndarray::Array2;
+use rgm_geom::frame::Normalisation;
 use rgm_geom::refine::{refine, RefineConfig};
+use rgm_geom::registrar::{Normalised, Refined};
 use rgm_geom::{Point3, PointCloud, RigidTransform, Vector3};
 use rgm_match::{hard_match, MatchConfig};
 use rgm_model::evaluate::evaluate_pair;
 use rgm_model::network::{Config, Edges, FeaturerCache, Mode, Rgm, RgmCache, Scoring};
-use rgm_model::pipeline::Normalisation;
-use rgm_model::{Method, MethodError, PipelineConfig, RgmRegistrar};
+use rgm_model::{Method, MethodError, PipelineConfig, Registrar, RgmRegistrar};
+
+/// RGM as `rgm register --method rgm --no-refine` runs it: in the network's frame.
+fn normalised(network: Rgm<f32>, config: PipelineConfig) -> Normalised<RgmRegistrar> {
+    Normalised {
+        inner: RgmRegistrar::new(network, config),
+    }
+}
 
 fn fixture() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/rgm_tiny_state_dict.safetensors")
@@ -68,7 +76,11 @@ fn the_pipeline_uses_only_cycle_consistent_one_to_one_pairs() {
         passes: 1,
         ..Default::default()
     };
-    let outcome = |config| RgmRegistrar::new(network.clone(), config).register(&source, &target);
+    let outcome = |config| {
+        normalised(network.clone(), config)
+            .register(&source, &target)
+            .map(|found| found.result)
+    };
     match (outcome(one_way), outcome(both_ways)) {
         (Ok(a), Ok(b)) => {
             // Cycle consistency keeps a subset of the one-way pairs.
@@ -97,7 +109,7 @@ fn the_pipeline_uses_only_cycle_consistent_one_to_one_pairs() {
 
 #[test]
 fn rgm_weights_of_the_wrong_size_are_a_named_error() {
-    let err = Method::rgm(Config::small(), &fixture()).unwrap_err();
+    let err = rgm_model::weights::load_registrar(Config::small(), &fixture()).unwrap_err();
     let text = err.to_string();
     assert!(
         text.contains("pointfeaturer.conv1.weight") || text.contains("expected"),
@@ -237,11 +249,12 @@ fn the_pipeline_reports_the_correspondences_the_plain_network_finds() {
         passes: 1,
         ..Default::default()
     };
-    let mut registrar = RgmRegistrar::new(network, config);
-    let result = registrar.register(&source, &target).unwrap();
+    let found = normalised(network, config)
+        .register(&source, &target)
+        .unwrap();
     assert!(!expected.pairs().is_empty());
-    assert_eq!(registrar.correspondences(), expected.pairs());
-    assert_eq!(result.inlier_count, expected.pairs().len());
+    assert_eq!(found.correspondences, expected.pairs());
+    assert_eq!(found.result.inlier_count, expected.pairs().len());
 }
 
 #[test]
@@ -348,17 +361,17 @@ fn far_large_clouds_register_as_their_normalised_copies() {
         cycle_consistency: false,
         ..Default::default()
     };
-    let mut a = RgmRegistrar::new(network.clone(), config.clone());
-    let mut b = RgmRegistrar::new(network, config);
-    let (big, small) = (
-        a.register(&source, &target).unwrap(),
-        b.register(&ns, &nt).unwrap(),
-    );
-    assert_eq!(a.correspondences(), b.correspondences());
-    assert!(!a.correspondences().is_empty());
+    let big = normalised(network.clone(), config.clone())
+        .register(&source, &target)
+        .unwrap();
+    let small = RgmRegistrar::new(network, config)
+        .register(&ns, &nt)
+        .unwrap();
+    assert_eq!(big.correspondences, small.correspondences);
+    assert!(!big.correspondences.is_empty());
     assert_same_transform(
-        &big.t_target_source,
-        &frame.undo(&small.t_target_source),
+        &big.result.t_target_source,
+        &frame.undo(&small.result.t_target_source),
         1e-9,
     );
 }
@@ -372,15 +385,14 @@ fn refinement_starts_from_rgms_transform() {
         cycle_consistency: false,
         ..Default::default()
     };
-    let refined = PipelineConfig {
-        refine: Some(RefineConfig::default()),
-        ..plain.clone()
-    };
-    let rgm = RgmRegistrar::new(network.clone(), plain)
+    let rgm = normalised(network.clone(), plain.clone())
         .register(&source, &target)
-        .unwrap();
-    let mut registrar = RgmRegistrar::new(network, refined);
-    let both = registrar.register(&source, &target).unwrap();
+        .unwrap()
+        .result;
+    let mut registrar = Normalised {
+        inner: Refined::new(RgmRegistrar::new(network, plain), RefineConfig::default()),
+    };
+    let both = registrar.register(&source, &target).unwrap().result;
     let expected = refine(
         &source,
         &target,
@@ -390,8 +402,8 @@ fn refinement_starts_from_rgms_transform() {
     .unwrap();
     assert_same_transform(&both.t_target_source, &expected.t_target_source, 1e-12);
     assert_eq!(both.iterations, 1 + expected.iterations);
-    // The network's correspondences, the refinement's score.
-    assert_eq!(both.inlier_count, rgm.inlier_count);
+    // The refinement's score.
+    assert_eq!(both.inlier_count, expected.inlier_count);
     assert!((both.fitness - expected.fitness).abs() < 1e-12);
     assert!((both.inlier_rmse - expected.inlier_rmse).abs() < 1e-12);
     assert!(both.inlier_rmse < rgm.inlier_rmse, "{both:?} {rgm:?}");
@@ -420,13 +432,12 @@ fn a_record_refined_afterwards_is_what_the_refined_method_records() {
         passes: 1,
         ..Default::default()
     };
-    let method = |config| Method::Rgm(Box::new(RgmRegistrar::new(network.clone(), config)));
-    let record = evaluate_pair(&mut method(plain.clone()), 3, &pair).unwrap();
-    let refined_config = PipelineConfig {
-        refine: Some(RefineConfig::default()),
-        ..plain
-    };
-    let expected = evaluate_pair(&mut method(refined_config), 3, &pair).unwrap();
+    let plain_method = Method::new(normalised(network.clone(), plain.clone()));
+    let record = evaluate_pair(&mut plain_method.clone(), 3, &pair).unwrap();
+    let mut refined_method = Method::new(Normalised {
+        inner: Refined::new(RgmRegistrar::new(network, plain), RefineConfig::default()),
+    });
+    let expected = evaluate_pair(&mut refined_method, 3, &pair).unwrap();
     let refined = record.refined(&pair, &RefineConfig::default()).unwrap();
     // The same refinement from the same start, up to the rounding of leaving the network's
     // frame and coming back (clouds 40 across, 100 from the origin).

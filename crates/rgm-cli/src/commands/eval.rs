@@ -50,7 +50,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     let (dataset, generator) = args.data.open()?;
     let (shapes, indices) = args.data.shapes(&dataset);
-    let bar = progress(indices.len(), method.name());
+    let bar = progress(indices.len(), &method.name());
     let recalled = AtomicUsize::new(0);
     let pool = pool(&args)?;
     let records: Vec<PairRecord> = pool.install(|| {
@@ -76,7 +76,7 @@ pub fn run(args: Args) -> Result<()> {
     })?;
     bar.finish_and_clear();
     table::report(
-        method.name(),
+        &method.name(),
         &args.data.pairs_name(),
         &records,
         args.json.as_deref(),
@@ -88,7 +88,7 @@ pub fn run(args: Args) -> Result<()> {
 fn run_scans(args: &Args, method: &Method) -> Result<()> {
     let folders = args.data.scan_pairs()?;
     let total: usize = folders.iter().map(|(_, pairs)| pairs.len()).sum();
-    let bar = progress(total, method.name());
+    let bar = progress(total, &method.name());
     let pool = pool(args)?;
     let mut results: Vec<(String, Vec<ScanRecord>)> = Vec::new();
     for (name, pairs) in folders {
@@ -110,13 +110,13 @@ fn run_scans(args: &Args, method: &Method) -> Result<()> {
     bar.finish_and_clear();
     println!("{}", scan_table_header());
     for (name, records) in &results {
-        if let Some(row) = scan_table_row(method.name(), name, records) {
+        if let Some(row) = scan_table_row(&method.name(), name, records) {
             println!("{row}");
         }
     }
     if results.len() > 1 {
         let all: Vec<ScanRecord> = results.iter().flat_map(|(_, r)| r.clone()).collect();
-        if let Some(row) = scan_table_row(method.name(), "all", &all) {
+        if let Some(row) = scan_table_row(&method.name(), "all", &all) {
             println!("{row}");
         }
     }

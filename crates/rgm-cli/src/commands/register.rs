@@ -48,7 +48,7 @@ pub fn run(args: Args) -> Result<()> {
     let rows = result.t_target_source.to_rows();
     let chosen = registration
         .chosen
-        .map(|k| registration.candidates[k].method);
+        .map(|k| registration.candidates[k].method.as_str());
     if args.json {
         let candidates: Vec<serde_json::Value> = registration
             .candidates

@@ -6,7 +6,6 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use rgm_data::Correspondence;
 use rgm_geom::{Matrix4, RigidTransform};
-use rgm_model::Method;
 use rgm_viz::{correct_fraction, correspondence_figure, registration_figure};
 
 use crate::MethodArgs;
@@ -30,8 +29,10 @@ pub struct Args {
     /// The PNG to write: source orange, target blue; before (left) and after (right).
     #[arg(long, value_name = "FILE")]
     out: PathBuf,
-    /// Also write RGM's hard correspondence matrix as a PNG (as the paper's Figure 5: black
-    /// correct, red wrong, grey missed), judged against --truth. Needs --method rgm.
+    /// Also write the correspondence matrix of the found transform as a PNG (as the paper's
+    /// Figure 5: black correct, red wrong, grey missed), judged against --truth: the network's
+    /// hard matches with `--method rgm --no-refine`, otherwise the source points the transform
+    /// brings within the method's scoring distance of a target point.
     #[arg(long, value_name = "FILE", requires = "truth")]
     matrix: Option<PathBuf>,
     /// The true transform target ← source (formats as --transform): the correct
@@ -66,32 +67,22 @@ pub fn run(args: Args) -> Result<()> {
         (Some(_), None) => None, // nothing to find
         _ => {
             let mut method = args.method.build(crate::Defaults::Register)?;
-            if args.matrix.is_some() && !matches!(method, Method::Rgm(_)) {
-                bail!(
-                    "--matrix shows RGM's correspondences; {} has none (use --method rgm)",
-                    method.name()
-                );
-            }
-            let registration = crate::register_files(
+            Some(crate::register_files(
                 &mut method,
                 (&source, &target),
                 (&args.source, &args.target),
-            )?;
-            Some((method, registration.result.t_target_source))
+            )?)
         }
     };
     let transform = given
-        .or(found.as_ref().map(|(_, t)| *t))
+        .or(found.as_ref().map(|found| found.result.t_target_source))
         .context("no transform given or found")?;
     registration_figure(&source, &target, &transform)?.write_png(&args.out)?;
     println!("wrote {}", args.out.display());
-    if let (Some(path), Some(truth), Some((method, _))) = (&args.matrix, &args.truth, &found) {
-        let Method::Rgm(registrar) = method else {
-            unreachable!("refused before the registration");
-        };
+    if let (Some(path), Some(truth), Some(found)) = (&args.matrix, &args.truth, &found) {
         let moved = source.transformed(&read_transform(truth)?);
         let correct = Correspondence::rebuild(&moved.points, &target.points);
-        let pairs = registrar.correspondences();
+        let pairs = &found.correspondences;
         correspondence_figure(&correct, pairs, MATRIX_BLOCKS)?.write_png(path)?;
         println!(
             "wrote {}: {} correspondences, {:.1} % correct",

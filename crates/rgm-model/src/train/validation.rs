@@ -7,6 +7,7 @@ use rayon::prelude::*;
 use rgm_data::{Pair, PairGenerator, Shape};
 use rgm_geom::metrics::PairMetrics;
 use rgm_geom::refine::{refine, RefineConfig};
+use rgm_geom::registrar::Normalised;
 use rgm_geom::RigidTransform;
 use rgm_match::bce_forward;
 use rgm_nn::Scalar;
@@ -126,13 +127,15 @@ impl Trainer {
             .enumerate()
             .map(|(w, worker)| {
                 worker.network.featurer.test_statistics = test_statistics;
-                let mut method = Method::Rgm(Box::new(RgmRegistrar::new(
-                    worker.network.clone(),
-                    PipelineConfig {
-                        precision,
-                        ..PipelineConfig::default()
-                    },
-                )));
+                let mut method = Method::new(Normalised {
+                    inner: RgmRegistrar::new(
+                        worker.network.clone(),
+                        PipelineConfig {
+                            precision,
+                            ..PipelineConfig::default()
+                        },
+                    ),
+                });
                 let mut part = ValidationPart::default();
                 for i in (w..total).step_by(workers) {
                     let full = generator.test_pair(shapes, i)?;

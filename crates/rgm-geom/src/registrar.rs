@@ -1,0 +1,500 @@
+//! One shape for every registration method: a [`Registrar`] maps a source cloud onto a target
+//! cloud, and the wrappers here compose registrars without knowing what they wrap —
+//! [`Refined`] (ICP refinement of its transform), [`Normalised`] (the pair centred and scaled
+//! into the unit-sphere frame), [`AtResolution`] (a last refinement at a dense pair's own
+//! point spacing) and [`crate::best_of::BestOf`] (several methods, the best by a score that
+//! needs no ground truth).
+//!
+//! The trait is generic over its error so that methods above this crate (the RGM network)
+//! compose with the classical ones here: every registrar of this crate works with any error
+//! type that a [`GeomError`] converts into.
+
+use std::fmt;
+use std::time::Instant;
+
+use crate::fgr::{self, FgrConfig, Progress};
+use crate::frame::{near, Normalisation};
+use crate::icp::{self, IcpConfig};
+use crate::refine::{self, RefineConfig, ResolutionConfig};
+use crate::registration::{score, RegistrationResult, Score};
+use crate::thinning::DENSITY_POINTS;
+use crate::{GeomError, KnnIndex, PointCloud, RigidTransform};
+
+/// What users call a method: its base name and whether its transform is refined, spelled
+/// `base` or `base+icp` in the command line, the tables, the Python package and JSON.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct MethodId {
+    /// The method without refinement (`icp`, `fgr`, `rgm`, `auto`).
+    pub base: &'static str,
+    /// Followed by [`crate::refine`].
+    pub refined: bool,
+}
+
+impl MethodId {
+    /// What a refined method's name ends with.
+    pub const REFINED_SUFFIX: &'static str = "+icp";
+}
+
+impl fmt::Display for MethodId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let suffix = if self.refined {
+            Self::REFINED_SUFFIX
+        } else {
+            ""
+        };
+        write!(f, "{}{suffix}", self.base)
+    }
+}
+
+/// One method's outcome inside a composite ([`crate::best_of::BestOf`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Candidate {
+    /// The method that made it ([`MethodId`], with `/cells` when it ran on the
+    /// [`crate::thinning::Thinning::Cells`] version of a dense pair).
+    pub method: String,
+    /// Its transform, in the caller's frame.
+    pub t_target_source: RigidTransform,
+    /// Its score ([`crate::best_of::overlap_score`]); the highest wins. `None` when the method
+    /// failed.
+    pub score: Option<f64>,
+    /// Why the method failed, if it did.
+    pub failure: Option<String>,
+}
+
+/// What a registrar found on one pair.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Registration {
+    /// The transform, its iterations and inlier statistics.
+    pub result: RegistrationResult,
+    /// The (source index, target index) pairs behind `result.inlier_count`: the method's own
+    /// matches (RGM's last hard correspondences), or the source points the transform brings
+    /// within the scoring distance of their nearest target point (Open3D's correspondence set).
+    pub correspondences: Vec<(usize, usize)>,
+    /// Wall time of the method alone (no file reading), in milliseconds.
+    pub time_ms: f64,
+    /// A composite's candidates, each with its score (empty for a single method), and the index
+    /// of the one returned.
+    pub candidates: Vec<Candidate>,
+    pub chosen: Option<usize>,
+    /// Why the result is not to be trusted, when it is not (the best candidate overlaps too
+    /// little, [`crate::best_of::MIN_OVERLAP`]): the caller reports the pair as not
+    /// registered, with this reason.
+    pub doubt: Option<String>,
+}
+
+impl Registration {
+    /// A single method's registration of `result` on `source` and `target`, its correspondences
+    /// the source points that `result`'s transform brings within `max_distance` of `target`,
+    /// timed from `start`.
+    pub fn scored_within(
+        result: RegistrationResult,
+        source: &PointCloud,
+        target: &PointCloud,
+        max_distance: f64,
+        start: Instant,
+    ) -> Self {
+        let mut correspondences = Vec::new();
+        score(
+            &source.points,
+            &KnnIndex::new(&target.points),
+            &result.t_target_source,
+            max_distance,
+            Some(&mut correspondences),
+        );
+        Self::single(result, correspondences, start)
+    }
+
+    /// A single method's registration, timed from `start`.
+    pub fn single(
+        result: RegistrationResult,
+        correspondences: Vec<(usize, usize)>,
+        start: Instant,
+    ) -> Self {
+        Self {
+            result,
+            correspondences,
+            time_ms: elapsed_ms(start),
+            candidates: Vec::new(),
+            chosen: None,
+            doubt: None,
+        }
+    }
+}
+
+/// Milliseconds since `start`.
+pub fn elapsed_ms(start: Instant) -> f64 {
+    start.elapsed().as_secs_f64() * 1e3
+}
+
+/// A registration method: the transform that maps `source` onto `target`.
+pub trait Registrar<E> {
+    /// The method's name.
+    fn id(&self) -> MethodId;
+
+    /// Registers `source` onto `target`, telling `progress` where it is (methods that take
+    /// long on large clouds report; others say nothing).
+    fn register_with_progress(
+        &mut self,
+        source: &PointCloud,
+        target: &PointCloud,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E>;
+
+    /// Registers `source` onto `target`.
+    fn register(&mut self, source: &PointCloud, target: &PointCloud) -> Result<Registration, E> {
+        self.register_with_progress(source, target, &mut |_| {})
+    }
+}
+
+/// A [`Registrar`] behind a pointer: cloneable and sendable to other threads, so that a
+/// composite can hold methods of different types and a caller can give each thread its own copy.
+pub trait DynRegistrar<E>: Registrar<E> + Send + Sync {
+    /// A copy of this registrar in a new box.
+    fn clone_box(&self) -> Box<dyn DynRegistrar<E>>;
+}
+
+impl<E, R: Registrar<E> + Clone + Send + Sync + 'static> DynRegistrar<E> for R {
+    fn clone_box(&self) -> Box<dyn DynRegistrar<E>> {
+        Box::new(self.clone())
+    }
+}
+
+impl<E: 'static> Clone for Box<dyn DynRegistrar<E>> {
+    fn clone(&self) -> Self {
+        (**self).clone_box()
+    }
+}
+
+impl<E> fmt::Debug for dyn DynRegistrar<E> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "Registrar({})", self.id())
+    }
+}
+
+impl<E> Registrar<E> for Box<dyn DynRegistrar<E>> {
+    fn id(&self) -> MethodId {
+        (**self).id()
+    }
+
+    fn register_with_progress(
+        &mut self,
+        source: &PointCloud,
+        target: &PointCloud,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        (**self).register_with_progress(source, target, progress)
+    }
+}
+
+/// Point-to-point ICP ([`crate::icp`]) from its configured initial transform.
+impl<E: From<GeomError>> Registrar<E> for IcpConfig {
+    fn id(&self) -> MethodId {
+        MethodId {
+            base: icp::NAME,
+            refined: false,
+        }
+    }
+
+    fn register_with_progress(
+        &mut self,
+        source: &PointCloud,
+        target: &PointCloud,
+        _: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        let start = Instant::now();
+        let result = icp::register(source, target, self)?;
+        let distance = self.max_correspondence_distance;
+        Ok(Registration::scored_within(
+            result, source, target, distance, start,
+        ))
+    }
+}
+
+/// Fast Global Registration on FPFH features ([`crate::fgr`]).
+impl<E: From<GeomError>> Registrar<E> for FgrConfig {
+    fn id(&self) -> MethodId {
+        MethodId {
+            base: fgr::NAME,
+            refined: false,
+        }
+    }
+
+    fn register_with_progress(
+        &mut self,
+        source: &PointCloud,
+        target: &PointCloud,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        let start = Instant::now();
+        let result = fgr::register_with_progress(source, target, self, progress)?;
+        let distance = self.maximum_correspondence_distance;
+        Ok(Registration::scored_within(
+            result, source, target, distance, start,
+        ))
+    }
+}
+
+/// `inner`, then [`refine::refine`] (trimmed point-to-plane ICP, coarse to fine) from its
+/// transform, on the clouds `inner` was given. The result is scored at the refinement's finest
+/// distance; the iterations add up.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Refined<R> {
+    pub inner: R,
+    pub config: RefineConfig,
+}
+
+impl<R> Refined<R> {
+    /// `inner` refined with `config`.
+    pub fn new(inner: R, config: RefineConfig) -> Self {
+        Self { inner, config }
+    }
+}
+
+impl<E: From<GeomError>, R: Registrar<E>> Registrar<E> for Refined<R> {
+    fn id(&self) -> MethodId {
+        MethodId {
+            refined: true,
+            ..self.inner.id()
+        }
+    }
+
+    fn register_with_progress(
+        &mut self,
+        source: &PointCloud,
+        target: &PointCloud,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        let start = Instant::now();
+        let coarse = self
+            .inner
+            .register_with_progress(source, target, progress)?;
+        let fine = refine::refine(source, target, &coarse.result.t_target_source, &self.config)?;
+        let result = RegistrationResult {
+            iterations: coarse.result.iterations + fine.iterations,
+            ..fine
+        };
+        let distance = self.config.finest_distance();
+        Ok(Registration {
+            candidates: coarse.candidates,
+            chosen: coarse.chosen,
+            doubt: coarse.doubt,
+            ..Registration::scored_within(result, source, target, distance, start)
+        })
+    }
+}
+
+/// `inner` on the pair in the unit-sphere frame ([`Normalisation::of_pair`]), far outliers
+/// ([`near`]) left out; the result is given back in the caller's frame: transforms undone,
+/// correspondences indexing the clouds as given, RMSE in the caller's units, fitness counting
+/// the far outliers as source points without a partner.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Normalised<R> {
+    pub inner: R,
+}
+
+impl<E: From<GeomError>, R: Registrar<E>> Registrar<E> for Normalised<R> {
+    fn id(&self) -> MethodId {
+        self.inner.id()
+    }
+
+    fn register_with_progress(
+        &mut self,
+        source: &PointCloud,
+        target: &PointCloud,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        let start = Instant::now();
+        let frame = Normalisation::of_pair(source, target);
+        let (source_near, target_near) = (near(source), near(target));
+        let fs = frame.source(&source.select(&source_near)); // (N', 3)
+        let ft = frame.target(&target.select(&target_near)); // (M', 3)
+        let mut found = self.inner.register_with_progress(&fs, &ft, progress)?;
+        let result = &mut found.result;
+        result.t_target_source = frame.undo(&result.t_target_source);
+        result.inlier_rmse *= frame.scale;
+        if !source.is_empty() {
+            result.fitness *= fs.len() as f64 / source.len() as f64;
+        }
+        for (i, j) in &mut found.correspondences {
+            (*i, *j) = (source_near[*i], target_near[*j]);
+        }
+        for candidate in &mut found.candidates {
+            candidate.t_target_source = frame.undo(&candidate.t_target_source);
+        }
+        found.time_ms = elapsed_ms(start);
+        Ok(found)
+    }
+}
+
+/// `inner`, then, on a pair denser than [`DENSITY_POINTS`], [`refine::refine_at_resolution`]
+/// from its transform: point-to-plane stages at the clouds' own point spacing, finer than
+/// `coarser_than` (the finest distance `inner` refined at). A pair as sparse as the training
+/// clouds is returned as `inner` found it: its noise may exceed its spacing, and stages finer
+/// than the coarse ones would fit the noise. Rescored at `scoring_distance`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AtResolution<R> {
+    pub inner: R,
+    pub coarser_than: f64,
+    pub scoring_distance: f64,
+    pub config: ResolutionConfig,
+}
+
+impl<E: From<GeomError>, R: Registrar<E>> Registrar<E> for AtResolution<R> {
+    fn id(&self) -> MethodId {
+        self.inner.id()
+    }
+
+    fn register_with_progress(
+        &mut self,
+        source: &PointCloud,
+        target: &PointCloud,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        let start = Instant::now();
+        let mut found = self
+            .inner
+            .register_with_progress(source, target, progress)?;
+        if source.len().max(target.len()) <= DENSITY_POINTS {
+            return Ok(found);
+        }
+        let index = KnnIndex::new(&target.points);
+        let (transform, more) = refine::refine_at_resolution(
+            source,
+            target,
+            &index,
+            &found.result.t_target_source,
+            self.coarser_than,
+            &self.config,
+        )?;
+        found.correspondences.clear();
+        let scored: Score = score(
+            &source.points,
+            &index,
+            &transform,
+            self.scoring_distance,
+            Some(&mut found.correspondences),
+        );
+        found.result = RegistrationResult::scored(
+            transform,
+            found.result.iterations + more,
+            found.result.converged,
+            scored,
+        );
+        found.time_ms = elapsed_ms(start);
+        Ok(found)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::airplane;
+    use crate::{Point3, Vector3};
+
+    /// 200 points on a twisted curve, and the same points moved by 5° and 0.02.
+    fn curve_pair() -> (PointCloud, PointCloud) {
+        let source = PointCloud::new(
+            (0..200)
+                .map(|i| {
+                    let s = i as f64 / 200.0;
+                    Point3::new((7.0 * s).cos(), (5.0 * s).sin(), s * s)
+                })
+                .collect(),
+        );
+        let pose = RigidTransform::new(
+            crate::euler::rotation_xyz_intrinsic(0.0, 0.0, 5f64.to_radians()),
+            Vector3::new(0.02, 0.0, 0.0),
+        );
+        let target = source.transformed(&pose);
+        (source, target)
+    }
+
+    #[test]
+    fn names_compose() {
+        let fgr = FgrConfig::default();
+        assert_eq!(Registrar::<GeomError>::id(&fgr).to_string(), "fgr");
+        let refined = Refined::new(fgr, RefineConfig::default());
+        assert_eq!(Registrar::<GeomError>::id(&refined).to_string(), "fgr+icp");
+        let normalised = Normalised { inner: refined };
+        assert_eq!(
+            Registrar::<GeomError>::id(&normalised).to_string(),
+            "fgr+icp"
+        );
+        assert_eq!(
+            Registrar::<GeomError>::id(&IcpConfig::default()).to_string(),
+            "icp"
+        );
+    }
+
+    #[test]
+    fn correspondences_are_the_pairs_behind_the_inlier_count() {
+        let (source, target) = curve_pair();
+        let refine = RefineConfig::default();
+        let methods: [(Box<dyn DynRegistrar<GeomError>>, f64); 3] = [
+            (
+                Box::new(IcpConfig::default()),
+                IcpConfig::default().max_correspondence_distance,
+            ),
+            (
+                Box::new(FgrConfig::default()),
+                FgrConfig::default().maximum_correspondence_distance,
+            ),
+            (
+                Box::new(Refined::new(FgrConfig::default(), refine.clone())),
+                refine.finest_distance(),
+            ),
+        ];
+        for (mut method, max_distance) in methods {
+            let name = method.id();
+            let found = method.register(&source, &target).unwrap();
+            let pairs = &found.correspondences;
+            assert_eq!(pairs.len(), found.result.inlier_count, "{name}");
+            assert!(pairs.len() > 100, "{name}: {}", pairs.len());
+            for &(i, j) in pairs {
+                let d = (found.result.t_target_source.apply(&source.points[i]) - target.points[j])
+                    .norm();
+                assert!(d < max_distance, "{name}: {d}");
+            }
+        }
+    }
+
+    #[test]
+    fn normalised_registers_a_pair_at_any_scale_and_gives_it_back_in_the_callers_frame() {
+        // The airplane at 1,000 times its size, far from the origin, turned by 10°: FGR's
+        // unit-sphere radii fit it only in the normalised frame.
+        let shape = airplane();
+        let big = PointCloud::new(
+            shape
+                .points
+                .iter()
+                .map(|p| Point3::from(p.coords * 1000.0 + Vector3::new(5e3, -2e3, 1e3)))
+                .collect(),
+        );
+        let pose = RigidTransform::new(
+            crate::euler::rotation_xyz_intrinsic(0.1, -0.05, 10f64.to_radians()),
+            Vector3::new(30.0, 0.0, -20.0),
+        );
+        let target = big.transformed(&pose);
+        let mut method = Normalised {
+            inner: Refined::new(FgrConfig::default(), RefineConfig::default()),
+        };
+        let found: Registration =
+            Registrar::<GeomError>::register(&mut method, &big, &target).unwrap();
+        let t = found.result.t_target_source;
+        let angle = t.inverse().compose(&pose).rotation_angle_deg();
+        assert!(angle < 0.01, "{angle}°");
+        assert!((t.translation - pose.translation).norm() < 1.0, "{t:?}");
+        // Fitness counts every source point; the RMSE is in the caller's units (the clouds
+        // coincide: well below a point spacing of the big airplane, tens of units).
+        assert!(found.result.fitness > 0.99, "{}", found.result.fitness);
+        assert!(
+            found.result.inlier_rmse < 1.0,
+            "{}",
+            found.result.inlier_rmse
+        );
+        for &(i, j) in &found.correspondences {
+            assert!((t.apply(&big.points[i]) - target.points[j]).norm() < 40.0);
+        }
+        assert_eq!(found.correspondences.len(), found.result.inlier_count);
+    }
+}
