@@ -166,7 +166,7 @@ pub fn run(args: &BatchArgs, method: &MethodArgs) -> Result<()> {
     );
     if failed + doubted > 0 {
         bail!(
-            "{failed} of {} pairs failed and {doubted} were not registered; their lines in \
+            "of {} pairs, {failed} failed and {doubted} were not registered; their lines in \
              {written} say why",
             all.len()
         );
@@ -186,10 +186,14 @@ fn register(method: &mut Method, pair: &Listed, bar: &indicatif::ProgressBar) ->
     let registered = (|| -> Result<serde_json::Value> {
         let source = read(&pair.source_path)?;
         let target = read(&pair.target_path)?;
-        let registration = method
-            .register(&source, &target)
-            .map_err(|e| crate::method_failure(e, method.name(), (&pair.source_path, &pair.target_path)))?;
-        Ok(super::register::json(method, &registration, (source.len(), target.len())))
+        let registration = method.register(&source, &target).map_err(|e| {
+            crate::method_failure(e, method.name(), (&pair.source_path, &pair.target_path))
+        })?;
+        Ok(super::register::json(
+            method,
+            &registration,
+            (source.len(), target.len()),
+        ))
     })();
     let (mut value, outcome) = match registered {
         Ok(value) if value["registered"] == true => (value, Outcome::Registered),
@@ -206,7 +210,8 @@ fn register(method: &mut Method, pair: &Listed, bar: &indicatif::ProgressBar) ->
 
 /// The pairs of LIST, CSV or JSON (by its first character), a repeated pair once.
 fn read_list(path: &Path) -> Result<Vec<Listed>> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
     let folder = path.parent().unwrap_or(Path::new(""));
     let named = if text.trim_start().starts_with(['[', '{']) {
@@ -219,7 +224,9 @@ fn read_list(path: &Path) -> Result<Vec<Listed>> {
     for (source, target, place) in named {
         let key = (source.clone(), target.clone());
         if let Some(earlier) = first.get(&key) {
-            eprintln!("rgm: {place} repeats the pair of {earlier} ({source}, {target}); it runs once");
+            eprintln!(
+                "rgm: {place} repeats the pair of {earlier} ({source}, {target}); it runs once"
+            );
             continue;
         }
         first.insert(key, place);
@@ -247,7 +254,8 @@ fn csv_list(path: &Path, text: &str) -> Result<Vec<(String, String, String)>> {
     let Some((n, header)) = rows.next() else {
         bail!("{}: no header line `source,target`", path.display());
     };
-    let names = csv_fields(header).map_err(|why| anyhow::anyhow!("{}: {why}: `{header}`", at(n)))?;
+    let names =
+        csv_fields(header).map_err(|why| anyhow::anyhow!("{}: {why}: `{header}`", at(n)))?;
     let column = |name: &str| names.iter().position(|h| h.eq_ignore_ascii_case(name));
     let (Some(s), Some(t)) = (column("source"), column("target")) else {
         bail!(
@@ -257,10 +265,15 @@ fn csv_list(path: &Path, text: &str) -> Result<Vec<(String, String, String)>> {
     };
     let mut pairs = Vec::new();
     for (n, line) in rows {
-        let fields = csv_fields(line).map_err(|why| anyhow::anyhow!("{}: {why}: `{line}`", at(n)))?;
+        let fields =
+            csv_fields(line).map_err(|why| anyhow::anyhow!("{}: {why}: `{line}`", at(n)))?;
         let get = |k: usize, name: &str| match fields.get(k) {
             Some(f) if !f.is_empty() => Ok(f.clone()),
-            _ => Err(anyhow::anyhow!("{}: no {name} file (column {}): `{line}`", at(n), k + 1)),
+            _ => Err(anyhow::anyhow!(
+                "{}: no {name} file (column {}): `{line}`",
+                at(n),
+                k + 1
+            )),
         };
         pairs.push((get(s, "source")?, get(t, "target")?, at(n)));
     }
@@ -435,7 +448,10 @@ mod tests {
             csv_fields(r#""x, y.ply", "say ""hi"".ply",,z"#).unwrap(),
             ["x, y.ply", r#"say "hi".ply"#, "", "z"]
         );
-        assert_eq!(csv_fields(r#""open"#), Err("a quoted field has no closing quote"));
+        assert_eq!(
+            csv_fields(r#""open"#),
+            Err("a quoted field has no closing quote")
+        );
         assert_eq!(csv_fields(r#""a"b,c"#), Err("text after a quoted field"));
     }
 }

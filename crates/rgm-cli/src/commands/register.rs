@@ -42,11 +42,8 @@ pub fn run(args: Args) -> Result<()> {
     let source = crate::read_cloud(source_path)?;
     let target = crate::read_cloud(target_path)?;
     let mut method = args.method.build(crate::Defaults::Register)?;
-    let registration = crate::register_files(
-        &mut method,
-        (&source, &target),
-        (source_path, target_path),
-    )?;
+    let registration =
+        crate::register_files(&mut method, (&source, &target), (source_path, target_path))?;
     let result = &registration.result;
     let refined = method.is_refined();
     let doubt = registration.doubt.as_deref();
