@@ -11,17 +11,19 @@
 //! pool's workers under Linux's default start method) registers too.
 
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
 use pyo3::exceptions::{PyMemoryError, PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyList, PySlice, PyTuple};
+use rayon::prelude::*;
 use rgm_data::{DataError, ModelNet40, PairGenerator, Setting, Shape, Split};
 use rgm_geom::{Matrix4, PairMetrics, Point3, PointCloud, RigidTransform};
 use rgm_model::network::TestStatistics;
-use rgm_model::{Method, MethodError, MethodName, MethodOptions};
+use rgm_model::{Method, MethodError, MethodName, MethodOptions, Registration};
 use rgm_nn::threads::with_denormals_flushed;
 
 /// How far from rigid a given 4×4 transform may be (as `rgm score` reads outside transforms).
@@ -118,15 +120,29 @@ fn transform(matrix: &PyReadonlyArray2<'_, f64>, name: &str) -> PyResult<RigidTr
 /// A registration method loaded once, for any number of pairs from any number of threads.
 #[pyclass(frozen, module = "rgm._rgm")]
 struct Registrar {
+    /// Shared with the pool's work, which may outlive a call interrupted by Ctrl-C.
+    copies: Arc<Copies>,
+}
+
+/// A method and the copies of it that threads register with.
+struct Copies {
     /// Copied for a call that finds no idle copy.
     prototype: Method,
     /// Copies not in use, their buffers kept: one per thread that registered at the same time.
     idle: Mutex<Vec<Method>>,
 }
 
-impl Registrar {
-    /// The idle copies (a panic while one was held leaves the list valid, so poisoning is
-    /// ignored).
+impl Copies {
+    /// A copy of the method for one thread's work, back among the idle ones when dropped (a
+    /// panic while one was held leaves the list valid, so poisoning is ignored).
+    fn lease(self: &Arc<Self>) -> Lease {
+        let popped = self.idle().pop();
+        Lease {
+            method: Some(popped.unwrap_or_else(|| self.prototype.clone())),
+            copies: self.clone(),
+        }
+    }
+
     fn idle(&self) -> MutexGuard<'_, Vec<Method>> {
         self.idle
             .lock()
@@ -134,27 +150,320 @@ impl Registrar {
     }
 }
 
-/// One candidate of the combined method, in the order `rgm/__init__.py` reads it.
-type CandidateFields<'py> = (
-    &'static str,              // method
-    Option<f64>,               // score
-    Bound<'py, PyArray2<f64>>, // (4, 4) transformation
-    Option<String>,            // why it failed
-);
+/// A copy of the method lent by [`Copies::lease`].
+struct Lease {
+    method: Option<Method>, // Some until dropped
+    copies: Arc<Copies>,
+}
 
-/// Result fields of one registration, in the order `rgm/__init__.py` reads them.
-type Outcome<'py> = (
-    Bound<'py, PyArray2<f64>>, // (4, 4) transformation, target ← source
-    f64,                       // fitness
-    f64,                       // inlier RMSE
-    Bound<'py, PyArray2<i64>>, // (K, 2) correspondences
-    f64,                       // time in milliseconds
-    usize,                     // iterations
-    bool,                      // converged
-    Vec<CandidateFields<'py>>, // the combined method's candidates (empty for the others)
-    Option<&'static str>,      // the chosen candidate's method
-    Option<String>,            // why the result is not credible (not registered)
-);
+impl Drop for Lease {
+    fn drop(&mut self) {
+        if let Some(method) = self.method.take() {
+            self.copies.idle().push(method);
+        }
+    }
+}
+
+/// One pair's registration and the (source, target) index pairs behind it.
+type Registered = Result<(Registration, Vec<(usize, usize)>), MethodError>;
+
+/// Registers `source` onto `target` with `method`, with its correspondences.
+fn register_pair(method: &mut Method, source: &PointCloud, target: &PointCloud) -> Registered {
+    let registration = method.register(source, target)?;
+    let pairs = method.correspondences(source, target, &registration.result);
+    Ok((registration, pairs))
+}
+
+/// Runs `job` on the pool while this thread waits for it, GIL released, looking at Python's
+/// signals ten times a second: Ctrl-C raises KeyboardInterrupt at once and sets the flag `job`
+/// is given, so that it stops early (it ends in the background). `what` names the work in the
+/// error of a panic.
+fn on_pool<T: Send + 'static>(
+    py: Python<'_>,
+    what: &str,
+    job: impl FnOnce(&AtomicBool) -> T + Send + 'static,
+) -> PyResult<T> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    let (done, mut result) = std::sync::mpsc::channel();
+    pool()?.spawn(move || {
+        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            with_denormals_flushed(|| job(&flag))
+        }));
+        let _ = done.send(outcome); // the caller is gone after a Ctrl-C
+    });
+    let outcome = loop {
+        // The receiver goes into the GIL-free closure and back (it may not be shared).
+        let got;
+        (result, got) = py.detach(move || {
+            let got = result.recv_timeout(std::time::Duration::from_millis(100));
+            (result, got)
+        });
+        match got {
+            Ok(finished) => break finished,
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
+                if let Err(interrupt) = py.check_signals() {
+                    stop.store(true, Ordering::Relaxed);
+                    return Err(interrupt);
+                }
+            }
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
+                return Err(PyRuntimeError::new_err(
+                    "rgm's worker thread ended unexpectedly",
+                ))
+            }
+        }
+    };
+    outcome.map_err(|_| PyRuntimeError::new_err(format!("{what} panicked (a bug in rgm)")))
+}
+
+/// The Python error of method `name` failing (`MemoryError` when it would need too much).
+fn method_error(name: &str, err: MethodError) -> PyErr {
+    let message = format!("{name} failed: {err}");
+    match err {
+        MethodError::TooMuchMemory { .. } => PyMemoryError::new_err(message),
+        _ => PyRuntimeError::new_err(message),
+    }
+}
+
+/// One candidate of the default method (``"auto"``), which runs RGM and FGR and keeps the one
+/// that overlaps better.
+///
+/// Attributes:
+///     method: ``"rgm+icp"`` or ``"fgr+icp"`` (without ``+icp`` when unrefined; with ``/cells``
+///         on the second thinning of a dense pair).
+///     score: the share of each cloud's points within 0.02 of the other cloud after the
+///         transform (in the unit-sphere frame), source to target plus target to source: 0 to
+///         2, higher is better; the highest wins. ``None`` when the method failed.
+///     transformation: (4, 4) float64, target ← source (the identity when it failed).
+///     failure: why the method failed, or ``None``.
+#[pyclass(frozen, module = "rgm", get_all)]
+struct Candidate {
+    method: String,
+    score: Option<f64>,
+    transformation: Py<PyArray2<f64>>, // (4, 4)
+    failure: Option<String>,
+}
+
+#[pymethods]
+impl Candidate {
+    #[new]
+    #[pyo3(signature = (method, score, transformation, failure=None))]
+    fn new(
+        method: String,
+        score: Option<f64>,
+        transformation: Py<PyArray2<f64>>,
+        failure: Option<String>,
+    ) -> Self {
+        Self {
+            method,
+            score,
+            transformation,
+            failure,
+        }
+    }
+
+    fn __repr__(&self) -> String {
+        let score = self.score.map_or("None".into(), |s| s.to_string());
+        let failure = self.failure.as_ref().map_or("".into(), |f| format!(", failure={f:?}"));
+        format!("Candidate(method={:?}, score={score}{failure})", self.method)
+    }
+
+    /// Pickles as its fields (results travel back from process pools and Dask workers).
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+        let py = slf.py();
+        let c = slf.get();
+        let fields = (&c.method, c.score, c.transformation.clone_ref(py), &c.failure);
+        Ok((slf.get_type().into_any(), fields.into_pyobject(py)?))
+    }
+}
+
+/// The outcome of registering a source cloud onto a target cloud.
+///
+/// Attributes:
+///     transformation: (4, 4) float64 homogeneous matrix that maps source coordinates into
+///         the target's frame (target ← source), ``y = R x + t``, as Open3D's
+///         ``registration_*`` results.
+///     rotation: the (3, 3) rotation R of ``transformation`` (a view of it).
+///     translation: the (3,) translation t of ``transformation`` (a view of it).
+///     fitness: share of source points the method's score counts as inliers (for a refined
+///         result: source points with a target point within the finest ICP distance).
+///     inlier_rmse: root mean square distance of those inliers, in the clouds' units.
+///     correspondences: (K, 2) int64 (source index, target index) pairs behind the result:
+///         RGM's matches of its last pass, or for FGR and ICP the source points that the
+///         transform brings within the method's scoring distance of their nearest target point.
+///     time_ms: the method's own time in milliseconds (no conversion, no file reading).
+///     method: the method run, as ``rgm register`` names it (``auto+icp`` by default,
+///         ``rgm+icp`` for RGM refined).
+///     iterations: RGM's passes plus ICP iterations, or the method's iterations.
+///     converged: whether the method's convergence test stopped it.
+///     candidates: the default method's candidates (RGM's, then FGR's; on a pair denser
+///         than 1,024 points both again on a second thinning, ``rgm+icp/cells`` and
+///         ``fgr+icp/cells``), each a Candidate with its score; empty for the other methods.
+///     chosen: the method of the candidate returned, or ``None`` for the other methods.
+///     registered: ``False`` when the result is not credible (the default method's best
+///         candidate overlaps too little: fewer than one point in twenty of each cloud lies on
+///         the other), ``reason`` says why; ``transformation`` is then the best guess, not to
+///         be used as a registration.
+///     reason: why ``registered`` is ``False``, or ``None``.
+#[pyclass(frozen, module = "rgm", get_all)]
+struct RegistrationResult {
+    transformation: Py<PyArray2<f64>>, // (4, 4)
+    fitness: f64,
+    inlier_rmse: f64,
+    correspondences: Py<PyArray2<i64>>, // (K, 2)
+    time_ms: f64,
+    method: String,
+    iterations: usize,
+    converged: bool,
+    candidates: Py<PyList>, // of Candidate
+    chosen: Option<String>,
+    registered: bool,
+    reason: Option<String>,
+}
+
+impl RegistrationResult {
+    /// The result of `registration` by method `name`, with its correspondences `pairs`.
+    fn from_registration(
+        py: Python<'_>,
+        name: &str,
+        registration: &Registration,
+        pairs: &[(usize, usize)],
+    ) -> PyResult<Self> {
+        let result = &registration.result;
+        let candidates = registration
+            .candidates
+            .iter()
+            .map(|c| {
+                Candidate::new(
+                    c.method.to_string(),
+                    c.score,
+                    matrix_array(py, &c.t_target_source).unbind(),
+                    c.failure.clone(),
+                )
+            })
+            .collect::<Vec<_>>();
+        Ok(Self {
+            transformation: matrix_array(py, &result.t_target_source).unbind(),
+            fitness: result.fitness,
+            inlier_rmse: result.inlier_rmse,
+            correspondences: pairs_array(py, pairs).unbind(),
+            time_ms: registration.time_ms,
+            method: name.to_string(),
+            iterations: result.iterations,
+            converged: result.converged,
+            candidates: PyList::new(py, candidates)?.unbind(),
+            chosen: registration
+                .chosen
+                .map(|k| registration.candidates[k].method.to_string()),
+            registered: registration.doubt.is_none(),
+            reason: registration.doubt.clone(),
+        })
+    }
+
+    /// `transformation[rows, 3 or :3]`, a view.
+    fn block<'py>(&self, py: Python<'py>, columns: Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+        let rows = PySlice::new(py, 0, 3, 1);
+        self.transformation.bind(py).get_item((rows, columns))
+    }
+}
+
+#[pymethods]
+impl RegistrationResult {
+    #[new]
+    #[pyo3(signature = (
+        transformation, fitness, inlier_rmse, correspondences, time_ms, method, iterations,
+        converged, candidates=None, chosen=None, registered=true, reason=None
+    ))]
+    #[allow(clippy::too_many_arguments)] // one per field, as the dataclass it replaces took them
+    fn new(
+        py: Python<'_>,
+        transformation: Py<PyArray2<f64>>,
+        fitness: f64,
+        inlier_rmse: f64,
+        correspondences: Py<PyArray2<i64>>,
+        time_ms: f64,
+        method: String,
+        iterations: usize,
+        converged: bool,
+        candidates: Option<Bound<'_, PyAny>>,
+        chosen: Option<String>,
+        registered: bool,
+        reason: Option<String>,
+    ) -> PyResult<Self> {
+        let candidates = match candidates {
+            Some(items) => PyList::new(py, items.try_iter()?.collect::<PyResult<Vec<_>>>()?)?,
+            None => PyList::empty(py),
+        };
+        Ok(Self {
+            transformation,
+            fitness,
+            inlier_rmse,
+            correspondences,
+            time_ms,
+            method,
+            iterations,
+            converged,
+            candidates: candidates.unbind(),
+            chosen,
+            registered,
+            reason,
+        })
+    }
+
+    /// The (3, 3) rotation R of ``transformation`` (a view of it).
+    #[getter]
+    fn rotation<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        self.block(py, PySlice::new(py, 0, 3, 1).into_any())
+    }
+
+    /// The (3,) translation t of ``transformation`` (a view of it).
+    #[getter]
+    fn translation<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        self.block(py, 3i64.into_pyobject(py)?.into_any())
+    }
+
+    fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
+        let optional = |v: &Option<String>| v.as_ref().map_or("None".into(), |v| format!("{v:?}"));
+        Ok(format!(
+            "RegistrationResult(method={:?}, registered={}, fitness={}, inlier_rmse={}, \
+             correspondences={}, iterations={}, converged={}, time_ms={:.1}, chosen={}, \
+             reason={}, transformation={})",
+            self.method,
+            if self.registered { "True" } else { "False" },
+            self.fitness,
+            self.inlier_rmse,
+            self.correspondences.bind(py).len()?,
+            self.iterations,
+            if self.converged { "True" } else { "False" },
+            self.time_ms,
+            optional(&self.chosen),
+            optional(&self.reason),
+            self.transformation.bind(py).repr()?,
+        ))
+    }
+
+    /// Pickles as its fields (results travel back from process pools and Dask workers).
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+        let py = slf.py();
+        let r = slf.get();
+        let fields = (
+            r.transformation.clone_ref(py),
+            r.fitness,
+            r.inlier_rmse,
+            r.correspondences.clone_ref(py),
+            r.time_ms,
+            &r.method,
+            r.iterations,
+            r.converged,
+            r.candidates.clone_ref(py),
+            &r.chosen,
+            r.registered,
+            &r.reason,
+        );
+        Ok((slf.get_type().into_any(), fields.into_pyobject(py)?))
+    }
+}
 
 #[pymethods]
 impl Registrar {
@@ -198,96 +507,73 @@ impl Registrar {
             .detach(|| pool.install(|| options.build()))
             .map_err(value_error)?;
         Ok(Self {
-            prototype,
-            idle: Mutex::new(Vec::new()),
+            copies: Arc::new(Copies {
+                prototype,
+                idle: Mutex::new(Vec::new()),
+            }),
         })
     }
 
     /// The method's name as `rgm register` prints it (`rgm+icp` when refined).
     #[getter]
     fn name(&self) -> &'static str {
-        self.prototype.name()
+        self.copies.prototype.name()
     }
 
     /// Registers `source` onto `target` (float64, (N, 3) and (M, 3)).
-    fn register<'py>(
+    fn register(
         &self,
-        py: Python<'py>,
-        source: PyReadonlyArray2<'py, f64>,
-        target: PyReadonlyArray2<'py, f64>,
-    ) -> PyResult<Outcome<'py>> {
+        py: Python<'_>,
+        source: PyReadonlyArray2<'_, f64>,
+        target: PyReadonlyArray2<'_, f64>,
+    ) -> PyResult<RegistrationResult> {
         let (source, target) = (cloud(&source, "source")?, cloud(&target, "target")?);
-        let popped = self.idle().pop();
-        let mut method = popped.unwrap_or_else(|| self.prototype.clone());
-        // The work runs on the pool while this thread waits for it, GIL released, and looks
-        // at Python's signals ten times a second: Ctrl-C raises KeyboardInterrupt at once
-        // (the abandoned work ends in the background, and its copy of the method is dropped).
-        let (done, mut result) = std::sync::mpsc::channel();
-        pool()?.spawn(move || {
-            let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                with_denormals_flushed(|| -> Result<_, MethodError> {
-                    let registration = method.register(&source, &target)?;
-                    let pairs = method.correspondences(&source, &target, &registration.result);
-                    Ok((registration, pairs))
-                })
-            }));
-            let _ = done.send((method, outcome)); // the caller is gone after a Ctrl-C
-        });
-        let (method, outcome) = loop {
-            // The receiver goes into the GIL-free closure and back (it may not be shared).
-            let got;
-            (result, got) = py.detach(move || {
-                let got = result.recv_timeout(std::time::Duration::from_millis(100));
-                (result, got)
-            });
-            match got {
-                Ok(finished) => break finished,
-                Err(std::sync::mpsc::RecvTimeoutError::Timeout) => py.check_signals()?,
-                Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
-                    return Err(PyRuntimeError::new_err(
-                        "rgm's worker thread ended unexpectedly",
-                    ))
-                }
-            }
-        };
-        self.idle().push(method);
-        let outcome = outcome.map_err(|_| {
-            PyRuntimeError::new_err(format!("{} panicked (a bug in rgm)", self.prototype.name()))
-        })?;
-        let (registration, pairs) = outcome.map_err(|e| {
-            let message = format!("{} failed: {e}", self.prototype.name());
-            match e {
-                MethodError::TooMuchMemory { .. } => PyMemoryError::new_err(message),
-                _ => PyRuntimeError::new_err(message),
-            }
-        })?;
-        let result = registration.result;
-        let candidates = registration
-            .candidates
+        let copies = self.copies.clone();
+        let name = self.name();
+        let (registration, pairs) = on_pool(py, name, move |_| {
+            register_pair(copies.lease().method.as_mut().expect("leased"), &source, &target)
+        })?
+        .map_err(|e| method_error(name, e))?;
+        RegistrationResult::from_registration(py, name, &registration, &pairs)
+    }
+
+    /// Registers each (source, target) of `pairs` on all of the pool's threads; the results
+    /// in the order of `pairs`, or the error of the first pair that failed, naming it.
+    fn register_many(
+        &self,
+        py: Python<'_>,
+        pairs: Vec<(PyReadonlyArray2<'_, f64>, PyReadonlyArray2<'_, f64>)>,
+    ) -> PyResult<Vec<RegistrationResult>> {
+        let clouds = pairs
             .iter()
-            .map(|c| {
-                (
-                    c.method,
-                    c.score,
-                    matrix_array(py, &c.t_target_source),
-                    c.failure.clone(),
+            .map(|(s, t)| Ok((cloud(s, "source")?, cloud(t, "target")?)))
+            .collect::<PyResult<Vec<_>>>()?;
+        let copies = self.copies.clone();
+        let name = self.name();
+        let outcomes = on_pool(py, name, move |stop| {
+            clouds
+                .par_iter()
+                .map_init(
+                    || copies.lease(),
+                    |lease, (source, target)| {
+                        let method = lease.method.as_mut().expect("leased");
+                        // After a Ctrl-C nobody waits for the rest.
+                        (!stop.load(Ordering::Relaxed))
+                            .then(|| register_pair(method, source, target))
+                    },
                 )
+                .collect::<Vec<_>>()
+        })?;
+        outcomes
+            .into_iter()
+            .enumerate()
+            .map(|(i, outcome)| {
+                let (registration, pairs) = outcome
+                    .ok_or_else(|| PyRuntimeError::new_err("rgm's work was cut short"))?
+                    .map_err(|e| method_error(&format!("pair {i}: {name}"), e))?;
+                RegistrationResult::from_registration(py, name, &registration, &pairs)
             })
-            .collect();
-        Ok((
-            matrix_array(py, &result.t_target_source),
-            result.fitness,
-            result.inlier_rmse,
-            pairs_array(py, &pairs),
-            registration.time_ms,
-            result.iterations,
-            result.converged,
-            candidates,
-            registration
-                .chosen
-                .map(|k| registration.candidates[k].method),
-            registration.doubt,
-        ))
+            .collect()
     }
 }
 
@@ -408,6 +694,8 @@ fn _rgm(m: &Bound<'_, PyModule>) -> PyResult<()> {
         MethodName::ALL.iter().map(|n| n.name()).collect::<Vec<_>>(),
     )?;
     m.add_class::<Registrar>()?;
+    m.add_class::<RegistrationResult>()?;
+    m.add_class::<Candidate>()?;
     m.add_class::<ModelNetPairs>()?;
     m.add_function(wrap_pyfunction!(metrics, m)?)?;
     Ok(())
