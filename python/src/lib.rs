@@ -18,6 +18,7 @@ use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
 use pyo3::exceptions::{PyMemoryError, PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
+use pyo3::IntoPyObjectExt;
 use pyo3::types::{PyDict, PyList, PySlice, PyTuple};
 use rayon::prelude::*;
 use rgm_data::{DataError, ModelNet40, PairGenerator, Setting, Shape, Split};
@@ -217,6 +218,11 @@ fn on_pool<T: Send + 'static>(
     outcome.map_err(|_| PyRuntimeError::new_err(format!("{what} panicked (a bug in rgm)")))
 }
 
+/// Python's `repr` of `value`.
+fn repr<'py>(py: Python<'py>, value: impl IntoPyObject<'py>) -> PyResult<String> {
+    Ok(value.into_bound_py_any(py)?.repr()?.to_string())
+}
+
 /// The Python error of method `name` failing (`MemoryError` when it would need too much).
 fn method_error(name: &str, err: MethodError) -> PyErr {
     let message = format!("{name} failed: {err}");
@@ -263,10 +269,13 @@ impl Candidate {
         }
     }
 
-    fn __repr__(&self) -> String {
-        let score = self.score.map_or("None".into(), |s| s.to_string());
-        let failure = self.failure.as_ref().map_or("".into(), |f| format!(", failure={f:?}"));
-        format!("Candidate(method={:?}, score={score}{failure})", self.method)
+    fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
+        Ok(format!(
+            "Candidate(method={}, score={}, failure={})",
+            repr(py, &self.method)?,
+            repr(py, self.score)?,
+            repr(py, &self.failure)?,
+        ))
     }
 
     /// Pickles as its fields (results travel back from process pools and Dask workers).
@@ -424,22 +433,22 @@ impl RegistrationResult {
     }
 
     fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
-        let optional = |v: &Option<String>| v.as_ref().map_or("None".into(), |v| format!("{v:?}"));
         Ok(format!(
-            "RegistrationResult(method={:?}, registered={}, fitness={}, inlier_rmse={}, \
-             correspondences={}, iterations={}, converged={}, time_ms={:.1}, chosen={}, \
-             reason={}, transformation={})",
-            self.method,
-            if self.registered { "True" } else { "False" },
-            self.fitness,
-            self.inlier_rmse,
+            "RegistrationResult(method={}, registered={}, reason={}, fitness={}, \
+             inlier_rmse={}, correspondences=<{} pairs>, iterations={}, converged={}, \
+             time_ms={}, chosen={}, candidates={}, transformation={})",
+            repr(py, &self.method)?,
+            repr(py, self.registered)?,
+            repr(py, &self.reason)?,
+            repr(py, self.fitness)?,
+            repr(py, self.inlier_rmse)?,
             self.correspondences.bind(py).len()?,
             self.iterations,
-            if self.converged { "True" } else { "False" },
-            self.time_ms,
-            optional(&self.chosen),
-            optional(&self.reason),
-            self.transformation.bind(py).repr()?,
+            repr(py, self.converged)?,
+            repr(py, self.time_ms)?,
+            repr(py, &self.chosen)?,
+            repr(py, self.candidates.bind(py))?,
+            repr(py, self.transformation.bind(py))?,
         ))
     }
 
