@@ -292,3 +292,27 @@ def test_a_result_has_named_read_only_fields_a_repr_and_pickles(airplane, regist
     )
     assert (made.candidates, made.chosen, made.registered, made.reason) == ([], None, True, None)
     np.testing.assert_array_equal(made.translation, np.zeros(3))
+
+
+def test_ctrl_c_interrupts_register_many_and_the_registrar_goes_on(airplane):
+    import os
+    import signal
+
+    registrar = rgm.Registrar()
+    pairs = [(airplane, moved(airplane, pose((3 * k, -2 * k, k), (0.01 * k, 0, 0)))) for k in range(16)]
+    start = time.perf_counter()
+    expected = registrar.register_many(pairs)
+    whole = time.perf_counter() - start
+    assert whole > 1.0, f"16 pairs take {whole:.2f} s: too short to interrupt"
+    timer = threading.Timer(0.2, os.kill, (os.getpid(), signal.SIGINT))
+    start = time.perf_counter()
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        registrar.register_many(pairs)
+    interrupted = time.perf_counter() - start
+    timer.join()
+    assert interrupted < whole / 2, (interrupted, whole)
+    # The interrupted call's copies of the method come back unharmed.
+    again = registrar.register_many(pairs[:3])
+    for one, other in zip(expected, again):
+        np.testing.assert_array_equal(one.transformation, other.transformation)
