@@ -18,8 +18,8 @@ use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
 use pyo3::exceptions::{PyMemoryError, PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::IntoPyObjectExt;
 use pyo3::types::{PyDict, PyList, PySlice, PyTuple};
+use pyo3::IntoPyObjectExt;
 use rayon::prelude::*;
 use rgm_data::{DataError, ModelNet40, PairGenerator, Setting, Shape, Split};
 use rgm_geom::{Matrix4, PairMetrics, Point3, PointCloud, RigidTransform};
@@ -279,10 +279,17 @@ impl Candidate {
     }
 
     /// Pickles as its fields (results travel back from process pools and Dask workers).
-    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+    fn __reduce__<'py>(
+        slf: &Bound<'py, Self>,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
         let py = slf.py();
         let c = slf.get();
-        let fields = (&c.method, c.score, c.transformation.clone_ref(py), &c.failure);
+        let fields = (
+            &c.method,
+            c.score,
+            c.transformation.clone_ref(py),
+            &c.failure,
+        );
         Ok((slf.get_type().into_any(), fields.into_pyobject(py)?))
     }
 }
@@ -371,7 +378,11 @@ impl RegistrationResult {
     }
 
     /// `transformation[rows, 3 or :3]`, a view.
-    fn block<'py>(&self, py: Python<'py>, columns: Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+    fn block<'py>(
+        &self,
+        py: Python<'py>,
+        columns: Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
         let rows = PySlice::new(py, 0, 3, 1);
         self.transformation.bind(py).get_item((rows, columns))
     }
@@ -453,7 +464,9 @@ impl RegistrationResult {
     }
 
     /// Pickles as its fields (results travel back from process pools and Dask workers).
-    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+    fn __reduce__<'py>(
+        slf: &Bound<'py, Self>,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
         let py = slf.py();
         let r = slf.get();
         let fields = (
@@ -540,7 +553,11 @@ impl Registrar {
         let copies = self.copies.clone();
         let name = self.name();
         let (registration, pairs) = on_pool(py, name, move |_| {
-            register_pair(copies.lease().method.as_mut().expect("leased"), &source, &target)
+            register_pair(
+                copies.lease().method.as_mut().expect("leased"),
+                &source,
+                &target,
+            )
         })?
         .map_err(|e| method_error(name, e))?;
         RegistrationResult::from_registration(py, name, &registration, &pairs)
