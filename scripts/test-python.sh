@@ -2,7 +2,8 @@
 # Builds the Python package (python/) into a fresh virtual environment, target/python-venv, and
 # runs its tests. The README's test command runs it after `cargo test --workspace`, whose `rgm`
 # binary (target/debug/rgm) the tests compare the package against. Needs python3 with venv and
-# pip, and PyPI for maturin, numpy and pytest.
+# pip, and PyPI for maturin, numpy and the `test` extra (pytest; dask and distributed for the
+# Dask example's test).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 start=$SECONDS

@@ -9,8 +9,9 @@ Register two clouds (float32 or float64 arrays of shape (N, 3))::
 ``rgm.register`` runs what the ``rgm register`` command runs, with the same defaults: the RGM
 network with the model built into rgm and FGR, each refined by ICP on the full clouds, and the
 result that overlaps better (``result.candidates`` holds both, with their scores). ``rgm.Registrar``
-loads a method once for many pairs; ``rgm.metrics`` and ``rgm.modelnet_pairs`` give the
-paper's metrics and the benchmark's pairs, to evaluate any method on exactly rgm's pairs.
+loads a method once for many pairs (``Registrar.register_many`` runs a list of them on all
+cores); ``rgm.metrics`` and ``rgm.modelnet_pairs`` give the paper's metrics and the benchmark's
+pairs, to evaluate any method on exactly rgm's pairs.
 
 The work runs in Rust with the GIL released: Python threads register pairs in parallel, Ctrl-C
 interrupts a registration at once, and a ``Registrar`` pickles (as its settings) for process
@@ -19,12 +20,11 @@ pools of any start method (a process forked after a registration starts its own 
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Iterator, Optional, Union, overload
+from typing import Iterable, Iterator, List, Optional, Tuple, Union, overload
 
 import numpy as np
 
@@ -98,77 +98,16 @@ def _homogeneous(rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
     return matrix
 
 
-@dataclass(frozen=True, eq=False)  # arrays have no single truth value to compare by
-class Candidate:
-    """One method's result inside the default method (``"auto"``), which runs RGM and FGR.
+#: One candidate of the default method: ``method``, ``score``, ``transformation``, ``failure``
+#: (``help(rgm.Candidate)`` says what each holds).
+Candidate = _rgm.Candidate
 
-    Attributes:
-        method: ``"rgm+icp"`` or ``"fgr+icp"`` (without ``+icp`` when unrefined).
-        score: the share of each cloud's points within 0.02 of the other cloud after the
-            transform (in the unit-sphere frame), source to target plus target to source: 0 to
-            2, higher is better; the highest wins. ``None`` when the method failed.
-        transformation: (4, 4) float64, target ← source (the identity when it failed).
-        failure: why the method failed, or ``None``.
-    """
-
-    method: str
-    score: Optional[float]
-    transformation: np.ndarray
-    failure: Optional[str]
-
-
-@dataclass(frozen=True, eq=False)  # arrays have no single truth value to compare by
-class RegistrationResult:
-    """The outcome of registering a source cloud onto a target cloud.
-
-    Attributes:
-        transformation: (4, 4) float64 homogeneous matrix that maps source coordinates into
-            the target's frame (target ← source), ``y = R x + t``, as Open3D's
-            ``registration_*`` results.
-        fitness: share of source points the method's score counts as inliers (for a refined
-            result: source points with a target point within the finest ICP distance).
-        inlier_rmse: root mean square distance of those inliers, in the clouds' units.
-        correspondences: (K, 2) int64 (source index, target index) pairs behind the result:
-            RGM's matches of its last pass, or for FGR and ICP the source points that the
-            transform brings within the method's scoring distance of their nearest target point.
-        time_ms: the method's own time in milliseconds (no conversion, no file reading).
-        method: the method run, as ``rgm register`` names it (``auto+icp`` by default,
-            ``rgm+icp`` for RGM refined).
-        iterations: RGM's passes plus ICP iterations, or the method's iterations.
-        converged: whether the method's convergence test stopped it.
-        candidates: the default method's candidates (RGM's, then FGR's; on a pair denser
-            than 1,024 points a cloud both again on a second thinning, ``rgm+icp/cells`` and
-            ``fgr+icp/cells``), each with its score; empty for the other methods.
-        chosen: the method of the candidate returned, or ``None`` for the other methods.
-        registered: ``False`` when the result is not credible (the default method's best
-            candidate overlaps too little: fewer than one point in twenty of each cloud lies on
-            the other), ``reason`` says why; ``transformation`` is then the best guess, not to
-            be used as a registration.
-        reason: why ``registered`` is ``False``, or ``None``.
-    """
-
-    transformation: np.ndarray
-    fitness: float
-    inlier_rmse: float
-    correspondences: np.ndarray
-    time_ms: float
-    method: str
-    iterations: int
-    converged: bool
-    candidates: list = dataclasses.field(default_factory=list)
-    chosen: Optional[str] = None
-    registered: bool = True
-    reason: Optional[str] = None
-
-    @property
-    def rotation(self) -> np.ndarray:
-        """The (3, 3) rotation R of ``transformation``."""
-        return self.transformation[:3, :3]
-
-    @property
-    def translation(self) -> np.ndarray:
-        """The (3,) translation t of ``transformation``."""
-        return self.transformation[:3, 3]
+#: What ``register`` returns: ``transformation`` (with its ``rotation`` and ``translation``),
+#: ``fitness``, ``inlier_rmse``, ``correspondences``, ``time_ms``, ``method``, ``iterations``,
+#: ``converged``, ``candidates``, ``chosen``, ``registered`` and ``reason``
+#: (``help(rgm.RegistrationResult)`` says what each holds). It pickles, so results travel back
+#: from process pools and Dask workers.
+RegistrationResult = _rgm.RegistrationResult
 
 
 class Registrar:
@@ -176,8 +115,9 @@ class Registrar:
 
     Building one loads the method's network (for RGM); ``register`` then runs it on any
     number of pairs, from any number of threads at once (the GIL is released while it works,
-    and each thread gets its own copy of the network's buffers). A Registrar pickles as its
-    settings: unpickled in another process, it loads its network there, once per process.
+    and each thread gets its own copy of the network's buffers); ``register_many`` runs a
+    list of pairs on all cores. A Registrar pickles as its settings: unpickled in another
+    process (a process pool's or a Dask worker), it loads its network there, once per process.
 
     Args:
         method: ``"auto"`` (RGM and FGR, each refined, the better by its overlap score),
@@ -265,32 +205,42 @@ class Registrar:
         """
         source = _points("source", source)
         target = _points("target", target)
-        (
-            transformation,
-            fitness,
-            rmse,
-            pairs,
-            time_ms,
-            iterations,
-            converged,
-            candidates,
-            chosen,
-            reason,
-        ) = self._native.register(source, target)
-        return RegistrationResult(
-            transformation=transformation,
-            fitness=fitness,
-            inlier_rmse=rmse,
-            correspondences=pairs,
-            time_ms=time_ms,
-            method=self._native.name,
-            iterations=iterations,
-            converged=converged,
-            candidates=[Candidate(*fields) for fields in candidates],
-            chosen=chosen,
-            registered=reason is None,
-            reason=reason,
-        )
+        return self._native.register(source, target)
+
+    def register_many(
+        self, pairs: Iterable[Tuple[np.ndarray, np.ndarray]]
+    ) -> List[RegistrationResult]:
+        """``register`` on each (source, target) of ``pairs``, on all cores at once.
+
+        The pairs run in parallel on rgm's threads (one per core) with the GIL released; each
+        result is the one ``register`` gives for its pair alone. Ctrl-C interrupts at once.
+
+        Args:
+            pairs: (source, target) pairs of clouds, each as ``register`` takes them.
+
+        Returns:
+            A list of RegistrationResult, in the order of ``pairs``.
+
+        Raises:
+            ValueError: a pair that is not two clouds, or a cloud that ``register`` refuses
+                (the message names the pair's index: ``pairs[3] target ...``).
+            RuntimeError: the method found no transform for a pair (the first such pair's
+                error, naming its index: ``pair 3: rgm+icp failed: ...``).
+            MemoryError: as for ``register``.
+        """
+        checked = []
+        for index, pair in enumerate(pairs):
+            try:
+                source, target = pair
+            except (TypeError, ValueError):
+                raise ValueError(
+                    f"pairs[{index}] must be a (source, target) pair of clouds, "
+                    f"got {type(pair).__name__}"
+                ) from None
+            checked.append(
+                (_points(f"pairs[{index}] source", source), _points(f"pairs[{index}] target", target))
+            )
+        return self._native.register_many(checked)
 
     def __reduce__(self):
         # Unpickled through the cache of rgm.register: a process pool's worker loads the

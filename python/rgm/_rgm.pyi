@@ -24,20 +24,56 @@ class Registrar:
     def name(self) -> str: ...
     def register(
         self, source: npt.NDArray[np.float64], target: npt.NDArray[np.float64]
-    ) -> tuple[
-        npt.NDArray[np.float64],  # (4, 4) transformation, target ← source
-        float,  # fitness
-        float,  # inlier RMSE
-        npt.NDArray[np.int64],  # (K, 2) correspondences
-        float,  # time in milliseconds
-        int,  # iterations
-        bool,  # converged
-        list[
-            tuple[str, Optional[float], npt.NDArray[np.float64], Optional[str]]
-        ],  # candidates: method, score, (4, 4) transformation, failure
-        Optional[str],  # the chosen candidate's method
-        Optional[str],  # why the result is not credible (not registered)
-    ]: ...
+    ) -> RegistrationResult: ...
+    def register_many(
+        self, pairs: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]]
+    ) -> list[RegistrationResult]: ...
+
+class Candidate:
+    method: str
+    score: Optional[float]
+    transformation: npt.NDArray[np.float64]  # (4, 4), target ← source
+    failure: Optional[str]
+    def __init__(
+        self,
+        method: str,
+        score: Optional[float],
+        transformation: npt.NDArray[np.float64],
+        failure: Optional[str] = None,
+    ) -> None: ...
+
+class RegistrationResult:
+    transformation: npt.NDArray[np.float64]  # (4, 4), target ← source
+    fitness: float
+    inlier_rmse: float
+    correspondences: npt.NDArray[np.int64]  # (K, 2)
+    time_ms: float
+    method: str
+    iterations: int
+    converged: bool
+    candidates: list[Candidate]
+    chosen: Optional[str]
+    registered: bool
+    reason: Optional[str]
+    def __init__(
+        self,
+        transformation: npt.NDArray[np.float64],
+        fitness: float,
+        inlier_rmse: float,
+        correspondences: npt.NDArray[np.int64],
+        time_ms: float,
+        method: str,
+        iterations: int,
+        converged: bool,
+        candidates: Optional[list[Candidate]] = None,
+        chosen: Optional[str] = None,
+        registered: bool = True,
+        reason: Optional[str] = None,
+    ) -> None: ...
+    @property
+    def rotation(self) -> npt.NDArray[np.float64]: ...  # (3, 3)
+    @property
+    def translation(self) -> npt.NDArray[np.float64]: ...  # (3,)
 
 class ModelNetPairs:
     def __init__(

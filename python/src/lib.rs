@@ -11,6 +11,7 @@
 //! pool's workers under Linux's default start method) registers too.
 
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 
 use numpy::ndarray::Array2;
@@ -18,11 +19,16 @@ use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
 use pyo3::exceptions::{PyMemoryError, PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use rayon::prelude::*;
 use rgm_data::{DataError, ModelNet40, PairGenerator, Setting, Shape, Split};
 use rgm_geom::{Matrix4, PairMetrics, Point3, PointCloud, RigidTransform};
 use rgm_model::network::TestStatistics;
-use rgm_model::{Method, MethodError, MethodName, MethodOptions};
+use rgm_model::Registrar as _;
+use rgm_model::{Method, MethodError, MethodName, MethodOptions, Registration};
 use rgm_nn::threads::with_denormals_flushed;
+
+mod result;
+use result::{Candidate, RegistrationResult};
 
 /// How far from rigid a given 4×4 transform may be (as `rgm score` reads outside transforms).
 const RIGID_TOLERANCE: f64 = 1e-4;
@@ -118,15 +124,29 @@ fn transform(matrix: &PyReadonlyArray2<'_, f64>, name: &str) -> PyResult<RigidTr
 /// A registration method loaded once, for any number of pairs from any number of threads.
 #[pyclass(frozen, module = "rgm._rgm")]
 struct Registrar {
+    /// Shared with the pool's work, which may outlive a call interrupted by Ctrl-C.
+    copies: Arc<Copies>,
+}
+
+/// A method and the copies of it that threads register with.
+struct Copies {
     /// Copied for a call that finds no idle copy.
     prototype: Method,
     /// Copies not in use, their buffers kept: one per thread that registered at the same time.
     idle: Mutex<Vec<Method>>,
 }
 
-impl Registrar {
-    /// The idle copies (a panic while one was held leaves the list valid, so poisoning is
-    /// ignored).
+impl Copies {
+    /// A copy of the method for one thread's work, back among the idle ones when dropped (a
+    /// panic while one was held leaves the list valid, so poisoning is ignored).
+    fn lease(self: &Arc<Self>) -> Lease {
+        let popped = self.idle().pop();
+        Lease {
+            method: Some(popped.unwrap_or_else(|| self.prototype.clone())),
+            copies: self.clone(),
+        }
+    }
+
     fn idle(&self) -> MutexGuard<'_, Vec<Method>> {
         self.idle
             .lock()
@@ -134,27 +154,81 @@ impl Registrar {
     }
 }
 
-/// One candidate of the combined method, in the order `rgm/__init__.py` reads it.
-type CandidateFields<'py> = (
-    &'static str,              // method
-    Option<f64>,               // score
-    Bound<'py, PyArray2<f64>>, // (4, 4) transformation
-    Option<String>,            // why it failed
-);
+/// A copy of the method lent by [`Copies::lease`].
+struct Lease {
+    method: Option<Method>, // Some until dropped
+    copies: Arc<Copies>,
+}
 
-/// Result fields of one registration, in the order `rgm/__init__.py` reads them.
-type Outcome<'py> = (
-    Bound<'py, PyArray2<f64>>, // (4, 4) transformation, target ← source
-    f64,                       // fitness
-    f64,                       // inlier RMSE
-    Bound<'py, PyArray2<i64>>, // (K, 2) correspondences
-    f64,                       // time in milliseconds
-    usize,                     // iterations
-    bool,                      // converged
-    Vec<CandidateFields<'py>>, // the combined method's candidates (empty for the others)
-    Option<&'static str>,      // the chosen candidate's method
-    Option<String>,            // why the result is not credible (not registered)
-);
+impl Drop for Lease {
+    fn drop(&mut self) {
+        if let Some(method) = self.method.take() {
+            self.copies.idle().push(method);
+        }
+    }
+}
+
+/// One pair's registration and the (source, target) index pairs behind it.
+type Registered = Result<(Registration, Vec<(usize, usize)>), MethodError>;
+
+/// Registers `source` onto `target` with `method`, with its correspondences.
+fn register_pair(method: &mut Method, source: &PointCloud, target: &PointCloud) -> Registered {
+    let mut registration = method.register(source, target)?;
+    let pairs = std::mem::take(&mut registration.correspondences);
+    Ok((registration, pairs))
+}
+
+/// Runs `job` on the pool while this thread waits for it, GIL released, looking at Python's
+/// signals ten times a second: Ctrl-C raises KeyboardInterrupt at once and sets the flag `job`
+/// is given, so that it stops early (it ends in the background). `what` names the work in the
+/// error of a panic.
+fn on_pool<T: Send + 'static>(
+    py: Python<'_>,
+    what: &str,
+    job: impl FnOnce(&AtomicBool) -> T + Send + 'static,
+) -> PyResult<T> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    let (done, mut result) = std::sync::mpsc::channel();
+    pool()?.spawn(move || {
+        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            with_denormals_flushed(|| job(&flag))
+        }));
+        let _ = done.send(outcome); // the caller is gone after a Ctrl-C
+    });
+    let outcome = loop {
+        // The receiver goes into the GIL-free closure and back (it may not be shared).
+        let got;
+        (result, got) = py.detach(move || {
+            let got = result.recv_timeout(std::time::Duration::from_millis(100));
+            (result, got)
+        });
+        match got {
+            Ok(finished) => break finished,
+            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
+                if let Err(interrupt) = py.check_signals() {
+                    stop.store(true, Ordering::Relaxed);
+                    return Err(interrupt);
+                }
+            }
+            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
+                return Err(PyRuntimeError::new_err(
+                    "rgm's worker thread ended unexpectedly",
+                ))
+            }
+        }
+    };
+    outcome.map_err(|_| PyRuntimeError::new_err(format!("{what} panicked (a bug in rgm)")))
+}
+
+/// The Python error of method `name` failing (`MemoryError` when it would need too much).
+fn method_error(name: &str, err: MethodError) -> PyErr {
+    let message = format!("{name} failed: {err}");
+    match err {
+        MethodError::TooMuchMemory { .. } => PyMemoryError::new_err(message),
+        _ => PyRuntimeError::new_err(message),
+    }
+}
 
 #[pymethods]
 impl Registrar {
@@ -198,96 +272,77 @@ impl Registrar {
             .detach(|| pool.install(|| options.build()))
             .map_err(value_error)?;
         Ok(Self {
-            prototype,
-            idle: Mutex::new(Vec::new()),
+            copies: Arc::new(Copies {
+                prototype,
+                idle: Mutex::new(Vec::new()),
+            }),
         })
     }
 
     /// The method's name as `rgm register` prints it (`rgm+icp` when refined).
     #[getter]
-    fn name(&self) -> &'static str {
-        self.prototype.name()
+    fn name(&self) -> String {
+        self.copies.prototype.name()
     }
 
     /// Registers `source` onto `target` (float64, (N, 3) and (M, 3)).
-    fn register<'py>(
+    fn register(
         &self,
-        py: Python<'py>,
-        source: PyReadonlyArray2<'py, f64>,
-        target: PyReadonlyArray2<'py, f64>,
-    ) -> PyResult<Outcome<'py>> {
+        py: Python<'_>,
+        source: PyReadonlyArray2<'_, f64>,
+        target: PyReadonlyArray2<'_, f64>,
+    ) -> PyResult<RegistrationResult> {
         let (source, target) = (cloud(&source, "source")?, cloud(&target, "target")?);
-        let popped = self.idle().pop();
-        let mut method = popped.unwrap_or_else(|| self.prototype.clone());
-        // The work runs on the pool while this thread waits for it, GIL released, and looks
-        // at Python's signals ten times a second: Ctrl-C raises KeyboardInterrupt at once
-        // (the abandoned work ends in the background, and its copy of the method is dropped).
-        let (done, mut result) = std::sync::mpsc::channel();
-        pool()?.spawn(move || {
-            let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                with_denormals_flushed(|| -> Result<_, MethodError> {
-                    let registration = method.register(&source, &target)?;
-                    let pairs = method.correspondences(&source, &target, &registration.result);
-                    Ok((registration, pairs))
-                })
-            }));
-            let _ = done.send((method, outcome)); // the caller is gone after a Ctrl-C
-        });
-        let (method, outcome) = loop {
-            // The receiver goes into the GIL-free closure and back (it may not be shared).
-            let got;
-            (result, got) = py.detach(move || {
-                let got = result.recv_timeout(std::time::Duration::from_millis(100));
-                (result, got)
-            });
-            match got {
-                Ok(finished) => break finished,
-                Err(std::sync::mpsc::RecvTimeoutError::Timeout) => py.check_signals()?,
-                Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
-                    return Err(PyRuntimeError::new_err(
-                        "rgm's worker thread ended unexpectedly",
-                    ))
-                }
-            }
-        };
-        self.idle().push(method);
-        let outcome = outcome.map_err(|_| {
-            PyRuntimeError::new_err(format!("{} panicked (a bug in rgm)", self.prototype.name()))
-        })?;
-        let (registration, pairs) = outcome.map_err(|e| {
-            let message = format!("{} failed: {e}", self.prototype.name());
-            match e {
-                MethodError::TooMuchMemory { .. } => PyMemoryError::new_err(message),
-                _ => PyRuntimeError::new_err(message),
-            }
-        })?;
-        let result = registration.result;
-        let candidates = registration
-            .candidates
+        let copies = self.copies.clone();
+        let name = &self.name();
+        let (registration, pairs) = on_pool(py, name, move |_| {
+            register_pair(
+                copies.lease().method.as_mut().expect("leased"),
+                &source,
+                &target,
+            )
+        })?
+        .map_err(|e| method_error(name, e))?;
+        RegistrationResult::from_registration(py, name, &registration, &pairs)
+    }
+
+    /// Registers each (source, target) of `pairs` on all of the pool's threads; the results
+    /// in the order of `pairs`, or the error of the first pair that failed, naming it.
+    fn register_many(
+        &self,
+        py: Python<'_>,
+        pairs: Vec<(PyReadonlyArray2<'_, f64>, PyReadonlyArray2<'_, f64>)>,
+    ) -> PyResult<Vec<RegistrationResult>> {
+        let clouds = pairs
             .iter()
-            .map(|c| {
-                (
-                    c.method,
-                    c.score,
-                    matrix_array(py, &c.t_target_source),
-                    c.failure.clone(),
+            .map(|(s, t)| Ok((cloud(s, "source")?, cloud(t, "target")?)))
+            .collect::<PyResult<Vec<_>>>()?;
+        let copies = self.copies.clone();
+        let name = &self.name();
+        let outcomes = on_pool(py, name, move |stop| {
+            clouds
+                .par_iter()
+                .map_init(
+                    || copies.lease(),
+                    |lease, (source, target)| {
+                        let method = lease.method.as_mut().expect("leased");
+                        // After a Ctrl-C nobody waits for the rest.
+                        (!stop.load(Ordering::Relaxed))
+                            .then(|| register_pair(method, source, target))
+                    },
                 )
+                .collect::<Vec<_>>()
+        })?;
+        outcomes
+            .into_iter()
+            .enumerate()
+            .map(|(i, outcome)| {
+                let (registration, pairs) = outcome
+                    .ok_or_else(|| PyRuntimeError::new_err("rgm's work was cut short"))?
+                    .map_err(|e| method_error(&format!("pair {i}: {name}"), e))?;
+                RegistrationResult::from_registration(py, name, &registration, &pairs)
             })
-            .collect();
-        Ok((
-            matrix_array(py, &result.t_target_source),
-            result.fitness,
-            result.inlier_rmse,
-            pairs_array(py, &pairs),
-            registration.time_ms,
-            result.iterations,
-            result.converged,
-            candidates,
-            registration
-                .chosen
-                .map(|k| registration.candidates[k].method),
-            registration.doubt,
-        ))
+            .collect()
     }
 }
 
@@ -408,6 +463,8 @@ fn _rgm(m: &Bound<'_, PyModule>) -> PyResult<()> {
         MethodName::ALL.iter().map(|n| n.name()).collect::<Vec<_>>(),
     )?;
     m.add_class::<Registrar>()?;
+    m.add_class::<RegistrationResult>()?;
+    m.add_class::<Candidate>()?;
     m.add_class::<ModelNetPairs>()?;
     m.add_function(wrap_pyfunction!(metrics, m)?)?;
     Ok(())

@@ -231,3 +231,88 @@ def test_the_same_transform_as_the_rgm_command(airplane, rgm_command, tmp_path):
         np.testing.assert_array_equal(np.array(cli["transform"]), result.transformation)
         assert (cli["fitness"], cli["inlier_rmse"]) == (result.fitness, result.inlier_rmse)
         assert cli["correspondences"] == len(result.correspondences)
+
+
+def test_register_many_gives_the_one_by_one_results(data, registrar):
+    pairs = _pairs(data, 4)
+    serial = [registrar.register(s, t) for s, t, _ in pairs]
+    # Each pair twice, all in one call.
+    many = registrar.register_many([(s, t) for s, t, _ in pairs] * 2)
+    assert len(many) == 8
+    for one, other in zip(serial + serial, many):
+        np.testing.assert_array_equal(one.transformation, other.transformation)
+        np.testing.assert_array_equal(one.correspondences, other.correspondences)
+        assert (one.fitness, one.inlier_rmse, one.iterations, one.chosen) == (
+            other.fitness,
+            other.inlier_rmse,
+            other.iterations,
+            other.chosen,
+        )
+        assert [c.score for c in one.candidates] == [c.score for c in other.candidates]
+    assert registrar.register_many([]) == []
+    airplane = pairs[0][0]
+    with pytest.raises(ValueError, match=r"^pairs\[1\] target must have shape \(N, 3\)"):
+        registrar.register_many([(airplane, airplane), (airplane, np.zeros((30, 2)))])
+    with pytest.raises(ValueError, match=r"^pairs\[0\] must be a \(source, target\) pair"):
+        registrar.register_many([airplane])
+    with pytest.raises(RuntimeError, match=r"^pair 1: rgm\+icp failed: .*needs at least"):
+        rgm.Registrar(method="rgm").register_many([(airplane, airplane), (airplane[:5], airplane[:5])])
+
+
+def test_a_result_has_named_read_only_fields_a_repr_and_pickles(airplane, registrar):
+    result = registrar.register(airplane, moved(airplane, KNOWN))
+    assert isinstance(result, rgm.RegistrationResult)
+    assert isinstance(result.candidates[0], rgm.Candidate)
+    text = repr(result)
+    assert text.startswith("RegistrationResult(method='auto+icp', registered=True, reason=None"), text
+    assert f"correspondences=<{len(result.correspondences)} pairs>" in text
+    assert "Candidate(method='rgm+icp', score=" in text and "transformation=array([[" in text
+    with pytest.raises(AttributeError):
+        result.fitness = 1.0
+    copy = pickle.loads(pickle.dumps(result))
+    for name in ("fitness", "inlier_rmse", "time_ms", "method", "iterations", "converged", "chosen", "registered", "reason"):
+        assert getattr(copy, name) == getattr(result, name), name
+    np.testing.assert_array_equal(copy.transformation, result.transformation)
+    np.testing.assert_array_equal(copy.correspondences, result.correspondences)
+    assert [(c.method, c.score, c.failure) for c in copy.candidates] == [
+        (c.method, c.score, c.failure) for c in result.candidates
+    ]
+    np.testing.assert_array_equal(copy.candidates[1].transformation, result.candidates[1].transformation)
+    # Built by keyword, as the dataclass it replaces was: the defaults of a method without
+    # candidates.
+    made = rgm.RegistrationResult(
+        transformation=np.eye(4),
+        fitness=0.5,
+        inlier_rmse=0.01,
+        correspondences=np.zeros((0, 2), dtype=np.int64),
+        time_ms=1.0,
+        method="icp",
+        iterations=3,
+        converged=True,
+    )
+    assert (made.candidates, made.chosen, made.registered, made.reason) == ([], None, True, None)
+    np.testing.assert_array_equal(made.translation, np.zeros(3))
+
+
+def test_ctrl_c_interrupts_register_many_and_the_registrar_goes_on(airplane):
+    import os
+    import signal
+
+    registrar = rgm.Registrar()
+    pairs = [(airplane, moved(airplane, pose((3 * k, -2 * k, k), (0.01 * k, 0, 0)))) for k in range(12)]
+    start = time.perf_counter()
+    expected = registrar.register_many(pairs)
+    whole = time.perf_counter() - start
+    assert whole > 1.0, f"12 pairs take {whole:.2f} s: too short to interrupt"
+    timer = threading.Timer(0.2, os.kill, (os.getpid(), signal.SIGINT))
+    start = time.perf_counter()
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        registrar.register_many(pairs)
+    interrupted = time.perf_counter() - start
+    timer.join()
+    assert interrupted < whole / 2, (interrupted, whole)
+    # The interrupted call's copies of the method come back unharmed.
+    again = registrar.register_many(pairs[:3])
+    for one, other in zip(expected, again):
+        np.testing.assert_array_equal(one.transformation, other.transformation)

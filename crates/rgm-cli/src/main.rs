@@ -191,22 +191,49 @@ pub fn register_files(
             bar.set_position((100.0 * p.done) as u64);
             bar.set_message(p.step);
         })
-        .map_err(|err| {
-            let hint = match err {
-                rgm_model::MethodError::TooMuchMemory { .. } => {
-                    " (--match-points N matches on fewer points)"
-                }
-                _ => "",
-            };
-            anyhow::Error::new(err).context(format!(
-                "{} failed on {} → {}{hint}",
-                method.name(),
-                source_path.display(),
-                target_path.display()
-            ))
-        });
+        .map_err(|err| method_failure(err, &method.name(), (source_path, target_path)));
     bar.finish_and_clear();
     registration
+}
+
+/// `err` of method `name` on the pair of files, named, with a hint where an option helps.
+pub fn method_failure(
+    err: rgm_model::MethodError,
+    name: &str,
+    (source_path, target_path): (&Path, &Path),
+) -> anyhow::Error {
+    let hint = match err {
+        rgm_model::MethodError::TooMuchMemory { .. } => {
+            " (--match-points N matches on fewer points)"
+        }
+        _ => "",
+    };
+    anyhow::Error::new(err).context(format!(
+        "{name} failed on {} → {}{hint}",
+        source_path.display(),
+        target_path.display()
+    ))
+}
+
+/// `--workers N`: how many pairs run at once.
+#[derive(clap::Args, Debug, Clone)]
+pub struct WorkerArgs {
+    /// Pairs registered at once, one per worker thread [default: one per core; the
+    /// `RAYON_NUM_THREADS` variable sets it too]. Times are each method's own, per pair.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
+    workers: Option<u16>,
+}
+
+impl WorkerArgs {
+    /// The pool of `--workers` threads, each flushing denormals.
+    fn pool(&self) -> anyhow::Result<rayon::ThreadPool> {
+        Ok(rayon::ThreadPoolBuilder::new()
+            .num_threads(self.workers.map_or(0, usize::from))
+            .start_handler(|_| {
+                rgm_nn::threads::flush_denormals_to_zero();
+            })
+            .build()?)
+    }
 }
 
 /// Where the ModelNet40 data is: `--data DIR` or `$RGM_DATA`.

@@ -12,7 +12,7 @@ use rgm_model::evaluate::{
 };
 use rgm_model::Method;
 
-use crate::{progress, table, DataArgs, MethodArgs};
+use crate::{progress, table, DataArgs, MethodArgs, WorkerArgs};
 
 /// Options of `rgm eval`.
 #[derive(clap::Args, Debug)]
@@ -24,20 +24,8 @@ pub struct Args {
     /// Also write every pair's transform and metrics to this JSON file.
     #[arg(long, value_name = "FILE")]
     json: Option<PathBuf>,
-    /// Pairs registered at once, one per worker thread [default: one per core; the
-    /// `RAYON_NUM_THREADS` variable sets it too]. Times are each method's own, per pair.
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
-    workers: Option<u16>,
-}
-
-/// The pool of `--workers` threads.
-fn pool(args: &Args) -> Result<rayon::ThreadPool> {
-    Ok(rayon::ThreadPoolBuilder::new()
-        .num_threads(args.workers.map_or(0, usize::from))
-        .start_handler(|_| {
-            rgm_nn::threads::flush_denormals_to_zero();
-        })
-        .build()?)
+    #[command(flatten)]
+    workers: WorkerArgs,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -52,7 +40,7 @@ pub fn run(args: Args) -> Result<()> {
     let (shapes, indices) = args.data.shapes(&dataset);
     let bar = progress(indices.len(), &method.name());
     let recalled = AtomicUsize::new(0);
-    let pool = pool(&args)?;
+    let pool = args.workers.pool()?;
     let records: Vec<PairRecord> = pool.install(|| {
         indices
             .par_iter()
@@ -89,7 +77,7 @@ fn run_scans(args: &Args, method: &Method) -> Result<()> {
     let folders = args.data.scan_pairs()?;
     let total: usize = folders.iter().map(|(_, pairs)| pairs.len()).sum();
     let bar = progress(total, &method.name());
-    let pool = pool(args)?;
+    let pool = args.workers.pool()?;
     let mut results: Vec<(String, Vec<ScanRecord>)> = Vec::new();
     for (name, pairs) in folders {
         let records: Vec<ScanRecord> = pool.install(|| {

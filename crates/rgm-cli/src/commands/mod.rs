@@ -1,5 +1,6 @@
 //! One module per subcommand, each with its `Args` and `run`.
 
+pub mod batch;
 pub mod eval;
 pub mod pairs;
 pub mod register;

@@ -1,9 +1,11 @@
-//! `rgm register SRC TGT`: the transform that maps SRC onto TGT.
+//! `rgm register SRC TGT`: the transform that maps SRC onto TGT; `--pairs LIST` runs many
+//! pairs ([`super::batch`]).
 
 use std::path::PathBuf;
 
 use anyhow::Result;
 use rgm_data::write_point_cloud;
+use rgm_model::{Method, Registration};
 
 use crate::MethodArgs;
 
@@ -11,74 +13,46 @@ use crate::MethodArgs;
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The cloud to move (PLY, OFF, XYZ/CSV or .npy).
-    source: PathBuf,
+    #[arg(required_unless_present = "pairs", conflicts_with = "pairs")]
+    source: Option<PathBuf>,
     /// The cloud to move it onto.
-    target: PathBuf,
+    #[arg(required_unless_present = "pairs", conflicts_with = "pairs")]
+    target: Option<PathBuf>,
     #[command(flatten)]
     method: MethodArgs,
     /// Write the source moved by the found transform to this file (format by extension).
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, value_name = "FILE", conflicts_with = "pairs")]
     out: Option<PathBuf>,
-    /// Print one JSON object instead of text.
+    /// Print one JSON object instead of text (--pairs always writes JSON).
     #[arg(long)]
     json: bool,
+    #[command(flatten)]
+    batch: super::batch::BatchArgs,
 }
 
 pub fn run(args: Args) -> Result<()> {
+    let (Some(source_path), Some(target_path)) = (&args.source, &args.target) else {
+        return super::batch::run(&args.batch, &args.method);
+    };
+    args.batch.refuse_without_pairs()?;
     if let Some(out) = &args.out {
         rgm_data::io::Format::from_path(out)?;
         crate::check_writable(out)?;
     }
-    let source = crate::read_cloud(&args.source)?;
-    let target = crate::read_cloud(&args.target)?;
+    let source = crate::read_cloud(source_path)?;
+    let target = crate::read_cloud(target_path)?;
     let mut method = args.method.build(crate::Defaults::Register)?;
-    let registration = crate::register_files(
-        &mut method,
-        (&source, &target),
-        (&args.source, &args.target),
-    )?;
+    let registration =
+        crate::register_files(&mut method, (&source, &target), (source_path, target_path))?;
     let result = &registration.result;
-    // RGM's correspondences are the network's matches of the last pass; ICP refinement may
-    // have moved the transform after them.
     let refined = method.is_refined();
     let doubt = registration.doubt.as_deref();
     if let (Some(out), None) = (&args.out, doubt) {
         write_point_cloud(out, &source.transformed(&result.t_target_source))?;
     }
     let rows = result.t_target_source.to_rows();
-    let chosen = registration
-        .chosen
-        .map(|k| registration.candidates[k].method.as_str());
     if args.json {
-        let candidates: Vec<serde_json::Value> = registration
-            .candidates
-            .iter()
-            .map(|c| {
-                serde_json::json!({
-                    "method": c.method,
-                    "score": c.score,
-                    "transform": c.t_target_source.to_rows(),
-                    "failure": c.failure,
-                })
-            })
-            .collect();
-        let value = serde_json::json!({
-            "method": method.name(),
-            "transform": rows,
-            "time_ms": registration.time_ms,
-            "iterations": result.iterations,
-            "converged": result.converged,
-            "correspondences": result.inlier_count,
-            "refined": refined,
-            "fitness": result.fitness,
-            "inlier_rmse": result.inlier_rmse,
-            "source_points": source.len(),
-            "target_points": target.len(),
-            "candidates": candidates,
-            "chosen": chosen,
-            "registered": doubt.is_none(),
-            "reason": doubt,
-        });
+        let value = json(&method, &registration, (source.len(), target.len()));
         println!("{value}");
         return not_registered(doubt);
     }
@@ -125,6 +99,50 @@ pub fn run(args: Args) -> Result<()> {
         println!("# wrote the moved source to {}", out.display());
     }
     Ok(())
+}
+
+/// The object `rgm register --json` prints for `registration` by `method` of clouds of
+/// `points` (source, target) points; `--pairs` writes it per pair.
+pub fn json(
+    method: &Method,
+    registration: &Registration,
+    (source_points, target_points): (usize, usize),
+) -> serde_json::Value {
+    let result = &registration.result;
+    let candidates: Vec<serde_json::Value> = registration
+        .candidates
+        .iter()
+        .map(|c| {
+            serde_json::json!({
+                "method": c.method,
+                "score": c.score,
+                "transform": c.t_target_source.to_rows(),
+                "failure": c.failure,
+            })
+        })
+        .collect();
+    let chosen = registration
+        .chosen
+        .map(|k| registration.candidates[k].method.as_str());
+    serde_json::json!({
+        "method": method.name(),
+        "transform": result.t_target_source.to_rows(),
+        "time_ms": registration.time_ms,
+        "iterations": result.iterations,
+        "converged": result.converged,
+        // The pairs behind the fitness: RGM's last hard matches unrefined, the refinement's
+        // inliers refined.
+        "correspondences": result.inlier_count,
+        "refined": method.is_refined(),
+        "fitness": result.fitness,
+        "inlier_rmse": result.inlier_rmse,
+        "source_points": source_points,
+        "target_points": target_points,
+        "candidates": candidates,
+        "chosen": chosen,
+        "registered": registration.doubt.is_none(),
+        "reason": registration.doubt,
+    })
 }
 
 /// The error of a result that is not credible ([`rgm_model::Registration::doubt`]): the pair is

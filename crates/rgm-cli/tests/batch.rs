@@ -1,0 +1,365 @@
+//! `rgm register --pairs LIST`: the lines of one-by-one `rgm register --json` calls, a failed
+//! pair as a line, errors in LIST naming the file, the line and the value, and a resumable
+//! `--output` that never holds a pair twice.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn rgm(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_rgm"))
+        .args(args)
+        .output()
+        .expect("the rgm binary runs")
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// A fresh folder for one test's files.
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("rgm-batch-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// The first `count` partial test pairs written by `rgm pairs` into `dir/pairs`; their
+/// `pairs.json` is a LIST.
+fn written_pairs(dir: &Path, count: usize) -> PathBuf {
+    let data =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/modelnet40_npy1024");
+    let out = dir.join("pairs");
+    let written = rgm(&[
+        "pairs",
+        "--data",
+        data.to_str().unwrap(),
+        "--limit",
+        &count.to_string(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(written.status.success(), "{}", stderr(&written));
+    out.join("pairs.json")
+}
+
+/// The JSON lines of `file`, each checked to be one complete object.
+fn lines(file: &Path) -> Vec<serde_json::Value> {
+    let text = std::fs::read_to_string(file).unwrap();
+    assert!(
+        text.is_empty() || text.ends_with('\n'),
+        "a cut-off line in {text}"
+    );
+    text.lines()
+        .map(|l| serde_json::from_str(l).expect("a JSON line"))
+        .collect()
+}
+
+/// `lines` by their pair, each pair once.
+fn by_pair(lines: &[serde_json::Value]) -> HashMap<(String, String), serde_json::Value> {
+    let mut pairs = HashMap::new();
+    for line in lines {
+        let key = (
+            line["source"].as_str().unwrap().to_string(),
+            line["target"].as_str().unwrap().to_string(),
+        );
+        assert!(pairs.insert(key, line.clone()).is_none(), "twice: {line}");
+    }
+    pairs
+}
+
+#[test]
+fn every_line_is_what_rgm_register_json_prints_for_its_pair() {
+    let dir = scratch("same");
+    let list = written_pairs(&dir, 3);
+    let output = dir.join("out.jsonl");
+    let out = rgm(&[
+        "register",
+        "--pairs",
+        list.to_str().unwrap(),
+        "--output",
+        output.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let batch = lines(&output);
+    assert_eq!(batch.len(), 3);
+    for mut line in batch {
+        let (source, target) = (
+            line["source"].as_str().unwrap().to_string(),
+            line["target"].as_str().unwrap().to_string(),
+        );
+        let folder = list.parent().unwrap();
+        let one = rgm(&[
+            "register",
+            folder.join(&source).to_str().unwrap(),
+            folder.join(&target).to_str().unwrap(),
+            "--json",
+        ]);
+        let mut alone: serde_json::Value =
+            serde_json::from_slice(&one.stdout).expect("rgm register --json prints an object");
+        assert_eq!(alone["method"], "auto+icp");
+        // The method's own time differs from run to run; everything else is the same.
+        for value in [&mut line, &mut alone] {
+            let object = value.as_object_mut().unwrap();
+            assert!(object.remove("time_ms").unwrap().as_f64().unwrap() > 0.0);
+        }
+        let object = line.as_object_mut().unwrap();
+        assert_eq!(object.remove("source").unwrap(), source.as_str());
+        assert_eq!(object.remove("target").unwrap(), target.as_str());
+        assert_eq!(line, alone, "{source} → {target}");
+    }
+}
+
+#[test]
+fn a_rerun_registers_only_the_pairs_without_a_line_and_never_writes_one_twice() {
+    let dir = scratch("resume");
+    let list = written_pairs(&dir, 6);
+    let output = dir.join("out.jsonl");
+    let run = || {
+        rgm(&[
+            "register",
+            "--pairs",
+            list.to_str().unwrap(),
+            "--method",
+            "icp",
+            "--output",
+            output.to_str().unwrap(),
+        ])
+    };
+    let first = run();
+    assert!(first.status.success(), "{}", stderr(&first));
+    let text = std::fs::read_to_string(&output).unwrap();
+    let whole = by_pair(&lines(&output));
+    assert_eq!(whole.len(), 6);
+    // Line 2 removed and the last line cut in the middle, as a killed run leaves it, and the
+    // first line written twice.
+    let kept: Vec<&str> = text.lines().collect();
+    let cut = &kept[5][..kept[5].len() / 2];
+    let damaged = format!(
+        "{}\n{}\n{}\n{}\n{}\n{cut}",
+        kept[0], kept[2], kept[3], kept[0], kept[4]
+    );
+    std::fs::write(&output, damaged).unwrap();
+    let rerun = run();
+    assert!(rerun.status.success(), "{}", stderr(&rerun));
+    assert!(
+        stderr(&rerun).contains("4 of the 6 pairs have their line in"),
+        "{}",
+        stderr(&rerun)
+    );
+    let again = by_pair(&lines(&output));
+    assert_eq!(again.len(), 6);
+    // The kept lines are the first run's (a pair registered again would have another
+    // time_ms); the two redone pairs have the first run's transforms.
+    for k in [0, 2, 3, 4] {
+        let line: serde_json::Value = serde_json::from_str(kept[k]).unwrap();
+        let key = (
+            line["source"].as_str().unwrap().to_string(),
+            line["target"].as_str().unwrap().to_string(),
+        );
+        assert_eq!(again[&key], line);
+    }
+    for (key, line) in &whole {
+        assert_eq!(again[key]["transform"], line["transform"]);
+    }
+    // Finished: a third run registers nothing and changes nothing.
+    let before = std::fs::read_to_string(&output).unwrap();
+    let third = run();
+    assert!(third.status.success(), "{}", stderr(&third));
+    assert!(
+        stderr(&third).contains("registering 0"),
+        "{}",
+        stderr(&third)
+    );
+    assert_eq!(std::fs::read_to_string(&output).unwrap(), before);
+}
+
+#[test]
+fn a_killed_run_finishes_on_a_rerun_without_redoing_its_pairs() {
+    let dir = scratch("killed");
+    let list = written_pairs(&dir, 8);
+    let output = dir.join("out.jsonl");
+    let args = [
+        "register",
+        "--pairs",
+        list.to_str().unwrap(),
+        "--method",
+        "fgr",
+        "--workers",
+        "1",
+        "--output",
+        output.to_str().unwrap(),
+    ];
+    let mut child = Command::new(env!("CARGO_BIN_EXE_rgm"))
+        .args(args)
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // Killed once its first line is written (or left alone, should it finish first).
+    while std::fs::read_to_string(&output).map_or(0, |t| t.lines().count()) == 0 {
+        if child.try_wait().unwrap().is_some() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let _ = child.kill();
+    child.wait().unwrap();
+    let text = std::fs::read_to_string(&output).unwrap();
+    let finished: Vec<serde_json::Value> = text
+        .split_inclusive('\n')
+        .filter(|l| l.ends_with('\n'))
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert!(!finished.is_empty());
+    let rerun = rgm(&args);
+    assert!(rerun.status.success(), "{}", stderr(&rerun));
+    let all = by_pair(&lines(&output));
+    assert_eq!(all.len(), 8);
+    for line in &finished {
+        let key = (
+            line["source"].as_str().unwrap().to_string(),
+            line["target"].as_str().unwrap().to_string(),
+        );
+        assert_eq!(&all[&key], line, "a finished pair registered again");
+    }
+}
+
+#[test]
+fn a_pair_that_fails_is_a_line_naming_why_and_the_status_says_so() {
+    let dir = scratch("fails");
+    let list = written_pairs(&dir, 2);
+    let csv = dir.join("list.csv");
+    std::fs::write(
+        &csv,
+        "# a comment, then the header\nid,target,source\n\
+         1,pairs/0000_target.ply,\"pairs/0000_source.ply\"\n\
+         2,pairs/0000_target.ply,pairs/missing.ply\n\
+         3,pairs/0000_target.ply,pairs/0000_source.ply\n",
+    )
+    .unwrap();
+    assert!(list.is_file());
+    let out = rgm(&[
+        "register",
+        "--pairs",
+        csv.to_str().unwrap(),
+        "--method",
+        "icp",
+    ]);
+    assert!(!out.status.success());
+    let text = String::from_utf8(out.stdout.clone()).unwrap();
+    let printed: Vec<serde_json::Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    // The repeated pair runs once.
+    assert_eq!(printed.len(), 2, "{text}");
+    let failed = printed
+        .iter()
+        .find(|l| l["source"] == "pairs/missing.ply")
+        .expect("a line for the missing file");
+    let why = failed["error"].as_str().unwrap();
+    assert!(
+        why.contains(&format!("{}", dir.join("pairs/missing.ply").display())),
+        "{why}"
+    );
+    assert!(printed.iter().any(|l| l["registered"] == true));
+    let said = stderr(&out);
+    assert!(said.contains("list.csv:5 repeats the pair of"), "{said}");
+    assert!(
+        said.contains("2 pairs: 1 registered, 0 not registered, 1 failed"),
+        "{said}"
+    );
+}
+
+#[test]
+fn errors_in_the_list_name_the_file_the_line_and_the_value() {
+    let dir = scratch("list");
+    let cases = [
+        (
+            "header.csv",
+            "src,tgt\na.ply,b.ply\n",
+            "header.csv:1: the header must name the columns `source` and `target`: `src,tgt`",
+        ),
+        (
+            "row.csv",
+            "source,target\na.ply,b.ply\n\nc.ply\n",
+            "row.csv:4: no target file (column 2): `c.ply`",
+        ),
+        (
+            "quote.csv",
+            "source,target\n\"a.ply,b.ply\n",
+            "quote.csv:2: a quoted field has no closing quote: `\"a.ply,b.ply`",
+        ),
+        ("empty.csv", "source,target\n", "empty.csv: no pair listed"),
+        (
+            "entry.json",
+            r#"[{"source": "a.ply", "target": "b.ply"}, {"source": "c.ply"}]"#,
+            r#"entry.json entry 2: no "target" file name: `{"source":"c.ply"}`"#,
+        ),
+        (
+            "shape.json",
+            r#"{"sources": []}"#,
+            r#"shape.json: a JSON list of pairs is a list of {"source": FILE, "target": FILE}"#,
+        ),
+        (
+            "broken.json",
+            "[{\"source\": \"a.ply\",\n \"target\" 3}]",
+            "broken.json: not valid JSON: expected `:` at line 2 column 11",
+        ),
+    ];
+    for (name, text, says) in cases {
+        let list = dir.join(name);
+        std::fs::write(&list, text).unwrap();
+        let out = rgm(&[
+            "register",
+            "--pairs",
+            list.to_str().unwrap(),
+            "--method",
+            "icp",
+        ]);
+        assert!(!out.status.success());
+        assert!(out.stdout.is_empty(), "{name}");
+        let said = stderr(&out);
+        assert!(said.contains(says), "{name}: {said}");
+    }
+    // An --output that is not ours, or of another method, is refused and left as it was.
+    let list = dir.join("header.csv");
+    std::fs::write(&list, "source,target\na.ply,b.ply\n").unwrap();
+    for (text, says) in [
+        (
+            "not json\n",
+            "other.jsonl:1: not a line of `rgm register --pairs`",
+        ),
+        (
+            "{\"source\": \"a.ply\", \"target\": \"b.ply\", \"method\": \"fgr+icp\"}\n",
+            "other.jsonl:1: a result of method \"fgr+icp\", not of this run's icp",
+        ),
+    ] {
+        let output = dir.join("other.jsonl");
+        std::fs::write(&output, text).unwrap();
+        let out = rgm(&[
+            "register",
+            "--pairs",
+            list.to_str().unwrap(),
+            "--method",
+            "icp",
+            "--output",
+            output.to_str().unwrap(),
+        ]);
+        assert!(!out.status.success());
+        assert!(stderr(&out).contains(says), "{}", stderr(&out));
+        assert_eq!(std::fs::read_to_string(&output).unwrap(), text);
+    }
+    // One pair and a list are one or the other.
+    let out = rgm(&[
+        "register",
+        "a.ply",
+        "b.ply",
+        "--pairs",
+        list.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success() && stderr(&out).contains("cannot be used with"));
+    let out = rgm(&["register", "a.ply", "b.ply", "--workers", "2"]);
+    assert!(!out.status.success() && stderr(&out).contains("--workers applies to --pairs"));
+}
