@@ -25,6 +25,12 @@ use rgm_nn::Precision;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Threads one command may use: `rgm register` runs its candidates (RGM and FGR) side by
+    /// side on them, and `--workers` of `register --pairs` and `rgm eval` defaults to it
+    /// (`rgm train` has its own --workers) [default: one per core; the `RAYON_NUM_THREADS`
+    /// variable sets it too].
+    #[arg(long, global = true, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
+    threads: Option<u16>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -218,8 +224,8 @@ pub fn method_failure(
 /// `--workers N`: how many pairs run at once.
 #[derive(clap::Args, Debug, Clone)]
 pub struct WorkerArgs {
-    /// Pairs registered at once, one per worker thread [default: one per core; the
-    /// `RAYON_NUM_THREADS` variable sets it too]. Times are each method's own, per pair.
+    /// Pairs registered at once, one per worker thread [default: --threads]. Times are each
+    /// method's own, per pair.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
     workers: Option<u16>,
 }
@@ -228,7 +234,10 @@ impl WorkerArgs {
     /// The pool of `--workers` threads, each flushing denormals.
     fn pool(&self) -> anyhow::Result<rayon::ThreadPool> {
         Ok(rayon::ThreadPoolBuilder::new()
-            .num_threads(self.workers.map_or(0, usize::from))
+            .num_threads(
+                self.workers
+                    .map_or_else(rayon::current_num_threads, usize::from),
+            )
             .start_handler(|_| {
                 rgm_nn::threads::flush_denormals_to_zero();
             })
@@ -384,7 +393,7 @@ fn end_quietly_on_closed_pipes() {
 fn main() -> ExitCode {
     end_quietly_on_closed_pipes();
     let cli = Cli::parse();
-    set_up_compute_threads();
+    set_up_compute_threads(cli.threads.map_or(0, usize::from));
     let outcome = match cli.command {
         Command::Register(args) => commands::register::run(args),
         Command::Eval(args) => commands::eval::run(args),
@@ -406,9 +415,9 @@ fn main() -> ExitCode {
 /// one OpenBLAS thread unless `OPENBLAS_NUM_THREADS` asks for more: more threads gain a little
 /// on an idle machine, but while other work holds the cores OpenBLAS's spinning threads make a
 /// registration many times slower (docs/speed.md, "The `rgm` command: threads"). `rgm eval`
-/// runs pairs on parallel workers instead.
-fn set_up_compute_threads() {
-    rgm_nn::threads::flush_denormals_everywhere();
+/// runs pairs on parallel workers instead. `threads` workers in rayon's pool (0: one per core).
+fn set_up_compute_threads(threads: usize) {
+    rgm_nn::threads::flush_denormals_everywhere(threads);
     if std::env::var_os("OPENBLAS_NUM_THREADS").is_none() {
         rgm_nn::threads::set_blas_threads(1);
     }

@@ -74,10 +74,13 @@ pub fn with_denormals_flushed<T>(work: impl FnOnce() -> T) -> T {
 /// load the calling thread's SSE control word with each job, so they follow it — checked by
 /// `tests/denormals.rs`) and rayon's global pool, built here with the flag set in each worker.
 /// Call it once at the start of the program, before any op (rayon's pool can only be built
-/// once). Returns false if rayon's pool already existed (its workers then keep denormals).
-pub fn flush_denormals_everywhere() -> bool {
+/// once); the pool has `threads` workers (0: rayon's default, one per core unless
+/// `RAYON_NUM_THREADS` says otherwise). Returns false if rayon's pool already existed (its
+/// workers then keep denormals).
+pub fn flush_denormals_everywhere(threads: usize) -> bool {
     flush_denormals_to_zero();
     rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
         .start_handler(|_| {
             flush_denormals_to_zero();
         })

@@ -18,7 +18,7 @@ fn denormals_flush_on_every_compute_thread() {
         "denormal results before the call"
     );
     assert!(
-        flush_denormals_everywhere(),
+        flush_denormals_everywhere(0),
         "rayon's pool was still unbuilt"
     );
     // OpenBLAS splits a 256² product over its workers: every entry zero means all of them flush.
