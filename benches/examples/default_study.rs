@@ -12,6 +12,12 @@
 //! The splits are ordered by category (the first 200 partial test pairs are airplanes, bathtubs
 //! and beds), so a sample meant to speak for a split takes a stride, not its first pairs.
 //!
+//! `--study cascade` runs `rgm register`'s default on each pair and, from its two candidates'
+//! overlap scores, outcomes and times, prints what a cascade would give: the cheap candidate
+//! first, the other only when the first's score is below a threshold (then the better of the
+//! two, as the default picks), for each order and threshold. Run it on one thread
+//! (`RAYON_NUM_THREADS=1`) so that each candidate's time is its own.
+//!
 //! `--study robustness` instead runs `rgm register`'s default on each pair as it is, at half
 //! and at twice its size, and with each cloud made of 20,000 points (every point repeated, with
 //! N(0, 0.005²) noise), and prints each version's recall (transforms scaled back to the pair's
@@ -177,6 +183,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // The pair indices of the sample (each pair is made from its index: the same pairs as the
     // tables' for the test split).
     let indices: Vec<usize> = (offset..shapes.len()).step_by(stride).take(limit).collect();
+    if arg(&args, "--study").as_deref() == Some("cascade") {
+        return cascade(&generator, &shapes, &indices);
+    }
     if arg(&args, "--study").as_deref() == Some("robustness") {
         let versions = arg(&args, "--versions")
             .unwrap_or_else(|| "as they are,half size,twice the size,20000 points each".into());
@@ -328,6 +337,83 @@ fn densified(cloud: &PointCloud, n: usize, seed: u64) -> PointCloud {
             })
             .collect(),
     )
+}
+
+/// One candidate of the default on one pair: its outcome, overlap score and time.
+struct Tried {
+    outcome: Outcome,
+    score: f64,
+    ms: f64,
+}
+
+fn cascade(
+    generator: &PairGenerator,
+    shapes: &[&rgm_data::Shape],
+    indices: &[usize],
+) -> Result<(), Box<dyn std::error::Error>> {
+    let mut method = MethodOptions::default().build()?;
+    let mut pairs: Vec<[Tried; 2]> = Vec::new(); // (RGM's, FGR's) per pair
+    for (done, &i) in indices.iter().enumerate() {
+        let pair = generator.test_pair(shapes, i)?;
+        let found = method.register(&pair.source, &pair.target)?;
+        let tried = |k: usize| {
+            let c = &found.candidates[k];
+            Tried {
+                outcome: outcome(
+                    &c.t_target_source,
+                    &pair.t_target_source,
+                    &pair.source,
+                    &pair.target,
+                ),
+                score: c.score.unwrap_or(f64::NEG_INFINITY),
+                ms: c.time_ms,
+            }
+        };
+        pairs.push([tried(0), tried(1)]);
+        if (done + 1) % 50 == 0 {
+            eprintln!("{} of {} pairs", done + 1, indices.len());
+        }
+    }
+    let n = pairs.len() as f64;
+    println!(
+        "| first | threshold | recall | > 45° | ms / pair (candidates) | pairs running the second |"
+    );
+    println!("|---|---:|---:|---:|---:|---:|");
+    for (first, name) in [(1, "fgr+icp"), (0, "rgm+icp")] {
+        for threshold in [0.0, 1.0, 1.2, 1.4, 1.5, 1.6, 1.7, 1.8, 1.9, f64::INFINITY] {
+            let mut outcomes = Vec::new();
+            let (mut ms, mut second) = (0.0, 0);
+            for tried in &pairs {
+                let a = &tried[first];
+                ms += a.ms;
+                let pick = if a.score >= threshold {
+                    a
+                } else {
+                    second += 1;
+                    ms += tried[1 - first].ms;
+                    // The default's choice: the higher score, ties to RGM.
+                    if tried[1].score > tried[0].score {
+                        &tried[1]
+                    } else {
+                        &tried[0]
+                    }
+                };
+                outcomes.push(Outcome {
+                    recall: pick.outcome.recall,
+                    mie_r: pick.outcome.mie_r,
+                });
+            }
+            let (recall, wild, _) = summary(&outcomes);
+            println!(
+                "| {name} | {threshold} | {:.2} % | {:.2} % | {:.0} | {:.1} % |",
+                100.0 * recall,
+                100.0 * wild,
+                ms / n,
+                100.0 * second as f64 / n
+            );
+        }
+    }
+    Ok(())
 }
 
 fn robustness(

@@ -122,13 +122,17 @@ impl<E: From<GeomError> + ToString + Send> Registrar<E> for BestOf<E> {
             let (s, t) = (thinned(source, how), thinned(target, how));
             // The candidates are independent until scored: they run side by side, each on a
             // core of its own when there are cores to spare, and are scored in their order.
-            let outcomes: Vec<Result<Registration, E>> = self
+            let outcomes: Vec<(Result<Registration, E>, f64)> = self
                 .candidates
                 .par_iter_mut()
-                .map(|candidate| candidate.register(&s, &t))
+                .map(|candidate| {
+                    let start = Instant::now();
+                    let outcome = candidate.register(&s, &t);
+                    (outcome, elapsed_ms(start))
+                })
                 .collect();
             let mut found = Vec::with_capacity(outcomes.len()); // this thinning's transforms
-            for (candidate, outcome) in self.candidates.iter().zip(outcomes) {
+            for (candidate, (outcome, time_ms)) in self.candidates.iter().zip(outcomes) {
                 let method = format!("{}{}", candidate.id(), how.suffix());
                 match outcome {
                     Ok(registration) => {
@@ -149,6 +153,7 @@ impl<E: From<GeomError> + ToString + Send> Registrar<E> for BestOf<E> {
                             t_target_source: transform,
                             score: Some(value),
                             failure: None,
+                            time_ms,
                         });
                     }
                     Err(err) => candidates.push(Candidate {
@@ -156,6 +161,7 @@ impl<E: From<GeomError> + ToString + Send> Registrar<E> for BestOf<E> {
                         t_target_source: RigidTransform::identity(),
                         score: None,
                         failure: Some(err.to_string()),
+                        time_ms,
                     }),
                 }
             }

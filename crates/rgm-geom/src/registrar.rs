@@ -59,6 +59,8 @@ pub struct Candidate {
     pub score: Option<f64>,
     /// Why the method failed, if it did.
     pub failure: Option<String>,
+    /// Wall time of the method on the pair, in milliseconds.
+    pub time_ms: f64,
 }
 
 /// What a registrar found on one pair.

@@ -59,11 +59,11 @@ impl PairRecord {
         })
     }
 
-    /// This record's transform refined as `rgm+icp` refines RGM's (in the network's
-    /// frame, on the full clouds of `pair`), scored: the record `rgm eval --refine` would give,
-    /// without running the network again. Its time adds the refinement's to this record's. A
-    /// failed record stays as it is; a failed refinement is recorded as a failure (the identity),
-    /// as the pipeline reports it.
+    /// This record's transform refined as `rgm+icp` refines RGM's (in the network's frame, on
+    /// the full clouds of `pair`), scored: the record `rgm eval --refine` would give, without
+    /// running the network again (its correspondences the refinement's inliers). Its time adds
+    /// the refinement's to this record's. A failed record stays as it is; a failed refinement is
+    /// recorded as a failure (the identity), as the pipeline reports it.
     pub fn refined(&self, pair: &Pair, config: &RefineConfig) -> rgm_geom::Result<Self> {
         if self.failure.is_some() {
             return Ok(self.clone());
@@ -77,16 +77,20 @@ impl PairRecord {
             config,
         );
         let time_ms = self.time_ms + start.elapsed().as_secs_f64() * 1e3;
-        let (transform, failure) = match refined {
-            Ok(r) => (frame.undo(&r.t_target_source), None),
-            Err(e) => (RigidTransform::identity(), Some(e.to_string())),
+        let (transform, correspondences, failure) = match refined {
+            Ok(r) => (frame.undo(&r.t_target_source), r.inlier_count, None),
+            Err(e) => (
+                RigidTransform::identity(),
+                self.correspondences,
+                Some(e.to_string()),
+            ),
         };
         Self::score(
             self.index,
             pair,
             transform,
             time_ms,
-            self.correspondences,
+            correspondences,
             failure,
         )
     }

@@ -118,6 +118,7 @@ pub fn json(
                 "score": c.score,
                 "transform": c.t_target_source.to_rows(),
                 "failure": c.failure,
+                "time_ms": c.time_ms,
             })
         })
         .collect();
