@@ -99,10 +99,15 @@ fn every_line_is_what_rgm_register_json_prints_for_its_pair() {
         let mut alone: serde_json::Value =
             serde_json::from_slice(&one.stdout).expect("rgm register --json prints an object");
         assert_eq!(alone["method"], "auto+icp");
-        // The method's own time differs from run to run; everything else is the same.
+        // The method's own time (and each candidate's) differs from run to run; everything else
+        // is the same.
         for value in [&mut line, &mut alone] {
             let object = value.as_object_mut().unwrap();
             assert!(object.remove("time_ms").unwrap().as_f64().unwrap() > 0.0);
+            for candidate in object["candidates"].as_array_mut().unwrap() {
+                let candidate = candidate.as_object_mut().unwrap();
+                assert!(candidate.remove("time_ms").unwrap().as_f64().unwrap() > 0.0);
+            }
         }
         let object = line.as_object_mut().unwrap();
         assert_eq!(object.remove("source").unwrap(), source.as_str());
