@@ -13,7 +13,7 @@
 //! The result is the f32 product up to the order of the additions: each entry of C is
 //! accumulated over K in order within a panel of [`KC`], panels added in order.
 
-use ndarray::{ArrayView2, ArrayViewMut2, Axis};
+use ndarray::{ArrayView2, ArrayViewMut2};
 use std::cell::RefCell;
 
 /// Rows of a micro-tile (and of a packed A strip).
@@ -85,10 +85,13 @@ pub fn f32_mat_mul(
             let nc = NC.min(n - j0);
             for p0 in (0..k).step_by(KC) {
                 let kc = KC.min(k - p0);
-                pack_b(
-                    b.slice(ndarray::s![p0..p0 + kc, j0..j0 + nc]),
-                    &mut packed.b,
-                );
+                // SAFETY: `available()` was checked above.
+                let b_packed = unsafe {
+                    pack_b(
+                        b.slice(ndarray::s![p0..p0 + kc, j0..j0 + nc]),
+                        &mut packed.b,
+                    )
+                };
                 // The first panel along K applies beta; the later ones add to it.
                 let beta = if p0 == 0 { beta } else { 1.0 };
                 for i0 in (0..m).step_by(MR) {
@@ -111,7 +114,7 @@ pub fn f32_mat_mul(
                             cols: MR as isize,
                         }
                     };
-                    for (sj, b_strip) in packed.b.chunks_exact(kc * NR).enumerate() {
+                    for (sj, b_strip) in b_packed.chunks_exact(kc * NR).enumerate() {
                         let j = j0 + sj * NR;
                         let cols = NR.min(n - j);
                         let c_tile = Strided {
@@ -155,32 +158,138 @@ fn pack_a(a: ArrayView2<'_, f32>, out: &mut Vec<f32>) {
     }
 }
 
-/// Packs `b` (kc, nc) into `out` as 32-column strips: strip s holds, for each k, the 32 values
-/// of row k at columns 32s..32s + 32 (zero past column nc).
-fn pack_b(b: ArrayView2<'_, f32>, out: &mut Vec<f32>) {
+/// Packs `b` (kc, nc) into `out` as 32-column strips and returns them: strip s holds, for each
+/// k, the 32 values of row k at columns 32s..32s + 32 (zero past column nc). Every value of the
+/// returned strips is written, so `out` is only grown, never cleared.
+///
+/// # Safety
+/// The processor must have AVX-512 F.
+#[target_feature(enable = "avx512f")]
+unsafe fn pack_b<'o>(b: ArrayView2<'_, f32>, out: &'o mut Vec<f32>) -> &'o [f32] {
+    use std::arch::x86_64::*;
     let (kc, nc) = b.dim();
     let strips = nc.div_ceil(NR);
-    out.clear();
-    out.resize(strips * kc * NR, 0.0);
-    if b.strides()[1] == 1 {
-        // Rows contiguous: 32 values at a time.
-        for (k, row) in b.axis_iter(Axis(0)).enumerate() {
-            let row = row.to_slice().expect("unit column stride");
-            for (s, cols) in row.chunks(NR).enumerate() {
-                let dst = &mut out[(s * kc + k) * NR..][..cols.len()];
-                for (d, &x) in dst.iter_mut().zip(cols) {
-                    *d = x;
+    let len = strips * kc * NR;
+    if out.len() < len {
+        out.resize(len, 0.0);
+    }
+    let out = &mut out[..len];
+    // The first `n` of 16 lanes (all for n ≥ 16, none for n = 0).
+    let mask = |n: usize| -> __mmask16 {
+        if n >= 16 {
+            !0
+        } else {
+            (1u16 << n) - 1
+        }
+    };
+    let (rows, cols) = (b.strides()[0], b.strides()[1]);
+    let base = b.as_ptr();
+    if cols == 1 {
+        // Rows contiguous: 16 values at a time, masked at the last column (zeros beyond).
+        for k in 0..kc {
+            // SAFETY: row k of `b` holds nc values from here.
+            let row = unsafe { base.offset(k as isize * rows) };
+            for s in 0..strips {
+                for h in 0..2 {
+                    let j = s * NR + 16 * h;
+                    let m = mask(nc.saturating_sub(j));
+                    // SAFETY: the mask keeps the load inside the row; the store stays in the
+                    // strip's row k.
+                    unsafe {
+                        let v = _mm512_maskz_loadu_ps(m, row.add(j.min(nc)));
+                        _mm512_storeu_ps(out.as_mut_ptr().add((s * kc + k) * NR + 16 * h), v);
+                    }
+                }
+            }
+        }
+    } else if rows == 1 {
+        // Columns contiguous (a transposed view, as `inp · weightᵀ` and the attention scores):
+        // 16 columns × 16 rows read as 16 column vectors, transposed in registers into the
+        // strip's 16 row pieces.
+        let mut block = [_mm512_setzero_ps(); 16];
+        for s in 0..strips {
+            for h in 0..2 {
+                let j0 = s * NR + 16 * h;
+                for k0 in (0..kc).step_by(16) {
+                    let m = mask(kc - k0);
+                    for (c, v) in block.iter_mut().enumerate() {
+                        *v = if j0 + c < nc {
+                            // SAFETY: column j0 + c holds kc values; the mask stops at kc.
+                            unsafe {
+                                _mm512_maskz_loadu_ps(
+                                    m,
+                                    base.offset((j0 + c) as isize * cols + k0 as isize),
+                                )
+                            }
+                        } else {
+                            _mm512_setzero_ps()
+                        };
+                    }
+                    // SAFETY: the processor has AVX-512 F (this function's contract).
+                    unsafe { transpose_16x16(&mut block) };
+                    for (r, v) in block.iter().enumerate().take((kc - k0).min(16)) {
+                        // SAFETY: row k0 + r < kc of strip s, lanes 16h..16h + 16.
+                        unsafe {
+                            _mm512_storeu_ps(
+                                out.as_mut_ptr().add((s * kc + k0 + r) * NR + 16 * h),
+                                *v,
+                            )
+                        };
+                    }
                 }
             }
         }
     } else {
-        // Columns contiguous (a transposed view, as `inp · weightᵀ`) or strided.
-        for (j, col) in b.axis_iter(Axis(1)).enumerate() {
-            let base = (j / NR) * kc * NR + j % NR;
-            for (k, &x) in col.iter().enumerate() {
-                out[base + k * NR] = x;
-            }
+        // Strided both ways (views of every n-th element): one value at a time.
+        out.fill(0.0);
+        for ((k, j), &x) in b.indexed_iter() {
+            out[((j / NR) * kc + k) * NR + j % NR] = x;
         }
+    }
+    out
+}
+
+/// Transposes the 16 × 16 block whose row i is `r[i]`: afterwards `r[i]` holds column i.
+///
+/// # Safety
+/// The processor must have AVX-512 F.
+#[target_feature(enable = "avx512f")]
+unsafe fn transpose_16x16(r: &mut [std::arch::x86_64::__m512; 16]) {
+    use std::arch::x86_64::*;
+    // 1. Interleave rows 2i and 2i + 1 by single values: t[2i] holds, per 128-bit lane,
+    //    (r2i[0], r2i+1[0], r2i[1], r2i+1[1]), t[2i + 1] the lane's upper halves.
+    let mut t = [_mm512_setzero_ps(); 16];
+    for i in 0..8 {
+        t[2 * i] = _mm512_unpacklo_ps(r[2 * i], r[2 * i + 1]);
+        t[2 * i + 1] = _mm512_unpackhi_ps(r[2 * i], r[2 * i + 1]);
+    }
+    // 2. Interleave those by pairs: each 128-bit lane now holds one column of 4 rows.
+    let (lo, hi) = (
+        |a: __m512, b: __m512| {
+            _mm512_castpd_ps(_mm512_unpacklo_pd(_mm512_castps_pd(a), _mm512_castps_pd(b)))
+        },
+        |a: __m512, b: __m512| {
+            _mm512_castpd_ps(_mm512_unpackhi_pd(_mm512_castps_pd(a), _mm512_castps_pd(b)))
+        },
+    );
+    for g in 0..4 {
+        let (a, b) = (4 * g, 4 * g + 2);
+        r[4 * g] = lo(t[a], t[b]);
+        r[4 * g + 1] = hi(t[a], t[b]);
+        r[4 * g + 2] = lo(t[a + 1], t[b + 1]);
+        r[4 * g + 3] = hi(t[a + 1], t[b + 1]);
+    }
+    // 3. and 4. Gather the 128-bit lanes of the four groups of four rows.
+    for g in 0..2 {
+        for i in 0..4 {
+            let (a, b) = (8 * g + i, 8 * g + 4 + i);
+            t[8 * g + i] = _mm512_shuffle_f32x4::<0x88>(r[a], r[b]);
+            t[8 * g + 4 + i] = _mm512_shuffle_f32x4::<0xdd>(r[a], r[b]);
+        }
+    }
+    for i in 0..8 {
+        r[i] = _mm512_shuffle_f32x4::<0x88>(t[i], t[8 + i]);
+        r[8 + i] = _mm512_shuffle_f32x4::<0xdd>(t[i], t[8 + i]);
     }
 }
 
@@ -256,6 +365,64 @@ unsafe fn micro_tile(
                 let v = block[r * NR + j];
                 *x = if beta == 0.0 { v } else { v + beta * *x };
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::{s, Array2};
+
+    #[test]
+    fn every_layout_of_b_packs_to_the_same_strips() {
+        if !available() {
+            eprintln!("no AVX-512 F: the kernel does not run here");
+            return;
+        }
+        // K = 300: a full panel of 256 and one of 44 (two blocks of 16 and a remainder);
+        // N = 45: a full strip and one of 13 columns.
+        let (m, k, n) = (37, 300, 45);
+        let value = |i: usize, j: usize| ((i * 31 + j * 17) % 23) as f32 - 11.0;
+        let a = Array2::from_shape_fn((m, k), |(i, j)| value(i, j));
+        let b = Array2::from_shape_fn((k, n), |(i, j)| value(j, i + 1));
+        let bt = b.t().to_owned(); // (N, K) stored: `.t()` has contiguous columns
+        let wide = Array2::from_shape_fn((k, 2 * n), |(i, j)| match j % 2 {
+            0 => b[(i, j / 2)],
+            _ => f32::NAN,
+        });
+        let strided = wide.slice(s![.., ..;2]);
+        let product = |b: ArrayView2<'_, f32>| {
+            let mut c = Array2::zeros((m, n));
+            f32_mat_mul(1.0, a.view(), b, 0.0, c.view_mut());
+            c
+        };
+        let plain = product(b.view());
+        assert_eq!(product(bt.t()), plain, "transposed view");
+        assert_eq!(product(strided), plain, "strided view");
+    }
+
+    #[test]
+    fn the_register_transpose_moves_each_value_to_its_mirror() {
+        if !available() {
+            eprintln!("no AVX-512 F: the transpose does not run here");
+            return;
+        }
+        use std::arch::x86_64::*;
+        let value = |i: usize, j: usize| (16 * i + j) as f32;
+        let mut block: [__m512; 16] = std::array::from_fn(|i| {
+            let row: [f32; 16] = std::array::from_fn(|j| value(i, j));
+            // SAFETY: AVX-512 F is available; `row` holds 16 values.
+            unsafe { _mm512_loadu_ps(row.as_ptr()) }
+        });
+        // SAFETY: as above.
+        unsafe { transpose_16x16(&mut block) };
+        for (i, v) in block.iter().enumerate() {
+            let mut row = [0f32; 16];
+            // SAFETY: as above.
+            unsafe { _mm512_storeu_ps(row.as_mut_ptr(), *v) };
+            let want: [f32; 16] = std::array::from_fn(|j| value(j, i));
+            assert_eq!(row, want, "row {i}");
         }
     }
 }
