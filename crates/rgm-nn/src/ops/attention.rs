@@ -377,10 +377,49 @@ mod tests {
         assert_eq!(out.row(1), kv.row(0));
     }
 
-    /// Checks every input and parameter gradient: cross-attention (9 queries, 10 keys) takes
-    /// inputs `[q, kv, params..]`; self-attention (10 rows) `[x, params..]` with `dkv_in = None`.
+    #[test]
+    fn row_blocks_give_the_whole_matrix_attention_bit_for_bit() {
+        // 150 queries: two whole blocks of 64 rows and one of 22; 70 keys.
+        let mha = MultiHeadAttention::<f32>::new(C, H, &mut StdRng::seed_from_u64(5)).unwrap();
+        let f32s = |shape: &[usize], seed| ix2(&uniform(shape, seed)).mapv(|v| v as f32);
+        let (q_in, kv_in) = (f32s(&[150, C], 320), f32s(&[70, C], 321));
+        let (mut out, mut cache) = (Array2::zeros((150, C)), AttentionCache::default());
+        mha.forward(out.view_mut(), q_in.view(), kv_in.view(), &mut cache)
+            .unwrap();
+        // The same products over whole matrices, head by head.
+        let project = |lin: &Linear<f32>, x: &Array2<f32>| {
+            let mut y = Array2::zeros((x.nrows(), C));
+            lin.forward(y.view_mut(), x.view()).unwrap();
+            y
+        };
+        let (q, k, v) = (
+            project(&mha.query, &q_in),
+            project(&mha.key, &kv_in),
+            project(&mha.value, &kv_in),
+        );
+        let (dk, mut heads) = (C / H, Array2::zeros((150, C)));
+        for head in 0..H {
+            let cols = s![.., head * dk..(head + 1) * dk];
+            let mut p = Array2::zeros((150, 70));
+            let scale = 1.0 / (dk as f32).sqrt();
+            mat_mul(scale, &q.slice(cols), &k.slice(cols).t(), 0.0, &mut p);
+            for row in p.rows_mut() {
+                softmax_slice(row.into_slice().unwrap());
+            }
+            mat_mul(1.0, &p, &v.slice(cols), 0.0, &mut heads.slice_mut(cols));
+        }
+        assert_eq!(out, project(&mha.output, &heads));
+    }
+
+    /// Checks every input and parameter gradient: cross-attention (70 queries: a whole block
+    /// of [`ROW_BLOCK`] rows and a part of one; 10 keys) takes inputs `[q, kv, params..]`;
+    /// self-attention (10 rows) `[x, params..]` with `dkv_in = None`.
     fn check_attention(self_attention: bool) {
-        let (nq, nk) = if self_attention { (10, 10) } else { (9, 10) };
+        let (nq, nk) = if self_attention {
+            (10, 10)
+        } else {
+            (ROW_BLOCK + 6, 10)
+        };
         let streams = if self_attention { 1 } else { 2 };
         let mut inputs = vec![uniform(&[nq, C], 91)];
         if !self_attention {
