@@ -111,6 +111,22 @@ pub fn sum<T: Scalar>(xs: &[T]) -> T {
     lanes.iter().fold(rest, |acc, &lane| acc + lane)
 }
 
+/// The largest of `init` and the values of `xs`, NaNs skipped (as `f32::max` skips them), in
+/// eight running maxima so that the comparisons vectorise. A maximum is exact, so this is the
+/// value of a single running maximum.
+pub fn max<T: Scalar>(xs: &[T], init: T) -> T {
+    let mut lanes = [init; 8];
+    let chunks = xs.chunks_exact(8);
+    let rest = chunks.remainder().iter().fold(init, |acc, &x| acc.max(x));
+    for chunk in chunks {
+        lanes
+            .iter_mut()
+            .zip(chunk)
+            .for_each(|(lane, &x)| *lane = lane.max(x));
+    }
+    lanes.iter().fold(rest, |acc, &lane| acc.max(lane))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -164,6 +180,26 @@ mod tests {
         assert_eq!(&xs[3..6], &[f32::INFINITY; 3]);
         assert!(xs[6].is_nan());
         assert_eq!(xs[7], std::f32::consts::E);
+    }
+
+    #[test]
+    fn max_is_the_running_maximum_skipping_nans() {
+        // 19 values: two rounds of the eight lanes and a remainder of three; the largest in
+        // a lane, then in the remainder; NaNs anywhere.
+        let mut xs: Vec<f32> = (0..19).map(|i| ((i * 7) % 19) as f32 - 9.0).collect();
+        xs[4] = f32::NAN;
+        let serial = |xs: &[f32], init: f32| xs.iter().fold(init, |m, &x| m.max(x));
+        assert_eq!(max(&xs, f32::NEG_INFINITY), 9.0);
+        assert_eq!(max(&xs, f32::NEG_INFINITY), serial(&xs, f32::NEG_INFINITY));
+        xs[17] = 30.0;
+        assert_eq!(max(&xs, 0.0), 30.0);
+        assert_eq!(max(&xs, 100.0), 100.0, "the initial value counts");
+        assert_eq!(
+            max(&[f32::NAN; 11], -1.0),
+            -1.0,
+            "all NaN: the initial value"
+        );
+        assert_eq!(max::<f64>(&[], f64::NEG_INFINITY), f64::NEG_INFINITY);
     }
 
     #[test]

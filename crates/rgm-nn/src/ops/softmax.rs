@@ -7,7 +7,7 @@ use ndarray::{ArrayView1, ArrayView2, ArrayViewMut1, ArrayViewMut2, Zip};
 
 /// Replaces a row by its softmax, shifted by the row maximum so no exponent overflows.
 pub(crate) fn softmax_slice<T: Scalar>(xs: &mut [T]) {
-    let max = xs.iter().fold(T::neg_infinity(), |m, &v| m.max(v));
+    let max = crate::exp::max(xs, T::neg_infinity());
     let inv = T::one() / exp_shifted_sum(xs, max);
     xs.iter_mut().for_each(|x| *x *= inv);
 }
