@@ -13,7 +13,7 @@
 //! The result is the f32 product up to the order of the additions: each entry of C is
 //! accumulated over K in order within a panel of [`KC`], panels added in order.
 
-use ndarray::{ArrayView2, ArrayViewMut2};
+use ndarray::{ArrayView1, ArrayView2, ArrayViewMut2};
 use std::cell::RefCell;
 
 /// Rows of a micro-tile (and of a packed A strip).
@@ -35,8 +35,9 @@ pub fn available() -> bool {
 /// The packed operands, kept per thread so that repeated products allocate nothing.
 #[derive(Default)]
 struct Packed {
-    a: Vec<f32>, // (KC, 8) one strip of A, for the rows at its edge and odd strides
-    b: Vec<f32>, // (NC/32, KC, 32) strips of B
+    a: Vec<f32>,    // (KC, 8) one strip of A, for the rows at its edge and odd strides
+    b: Vec<f32>,    // (NC/32, KC, 32) strips of B
+    bias: Vec<f32>, // (N rounded up to 32) the bias of `f32_mat_mul_bias`, zero-padded
 }
 
 thread_local! {
@@ -59,6 +60,39 @@ pub fn f32_mat_mul(
     a: ArrayView2<'_, f32>,
     b: ArrayView2<'_, f32>,
     beta: f32,
+    c: ArrayViewMut2<'_, f32>,
+) {
+    product(alpha, a, b, beta, None, c);
+}
+
+/// `c = a · b + bias` in f32, `bias` (N) added to every row in the product's write-back (the
+/// value `f32_mat_mul(1, a, b, 1, c)` gives with `c` holding the bias in every row, without
+/// that pass over C). What `c` held is ignored. Panics as [`f32_mat_mul`], or if `bias` does
+/// not have N values.
+pub fn f32_mat_mul_bias(
+    a: ArrayView2<'_, f32>,
+    b: ArrayView2<'_, f32>,
+    bias: ArrayView1<'_, f32>,
+    c: ArrayViewMut2<'_, f32>,
+) {
+    assert_eq!(
+        bias.len(),
+        b.ncols(),
+        "f32_mat_mul_bias: bias of {} values, {} columns",
+        bias.len(),
+        b.ncols()
+    );
+    product(1.0, a, b, 0.0, Some(bias), c);
+}
+
+/// `c = alpha · a · b + beta · c (+ bias in every row)`: [`f32_mat_mul`] and
+/// [`f32_mat_mul_bias`].
+fn product(
+    alpha: f32,
+    a: ArrayView2<'_, f32>,
+    b: ArrayView2<'_, f32>,
+    beta: f32,
+    bias: Option<ArrayView1<'_, f32>>,
     mut c: ArrayViewMut2<'_, f32>,
 ) {
     let (m, n) = super::check_shapes("f32_mat_mul", &a, &b, &c);
@@ -69,6 +103,9 @@ pub fn f32_mat_mul(
     }
     if k == 0 {
         scale(c.view_mut(), beta); // alpha · (empty sum) = 0
+        if let Some(bias) = bias {
+            c += &bias;
+        }
         return;
     }
     // A is read in place where a strip's 8 rows or its K values lie at one stride each (every
@@ -81,6 +118,13 @@ pub fn f32_mat_mul(
     };
     PACKED.with(|packed| {
         let packed = &mut *packed.borrow_mut();
+        // The bias padded with zeros to whole 32-column strips, so that every tile reads 32.
+        let bias = bias.map(|bias| {
+            packed.bias.clear();
+            packed.bias.extend(bias.iter());
+            packed.bias.resize(n.next_multiple_of(NR), 0.0);
+            &packed.bias[..]
+        });
         for j0 in (0..n).step_by(NC) {
             let nc = NC.min(n - j0);
             for p0 in (0..k).step_by(KC) {
@@ -92,8 +136,8 @@ pub fn f32_mat_mul(
                         &mut packed.b,
                     )
                 };
-                // The first panel along K applies beta; the later ones add to it.
-                let beta = if p0 == 0 { beta } else { 1.0 };
+                // The first panel along K applies beta and the bias; the later ones add to it.
+                let (beta, bias) = if p0 == 0 { (beta, bias) } else { (1.0, None) };
                 for i0 in (0..m).step_by(MR) {
                     let rows = MR.min(m - i0);
                     let a_mem = if rows == MR {
@@ -128,8 +172,16 @@ pub fn f32_mat_mul(
                         };
                         // SAFETY: `available()` was checked above; `a_mem` reaches kc columns
                         // of 8 rows, the strip kc rows of 32, `c_tile` rows × cols of `c`.
+                        let tile_bias = bias.map(|bias| &bias[j..j + NR]);
                         unsafe {
-                            micro_tile(kc, a_mem, b_strip, alpha, beta, c_tile, (rows, cols))
+                            micro_tile(
+                                kc,
+                                a_mem,
+                                b_strip,
+                                (alpha, beta, tile_bias),
+                                c_tile,
+                                (rows, cols),
+                            )
                         };
                     }
                 }
@@ -293,9 +345,10 @@ unsafe fn transpose_16x16(r: &mut [std::arch::x86_64::__m512; 16]) {
     }
 }
 
-/// One 8 × 32 block: `c = alpha · (a · b_strip) + beta · c` over the first `rows × cols` of
-/// the block (`beta = 0` ignores what `c` held). `a` is 8 rows × kc; rows past `rows` may be
-/// anything finite or packed zeros, as they are never written.
+/// One 8 × 32 block: `c = alpha · (a · b_strip) + beta · c (+ bias)` over the first
+/// `rows × cols` of the block (`beta = 0` ignores what `c` held; `bias` holds the block's 32
+/// columns' values). `a` is 8 rows × kc; rows past `rows` may be anything finite or packed
+/// zeros, as they are never written.
 ///
 /// # Safety
 /// The processor must have AVX-512 F; `a` reaches 8 rows of kc values, `b` holds `kc · 32`
@@ -305,8 +358,7 @@ unsafe fn micro_tile(
     kc: usize,
     a: Strided<*const f32>,
     b: &[f32],
-    alpha: f32,
-    beta: f32,
+    (alpha, beta, bias): (f32, f32, Option<&[f32]>),
     c: Strided<*mut f32>,
     (rows, cols): (usize, usize),
 ) {
@@ -348,6 +400,10 @@ unsafe fn micro_tile(
                     let old = unsafe { _mm512_maskz_loadu_ps(mask, at) };
                     v = _mm512_fmadd_ps(vbeta, old, v);
                 }
+                if let Some(bias) = bias {
+                    // SAFETY: `bias` holds 32 values.
+                    v = _mm512_add_ps(v, unsafe { _mm512_loadu_ps(bias.as_ptr().add(16 * h)) });
+                }
                 // SAFETY: as above.
                 unsafe { _mm512_mask_storeu_ps(at, mask, v) };
             }
@@ -363,7 +419,8 @@ unsafe fn micro_tile(
                 // SAFETY: (r, j) is inside the block of `c`.
                 let x = unsafe { &mut *c.ptr.offset(r as isize * c.rows + j as isize * c.cols) };
                 let v = block[r * NR + j];
-                *x = if beta == 0.0 { v } else { v + beta * *x };
+                let v = if beta == 0.0 { v } else { v + beta * *x };
+                *x = bias.map_or(v, |bias| v + bias[j]);
             }
         }
     }
