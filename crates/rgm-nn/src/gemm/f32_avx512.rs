@@ -178,7 +178,9 @@ fn product(
                                 kc,
                                 a_mem,
                                 b_strip,
-                                (alpha, beta, tile_bias),
+                                alpha,
+                                beta,
+                                tile_bias,
                                 c_tile,
                                 (rows, cols),
                             )
@@ -353,12 +355,17 @@ unsafe fn transpose_16x16(r: &mut [std::arch::x86_64::__m512; 16]) {
 /// # Safety
 /// The processor must have AVX-512 F; `a` reaches 8 rows of kc values, `b` holds `kc · 32`
 /// values, `c` reaches `rows × cols` values, `rows ≤ 8`, `cols ≤ 32`.
+// Each scalar its own argument, so that all arrive in registers (one aggregate of them went
+// through memory and stalled every call).
+#[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx512f")]
 unsafe fn micro_tile(
     kc: usize,
     a: Strided<*const f32>,
     b: &[f32],
-    (alpha, beta, bias): (f32, f32, Option<&[f32]>),
+    alpha: f32,
+    beta: f32,
+    bias: Option<&[f32]>,
     c: Strided<*mut f32>,
     (rows, cols): (usize, usize),
 ) {
@@ -385,13 +392,25 @@ unsafe fn micro_tile(
     let valpha = _mm512_set1_ps(alpha);
     if c.cols == 1 {
         let vbeta = _mm512_set1_ps(beta);
-        for r in 0..rows {
-            for h in 0..2 {
-                let len = cols.saturating_sub(16 * h).min(16);
-                if len == 0 {
-                    break;
+        // The columns of each half of the block that lie in C.
+        let masks: [__mmask16; 2] = std::array::from_fn(|h| {
+            let len = cols.saturating_sub(16 * h).min(16);
+            if len == 16 {
+                !0
+            } else {
+                (1u16 << len) - 1
+            }
+        });
+        // Loops of constant length (rows past `rows` skipped inside), so that they unroll and
+        // every accumulator stays in its register.
+        for r in 0..MR {
+            if r >= rows {
+                break;
+            }
+            for (h, &mask) in masks.iter().enumerate() {
+                if mask == 0 {
+                    continue;
                 }
-                let mask: __mmask16 = if len == 16 { !0 } else { (1u16 << len) - 1 };
                 // SAFETY: row r, columns 16h.. of the block are inside `c`.
                 let at = unsafe { c.ptr.offset(r as isize * c.rows + 16 * h as isize) };
                 let mut v = _mm512_mul_ps(valpha, acc[2 * r + h]);
