@@ -111,6 +111,21 @@ pub fn sum<T: Scalar>(xs: &[T]) -> T {
     lanes.iter().fold(rest, |acc, &lane| acc + lane)
 }
 
+/// Σ xs·ys over the shorter of the two, in eight running sums so that the products and
+/// additions vectorise.
+pub fn dot<T: Scalar>(xs: &[T], ys: &[T]) -> T {
+    let n = xs.len().min(ys.len());
+    let whole = n - n % 8;
+    let mut lanes = [T::zero(); 8];
+    for (x, y) in xs[..whole].chunks_exact(8).zip(ys[..whole].chunks_exact(8)) {
+        for l in 0..8 {
+            lanes[l] += x[l] * y[l];
+        }
+    }
+    let rest = (whole..n).fold(T::zero(), |acc, i| acc + xs[i] * ys[i]);
+    lanes.iter().fold(rest, |acc, &lane| acc + lane)
+}
+
 /// The largest of `init` and the values of `xs`, NaNs skipped (as `f32::max` skips them), in
 /// eight running maxima so that the comparisons vectorise. A maximum is exact, so this is the
 /// value of a single running maximum.
@@ -180,6 +195,21 @@ mod tests {
         assert_eq!(&xs[3..6], &[f32::INFINITY; 3]);
         assert!(xs[6].is_nan());
         assert_eq!(xs[7], std::f32::consts::E);
+    }
+
+    #[test]
+    fn dot_of_rows_with_a_remainder() {
+        // 19 values: two rounds of the eight lanes and three more; Σ k·(20 − k) over k = 1..=19.
+        let xs: Vec<f64> = (1..=19).map(f64::from).collect();
+        let ys: Vec<f64> = (1..=19).map(|k| f64::from(20 - k)).collect();
+        let want: f64 = (1..=19).map(|k| f64::from(k * (20 - k))).sum();
+        assert_eq!(dot(&xs, &ys), want);
+        assert_eq!(
+            dot(&xs[..3], &ys),
+            19.0 + 2.0 * 18.0 + 3.0 * 17.0,
+            "the shorter length"
+        );
+        assert_eq!(dot::<f32>(&[], &[]), 0.0);
     }
 
     #[test]
