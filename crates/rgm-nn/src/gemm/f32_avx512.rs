@@ -239,11 +239,12 @@ unsafe fn pack_b<'o>(b: ArrayView2<'_, f32>, out: &'o mut Vec<f32>) -> &'o [f32]
     let (rows, cols) = (b.strides()[0], b.strides()[1]);
     let base = b.as_ptr();
     if cols == 1 {
-        // Rows contiguous: 16 values at a time, masked at the last column (zeros beyond).
-        for k in 0..kc {
-            // SAFETY: row k of `b` holds nc values from here.
-            let row = unsafe { base.offset(k as isize * rows) };
-            for s in 0..strips {
+        // Rows contiguous: 16 values at a time, masked at the last column (zeros beyond); strip
+        // by strip, so that each strip is written in order.
+        for s in 0..strips {
+            for k in 0..kc {
+                // SAFETY: row k of `b` holds nc values from here.
+                let row = unsafe { base.offset(k as isize * rows) };
                 for h in 0..2 {
                     let j = s * NR + 16 * h;
                     let m = mask(nc.saturating_sub(j));
