@@ -27,8 +27,8 @@ pub struct MultiHeadAttention<T: Scalar> {
 }
 
 /// Query rows per block of the attention's three steps (scores, softmax, product with V; and
-/// in the backward dP, dS, dQ): 64 rows of up to 1,024 scores are 256 KiB, within L2.
-const ROW_BLOCK: usize = 64;
+/// in the backward dP, dS, dQ): 128 rows of up to 1,024 scores are 512 KiB, within L2.
+const ROW_BLOCK: usize = 128;
 
 /// The attention's independent pieces of work, as a parallel iterator: for each head and each
 /// block of [`ROW_BLOCK`] query rows, `(head, first row, the block's rows of per_head[head]
@@ -379,7 +379,7 @@ mod tests {
 
     #[test]
     fn row_blocks_give_the_whole_matrix_attention_bit_for_bit() {
-        // 150 queries: two whole blocks of 64 rows and one of 22; 70 keys.
+        // 150 queries: a whole block of 128 rows and one of 22; 70 keys.
         let mha = MultiHeadAttention::<f32>::new(C, H, &mut StdRng::seed_from_u64(5)).unwrap();
         let f32s = |shape: &[usize], seed| ix2(&uniform(shape, seed)).mapv(|v| v as f32);
         let (q_in, kv_in) = (f32s(&[150, C], 320), f32s(&[70, C], 321));
