@@ -356,8 +356,8 @@ unsafe fn transpose_16x16(r: &mut [std::arch::x86_64::__m512; 16]) {
 /// # Safety
 /// The processor must have AVX-512 F; `a` reaches 8 rows of kc values, `b` holds `kc · 32`
 /// values, `c` reaches `rows × cols` values, `rows ≤ 8`, `cols ≤ 32`.
-// Each scalar its own argument, so that all arrive in registers (one aggregate of them went
-// through memory and stalled every call).
+// Each scalar its own argument, so that all arrive in registers (an aggregate of them would
+// pass through memory, and loading it stalls each call).
 #[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx512f")]
 unsafe fn micro_tile(
