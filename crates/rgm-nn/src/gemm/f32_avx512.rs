@@ -373,13 +373,15 @@ unsafe fn micro_tile(
     use std::arch::x86_64::*;
     debug_assert!(b.len() == kc * NR && rows <= MR && cols <= NR);
     if c.cols == 1 {
-        // The block's rows of C, fetched while the products run (the write-back reads or
-        // writes them; C is often far from this core's caches).
+        // The block's rows of C and the next block's to the right, fetched while the products
+        // run (the write-backs read or write them; C is often far from this core's caches).
         for r in 0..rows {
             // SAFETY: a prefetch does not fault; row r of the block starts inside `c`.
             let at = unsafe { c.ptr.offset(r as isize * c.rows) };
             _mm_prefetch::<_MM_HINT_T0>(at as *const i8);
             _mm_prefetch::<_MM_HINT_T0>(at.wrapping_add(16) as *const i8);
+            _mm_prefetch::<_MM_HINT_T0>(at.wrapping_add(32) as *const i8);
+            _mm_prefetch::<_MM_HINT_T0>(at.wrapping_add(48) as *const i8);
         }
     }
     let mut acc = [_mm512_setzero_ps(); 2 * MR]; // (8, 2) vectors: row r, columns 16h..16h + 16
