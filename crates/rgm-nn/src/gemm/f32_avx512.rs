@@ -238,6 +238,8 @@ unsafe fn pack_b<'o>(b: ArrayView2<'_, f32>, out: &'o mut Vec<f32>) -> &'o [f32]
     };
     let (rows, cols) = (b.strides()[0], b.strides()[1]);
     let base = b.as_ptr();
+    /// Rows between a row being packed and the row fetched for later.
+    const AHEAD: isize = 8;
     if cols == 1 {
         // Rows contiguous: 16 values at a time, masked at the last column (zeros beyond); strip
         // by strip, so that each strip is written in order.
@@ -245,6 +247,11 @@ unsafe fn pack_b<'o>(b: ArrayView2<'_, f32>, out: &'o mut Vec<f32>) -> &'o [f32]
             for k in 0..kc {
                 // SAFETY: row k of `b` holds nc values from here.
                 let row = unsafe { base.offset(k as isize * rows) };
+                // The strip's piece of the row AHEAD rows further, fetched while these are
+                // copied (a prefetch does not fault, wherever it points).
+                let ahead = row.wrapping_offset(AHEAD * rows).wrapping_add(s * NR);
+                _mm_prefetch::<_MM_HINT_T0>(ahead as *const i8);
+                _mm_prefetch::<_MM_HINT_T0>(ahead.wrapping_add(16) as *const i8);
                 for h in 0..2 {
                     let j = s * NR + 16 * h;
                     let m = mask(nc.saturating_sub(j));
