@@ -78,7 +78,7 @@ pub use ops::max_k::{max_k_backward, max_k_forward, MaxKCache};
 pub use ops::normalize::{
     l1_normalize_columns_backward, l1_normalize_columns_forward, L1NormalizeCache,
 };
-pub use ops::relu::{relu_backward, relu_forward};
+pub use ops::relu::{relu_backward, relu_forward, relu_in_place};
 pub use ops::softmax::{softmax_rows_backward, softmax_rows_forward};
 pub use optim::Optimizer;
 pub use param::{Param, Parameters};

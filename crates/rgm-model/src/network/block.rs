@@ -15,7 +15,7 @@ use rgm_nn::gemm::mat_mul;
 use rgm_nn::param::{join_name, ParamView, ParamViewMut};
 use rgm_nn::{
     l1_normalize_columns_backward, l1_normalize_columns_forward, matmul_backward, matmul_forward,
-    relu_backward, relu_forward, softmax_rows_backward, softmax_rows_forward, L1NormalizeCache,
+    relu_backward, relu_in_place, softmax_rows_backward, softmax_rows_forward, L1NormalizeCache,
     Linear, Parameters,
 };
 
@@ -52,9 +52,7 @@ struct Side<T> {
     adj: Array2<T>,      // (R, R) E = softmax_rows(scores)
     adj_norm: Array2<T>, // (R, R) Ê, columns summing to 1
     l1: L1NormalizeCache<T>,
-    h_adj: Array2<T>,     // (R, Q) f_adj(F)
     a_adj: Array2<T>,     // (R, Q) ReLU(f_adj(F))
-    h_self: Array2<T>,    // (R, Q) f_self(F)
     a_self: Array2<T>,    // (R, Q) ReLU(f_self(F))
     fp: Array2<T>,        // (R, Q) F' = Ê·ReLU(f_adj(F)) + ReLU(f_self(F))
     cat: Array2<T>,       // (R, 2Q) F' ⊕ C̃F'_other (cross blocks)
@@ -77,9 +75,7 @@ impl<T: Element> Side<T> {
             adj: z(r, r),
             adj_norm: z(r, r),
             l1: L1NormalizeCache::default(),
-            h_adj: z(r, q),
             a_adj: z(r, q),
-            h_self: z(r, q),
             a_self: z(r, q),
             fp: z(r, q),
             cat: z(r, 2 * q),
@@ -231,10 +227,11 @@ impl<T: Element> Block<T> {
 
     /// F' = Ê·ReLU(f_adj(F)) + ReLU(f_self(F)) for one side. `f`: (R, C).
     fn gconv_forward(&self, side: &mut Side<T>, f: ArrayView2<'_, T>) -> Result<()> {
-        self.a_fc.forward(side.h_adj.view_mut(), f)?;
-        relu_forward(side.a_adj.view_mut(), side.h_adj.view())?;
-        self.u_fc.forward(side.h_self.view_mut(), f)?;
-        relu_forward(side.a_self.view_mut(), side.h_self.view())?;
+        // ReLU in place: the backward reads its output only.
+        self.a_fc.forward(side.a_adj.view_mut(), f)?;
+        relu_in_place(side.a_adj.view_mut());
+        self.u_fc.forward(side.a_self.view_mut(), f)?;
+        relu_in_place(side.a_self.view_mut());
         matmul_forward(side.fp.view_mut(), side.adj_norm.view(), side.a_adj.view())?;
         side.fp += &side.a_self;
         Ok(())

@@ -3,7 +3,7 @@
 //! over K; the four maxima concatenated are the node features, and a fifth 1×1 convolution with
 //! batch norm and ReLU on them gives the edge features. Output: node ⊕ edge per point.
 
-use super::{zeroed, Element, Mode, Result};
+use super::{shaped, zeroed, Element, Mode, Result};
 use ndarray::{s, Array2, ArrayView2};
 use rand::Rng;
 use rgm_geom::{knn_graph, Point3};
@@ -103,13 +103,13 @@ impl<T: Element> PointFeaturer<T> {
         cache.normed.resize_with(5, Default::default);
         cache.bn.resize_with(5, Default::default);
         cache.max_k.resize_with(4, Default::default);
-        zeroed(&mut cache.act[0], (n * k, 6));
+        shaped(&mut cache.act[0], (n * k, 6));
         edge_features_forward(cache.act[0].view_mut(), points, cache.idx.view())?;
-        zeroed(&mut cache.features, (n, node + widths[4]));
+        shaped(&mut cache.features, (n, node + widths[4]));
         let mut offset = 0;
         for i in 0..5 {
-            zeroed(&mut cache.pre[i], (rows(i), widths[i]));
-            zeroed(&mut cache.normed[i], (rows(i), widths[i]));
+            shaped(&mut cache.pre[i], (rows(i), widths[i]));
+            shaped(&mut cache.normed[i], (rows(i), widths[i]));
             // conv → bn → ReLU; the fifth reads the node features and writes the edge features.
             let (done, rest) = cache.act.split_at_mut(i + 1);
             let inp = if i < 4 {
@@ -134,7 +134,7 @@ impl<T: Element> PointFeaturer<T> {
             normed?;
             if i < 4 {
                 let act = &mut rest[0];
-                zeroed(act, (n * k, widths[i]));
+                shaped(act, (n * k, widths[i]));
                 relu_forward(act.view_mut(), cache.normed[i].view())?;
                 let block = s![.., offset..offset + widths[i]];
                 max_k_forward(

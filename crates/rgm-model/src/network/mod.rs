@@ -62,6 +62,15 @@ pub(crate) fn zeroed<T: Element>(buf: &mut Array2<T>, shape: (usize, usize)) {
     }
 }
 
+/// `buf` with `shape`, its values left as they are (zeros when it is reallocated): for a
+/// buffer the next op overwrites whole, where clearing it first would be a wasted pass over
+/// memory.
+pub(crate) fn shaped<T: Element>(buf: &mut Array2<T>, shape: (usize, usize)) {
+    if buf.dim() != shape {
+        *buf = Array2::zeros(shape);
+    }
+}
+
 /// The RGM network: `pointfeaturer`, then L [`Block`]s.
 #[derive(Clone, Debug)]
 pub struct Rgm<T: Element> {

@@ -2,7 +2,7 @@
 //! (the annotated transformer's, one layer each, no dropout), run in both directions with the
 //! same weights: T_X = decoder(X, encoder(Y)), T_Y = decoder(Y, encoder(X)).
 
-use super::{zeroed, Element, Result};
+use super::{shaped, zeroed, Element, Result};
 use ndarray::{Array2, ArrayView2, ArrayViewMut2};
 use rand::Rng;
 use rgm_nn::param::{join_name, ParamView, ParamViewMut};
@@ -85,11 +85,11 @@ impl<T: Element> Stack<T> {
         cache.normed.resize_with(subs, Default::default);
         cache.ln.resize_with(subs + 1, Default::default);
         cache.attn.resize_with(subs - 1, Default::default);
-        zeroed(&mut cache.xs[0], shape);
+        shaped(&mut cache.xs[0], shape);
         cache.xs[0].assign(&x);
-        zeroed(&mut cache.dx, shape); // scratch: each sub-layer's output before the residual
+        shaped(&mut cache.dx, shape); // scratch: each sub-layer's output before the residual
         for i in 0..subs {
-            zeroed(&mut cache.normed[i], shape);
+            shaped(&mut cache.normed[i], shape);
             self.sublayer_norms[i].forward(
                 cache.normed[i].view_mut(),
                 cache.xs[i].view(),
@@ -111,11 +111,11 @@ impl<T: Element> Stack<T> {
             }
             // x_{i+1} = x_i + op_i(LN_i(x_i))
             let (done, rest) = cache.xs.split_at_mut(i + 1);
-            zeroed(&mut rest[0], shape);
+            shaped(&mut rest[0], shape);
             rest[0].assign(&done[i]);
             rest[0] += &cache.dx;
         }
-        zeroed(&mut cache.out, shape);
+        shaped(&mut cache.out, shape);
         self.norm.forward(
             cache.out.view_mut(),
             cache.xs[subs].view(),

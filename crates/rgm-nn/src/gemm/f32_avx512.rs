@@ -13,7 +13,7 @@
 //! The result is the f32 product up to the order of the additions: each entry of C is
 //! accumulated over K in order within a panel of [`KC`], panels added in order.
 
-use ndarray::{ArrayView2, ArrayViewMut2, Axis};
+use ndarray::{ArrayView1, ArrayView2, ArrayViewMut2};
 use std::cell::RefCell;
 
 /// Rows of a micro-tile (and of a packed A strip).
@@ -35,8 +35,9 @@ pub fn available() -> bool {
 /// The packed operands, kept per thread so that repeated products allocate nothing.
 #[derive(Default)]
 struct Packed {
-    a: Vec<f32>, // (KC, 8) one strip of A, for the rows at its edge and odd strides
-    b: Vec<f32>, // (NC/32, KC, 32) strips of B
+    a: Vec<f32>,    // (KC, 8) one strip of A, for the rows at its edge and odd strides
+    b: Vec<f32>,    // (NC/32, KC, 32) strips of B
+    bias: Vec<f32>, // (N rounded up to 32) the bias of `f32_mat_mul_bias`, zero-padded
 }
 
 thread_local! {
@@ -59,6 +60,39 @@ pub fn f32_mat_mul(
     a: ArrayView2<'_, f32>,
     b: ArrayView2<'_, f32>,
     beta: f32,
+    c: ArrayViewMut2<'_, f32>,
+) {
+    product(alpha, a, b, beta, None, c);
+}
+
+/// `c = a · b + bias` in f32, `bias` (N) added to every row in the product's write-back (the
+/// value `f32_mat_mul(1, a, b, 1, c)` gives with `c` holding the bias in every row, without
+/// that pass over C). What `c` held is ignored. Panics as [`f32_mat_mul`], or if `bias` does
+/// not have N values.
+pub fn f32_mat_mul_bias(
+    a: ArrayView2<'_, f32>,
+    b: ArrayView2<'_, f32>,
+    bias: ArrayView1<'_, f32>,
+    c: ArrayViewMut2<'_, f32>,
+) {
+    assert_eq!(
+        bias.len(),
+        b.ncols(),
+        "f32_mat_mul_bias: bias of {} values, {} columns",
+        bias.len(),
+        b.ncols()
+    );
+    product(1.0, a, b, 0.0, Some(bias), c);
+}
+
+/// `c = alpha · a · b + beta · c (+ bias in every row)`: [`f32_mat_mul`] and
+/// [`f32_mat_mul_bias`].
+fn product(
+    alpha: f32,
+    a: ArrayView2<'_, f32>,
+    b: ArrayView2<'_, f32>,
+    beta: f32,
+    bias: Option<ArrayView1<'_, f32>>,
     mut c: ArrayViewMut2<'_, f32>,
 ) {
     let (m, n) = super::check_shapes("f32_mat_mul", &a, &b, &c);
@@ -69,6 +103,9 @@ pub fn f32_mat_mul(
     }
     if k == 0 {
         scale(c.view_mut(), beta); // alpha · (empty sum) = 0
+        if let Some(bias) = bias {
+            c += &bias;
+        }
         return;
     }
     // A is read in place where a strip's 8 rows or its K values lie at one stride each (every
@@ -81,16 +118,26 @@ pub fn f32_mat_mul(
     };
     PACKED.with(|packed| {
         let packed = &mut *packed.borrow_mut();
+        // The bias padded with zeros to whole 32-column strips, so that every tile reads 32.
+        let bias = bias.map(|bias| {
+            packed.bias.clear();
+            packed.bias.extend(bias.iter());
+            packed.bias.resize(n.next_multiple_of(NR), 0.0);
+            &packed.bias[..]
+        });
         for j0 in (0..n).step_by(NC) {
             let nc = NC.min(n - j0);
             for p0 in (0..k).step_by(KC) {
                 let kc = KC.min(k - p0);
-                pack_b(
-                    b.slice(ndarray::s![p0..p0 + kc, j0..j0 + nc]),
-                    &mut packed.b,
-                );
-                // The first panel along K applies beta; the later ones add to it.
-                let beta = if p0 == 0 { beta } else { 1.0 };
+                // SAFETY: `available()` was checked above.
+                let b_packed = unsafe {
+                    pack_b(
+                        b.slice(ndarray::s![p0..p0 + kc, j0..j0 + nc]),
+                        &mut packed.b,
+                    )
+                };
+                // The first panel along K applies beta and the bias; the later ones add to it.
+                let (beta, bias) = if p0 == 0 { (beta, bias) } else { (1.0, None) };
                 for i0 in (0..m).step_by(MR) {
                     let rows = MR.min(m - i0);
                     let a_mem = if rows == MR {
@@ -111,7 +158,7 @@ pub fn f32_mat_mul(
                             cols: MR as isize,
                         }
                     };
-                    for (sj, b_strip) in packed.b.chunks_exact(kc * NR).enumerate() {
+                    for (sj, b_strip) in b_packed.chunks_exact(kc * NR).enumerate() {
                         let j = j0 + sj * NR;
                         let cols = NR.min(n - j);
                         let c_tile = Strided {
@@ -125,8 +172,18 @@ pub fn f32_mat_mul(
                         };
                         // SAFETY: `available()` was checked above; `a_mem` reaches kc columns
                         // of 8 rows, the strip kc rows of 32, `c_tile` rows × cols of `c`.
+                        let tile_bias = bias.map(|bias| &bias[j..j + NR]);
                         unsafe {
-                            micro_tile(kc, a_mem, b_strip, alpha, beta, c_tile, (rows, cols))
+                            micro_tile(
+                                kc,
+                                a_mem,
+                                b_strip,
+                                alpha,
+                                beta,
+                                tile_bias,
+                                c_tile,
+                                (rows, cols),
+                            )
                         };
                     }
                 }
@@ -155,42 +212,160 @@ fn pack_a(a: ArrayView2<'_, f32>, out: &mut Vec<f32>) {
     }
 }
 
-/// Packs `b` (kc, nc) into `out` as 32-column strips: strip s holds, for each k, the 32 values
-/// of row k at columns 32s..32s + 32 (zero past column nc).
-fn pack_b(b: ArrayView2<'_, f32>, out: &mut Vec<f32>) {
+/// Packs `b` (kc, nc) into `out` as 32-column strips and returns them: strip s holds, for each
+/// k, the 32 values of row k at columns 32s..32s + 32 (zero past column nc). Every value of the
+/// returned strips is written, so `out` is only grown, never cleared.
+///
+/// # Safety
+/// The processor must have AVX-512 F.
+#[target_feature(enable = "avx512f")]
+unsafe fn pack_b<'o>(b: ArrayView2<'_, f32>, out: &'o mut Vec<f32>) -> &'o [f32] {
+    use std::arch::x86_64::*;
     let (kc, nc) = b.dim();
     let strips = nc.div_ceil(NR);
-    out.clear();
-    out.resize(strips * kc * NR, 0.0);
-    if b.strides()[1] == 1 {
-        // Rows contiguous: 32 values at a time.
-        for (k, row) in b.axis_iter(Axis(0)).enumerate() {
-            let row = row.to_slice().expect("unit column stride");
-            for (s, cols) in row.chunks(NR).enumerate() {
-                let dst = &mut out[(s * kc + k) * NR..][..cols.len()];
-                for (d, &x) in dst.iter_mut().zip(cols) {
-                    *d = x;
+    let len = strips * kc * NR;
+    if out.len() < len {
+        out.resize(len, 0.0);
+    }
+    let out = &mut out[..len];
+    // The first `n` of 16 lanes (all for n ≥ 16, none for n = 0).
+    let mask = |n: usize| -> __mmask16 {
+        if n >= 16 {
+            !0
+        } else {
+            (1u16 << n) - 1
+        }
+    };
+    let (rows, cols) = (b.strides()[0], b.strides()[1]);
+    let base = b.as_ptr();
+    /// Rows between a row being packed and the row fetched for later.
+    const AHEAD: isize = 8;
+    if cols == 1 {
+        // Rows contiguous: 16 values at a time, masked at the last column (zeros beyond); strip
+        // by strip, so that each strip is written in order.
+        for s in 0..strips {
+            for k in 0..kc {
+                // SAFETY: row k of `b` holds nc values from here.
+                let row = unsafe { base.offset(k as isize * rows) };
+                // The strip's piece of the row AHEAD rows further, fetched while these are
+                // copied (a prefetch does not fault, wherever it points).
+                let ahead = row.wrapping_offset(AHEAD * rows).wrapping_add(s * NR);
+                _mm_prefetch::<_MM_HINT_T0>(ahead as *const i8);
+                _mm_prefetch::<_MM_HINT_T0>(ahead.wrapping_add(16) as *const i8);
+                for h in 0..2 {
+                    let j = s * NR + 16 * h;
+                    let m = mask(nc.saturating_sub(j));
+                    // SAFETY: the mask keeps the load inside the row; the store stays in the
+                    // strip's row k.
+                    unsafe {
+                        let v = _mm512_maskz_loadu_ps(m, row.add(j.min(nc)));
+                        _mm512_storeu_ps(out.as_mut_ptr().add((s * kc + k) * NR + 16 * h), v);
+                    }
+                }
+            }
+        }
+    } else if rows == 1 {
+        // Columns contiguous (a transposed view, as `inp · weightᵀ` and the attention scores):
+        // 16 columns × 16 rows read as 16 column vectors, transposed in registers into the
+        // strip's 16 row pieces.
+        let mut block = [_mm512_setzero_ps(); 16];
+        for s in 0..strips {
+            for h in 0..2 {
+                let j0 = s * NR + 16 * h;
+                for k0 in (0..kc).step_by(16) {
+                    let m = mask(kc - k0);
+                    for (c, v) in block.iter_mut().enumerate() {
+                        *v = if j0 + c < nc {
+                            // SAFETY: column j0 + c holds kc values; the mask stops at kc.
+                            unsafe {
+                                _mm512_maskz_loadu_ps(
+                                    m,
+                                    base.offset((j0 + c) as isize * cols + k0 as isize),
+                                )
+                            }
+                        } else {
+                            _mm512_setzero_ps()
+                        };
+                    }
+                    // SAFETY: the processor has AVX-512 F (this function's contract).
+                    unsafe { transpose_16x16(&mut block) };
+                    for (r, v) in block.iter().enumerate().take((kc - k0).min(16)) {
+                        // SAFETY: row k0 + r < kc of strip s, lanes 16h..16h + 16.
+                        unsafe {
+                            _mm512_storeu_ps(
+                                out.as_mut_ptr().add((s * kc + k0 + r) * NR + 16 * h),
+                                *v,
+                            )
+                        };
+                    }
                 }
             }
         }
     } else {
-        // Columns contiguous (a transposed view, as `inp · weightᵀ`) or strided.
-        for (j, col) in b.axis_iter(Axis(1)).enumerate() {
-            let base = (j / NR) * kc * NR + j % NR;
-            for (k, &x) in col.iter().enumerate() {
-                out[base + k * NR] = x;
-            }
+        // Strided both ways (views of every n-th element): one value at a time.
+        out.fill(0.0);
+        for ((k, j), &x) in b.indexed_iter() {
+            out[((j / NR) * kc + k) * NR + j % NR] = x;
         }
+    }
+    out
+}
+
+/// Transposes the 16 × 16 block whose row i is `r[i]`: afterwards `r[i]` holds column i.
+///
+/// # Safety
+/// The processor must have AVX-512 F.
+#[target_feature(enable = "avx512f")]
+unsafe fn transpose_16x16(r: &mut [std::arch::x86_64::__m512; 16]) {
+    use std::arch::x86_64::*;
+    // 1. Interleave rows 2i and 2i + 1 by single values: t[2i] holds, per 128-bit lane,
+    //    (r2i[0], r2i+1[0], r2i[1], r2i+1[1]), t[2i + 1] the lane's upper halves.
+    let mut t = [_mm512_setzero_ps(); 16];
+    for i in 0..8 {
+        t[2 * i] = _mm512_unpacklo_ps(r[2 * i], r[2 * i + 1]);
+        t[2 * i + 1] = _mm512_unpackhi_ps(r[2 * i], r[2 * i + 1]);
+    }
+    // 2. Interleave those by pairs: each 128-bit lane now holds one column of 4 rows.
+    let (lo, hi) = (
+        |a: __m512, b: __m512| {
+            _mm512_castpd_ps(_mm512_unpacklo_pd(_mm512_castps_pd(a), _mm512_castps_pd(b)))
+        },
+        |a: __m512, b: __m512| {
+            _mm512_castpd_ps(_mm512_unpackhi_pd(_mm512_castps_pd(a), _mm512_castps_pd(b)))
+        },
+    );
+    for g in 0..4 {
+        let (a, b) = (4 * g, 4 * g + 2);
+        r[4 * g] = lo(t[a], t[b]);
+        r[4 * g + 1] = hi(t[a], t[b]);
+        r[4 * g + 2] = lo(t[a + 1], t[b + 1]);
+        r[4 * g + 3] = hi(t[a + 1], t[b + 1]);
+    }
+    // 3. and 4. Gather the 128-bit lanes of the four groups of four rows.
+    for g in 0..2 {
+        for i in 0..4 {
+            let (a, b) = (8 * g + i, 8 * g + 4 + i);
+            t[8 * g + i] = _mm512_shuffle_f32x4::<0x88>(r[a], r[b]);
+            t[8 * g + 4 + i] = _mm512_shuffle_f32x4::<0xdd>(r[a], r[b]);
+        }
+    }
+    for i in 0..8 {
+        r[i] = _mm512_shuffle_f32x4::<0x88>(t[i], t[8 + i]);
+        r[8 + i] = _mm512_shuffle_f32x4::<0xdd>(t[i], t[8 + i]);
     }
 }
 
-/// One 8 × 32 block: `c = alpha · (a · b_strip) + beta · c` over the first `rows × cols` of
-/// the block (`beta = 0` ignores what `c` held). `a` is 8 rows × kc; rows past `rows` may be
-/// anything finite or packed zeros, as they are never written.
+/// One 8 × 32 block: `c = alpha · (a · b_strip) + beta · c (+ bias)` over the first
+/// `rows × cols` of the block (`beta = 0` ignores what `c` held; `bias` holds the block's 32
+/// columns' values). `a` is 8 rows × kc; rows past `rows` may be anything finite or packed
+/// zeros, as they are never written.
 ///
 /// # Safety
 /// The processor must have AVX-512 F; `a` reaches 8 rows of kc values, `b` holds `kc · 32`
 /// values, `c` reaches `rows × cols` values, `rows ≤ 8`, `cols ≤ 32`.
+// Each scalar its own argument, so that all arrive in registers (an aggregate of them would
+// pass through memory, and loading it stalls each call).
+#[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx512f")]
 unsafe fn micro_tile(
     kc: usize,
@@ -198,11 +373,24 @@ unsafe fn micro_tile(
     b: &[f32],
     alpha: f32,
     beta: f32,
+    bias: Option<&[f32]>,
     c: Strided<*mut f32>,
     (rows, cols): (usize, usize),
 ) {
     use std::arch::x86_64::*;
     debug_assert!(b.len() == kc * NR && rows <= MR && cols <= NR);
+    if c.cols == 1 {
+        // The block's rows of C and the next block's to the right, fetched while the products
+        // run (the write-backs read or write them; C is often far from this core's caches).
+        for r in 0..rows {
+            // SAFETY: a prefetch does not fault; row r of the block starts inside `c`.
+            let at = unsafe { c.ptr.offset(r as isize * c.rows) };
+            _mm_prefetch::<_MM_HINT_T0>(at as *const i8);
+            _mm_prefetch::<_MM_HINT_T0>(at.wrapping_add(16) as *const i8);
+            _mm_prefetch::<_MM_HINT_T0>(at.wrapping_add(32) as *const i8);
+            _mm_prefetch::<_MM_HINT_T0>(at.wrapping_add(48) as *const i8);
+        }
+    }
     let mut acc = [_mm512_setzero_ps(); 2 * MR]; // (8, 2) vectors: row r, columns 16h..16h + 16
     let offsets: [isize; MR] = std::array::from_fn(|r| r as isize * a.rows);
     let (mut pa, mut pb) = (a.ptr, b.as_ptr());
@@ -224,13 +412,25 @@ unsafe fn micro_tile(
     let valpha = _mm512_set1_ps(alpha);
     if c.cols == 1 {
         let vbeta = _mm512_set1_ps(beta);
-        for r in 0..rows {
-            for h in 0..2 {
-                let len = cols.saturating_sub(16 * h).min(16);
-                if len == 0 {
-                    break;
+        // The columns of each half of the block that lie in C.
+        let masks: [__mmask16; 2] = std::array::from_fn(|h| {
+            let len = cols.saturating_sub(16 * h).min(16);
+            if len == 16 {
+                !0
+            } else {
+                (1u16 << len) - 1
+            }
+        });
+        // Loops of constant length (rows past `rows` skipped inside), so that they unroll and
+        // every accumulator stays in its register.
+        for r in 0..MR {
+            if r >= rows {
+                break;
+            }
+            for (h, &mask) in masks.iter().enumerate() {
+                if mask == 0 {
+                    continue;
                 }
-                let mask: __mmask16 = if len == 16 { !0 } else { (1u16 << len) - 1 };
                 // SAFETY: row r, columns 16h.. of the block are inside `c`.
                 let at = unsafe { c.ptr.offset(r as isize * c.rows + 16 * h as isize) };
                 let mut v = _mm512_mul_ps(valpha, acc[2 * r + h]);
@@ -238,6 +438,10 @@ unsafe fn micro_tile(
                     // SAFETY: the mask covers the `len` values of this row from `at`.
                     let old = unsafe { _mm512_maskz_loadu_ps(mask, at) };
                     v = _mm512_fmadd_ps(vbeta, old, v);
+                }
+                if let Some(bias) = bias {
+                    // SAFETY: `bias` holds 32 values.
+                    v = _mm512_add_ps(v, unsafe { _mm512_loadu_ps(bias.as_ptr().add(16 * h)) });
                 }
                 // SAFETY: as above.
                 unsafe { _mm512_mask_storeu_ps(at, mask, v) };
@@ -254,8 +458,67 @@ unsafe fn micro_tile(
                 // SAFETY: (r, j) is inside the block of `c`.
                 let x = unsafe { &mut *c.ptr.offset(r as isize * c.rows + j as isize * c.cols) };
                 let v = block[r * NR + j];
-                *x = if beta == 0.0 { v } else { v + beta * *x };
+                let v = if beta == 0.0 { v } else { v + beta * *x };
+                *x = bias.map_or(v, |bias| v + bias[j]);
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::{s, Array2};
+
+    #[test]
+    fn every_layout_of_b_packs_to_the_same_strips() {
+        if !available() {
+            eprintln!("no AVX-512 F: the kernel does not run here");
+            return;
+        }
+        // K = 300: a full panel of 256 and one of 44 (two blocks of 16 and a remainder);
+        // N = 45: a full strip and one of 13 columns.
+        let (m, k, n) = (37, 300, 45);
+        let value = |i: usize, j: usize| ((i * 31 + j * 17) % 23) as f32 - 11.0;
+        let a = Array2::from_shape_fn((m, k), |(i, j)| value(i, j));
+        let b = Array2::from_shape_fn((k, n), |(i, j)| value(j, i + 1));
+        let bt = b.t().to_owned(); // (N, K) stored: `.t()` has contiguous columns
+        let wide = Array2::from_shape_fn((k, 2 * n), |(i, j)| match j % 2 {
+            0 => b[(i, j / 2)],
+            _ => f32::NAN,
+        });
+        let strided = wide.slice(s![.., ..;2]);
+        let product = |b: ArrayView2<'_, f32>| {
+            let mut c = Array2::zeros((m, n));
+            f32_mat_mul(1.0, a.view(), b, 0.0, c.view_mut());
+            c
+        };
+        let plain = product(b.view());
+        assert_eq!(product(bt.t()), plain, "transposed view");
+        assert_eq!(product(strided), plain, "strided view");
+    }
+
+    #[test]
+    fn the_register_transpose_moves_each_value_to_its_mirror() {
+        if !available() {
+            eprintln!("no AVX-512 F: the transpose does not run here");
+            return;
+        }
+        use std::arch::x86_64::*;
+        let value = |i: usize, j: usize| (16 * i + j) as f32;
+        let mut block: [__m512; 16] = std::array::from_fn(|i| {
+            let row: [f32; 16] = std::array::from_fn(|j| value(i, j));
+            // SAFETY: AVX-512 F is available; `row` holds 16 values.
+            unsafe { _mm512_loadu_ps(row.as_ptr()) }
+        });
+        // SAFETY: as above.
+        unsafe { transpose_16x16(&mut block) };
+        for (i, v) in block.iter().enumerate() {
+            let mut row = [0f32; 16];
+            // SAFETY: as above.
+            unsafe { _mm512_storeu_ps(row.as_mut_ptr(), *v) };
+            let want: [f32; 16] = std::array::from_fn(|j| value(j, i));
+            assert_eq!(row, want, "row {i}");
         }
     }
 }

@@ -25,7 +25,7 @@ mod f32_avx512;
 mod kernels;
 
 #[cfg(target_arch = "x86_64")]
-pub use f32_avx512::f32_mat_mul;
+pub use f32_avx512::{f32_mat_mul, f32_mat_mul_bias};
 pub use kernels::{backend, register_peak_loop};
 
 /// Whether this processor runs [`f32_mat_mul`] (x86-64 with AVX-512 F).
@@ -44,7 +44,9 @@ use crate::bf16::bf16_bits;
 use crate::precision::{self, Precision};
 use crate::Scalar;
 use ndarray::linalg::general_mat_mul;
-use ndarray::{s, ArrayBase, ArrayView2, ArrayViewMut2, Axis, Data, DataMut, Ix2, Zip};
+use ndarray::{
+    s, ArrayBase, ArrayView1, ArrayView2, ArrayViewMut2, Axis, Data, DataMut, Ix1, Ix2, Zip,
+};
 use std::cell::RefCell;
 
 /// `c = alpha · a · b + beta · c`, `a`: (M, K), `b`: (K, N), `c`: (M, N), in the calling
@@ -63,6 +65,54 @@ pub fn mat_mul<T, S1, S2, S3>(
     S3: DataMut<Elem = T>,
 {
     T::mat_mul(alpha, a.view(), b.view(), beta, c.view_mut());
+}
+
+/// `c = a · b + bias`, `bias` (N) added to every row (a layer's bias): the value of [`mat_mul`]
+/// with `beta = 1` into a C that holds the bias in every row. Where the f32 product runs on
+/// AVX-512 the bias is added in the product's write-back, one pass over C fewer. What `c` held
+/// is ignored.
+pub fn mat_mul_bias<T, S1, S2, S3, S4>(
+    a: &ArrayBase<S1, Ix2>,
+    b: &ArrayBase<S2, Ix2>,
+    bias: &ArrayBase<S3, Ix1>,
+    c: &mut ArrayBase<S4, Ix2>,
+) where
+    T: Scalar,
+    S1: Data<Elem = T>,
+    S2: Data<Elem = T>,
+    S3: Data<Elem = T>,
+    S4: DataMut<Elem = T>,
+{
+    T::mat_mul_bias(a.view(), b.view(), bias.view(), c.view_mut());
+}
+
+/// [`mat_mul_bias`] as C filled with the bias, then [`mat_mul`] adding to it (every type and
+/// product but the f32 one on AVX-512).
+pub(crate) fn bias_then_mat_mul<T: Scalar>(
+    a: ArrayView2<'_, T>,
+    b: ArrayView2<'_, T>,
+    bias: ArrayView1<'_, T>,
+    mut c: ArrayViewMut2<'_, T>,
+) {
+    c.assign(&bias);
+    T::mat_mul(T::one(), a, b, T::one(), c);
+}
+
+/// [`mat_mul_bias`] for f32: in the AVX-512 product's write-back when [`mat_mul_f32`] would
+/// run that product, [`bias_then_mat_mul`] otherwise.
+pub(crate) fn mat_mul_bias_f32(
+    a: ArrayView2<'_, f32>,
+    b: ArrayView2<'_, f32>,
+    bias: ArrayView1<'_, f32>,
+    c: ArrayViewMut2<'_, f32>,
+) {
+    let bf16 = precision::current() == Precision::Bf16 && bf16_available();
+    if !bf16 && f32_avx512_available() {
+        #[cfg(target_arch = "x86_64")]
+        f32_mat_mul_bias(a, b, bias, c);
+    } else {
+        bias_then_mat_mul(a, b, bias, c);
+    }
 }
 
 /// [`mat_mul`] for f32: bf16 when the thread's precision is bf16 and [`bf16_available`];
@@ -566,6 +616,44 @@ mod tests {
             f32_mat_mul(1.0, a.view(), b.view(), 0.0, c.view_mut());
             assert_f32_product(c.view(), (1.0, a.view(), b.view()), (0.0, c0.view()));
         }
+    }
+
+    #[test]
+    fn the_bias_in_the_write_back_gives_the_product_into_a_c_holding_it_bit_for_bit() {
+        // Every shape of the bf16 tests, two panels along K (300), a B given transposed and a
+        // C with columns apart (the kernel's strided write-back); a C of NaN is ignored.
+        let shapes = SHAPES.iter().copied().chain([(37, 300, 45)]);
+        for (seed, (m, k, n)) in (100u64..).step_by(4).zip(shapes) {
+            let (a, bt, bias) = (
+                uniform(m, k, seed),
+                uniform(n, k, seed + 1),
+                uniform(1, n, seed + 2),
+            );
+            let bias = bias.row(0);
+            let mut want = Array2::zeros((m, n));
+            want.assign(&bias);
+            mat_mul(1.0, &a, &bt.t(), 1.0, &mut want);
+            let mut got = Array2::from_elem((m, n), f32::NAN);
+            mat_mul_bias(&a, &bt.t(), &bias, &mut got);
+            assert_eq!(got, want, "({m}, {k}, {n})");
+            let mut got_t = Array2::from_elem((n, m), f32::NAN);
+            mat_mul_bias(&a, &bt.t(), &bias, &mut got_t.view_mut().reversed_axes());
+            assert_eq!(got_t.t(), want, "({m}, {k}, {n}) into a transposed C");
+            // The fallback gives the same bits on every machine.
+            let mut fallback = Array2::from_elem((m, n), f32::NAN);
+            bias_then_mat_mul(a.view(), bt.t(), bias, fallback.view_mut());
+            assert_eq!(fallback, want, "({m}, {k}, {n}) fallback");
+        }
+        // f64 (BLAS): the bias plus the product.
+        let (a, b) = (
+            uniform(9, 5, 120).mapv(f64::from),
+            uniform(5, 3, 121).mapv(f64::from),
+        );
+        let bias = ndarray::array![0.5, -1.0, 2.0];
+        let mut c = Array2::from_elem((9, 3), f64::NAN);
+        mat_mul_bias(&a, &b, &bias, &mut c);
+        let want = a.dot(&b) + &bias;
+        assert!(c.abs_diff_eq(&want, 1e-12), "{c}");
     }
 
     #[test]

@@ -7,8 +7,9 @@ use super::softmax::{softmax_backward_in_place, softmax_slice};
 use crate::error::check_shape;
 use crate::gemm::mat_mul;
 use crate::param::{join_name, ParamView, ParamViewMut};
+use crate::precision;
 use crate::{NnError, Parameters, Result, Scalar};
-use ndarray::{s, Array2, Array3, ArrayView1, ArrayView2, ArrayViewMut1, ArrayViewMut2, Axis};
+use ndarray::{s, Array2, Array3, ArrayView2, ArrayViewMut2, Axis};
 use rand::Rng;
 use rayon::prelude::*;
 
@@ -23,6 +24,36 @@ pub struct MultiHeadAttention<T: Scalar> {
     pub key: Linear<T>,
     pub value: Linear<T>,
     pub output: Linear<T>,
+}
+
+/// Query rows per block of the attention's three steps (scores, softmax, product with V; and
+/// in the backward dP, dS, dQ): 128 rows of up to 1,024 scores are 512 KiB, within L2.
+const ROW_BLOCK: usize = 128;
+
+/// The attention's independent pieces of work, as a parallel iterator: for each head and each
+/// block of [`ROW_BLOCK`] query rows, `(head, first row, the block's rows of per_head[head]
+/// (rows, Nk), the block's rows of head's columns of per_row (rows, dk))`.
+fn head_row_blocks<'a, T: Scalar>(
+    per_head: &'a mut Array3<T>,
+    per_row: &'a mut Array2<T>,
+    dk: usize,
+) -> impl ParallelIterator<Item = (usize, usize, ArrayViewMut2<'a, T>, ArrayViewMut2<'a, T>)> {
+    let mut blocks = Vec::new();
+    for (head, (scores, columns)) in per_head
+        .outer_iter_mut()
+        .zip(per_row.axis_chunks_iter_mut(Axis(1), dk))
+        .enumerate()
+    {
+        let (mut scores, mut columns, mut r0) = (scores, columns, 0);
+        while scores.nrows() > ROW_BLOCK {
+            let (s, rest_s) = scores.split_at(Axis(0), ROW_BLOCK);
+            let (c, rest_c) = columns.split_at(Axis(0), ROW_BLOCK);
+            blocks.push((head, r0, s, c));
+            (scores, columns, r0) = (rest_s, rest_c, r0 + ROW_BLOCK);
+        }
+        blocks.push((head, r0, scores, columns));
+    }
+    blocks.into_par_iter()
 }
 
 /// The forward's intermediates, and the backward's scratch buffers (kept to reuse memory).
@@ -90,33 +121,28 @@ impl<T: Scalar> MultiHeadAttention<T> {
         self.key.forward(cache.k.view_mut(), kv_in)?;
         self.value.forward(cache.v.view_mut(), kv_in)?;
         let scale = T::one() / T::from_f64(dk as f64).sqrt();
-        for (head, mut p) in cache.probs.axis_iter_mut(Axis(0)).enumerate() {
-            let cols = s![.., head * dk..(head + 1) * dk];
-            mat_mul(
-                scale,
-                &cache.q.slice(cols),
-                &cache.k.slice(cols).t(),
-                T::zero(),
-                &mut p,
-            );
-        }
-        // The H·Nq score rows are independent: rayon spreads them over the cores while no BLAS
-        // call runs (the two pools never nest).
-        let probs = cache
-            .probs
-            .as_slice_mut()
-            .expect("probs is standard layout"); // (H*Nq*Nk)
-        probs.par_chunks_mut(nk.max(1)).for_each(softmax_slice);
-        for (head, p) in cache.probs.axis_iter(Axis(0)).enumerate() {
-            let cols = s![.., head * dk..(head + 1) * dk];
-            mat_mul(
-                T::one(),
-                &p,
-                &cache.v.slice(cols),
-                T::zero(),
-                &mut cache.heads.slice_mut(cols),
-            );
-        }
+        // Head by head and block by block of query rows, so that a block's score rows are
+        // still in cache for their softmax and their product with V; rayon spreads the blocks
+        // over the cores (each entry is computed as by whole-matrix products, on any thread).
+        let precision = precision::current();
+        let (q, k, v) = (cache.q.view(), cache.k.view(), cache.v.view());
+        head_row_blocks(&mut cache.probs, &mut cache.heads, dk).for_each(
+            |(head, r0, mut p, mut heads)| {
+                let _precision = precision::enter(precision);
+                let (rows, cols) = (r0..r0 + p.nrows(), head * dk..(head + 1) * dk);
+                mat_mul(
+                    scale,
+                    &q.slice(s![rows, cols.clone()]),
+                    &k.slice(s![.., cols.clone()]).t(),
+                    T::zero(),
+                    &mut p,
+                );
+                for row in p.rows_mut() {
+                    softmax_slice(row.into_slice().expect("probs rows are contiguous"));
+                }
+                mat_mul(T::one(), &p, &v.slice(s![.., cols]), T::zero(), &mut heads);
+            },
+        );
         self.output.forward(out, cache.heads.view())
     }
 
@@ -157,52 +183,52 @@ impl<T: Scalar> MultiHeadAttention<T> {
         self.output
             .backward(cache.dheads.view_mut(), dout, cache.heads.view())?;
         let scale = T::one() / T::from_f64(dk as f64).sqrt();
-        for (head, (p, mut dp)) in cache
-            .probs
-            .axis_iter(Axis(0))
-            .zip(cache.dprobs.axis_iter_mut(Axis(0)))
+        // dP → dS → dQ block by block of query rows, each block's rows still in cache for the
+        // next step; then dV and dK head by head. Spread over the cores by rayon; each entry is
+        // computed as by whole-matrix products.
+        let precision = precision::current();
+        let (probs, d_o) = (cache.probs.view(), cache.dheads.view());
+        let (k, v) = (cache.k.view(), cache.v.view());
+        head_row_blocks(&mut cache.dprobs, &mut cache.dq, dk).for_each(
+            |(head, r0, mut ds, mut dq)| {
+                let _precision = precision::enter(precision);
+                let (rows, cols) = (r0..r0 + ds.nrows(), head * dk..(head + 1) * dk);
+                mat_mul(
+                    T::one(),
+                    &d_o.slice(s![rows.clone(), cols.clone()]),
+                    &v.slice(s![.., cols.clone()]).t(),
+                    T::zero(),
+                    &mut ds,
+                );
+                for (d, y) in ds
+                    .rows_mut()
+                    .into_iter()
+                    .zip(probs.slice(s![head, rows, ..]).rows())
+                {
+                    softmax_backward_in_place(d, y);
+                }
+                mat_mul(scale, &ds, &k.slice(s![.., cols]), T::one(), &mut dq);
+            },
+        );
+        let (dprobs, q) = (cache.dprobs.view(), cache.q.view());
+        let dv_dk: Vec<_> = cache
+            .dv
+            .axis_chunks_iter_mut(Axis(1), dk)
+            .zip(cache.dk.axis_chunks_iter_mut(Axis(1), dk))
             .enumerate()
-        {
-            let cols = s![.., head * dk..(head + 1) * dk];
-            let d_o = cache.dheads.slice(cols);
-            mat_mul(T::one(), &d_o, &cache.v.slice(cols).t(), T::zero(), &mut dp);
-            mat_mul(
-                T::one(),
-                &p.t(),
-                &d_o,
-                T::one(),
-                &mut cache.dv.slice_mut(cols),
-            );
-        }
-        // dP → dS row by row, in place, spread over the cores by rayon (no BLAS call runs).
-        let probs = cache.probs.as_slice().expect("probs is standard layout"); // (H*Nq*Nk)
-        let dprobs = cache
-            .dprobs
-            .as_slice_mut()
-            .expect("dprobs is standard layout"); // (H*Nq*Nk)
-        dprobs
-            .par_chunks_mut(nk.max(1))
-            .zip(probs.par_chunks(nk.max(1)))
-            .for_each(|(d, y)| {
-                softmax_backward_in_place(ArrayViewMut1::from(d), ArrayView1::from(y));
+            .collect();
+        dv_dk
+            .into_par_iter()
+            .for_each(|(head, (mut dv, mut dk_h))| {
+                let _precision = precision::enter(precision);
+                let cols = s![.., head * dk..(head + 1) * dk];
+                let (p, ds) = (
+                    probs.index_axis(Axis(0), head),
+                    dprobs.index_axis(Axis(0), head),
+                );
+                mat_mul(T::one(), &p.t(), &d_o.slice(cols), T::one(), &mut dv);
+                mat_mul(scale, &ds.t(), &q.slice(cols), T::one(), &mut dk_h);
             });
-        for (head, ds) in cache.dprobs.axis_iter(Axis(0)).enumerate() {
-            let cols = s![.., head * dk..(head + 1) * dk];
-            mat_mul(
-                scale,
-                &ds,
-                &cache.k.slice(cols),
-                T::one(),
-                &mut cache.dq.slice_mut(cols),
-            );
-            mat_mul(
-                scale,
-                &ds.t(),
-                &cache.q.slice(cols),
-                T::one(),
-                &mut cache.dk.slice_mut(cols),
-            );
-        }
         self.query
             .backward(dq_in.view_mut(), cache.dq.view(), q_in)?;
         match dkv_in {
@@ -351,10 +377,49 @@ mod tests {
         assert_eq!(out.row(1), kv.row(0));
     }
 
-    /// Checks every input and parameter gradient: cross-attention (9 queries, 10 keys) takes
-    /// inputs `[q, kv, params..]`; self-attention (10 rows) `[x, params..]` with `dkv_in = None`.
+    #[test]
+    fn row_blocks_give_the_whole_matrix_attention_bit_for_bit() {
+        // 150 queries: a whole block of 128 rows and one of 22; 70 keys.
+        let mha = MultiHeadAttention::<f32>::new(C, H, &mut StdRng::seed_from_u64(5)).unwrap();
+        let f32s = |shape: &[usize], seed| ix2(&uniform(shape, seed)).mapv(|v| v as f32);
+        let (q_in, kv_in) = (f32s(&[150, C], 320), f32s(&[70, C], 321));
+        let (mut out, mut cache) = (Array2::zeros((150, C)), AttentionCache::default());
+        mha.forward(out.view_mut(), q_in.view(), kv_in.view(), &mut cache)
+            .unwrap();
+        // The same products over whole matrices, head by head.
+        let project = |lin: &Linear<f32>, x: &Array2<f32>| {
+            let mut y = Array2::zeros((x.nrows(), C));
+            lin.forward(y.view_mut(), x.view()).unwrap();
+            y
+        };
+        let (q, k, v) = (
+            project(&mha.query, &q_in),
+            project(&mha.key, &kv_in),
+            project(&mha.value, &kv_in),
+        );
+        let (dk, mut heads) = (C / H, Array2::zeros((150, C)));
+        for head in 0..H {
+            let cols = s![.., head * dk..(head + 1) * dk];
+            let mut p = Array2::zeros((150, 70));
+            let scale = 1.0 / (dk as f32).sqrt();
+            mat_mul(scale, &q.slice(cols), &k.slice(cols).t(), 0.0, &mut p);
+            for row in p.rows_mut() {
+                softmax_slice(row.into_slice().unwrap());
+            }
+            mat_mul(1.0, &p, &v.slice(cols), 0.0, &mut heads.slice_mut(cols));
+        }
+        assert_eq!(out, project(&mha.output, &heads));
+    }
+
+    /// Checks every input and parameter gradient: cross-attention (70 queries: a whole block
+    /// of [`ROW_BLOCK`] rows and a part of one; 10 keys) takes inputs `[q, kv, params..]`;
+    /// self-attention (10 rows) `[x, params..]` with `dkv_in = None`.
     fn check_attention(self_attention: bool) {
-        let (nq, nk) = if self_attention { (10, 10) } else { (9, 10) };
+        let (nq, nk) = if self_attention {
+            (10, 10)
+        } else {
+            (ROW_BLOCK + 6, 10)
+        };
         let streams = if self_attention { 1 } else { 2 };
         let mut inputs = vec![uniform(&[nq, C], 91)];
         if !self_attention {

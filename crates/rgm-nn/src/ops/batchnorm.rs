@@ -76,20 +76,35 @@ impl<T: Scalar> BatchNorm<T> {
                 });
             }
             let rf = T::from_f64(rows as f64);
-            cache.mean.fill(T::zero());
-            for row in inp.rows() {
-                cache.mean += &row;
+            // Row by row as slices: one vector loop over the channels per row.
+            let x = inp.as_standard_layout(); // (R, C)
+            let x_rows = || {
+                x.as_slice()
+                    .expect("standard layout")
+                    .chunks_exact(c.max(1))
+            };
+            let mean = cache
+                .mean
+                .as_slice_mut()
+                .expect("a new array is contiguous");
+            mean.fill(T::zero());
+            for row in x_rows() {
+                mean.iter_mut().zip(row).for_each(|(m, &x)| *m += x);
             }
-            cache.mean.mapv_inplace(|s| s / rf);
-            let var = &mut cache.rstd; // (C), holds the biased variance until the last line
+            mean.iter_mut().for_each(|s| *s /= rf);
+            // (C), holds the biased variance until the last line
+            let var = cache
+                .rstd
+                .as_slice_mut()
+                .expect("a new array is contiguous");
             var.fill(T::zero());
-            for row in inp.rows() {
-                Zip::from(&mut *var)
-                    .and(&row)
-                    .and(&cache.mean)
-                    .for_each(|v, &x, &m| *v += (x - m) * (x - m));
+            for row in x_rows() {
+                for ((v, &x), &m) in var.iter_mut().zip(row).zip(&*mean) {
+                    *v += (x - m) * (x - m);
+                }
             }
-            var.mapv_inplace(|s| s / rf);
+            var.iter_mut().for_each(|s| *s /= rf);
+            let var = &mut cache.rstd;
             let (m, unbias) = (self.momentum, rf / T::from_f64((rows - 1) as f64));
             Zip::from(&mut self.running_mean)
                 .and(&cache.mean)
@@ -147,17 +162,29 @@ impl<T: Scalar> BatchNorm<T> {
         )?;
         let mut sum_g = Array1::<T>::zeros(c); // (C), Σ_rows dy
         let mut sum_gx = Array1::<T>::zeros(c); // (C), Σ_rows dy x̂
-        for (g, x) in dout.rows().into_iter().zip(inp.rows()) {
-            Zip::from(&mut sum_g)
-                .and(&mut sum_gx)
-                .and(&g)
-                .and(&x)
-                .and(&cache.mean)
-                .and(&cache.rstd)
-                .for_each(|sg, sgx, &g, &x, &m, &r| {
-                    *sg += g;
-                    *sgx += g * (x - m) * r;
-                });
+        {
+            // Row by row as slices: one vector loop over the channels per row.
+            let (dout, inp) = (dout.as_standard_layout(), inp.as_standard_layout()); // (R, C)
+            let (mean, rstd) = (
+                cache.mean.as_slice().expect("a new array is contiguous"),
+                cache.rstd.as_slice().expect("a new array is contiguous"),
+            );
+            let sg = sum_g.as_slice_mut().expect("a new array is contiguous");
+            let sgx = sum_gx.as_slice_mut().expect("a new array is contiguous");
+            let rows = dout
+                .as_slice()
+                .expect("standard layout")
+                .chunks_exact(c.max(1));
+            for (g, x) in rows.zip(
+                inp.as_slice()
+                    .expect("standard layout")
+                    .chunks_exact(c.max(1)),
+            ) {
+                for j in 0..c {
+                    sg[j] += g[j];
+                    sgx[j] += g[j] * (x[j] - mean[j]) * rstd[j];
+                }
+            }
         }
         self.bias.grad += &sum_g;
         self.weight.grad += &sum_gx;

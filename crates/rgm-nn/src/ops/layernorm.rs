@@ -5,7 +5,7 @@
 use crate::error::{check_shape, check_shapes};
 use crate::param::{join_name, ParamView, ParamViewMut};
 use crate::{NnError, Param, Parameters, Result, Scalar};
-use ndarray::{Array1, ArrayView2, ArrayViewMut2, Ix1, Zip};
+use ndarray::{Array1, ArrayView1, ArrayView2, ArrayViewMut2, Ix1, Zip};
 
 /// The annotated transformer's LayerNorm; parameters named `a_2` (scale) and `b_2` (shift) as
 /// in its state dict.
@@ -111,16 +111,8 @@ impl<T: Scalar> LayerNorm<T> {
             let (mean, std) = (cache.mean[r], cache.std[r]);
             let inv = T::one() / (std + self.eps);
             let (x, g_out) = (inp.row(r), dout.row(r));
-            let (mut g_mean, mut g_dot_d) = (T::zero(), T::zero());
-            Zip::from(&x)
-                .and(&g_out)
-                .and(&self.scale.value)
-                .for_each(|&x, &go, &a| {
-                    let g = go * a;
-                    g_mean += g;
-                    g_dot_d += g * (x - mean);
-                });
-            g_mean /= cf;
+            let (g_sum, g_dot_d) = grad_sums(x, g_out, self.scale.value.view(), mean);
+            let g_mean = g_sum / cf;
             let coef = if std > T::zero() {
                 inv * inv * g_dot_d / (cm1 * std)
             } else {
@@ -144,6 +136,47 @@ impl<T: Scalar> LayerNorm<T> {
         }
         Ok(())
     }
+}
+
+/// `(Σ_j g_j, Σ_j g_j (x_j − mean))` over one row, `g = dout ⊙ a`: eight running sums of each,
+/// so that the additions vectorise (a single running sum is one serial chain of additions).
+fn grad_sums<T: Scalar>(
+    x: ArrayView1<'_, T>,
+    g_out: ArrayView1<'_, T>,
+    a: ArrayView1<'_, T>,
+    mean: T,
+) -> (T, T) {
+    let (Some(x), Some(g_out), Some(a)) = (x.as_slice(), g_out.as_slice(), a.as_slice()) else {
+        // Strided rows: the same sums on contiguous copies.
+        let copy = |v: ArrayView1<'_, T>| Array1::from_iter(v.iter().copied());
+        let (x, g_out, a) = (copy(x), copy(g_out), copy(a));
+        return grad_sums(x.view(), g_out.view(), a.view(), mean);
+    };
+    const LANES: usize = 8;
+    let (mut sums, mut dots) = ([T::zero(); LANES], [T::zero(); LANES]);
+    let whole = x.len() - x.len() % LANES;
+    for ((x, go), a) in x[..whole]
+        .chunks_exact(LANES)
+        .zip(g_out[..whole].chunks_exact(LANES))
+        .zip(a[..whole].chunks_exact(LANES))
+    {
+        for l in 0..LANES {
+            let g = go[l] * a[l];
+            sums[l] += g;
+            dots[l] += g * (x[l] - mean);
+        }
+    }
+    let (mut sum, mut dot) = (T::zero(), T::zero());
+    for j in whole..x.len() {
+        let g = g_out[j] * a[j];
+        sum += g;
+        dot += g * (x[j] - mean);
+    }
+    for l in 0..LANES {
+        sum += sums[l];
+        dot += dots[l];
+    }
+    (sum, dot)
 }
 
 impl<T: Scalar> Parameters<T> for LayerNorm<T> {
@@ -182,7 +215,7 @@ mod tests {
     }
 
     fn layer(i: &[ArrayD<f64>]) -> LayerNorm<f64> {
-        let mut ln = LayerNorm::new(5);
+        let mut ln = LayerNorm::new(i[1].len());
         ln.scale.value = ix1(&i[1]);
         ln.shift.value = ix1(&i[2]);
         ln
@@ -190,32 +223,53 @@ mod tests {
 
     #[test]
     fn backward_matches_finite_differences() {
-        let inputs = [uniform(&[4, 5], 61), uniform(&[5], 62), uniform(&[5], 63)];
-        let run = |i: &[ArrayD<f64>]| {
-            let (mut y, mut cache) = (Array2::zeros((4, 5)), LayerNormCache::default());
-            layer(i)
-                .forward(y.view_mut(), ix2(&i[0]).view(), &mut cache)
-                .unwrap();
-            (y, cache)
-        };
-        assert_gradients(
-            "layer_norm",
-            1e-6,
-            &inputs,
-            &mut |i| run(i).0.into_dyn(),
-            &mut |i, dout| {
-                let (_, cache) = run(i);
-                let mut ln = layer(i);
-                let mut dx = Array2::zeros((4, 5));
-                ln.backward(dx.view_mut(), ix2(dout).view(), ix2(&i[0]).view(), &cache)
+        // C = 5 (fewer channels than the backward's eight running sums) and C = 19 (two rounds
+        // of them and a remainder of three).
+        for c in [5, 19] {
+            let inputs = [uniform(&[4, c], 61), uniform(&[c], 62), uniform(&[c], 63)];
+            let run = |i: &[ArrayD<f64>]| {
+                let (mut y, mut cache) = (Array2::zeros((4, c)), LayerNormCache::default());
+                layer(i)
+                    .forward(y.view_mut(), ix2(&i[0]).view(), &mut cache)
                     .unwrap();
-                vec![
-                    dx.into_dyn(),
-                    ln.scale.grad.into_dyn(),
-                    ln.shift.grad.into_dyn(),
-                ]
-            },
-        );
+                (y, cache)
+            };
+            assert_gradients(
+                "layer_norm",
+                1e-6,
+                &inputs,
+                &mut |i| run(i).0.into_dyn(),
+                &mut |i, dout| {
+                    let (_, cache) = run(i);
+                    let mut ln = layer(i);
+                    let mut dx = Array2::zeros((4, c));
+                    ln.backward(dx.view_mut(), ix2(dout).view(), ix2(&i[0]).view(), &cache)
+                        .unwrap();
+                    vec![
+                        dx.into_dyn(),
+                        ln.scale.grad.into_dyn(),
+                        ln.shift.grad.into_dyn(),
+                    ]
+                },
+            );
+        }
+    }
+
+    #[test]
+    fn strided_rows_give_the_contiguous_gradients() {
+        // Every other column of a (3, 38) array: rows of 19 values two apart.
+        let (wide, dout) = (ix2(&uniform(&[3, 38], 64)), ix2(&uniform(&[3, 19], 65)));
+        let strided = wide.slice(ndarray::s![.., ..;2]);
+        let grads = |x: ArrayView2<'_, f64>| {
+            let (mut ln, mut cache) = (LayerNorm::<f64>::new(19), LayerNormCache::default());
+            ln.scale.value = ix1(&uniform(&[19], 66));
+            ln.forward(Array2::zeros((3, 19)).view_mut(), x, &mut cache)
+                .unwrap();
+            let mut dx = Array2::zeros((3, 19));
+            ln.backward(dx.view_mut(), dout.view(), x, &cache).unwrap();
+            (dx, ln.scale.grad, ln.shift.grad)
+        };
+        assert_eq!(grads(strided), grads(strided.to_owned().view()));
     }
 
     // A constant row has std = 0, where std is not differentiable (PyTorch returns NaN there).

@@ -1,7 +1,7 @@
 //! Linear layer / 1×1 convolution on `(rows, C)` matrices, with or without bias.
 
 use crate::error::check_shape;
-use crate::gemm::mat_mul;
+use crate::gemm::{mat_mul, mat_mul_bias};
 use crate::init;
 use crate::param::{join_name, ParamView, ParamViewMut};
 use crate::{Param, Parameters, Result, Scalar};
@@ -49,18 +49,10 @@ impl<T: Scalar> Linear<T> {
         let rows = inp.nrows();
         check_shape("linear forward", "inp", inp.shape(), &[rows, self.c_in()])?;
         check_shape("linear forward", "out", out.shape(), &[rows, self.c_out()])?;
-        let beta = match &self.bias {
-            Some(b) => {
-                out.assign(
-                    &b.value
-                        .broadcast((rows, self.c_out()))
-                        .expect("bias has C_out entries"),
-                );
-                T::one()
-            }
-            None => T::zero(),
-        };
-        mat_mul(T::one(), &inp, &self.weight.value.t(), beta, &mut out);
+        match &self.bias {
+            Some(b) => mat_mul_bias(&inp, &self.weight.value.t(), &b.value, &mut out),
+            None => mat_mul(T::one(), &inp, &self.weight.value.t(), T::zero(), &mut out),
+        }
         Ok(())
     }
 

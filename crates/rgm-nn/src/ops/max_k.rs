@@ -2,7 +2,7 @@
 
 use crate::error::check_shape;
 use crate::{NnError, Result, Scalar};
-use ndarray::{Array2, ArrayView2, ArrayViewMut2, Zip};
+use ndarray::{Array2, ArrayView1, ArrayView2, ArrayViewMut2};
 
 /// What [`max_k_backward`] needs: the winning neighbour of every output entry.
 #[derive(Clone, Debug, Default)]
@@ -29,23 +29,29 @@ pub fn max_k_forward<T: Scalar>(
     if cache.argmax.dim() != (n, c) {
         cache.argmax = Array2::zeros((n, c));
     }
+    // Slices of contiguous rows, so that each neighbour's comparison runs as one vector loop
+    // over the channels.
+    let inp = inp.as_standard_layout(); // (N*K, C)
+    let row = |i: usize| inp.row(i).to_slice().expect("standard layout");
+    let mut best = vec![T::zero(); c]; // (C)
     for p in 0..n {
-        let mut best = out.row_mut(p);
-        let mut arg = cache.argmax.row_mut(p);
-        best.assign(&inp.row(p * k));
+        let arg = cache
+            .argmax
+            .row_mut(p)
+            .into_slice()
+            .expect("standard layout"); // (C)
+        best.copy_from_slice(row(p * k));
         arg.fill(0);
         for j in 1..k {
             let j32 = j as u32;
             // Branch-free selects, so the loop vectorises.
-            Zip::from(&mut best)
-                .and(&mut arg)
-                .and(inp.row(p * k + j))
-                .for_each(|b, a, &x| {
-                    let greater = x > *b;
-                    *b = if greater { x } else { *b };
-                    *a = if greater { j32 } else { *a };
-                });
+            for ((b, a), &x) in best.iter_mut().zip(arg.iter_mut()).zip(row(p * k + j)) {
+                let greater = x > *b;
+                *b = if greater { x } else { *b };
+                *a = if greater { j32 } else { *a };
+            }
         }
+        out.row_mut(p).assign(&ArrayView1::from(&best[..]));
     }
     Ok(())
 }
@@ -94,6 +100,22 @@ mod tests {
         let mut dx = Array2::zeros((3, 2));
         max_k_backward(dx.view_mut(), array![[2.0, 3.0]].view(), 3, &cache).unwrap();
         assert_eq!(dx, array![[2.0, 0.0], [0.0, 3.0], [0.0, 0.0]]);
+    }
+
+    #[test]
+    fn any_layout_gives_the_same_max() {
+        // A transposed input and a column block of a wider output (as the featurer writes its
+        // node features) against standard arrays.
+        let x = ix2(&uniform(&[4 * 5, 3], 22));
+        let xt = x.t().to_owned(); // (3, 20) stored, viewed back as (20, 3)
+        let (mut plain, mut cache) = (Array2::zeros((4, 3)), MaxKCache::default());
+        max_k_forward(plain.view_mut(), x.view(), 5, &mut cache).unwrap();
+        let mut wide = Array2::from_elem((4, 7), -1.0);
+        let mut other = MaxKCache::default();
+        max_k_forward(wide.slice_mut(ndarray::s![.., 2..5]), xt.t(), 5, &mut other).unwrap();
+        assert_eq!(wide.slice(ndarray::s![.., 2..5]), plain);
+        assert_eq!(other.argmax, cache.argmax);
+        assert!(wide.slice(ndarray::s![.., ..2]).iter().all(|&v| v == -1.0));
     }
 
     #[test]

@@ -4,16 +4,29 @@ use crate::error::{check_shape, check_shapes};
 use crate::{Result, Scalar};
 use ndarray::{ArrayView, ArrayViewMut, Dimension, Zip};
 
+/// `max(x, 0)`, and 0 for NaN.
+fn relu<T: Scalar>(x: T) -> T {
+    if x > T::zero() {
+        x
+    } else {
+        T::zero()
+    }
+}
+
 /// `out = max(inp, 0)`.
 pub fn relu_forward<T: Scalar, D: Dimension>(
     mut out: ArrayViewMut<'_, T, D>,
     inp: ArrayView<'_, T, D>,
 ) -> Result<()> {
     check_shape("relu forward", "out", out.shape(), inp.shape())?;
-    Zip::from(&mut out)
-        .and(&inp)
-        .for_each(|o, &x| *o = if x > T::zero() { x } else { T::zero() });
+    Zip::from(&mut out).and(&inp).for_each(|o, &x| *o = relu(x));
     Ok(())
+}
+
+/// `x = max(x, 0)` in place: [`relu_forward`] where the input is not needed afterwards (its
+/// backward reads the output only), one pass over memory fewer.
+pub fn relu_in_place<T: Scalar, D: Dimension>(mut x: ArrayViewMut<'_, T, D>) {
+    x.mapv_inplace(relu);
 }
 
 /// Differentiates `out = max(inp, 0)`: `dinp += dout · [out > 0]` (zero gradient at 0, as
@@ -40,7 +53,7 @@ pub fn relu_backward<T: Scalar, D: Dimension>(
 mod tests {
     use super::*;
     use crate::gradcheck::{assert_gradients, uniform};
-    use ndarray::{array, ArrayD};
+    use ndarray::{array, Array2, ArrayD};
 
     #[test]
     fn forward_and_backward_by_hand() {
@@ -51,6 +64,17 @@ mod tests {
         let mut dx = array![[1.0, 1.0, 1.0]];
         relu_backward(dx.view_mut(), array![[5.0, 5.0, 5.0]].view(), y.view()).unwrap();
         assert_eq!(dx, array![[1.0, 1.0, 6.0]]);
+    }
+
+    #[test]
+    fn in_place_is_the_forward() {
+        let x = array![[-1.0, 0.0, 2.0, -0.0, f64::NAN, 1e-300]];
+        let mut y = Array2::zeros((1, 6));
+        relu_forward(y.view_mut(), x.view()).unwrap();
+        let mut z = x.clone();
+        relu_in_place(z.view_mut());
+        assert_eq!(z.mapv(f64::to_bits), y.mapv(f64::to_bits));
+        assert_eq!(z, array![[0.0, 0.0, 2.0, 0.0, 0.0, 1e-300]]);
     }
 
     #[test]

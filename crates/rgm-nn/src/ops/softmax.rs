@@ -7,7 +7,7 @@ use ndarray::{ArrayView1, ArrayView2, ArrayViewMut1, ArrayViewMut2, Zip};
 
 /// Replaces a row by its softmax, shifted by the row maximum so no exponent overflows.
 pub(crate) fn softmax_slice<T: Scalar>(xs: &mut [T]) {
-    let max = xs.iter().fold(T::neg_infinity(), |m, &v| m.max(v));
+    let max = crate::exp::max(xs, T::neg_infinity());
     let inv = T::one() / exp_shifted_sum(xs, max);
     xs.iter_mut().for_each(|x| *x *= inv);
 }
@@ -24,10 +24,14 @@ pub(crate) fn softmax_in_place<T: Scalar>(mut row: ArrayViewMut1<'_, T>) {
     }
 }
 
-/// `Σ_k dout_k out_k` of one row, shared by both forms of the softmax backward (ndarray's
-/// unrolled or BLAS dot: a plain fold does not vectorise).
+/// `Σ_k dout_k out_k` of one row, shared by both forms of the softmax backward: eight running
+/// sums over contiguous rows (a plain fold does not vectorise, and a BLAS call per row costs
+/// more than the row), ndarray's dot otherwise.
 fn row_dot<T: Scalar>(dout: ArrayView1<'_, T>, out: ArrayView1<'_, T>) -> T {
-    dout.dot(&out)
+    match (dout.as_slice(), out.as_slice()) {
+        (Some(d), Some(y)) => crate::exp::dot(d, y),
+        _ => dout.dot(&out),
+    }
 }
 
 /// Adds the softmax backward of one row: `dinp_j += out_j · (dout_j − Σ_k dout_k out_k)`.
@@ -113,17 +117,20 @@ mod tests {
             softmax_rows_forward(y.view_mut(), x.view()).unwrap();
             y
         };
-        assert_gradients(
-            "softmax_rows",
-            1e-6,
-            &[uniform(&[4, 5], 51) * 3.0],
-            &mut |i| fwd(&ix2(&i[0])).into_dyn(),
-            &mut |i, dout| {
-                let y = fwd(&ix2(&i[0]));
-                let mut dx = Array2::zeros(y.dim());
-                softmax_rows_backward(dx.view_mut(), ix2(dout).view(), y.view()).unwrap();
-                vec![dx.into_dyn()]
-            },
-        );
+        // Rows of 5 and of 19 (two rounds of the row dot's eight running sums and three more).
+        for cols in [5, 19] {
+            assert_gradients(
+                "softmax_rows",
+                1e-6,
+                &[uniform(&[4, cols], 51) * 3.0],
+                &mut |i| fwd(&ix2(&i[0])).into_dyn(),
+                &mut |i, dout| {
+                    let y = fwd(&ix2(&i[0]));
+                    let mut dx = Array2::zeros(y.dim());
+                    softmax_rows_backward(dx.view_mut(), ix2(dout).view(), y.view()).unwrap();
+                    vec![dx.into_dyn()]
+                },
+            );
+        }
     }
 }
