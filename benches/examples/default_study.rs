@@ -14,9 +14,10 @@
 //!
 //! `--study cascade` runs `rgm register`'s default on each pair and, from its two candidates'
 //! overlap scores, outcomes and times, prints what a cascade would give: the cheap candidate
-//! first, the other only when the first's score is below a threshold (then the better of the
-//! two, as the default picks), for each order and threshold. Run it on one thread
-//! (`RAYON_NUM_THREADS=1`) so that each candidate's time is its own.
+//! first, the other only when the first's score (0 to 2; a partial pair registered right
+//! scores about 1) is below a threshold (then the better of the two, as the default picks), for
+//! each order and threshold. Run it on one thread (`RAYON_NUM_THREADS=1`) so that each
+//! candidate's time is its own.
 //!
 //! `--study robustness` instead runs `rgm register`'s default on each pair as it is, at half
 //! and at twice its size, and with each cloud made of 20,000 points (every point repeated, with
@@ -380,7 +381,7 @@ fn cascade(
     );
     println!("|---|---:|---:|---:|---:|---:|");
     for (first, name) in [(1, "fgr+icp"), (0, "rgm+icp")] {
-        for threshold in [0.0, 1.0, 1.2, 1.4, 1.5, 1.6, 1.7, 1.8, 1.9, f64::INFINITY] {
+        for threshold in [0.0, 0.3, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.1, 1.2, f64::INFINITY] {
             let mut outcomes = Vec::new();
             let (mut ms, mut second) = (0.0, 0);
             for tried in &pairs {
