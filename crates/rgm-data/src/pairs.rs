@@ -12,6 +12,9 @@
 //! All draws come from one RNG per pair. Test pair `i` uses `StdRng::seed_from_u64(i)`, so every
 //! run and every method sees the same pairs; training pair `i` of epoch `e` uses a seed made of
 //! both (see [`train_seed`]), so epochs differ and pairs can be made in parallel.
+//!
+//! The file is long because its unit tests sit beside the code they check (as everywhere in
+//! rgm); the code itself is one job, kept in one place.
 
 use rand::rngs::StdRng;
 use rand::seq::SliceRandom;

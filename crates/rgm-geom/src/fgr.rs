@@ -30,6 +30,9 @@
 //! The result's fitness and RMSE are Open3D's score of the final transform at
 //! `maximum_correspondence_distance` (0.025 by default, in the clouds' units), as Open3D's
 //! `EvaluateRegistration` call at the end of FGR.
+//!
+//! The file is long because its unit tests sit beside the code they check (as everywhere in
+//! rgm); the code itself is one job, kept in one place.
 
 use nalgebra::{Matrix3, Matrix6, Point3, Vector3, Vector6};
 use rand::{rngs::StdRng, Rng, SeedableRng};

@@ -5,6 +5,9 @@
 //! (integer overflow in construction) when more points than a bucket holds share one
 //! coordinate — routine in real clouds with duplicated points. Splitting at the median by
 //! count keeps this tree balanced whatever the duplicates.
+//!
+//! The file is long because its unit tests sit beside the code they check (as everywhere in
+//! rgm); the code itself is one job, kept in one place.
 
 use nalgebra::Point3;
 

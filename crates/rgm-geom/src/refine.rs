@@ -19,6 +19,9 @@
 //! from 0.55° to 0.31° and registered 4 points more (docs/training/README.md, session 6).
 //!
 //! Normals of the target are estimated once by PCA ([`crate::normals`]).
+//!
+//! The file is long because its unit tests sit beside the code they check (as everywhere in
+//! rgm); the code itself is one job, kept in one place.
 
 use std::borrow::Cow;
 use std::cell::RefCell;

@@ -19,6 +19,9 @@
 //! product K·u·v ≥ e^{−3L}/(N·M) stay normal numbers (no overflow, no denormals) for N·M up to
 //! about 10⁹; otherwise, or if a scaling vector still leaves the normal range, the log form runs
 //! instead. [`SinkhornCache::form`] says which one ran.
+//!
+//! The file is long because its unit tests sit beside the code they check (as everywhere in
+//! rgm); the code itself is one job, kept in one place.
 
 use crate::error::{check_shape, MatchError, Result};
 use ndarray::linalg::{general_mat_mul, general_mat_vec_mul};

@@ -1,5 +1,8 @@
 //! Weight files in safetensors (readable by PyTorch, numpy, candle): every parameter and buffer
 //! under its state-dict name, in the element type of the model (F32 or F64).
+//!
+//! The file is long because its unit tests sit beside the code they check (as everywhere in
+//! rgm); the code itself is one job, kept in one place.
 
 use crate::bf16::{bf16_bits, bf16_to_f32};
 use crate::{NnError, Parameters, Result, Scalar};

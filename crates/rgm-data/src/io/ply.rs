@@ -5,6 +5,9 @@
 //! The body is read as a stream of values, one property after the other, element after element
 //! (the PLY definition; ASCII files are whitespace-separated tokens, binary files packed
 //! values). Elements after `vertex` are not read.
+//!
+//! The file is long because its unit tests sit beside the code they check (as everywhere in
+//! rgm); the code itself is one job, kept in one place.
 
 use std::io::Write;
 use std::path::Path;

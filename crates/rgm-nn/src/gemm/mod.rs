@@ -19,6 +19,9 @@
 //!    `alpha · block + beta · C` then goes into the matching (clipped) block of C.
 //!
 //! Packing reads A and B in the order they lie in memory, so transposed views cost the same.
+//!
+//! The file is long because its unit tests sit beside the code they check (as everywhere in
+//! rgm); the code itself is one job, kept in one place.
 
 #[cfg(target_arch = "x86_64")]
 mod f32_avx512;
