@@ -17,7 +17,7 @@ use anyhow::{Context, Result};
 use rayon::prelude::*;
 use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
 use rgm_geom::refine::RefineConfig;
-use rgm_geom::registrar::Normalised;
+use rgm_geom::registrar::{MethodId, Normalised};
 use rgm_model::evaluate::{evaluate_pair, table_header, table_row};
 use rgm_model::weights::{weights_dir, Manifest, ModelEntry};
 use rgm_model::{Method, MethodName, MethodOptions, PairRecord, Registrar, Summary};
@@ -240,13 +240,31 @@ fn test_shapes(dataset: &ModelNet40, set: TestSet, limit: Option<usize>) -> Vec<
 }
 
 /// ICP or FGR (refined when `refine`) as `rgm register --method` builds it.
-fn classical(method: MethodName, refine: bool) -> Result<Method> {
-    Ok(MethodOptions {
+/// Its row is named as the method names itself, its files with `-` for `+`.
+fn classical(method: MethodName, refine: bool) -> Result<Candidate> {
+    let method = MethodOptions {
         method,
         refine,
         ..MethodOptions::default()
     }
-    .build()?)
+    .build()?;
+    Ok(Candidate {
+        name: method.name(),
+        stem: method.name().replace('+', "-"),
+        variant: None,
+        pairs_seen: None,
+        method,
+    })
+}
+
+/// The name of `rgm register`'s default row (RGM and FGR, refined), known before its weights
+/// are read.
+fn default_row() -> String {
+    MethodId {
+        base: rgm_model::options::AUTO,
+        refined: true,
+    }
+    .to_string()
 }
 
 /// The methods of the tables of `set`: ICP and FGR (identity initialisation, Open3D's
@@ -262,34 +280,16 @@ fn classical(method: MethodName, refine: bool) -> Result<Method> {
 fn candidates(set: TestSet, manifest: &Manifest, only: &[String]) -> Result<Vec<Candidate>> {
     let wanted = |name: &str| only.is_empty() || only.iter().any(|o| o == name);
     let mut list = vec![
-        Candidate {
-            name: "icp".into(),
-            stem: "icp".into(),
-            variant: None,
-            pairs_seen: None,
-            method: classical(MethodName::Icp, false)?,
-        },
-        Candidate {
-            name: "fgr".into(),
-            stem: "fgr".into(),
-            variant: None,
-            pairs_seen: None,
-            method: classical(MethodName::Fgr, false)?,
-        },
+        classical(MethodName::Icp, false)?,
+        classical(MethodName::Fgr, false)?,
     ];
     if set.setting == Setting::Partial {
-        list.push(Candidate {
-            name: "fgr+icp".into(),
-            stem: "fgr-icp".into(),
-            variant: None,
-            pairs_seen: None,
-            method: classical(MethodName::Fgr, true)?,
-        });
+        list.push(classical(MethodName::Fgr, true)?);
     }
     // `rgm register`'s default on every test set, named by the built-in model it runs.
-    if let Some(builtin) = manifest.builtin_entry().filter(|_| wanted("auto+icp")) {
+    if let Some(builtin) = manifest.builtin_entry().filter(|_| wanted(&default_row())) {
         list.push(Candidate {
-            name: "auto+icp".into(),
+            name: default_row(),
             stem: format!("auto-{}-{}pairs-icp", builtin.name, builtin.pairs_seen),
             variant: None,
             pairs_seen: None,
@@ -315,8 +315,22 @@ fn candidates(set: TestSet, manifest: &Manifest, only: &[String]) -> Result<Vec<
 
 /// An error naming the rows of `only` that no test set has.
 fn check_only(manifest: &Manifest, only: &[String]) -> Result<()> {
-    let known: Vec<&str> = ["icp", "fgr", "fgr+icp", "auto+icp"]
-        .into_iter()
+    let classical = [
+        (MethodName::Icp, false),
+        (MethodName::Fgr, false),
+        (MethodName::Fgr, true),
+    ]
+    .map(|(name, refined)| {
+        MethodId {
+            base: name.name(),
+            refined,
+        }
+        .to_string()
+    });
+    let rows: Vec<String> = classical.into_iter().chain([default_row()]).collect();
+    let known: Vec<&str> = rows
+        .iter()
+        .map(String::as_str)
         .chain(manifest.models.iter().map(|m| m.name.as_str()))
         .collect();
     let unknown: Vec<&str> = only
@@ -326,8 +340,9 @@ fn check_only(manifest: &Manifest, only: &[String]) -> Result<()> {
         .collect();
     anyhow::ensure!(
         unknown.is_empty(),
-        "--only {}: no such row (the rows are icp, fgr, fgr+icp, auto+icp and the models of the manifest)",
-        unknown.join(",")
+        "--only {}: no such row (the rows are {} and the models of the manifest)",
+        unknown.join(","),
+        rows.join(", ")
     );
     Ok(())
 }
