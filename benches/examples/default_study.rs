@@ -381,7 +381,19 @@ fn cascade(
     );
     println!("|---|---:|---:|---:|---:|---:|");
     for (first, name) in [(1, "fgr+icp"), (0, "rgm+icp")] {
-        for threshold in [0.0, 0.3, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.1, 1.2, f64::INFINITY] {
+        for threshold in [
+            0.0,
+            0.3,
+            0.5,
+            0.6,
+            0.7,
+            0.8,
+            0.9,
+            1.0,
+            1.1,
+            1.2,
+            f64::INFINITY,
+        ] {
             let mut outcomes = Vec::new();
             let (mut ms, mut second) = (0.0, 0);
             for tried in &pairs {
