@@ -55,6 +55,10 @@ pub struct Args {
     /// Worker threads, each with its own copy of the method [default: every core].
     #[arg(long, value_name = "N")]
     threads: Option<usize>,
+    /// The commit this tree is, for a copy of it without its git history (another machine);
+    /// by default `git rev-parse`, marked when the code has uncommitted changes.
+    #[arg(long, value_name = "REV")]
+    commit: Option<String>,
 }
 
 /// One protocol of test pairs (spec §1): a setting on the whole test split or on the unseen
@@ -168,7 +172,7 @@ pub fn run(args: Args) -> Result<()> {
             .num_threads(threads)
             .build()?,
     };
-    let (load_before, commit_before) = (load_average(), commit());
+    let (load_before, commit_before) = (load_average(), commit(args.commit.as_deref()));
     let dataset = ModelNet40::open(&data)
         .with_context(|| format!("opening ModelNet40 at {}", data.display()))?;
     let manifest_path = weights_dir().join("manifest.json");
@@ -649,8 +653,12 @@ fn command_line(args: &Args) -> String {
     command
 }
 
-/// The commit the tables were made at, marked when the working tree differs from it.
-fn commit() -> String {
+/// The commit the tables were made at (`given`, or git's), marked when the working tree
+/// differs from it.
+fn commit(given: Option<&str>) -> String {
+    if let Some(rev) = given {
+        return format!("`{rev}` (a copy of its tree, without git)");
+    }
     let git = |args: &[&str]| {
         Command::new("git")
             .args(args)
