@@ -4,7 +4,7 @@
 //! ```text
 //! cargo run --release -p rgm-benches --example default_study -- --data DIR \
 //!     [--setting partial] [--limit 300] [--stride 1] [--offset 0] [--split validation] \
-//!     [--frame native|centred] [--study choices|robustness] \
+//!     [--frame native|centred] [--study choices|cascade|robustness] \
 //!     [--versions 'as they are,half size,twice the size,20000 points each']
 //! ```
 //!
@@ -12,12 +12,13 @@
 //! The splits are ordered by category (the first 200 partial test pairs are airplanes, bathtubs
 //! and beds), so a sample meant to speak for a split takes a stride, not its first pairs.
 //!
-//! `--study cascade` runs `rgm register`'s default on each pair and, from its two candidates'
-//! overlap scores, outcomes and times, prints what a cascade would give: the cheap candidate
-//! first, the other only when the first's score (0 to 2; a partial pair registered right
-//! scores about 1) is below a threshold (then the better of the two, as the default picks), for
-//! each order and threshold. Run it on one thread (`RAYON_NUM_THREADS=1`) so that each
-//! candidate's time is its own.
+//! `--study cascade` runs `rgm register`'s default with both candidates on each pair and, from
+//! their overlap scores, outcomes and times, prints what a cascade would give: FGR first, the
+//! network only when FGR's score (0 to 2; a partial pair registered right scores about 1) is
+//! below a threshold or its turned share (`rgm_geom::best_of::turned_share`) above a limit (then
+//! the better of the two, as the default picks). Run it on one thread (`RAYON_NUM_THREADS=1`)
+//! so that each candidate's time is its own. `--dump FILE` writes each pair's scores, outcomes,
+//! times and turned share to FILE, one line per pair.
 //!
 //! `--study robustness` instead runs `rgm register`'s default on each pair as it is, at half
 //! and at twice its size, and with each cloud made of 20,000 points (every point repeated, with
@@ -33,8 +34,9 @@
 use std::time::Instant;
 
 use rgm_data::{ModelNet40, PairGenerator, Setting, Split};
+use rgm_geom::best_of::turned_share;
 use rgm_geom::fgr::{self, FgrConfig};
-use rgm_geom::frame::Normalisation;
+use rgm_geom::frame::{near, Normalisation};
 use rgm_geom::metrics::PairMetrics;
 use rgm_geom::refine::{self, RefineConfig};
 use rgm_geom::registration::score;
@@ -185,7 +187,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // tables' for the test split).
     let indices: Vec<usize> = (offset..shapes.len()).step_by(stride).take(limit).collect();
     if arg(&args, "--study").as_deref() == Some("cascade") {
-        return cascade(&generator, &shapes, &indices);
+        return cascade(&generator, &shapes, &indices, arg(&args, "--dump"));
     }
     if arg(&args, "--study").as_deref() == Some("robustness") {
         let versions = arg(&args, "--versions")
@@ -351,9 +353,20 @@ fn cascade(
     generator: &PairGenerator,
     shapes: &[&rgm_data::Shape],
     indices: &[usize],
+    dump: Option<String>,
 ) -> Result<(), Box<dyn std::error::Error>> {
-    let mut method = MethodOptions::default().build()?;
-    let mut pairs: Vec<[Tried; 2]> = Vec::new(); // (RGM's, FGR's) per pair
+    use std::io::Write;
+    // One line per pair for other thresholds: index, then per candidate (FGR, RGM) score,
+    // recall, MIE(R) and ms, then FGR's turned share.
+    let mut dump = dump.map(std::fs::File::create).transpose()?;
+    // Both candidates on every pair, FGR's first, so that any cascade can be read off.
+    let mut method = MethodOptions {
+        accept: f64::INFINITY,
+        ..MethodOptions::default()
+    }
+    .build()?;
+    // Per pair: FGR's and RGM's outcomes, and FGR's turned share.
+    let mut pairs: Vec<([Tried; 2], f64)> = Vec::new();
     for (done, &i) in indices.iter().enumerate() {
         let pair = generator.test_pair(shapes, i)?;
         let found = method.register(&pair.source, &pair.target)?;
@@ -370,45 +383,55 @@ fn cascade(
                 ms: c.time_ms,
             }
         };
-        pairs.push([tried(0), tried(1)]);
+        // FGR's transform in the frame where the default scores it.
+        let frame = Normalisation::of_pair(&pair.source, &pair.target);
+        let s = frame.source(&pair.source.select(&near(&pair.source)));
+        let t = frame.target(&pair.target.select(&near(&pair.target)));
+        let (si, ti) = (KnnIndex::new(&s.points), KnnIndex::new(&t.points));
+        let fgr = frame.redo(&found.candidates[0].t_target_source);
+        let turned = turned_share((&s, &si), (&t, &ti), &fgr);
+        let both = [tried(0), tried(1)];
+        if let Some(file) = &mut dump {
+            let fields: Vec<String> = both
+                .iter()
+                .map(|c| {
+                    format!(
+                        "{} {} {} {}",
+                        c.score, c.outcome.recall, c.outcome.mie_r, c.ms
+                    )
+                })
+                .collect();
+            writeln!(file, "{i} {} {turned}", fields.join(" "))?;
+        }
+        pairs.push((both, turned));
         if (done + 1) % 50 == 0 {
             eprintln!("{} of {} pairs", done + 1, indices.len());
         }
     }
     let n = pairs.len() as f64;
     println!(
-        "| first | threshold | recall | > 45° | ms / pair (candidates) | pairs running the second |"
+        "| threshold | turned share at most | recall | > 45° | ms / pair (candidates) | pairs running the network |"
     );
-    println!("|---|---:|---:|---:|---:|---:|");
-    for (first, name) in [(1, "fgr+icp"), (0, "rgm+icp")] {
-        for threshold in [
-            0.0,
-            0.3,
-            0.5,
-            0.6,
-            0.7,
-            0.8,
-            0.9,
-            1.0,
-            1.1,
-            1.2,
-            f64::INFINITY,
-        ] {
+    println!("|---:|---:|---:|---:|---:|---:|");
+    for threshold in [0.0, 0.3, 0.5, 0.6, 0.7, 0.8, 1.0, 1.2, f64::INFINITY] {
+        for turned_at_most in [f64::INFINITY, 1.0, 0.8, 0.6, 0.5, 0.4, 0.3] {
+            if threshold == f64::INFINITY && turned_at_most != f64::INFINITY {
+                continue;
+            }
             let mut outcomes = Vec::new();
             let (mut ms, mut second) = (0.0, 0);
-            for tried in &pairs {
-                let a = &tried[first];
-                ms += a.ms;
-                let pick = if a.score >= threshold {
-                    a
+            for ([fgr, rgm], turned) in &pairs {
+                ms += fgr.ms;
+                let pick = if fgr.score >= threshold && *turned <= turned_at_most {
+                    fgr
                 } else {
                     second += 1;
-                    ms += tried[1 - first].ms;
-                    // The default's choice: the higher score, ties to RGM.
-                    if tried[1].score > tried[0].score {
-                        &tried[1]
+                    ms += rgm.ms;
+                    // The default's choice: the higher score, ties to FGR (the earlier).
+                    if rgm.score > fgr.score {
+                        rgm
                     } else {
-                        &tried[0]
+                        fgr
                     }
                 };
                 outcomes.push(Outcome {
@@ -418,7 +441,7 @@ fn cascade(
             }
             let (recall, wild, _) = summary(&outcomes);
             println!(
-                "| {name} | {threshold} | {:.2} % | {:.2} % | {:.0} | {:.1} % |",
+                "| {threshold} | {turned_at_most} | {:.2} % | {:.2} % | {:.0} | {:.1} % |",
                 100.0 * recall,
                 100.0 * wild,
                 ms / n,

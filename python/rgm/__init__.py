@@ -120,7 +120,8 @@ class Registrar:
     process (a process pool's or a Dask worker), it loads its network there, once per process.
 
     Args:
-        method: ``"auto"`` (RGM and FGR, each refined, the better by its overlap score),
+        method: ``"auto"`` (FGR, and RGM where FGR's result overlaps too little, each
+            refined, the better by its overlap score),
             ``"rgm"`` (the RGM network), ``"fgr"`` (Fast Global Registration on FPFH features)
             or ``"icp"`` (point-to-point ICP from the identity). Default: the method of
             ``rgm register`` (``rgm.DEFAULT_METHOD``, ``"auto"``).
@@ -145,6 +146,9 @@ class Registrar:
             model's training size, 384; 1,024 with ``weights``.
         passes: RGM and auto only: passes of network, matching and Kabsch, each on the source moved by
             the passes before. Default: 2, as in the paper.
+        accept: auto only: take FGR's result without running the network when its overlap
+            score (both clouds' share of points on the other, 0 to 2) reaches this;
+            ``float("inf")`` runs both methods on every pair. Default: that of ``rgm register``.
 
     Raises:
         ValueError: an unknown method, preset or test_statistics; an RGM option with another
@@ -161,6 +165,7 @@ class Registrar:
         test_statistics: Optional[str] = None,
         match_points: Optional[int] = None,
         passes: Optional[int] = None,
+        accept: Optional[float] = None,
     ) -> None:
         self._settings = (
             str(method),
@@ -170,6 +175,7 @@ class Registrar:
             test_statistics,
             None if match_points is None else int(match_points),
             None if passes is None else int(passes),
+            None if accept is None else float(accept),
         )
         if match_points is not None and int(match_points) < 0:
             raise ValueError(f"match_points must be at least 0, got {match_points}")

@@ -19,6 +19,7 @@ class Registrar:
         test_statistics: Optional[str],
         match_points: Optional[int],
         passes: Optional[int],
+        accept: Optional[float],
     ) -> None: ...
     @property
     def name(self) -> str: ...

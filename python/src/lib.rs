@@ -235,7 +235,7 @@ impl Registrar {
     /// Builds the method of `rgm_model::MethodOptions` from these options (`None`: its
     /// default) and loads its weights.
     #[new]
-    #[pyo3(signature = (method, refine, weights, preset, test_statistics, match_points, passes))]
+    #[pyo3(signature = (method, refine, weights, preset, test_statistics, match_points, passes, accept))]
     #[allow(clippy::too_many_arguments)] // one per option of `rgm.Registrar`
     fn new(
         py: Python<'_>,
@@ -246,6 +246,7 @@ impl Registrar {
         test_statistics: Option<String>,
         match_points: Option<usize>,
         passes: Option<usize>,
+        accept: Option<f64>,
     ) -> PyResult<Self> {
         let test_statistics = match test_statistics.as_deref() {
             None => None,
@@ -265,6 +266,7 @@ impl Registrar {
             match_points,
             passes,
             refine,
+            accept: accept.unwrap_or(MethodOptions::default().accept),
             ..MethodOptions::default()
         };
         let pool = pool()?;

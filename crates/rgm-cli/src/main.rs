@@ -124,6 +124,11 @@ pub struct MethodArgs {
     /// stays f32).
     #[arg(long, value_name = "f32|bf16", default_value_t = MethodOptions::default().precision)]
     precision: Precision,
+    /// auto: take FGR's result without running the network when its overlap score (both
+    /// clouds' share of points on the other, 0 to 2) reaches SCORE and the shape does not fit as
+    /// well turned about one of its axes; `inf` runs both methods on every pair (slower).
+    #[arg(long, value_name = "SCORE", default_value_t = MethodOptions::default().accept)]
+    accept: f64,
 }
 
 /// The help of --refine, with the distances of [`RefineConfig::default`].
@@ -179,6 +184,7 @@ impl MethodArgs {
             passes: self.passes.map(usize::from),
             precision: checked_precision(self.precision),
             refine,
+            accept: self.accept,
         };
         Ok(options.build()?)
     }

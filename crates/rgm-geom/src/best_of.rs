@@ -26,6 +26,49 @@ pub const SCORE_DISTANCE: f64 = 0.02;
 /// registered ([`Registration::doubt`]) rather than with a transform nothing supports.
 pub const MIN_OVERLAP: f64 = 0.1;
 
+/// When `rgm register`'s default takes its cheap candidate (FGR) without running the network
+/// ([`BestOf::accept`]): the cheapest on validation pairs that kept the recall and the share off
+/// by more than 45° of running both within 0.1 points (`docs/training/default-study/`).
+pub const ACCEPT: Acceptance = Acceptance {
+    score: 0.55,
+    turned_share: 0.3,
+};
+
+/// When a cascade's result is good enough to end it ([`BestOf::accept`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Acceptance {
+    /// The least [`overlap_score`] taken.
+    pub score: f64,
+    /// The largest [`turned_share`] taken: above it the shape overlaps itself turned about an
+    /// axis (a lamp, a box), the overlap cannot tell its pose, and the later candidates run.
+    pub turned_share: f64,
+}
+
+impl Acceptance {
+    /// Nothing is good enough: every candidate runs.
+    pub const NEVER: Self = Self {
+        score: f64::INFINITY,
+        turned_share: 0.0,
+    };
+
+    /// Whether `transform`, which scores `score` on the pair, ends the cascade; its
+    /// [`turned_share`] is measured on `thinned`, the pair as the candidates saw it (at most a
+    /// few thousand points, whatever the pair's density).
+    pub fn takes(
+        &self,
+        score: f64,
+        thinned: (&PointCloud, &PointCloud),
+        transform: &RigidTransform,
+    ) -> bool {
+        if score < self.score {
+            return false;
+        }
+        let (s, t) = thinned;
+        let (si, ti) = (KnnIndex::new(&s.points), KnnIndex::new(&t.points));
+        turned_share((s, &si), (t, &ti), transform) <= self.turned_share
+    }
+}
+
 /// How close the candidates' transforms (unit-sphere frame) on a dense pair's first thinning
 /// must be for the next thinning to be skipped: (degrees, distance).
 pub const AGREEMENT: (f64, f64) = (1.0, 0.02);
@@ -50,6 +93,43 @@ pub fn overlap_score(
     there.fitness + back.fitness
 }
 
+/// How little `transform`'s overlap tells the shape's pose: the best [`overlap_score`] of the
+/// source first turned by a quarter, a half or three quarters about one of its principal axes
+/// (through its centroid), as a share of `transform`'s own. Near 1 or above, a pose turned
+/// about that axis fits as well, as for a symmetric shape.
+pub fn turned_share(
+    source: (&PointCloud, &KnnIndex),
+    target: (&PointCloud, &KnnIndex),
+    transform: &RigidTransform,
+) -> f64 {
+    let score = overlap_score(source, target, transform);
+    if source.0.len() < 3 || score <= 0.0 {
+        return f64::INFINITY;
+    }
+    let centre = source.0.centroid();
+    let mut covariance = crate::Matrix3::zeros();
+    for p in &source.0.points {
+        let d = p - centre;
+        covariance += d * d.transpose();
+    }
+    let axes = covariance.symmetric_eigen().eigenvectors; // (3, 3), one axis a column
+    let mut best: f64 = 0.0;
+    for axis in axes.column_iter() {
+        let axis = nalgebra::Unit::new_normalize(axis.into_owned());
+        for quarters in 1..4 {
+            let turn = nalgebra::Rotation3::from_axis_angle(
+                &axis,
+                quarters as f64 * std::f64::consts::FRAC_PI_2,
+            )
+            .into_inner();
+            // About the centroid: p ↦ c + R (p − c).
+            let about = RigidTransform::new(turn, centre.coords - turn * centre.coords);
+            best = best.max(overlap_score(source, target, &transform.compose(&about)));
+        }
+    }
+    best / score
+}
+
 /// Two transforms within [`AGREEMENT`] of each other: rotations less than its degrees apart,
 /// and moving the frame's origin to points less than its distance apart.
 pub fn agree(a: &RigidTransform, b: &RigidTransform) -> bool {
@@ -64,6 +144,9 @@ pub fn agree(a: &RigidTransform, b: &RigidTransform) -> bool {
 /// scored alike on the clouds as given, until the candidates of one thinning agree ([`agree`]),
 /// which leaves nothing for the next to fix. A pair no denser runs once, as it is.
 ///
+/// With an [`Acceptance`] of a finite score it is a cascade: the first candidate runs alone, and
+/// the others only when its result is not taken.
+///
 /// Lengths are in unit-sphere units: wrap it in [`crate::registrar::Normalised`] for pairs of
 /// any size. The result is scored at `scoring_distance`; its correspondences are the source
 /// points within that distance of the target.
@@ -71,9 +154,13 @@ pub fn agree(a: &RigidTransform, b: &RigidTransform) -> bool {
 pub struct BestOf<E> {
     /// The name of the composite (`auto`).
     pub base: &'static str,
+    /// In the order they run and win ties: the cheap one first in a cascade.
     pub candidates: Vec<Box<dyn DynRegistrar<E>>>,
     pub thinnings: Vec<Thinning>,
     pub scoring_distance: f64,
+    /// When a result is taken as it is, and nothing after it runs; [`Acceptance::NEVER`] runs
+    /// every candidate, side by side.
+    pub accept: Acceptance,
 }
 
 impl<E: 'static> Clone for BestOf<E> {
@@ -83,6 +170,7 @@ impl<E: 'static> Clone for BestOf<E> {
             candidates: self.candidates.clone(),
             thinnings: self.thinnings.clone(),
             scoring_distance: self.scoring_distance,
+            accept: self.accept,
         }
     }
 }
@@ -115,54 +203,67 @@ impl<E: From<GeomError> + ToString + Send> Registrar<E> for BestOf<E> {
         } else {
             &self.thinnings[..1.min(self.thinnings.len())]
         };
+        // The candidates that run together: all of them, or in a cascade the first alone and
+        // then the rest.
+        let n = self.candidates.len();
+        let waves = if self.accept.score.is_finite() && n > 1 {
+            vec![0..1, 1..n]
+        } else {
+            vec![0..n]
+        };
         let mut candidates = Vec::new();
         let mut best: Option<Best> = None;
         let mut chosen = None;
-        for &how in thinnings {
+        'thinnings: for &how in thinnings {
             let (s, t) = (thinned(source, how), thinned(target, how));
-            // The candidates are independent until scored: they run side by side, each on a
-            // core of its own when there are cores to spare, and are scored in their order.
-            let outcomes: Vec<(Result<Registration, E>, f64)> = self
-                .candidates
-                .par_iter_mut()
-                .map(|candidate| {
-                    let start = Instant::now();
-                    let outcome = candidate.register(&s, &t);
-                    (outcome, elapsed_ms(start))
-                })
-                .collect();
-            let mut found = Vec::with_capacity(outcomes.len()); // this thinning's transforms
-            for (candidate, (outcome, time_ms)) in self.candidates.iter().zip(outcomes) {
-                let method = format!("{}{}", candidate.id(), how.suffix());
-                match outcome {
-                    Ok(registration) => {
-                        let transform = registration.result.t_target_source;
-                        found.push(transform);
-                        let value = overlap_score(
-                            (source, &source_index),
-                            (target, &target_index),
-                            &transform,
-                        );
-                        // Ties go to the earlier candidate, and the earlier thinning.
-                        if best.is_none_or(|(b, _, _)| value > b) {
-                            best = Some((value, transform, registration.result.iterations));
-                            chosen = Some(candidates.len());
+            let mut found = Vec::with_capacity(n); // this thinning's transforms
+            for wave in waves.iter().cloned() {
+                // The candidates of a wave are independent until scored: they run side by
+                // side, each on a core of its own when there are cores to spare, and are
+                // scored in their order.
+                let outcomes: Vec<(Result<Registration, E>, f64)> = self.candidates[wave.clone()]
+                    .par_iter_mut()
+                    .map(|candidate| {
+                        let start = Instant::now();
+                        let outcome = candidate.register(&s, &t);
+                        (outcome, elapsed_ms(start))
+                    })
+                    .collect();
+                for (candidate, (outcome, time_ms)) in self.candidates[wave].iter().zip(outcomes) {
+                    let method = format!("{}{}", candidate.id(), how.suffix());
+                    match outcome {
+                        Ok(registration) => {
+                            let transform = registration.result.t_target_source;
+                            found.push(transform);
+                            let value = overlap_score(
+                                (source, &source_index),
+                                (target, &target_index),
+                                &transform,
+                            );
+                            // Ties go to the earlier candidate, and the earlier thinning.
+                            if best.is_none_or(|(b, _, _)| value > b) {
+                                best = Some((value, transform, registration.result.iterations));
+                                chosen = Some(candidates.len());
+                            }
+                            candidates.push(Candidate {
+                                method,
+                                t_target_source: transform,
+                                score: Some(value),
+                                failure: None,
+                                time_ms,
+                            });
                         }
-                        candidates.push(Candidate {
+                        Err(err) => candidates.push(Candidate {
                             method,
-                            t_target_source: transform,
-                            score: Some(value),
-                            failure: None,
+                            t_target_source: RigidTransform::identity(),
+                            score: None,
+                            failure: Some(err.to_string()),
                             time_ms,
-                        });
+                        }),
                     }
-                    Err(err) => candidates.push(Candidate {
-                        method,
-                        t_target_source: RigidTransform::identity(),
-                        score: None,
-                        failure: Some(err.to_string()),
-                        time_ms,
-                    }),
+                }
+                if best.is_some_and(|(b, found, _)| self.accept.takes(b, (&s, &t), &found)) {
+                    break 'thinnings;
                 }
             }
             if found.len() > 1 && found[1..].iter().all(|t| agree(&found[0], t)) {
@@ -220,6 +321,144 @@ mod tests {
         assert!(agree(&a, &turn(10.0, 0.119)));
         assert!(!agree(&a, &turn(11.1, 0.1)));
         assert!(!agree(&a, &turn(10.0, 0.121)));
+    }
+
+    /// A method that answers every pair with one transform, and counts its calls.
+    #[derive(Clone)]
+    struct Fixed {
+        name: &'static str,
+        transform: RigidTransform,
+        calls: std::sync::Arc<std::sync::atomic::AtomicUsize>,
+    }
+
+    impl Fixed {
+        fn new(name: &'static str, shift: f64) -> Self {
+            Self {
+                name,
+                transform: RigidTransform::new(
+                    crate::Matrix3::identity(),
+                    Vector3::new(shift, 0.0, 0.0),
+                ),
+                calls: Default::default(),
+            }
+        }
+
+        fn calls(&self) -> usize {
+            self.calls.load(std::sync::atomic::Ordering::SeqCst)
+        }
+    }
+
+    impl Registrar<GeomError> for Fixed {
+        fn id(&self) -> MethodId {
+            MethodId {
+                base: self.name,
+                refined: false,
+            }
+        }
+
+        fn register_with_progress(
+            &mut self,
+            _: &PointCloud,
+            _: &PointCloud,
+            _: &mut dyn FnMut(Progress),
+        ) -> Result<Registration, GeomError> {
+            self.calls.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+            let result = RegistrationResult {
+                t_target_source: self.transform,
+                iterations: 0,
+                converged: true,
+                inlier_count: 0,
+                fitness: 0.0,
+                inlier_rmse: 0.0,
+            };
+            Ok(Registration::single(result, Vec::new(), Instant::now()))
+        }
+    }
+
+    #[test]
+    fn a_cascade_runs_the_rest_only_below_its_threshold() {
+        // 10 points 0.1 apart on a line, registered onto themselves: the identity overlaps
+        // fully (score 2), a shift of 0.05 not at all (score 0).
+        let line = PointCloud::new(
+            (0..10)
+                .map(|i| Point3::new(0.1 * i as f64, 0.0, 0.0))
+                .collect(),
+        );
+        let run = |first: &Fixed, second: &Fixed, accept: Acceptance| {
+            let mut best_of = BestOf::<GeomError> {
+                base: "both",
+                candidates: vec![Box::new(first.clone()), Box::new(second.clone())],
+                thinnings: vec![Thinning::Voxels],
+                scoring_distance: SCORE_DISTANCE,
+                accept,
+            };
+            best_of.register(&line, &line).unwrap()
+        };
+        let at = |score: f64| Acceptance {
+            score,
+            turned_share: f64::INFINITY,
+        };
+        // A first result at the threshold is taken; the second never runs.
+        let (right, wrong) = (Fixed::new("right", 0.0), Fixed::new("wrong", 0.05));
+        let found = run(&right, &wrong, at(2.0));
+        assert_eq!((found.candidates.len(), found.chosen), (1, Some(0)));
+        assert_eq!(found.candidates[0].score, Some(2.0));
+        assert_eq!((right.calls(), wrong.calls()), (1, 0));
+        // Below it the second runs, and the better wins.
+        let found = run(&wrong, &right, at(0.6));
+        let names: Vec<&str> = found.candidates.iter().map(|c| c.method.as_str()).collect();
+        assert_eq!((names, found.chosen), (vec!["wrong", "right"], Some(1)));
+        assert_eq!(found.result.t_target_source, right.transform);
+        // Never accepting runs both, however well the first does.
+        let found = run(&right, &wrong, Acceptance::NEVER);
+        assert_eq!((found.candidates.len(), found.chosen), (2, Some(0)));
+        assert_eq!((right.calls(), wrong.calls()), (3, 2));
+        // A line turned by half a turn about an axis across it is the same line: its pose is
+        // not told by the overlap, and a cascade that asks for a low turned share goes on.
+        let found = run(
+            &right,
+            &wrong,
+            Acceptance {
+                score: 2.0,
+                turned_share: 0.5,
+            },
+        );
+        assert_eq!((found.candidates.len(), found.chosen), (2, Some(0)));
+    }
+
+    #[test]
+    fn a_symmetric_shape_overlaps_itself_turned_and_an_irregular_one_does_not() {
+        let share = |points: Vec<Point3<f64>>| {
+            let cloud = PointCloud::new(points);
+            let index = KnnIndex::new(&cloud.points);
+            turned_share(
+                (&cloud, &index),
+                (&cloud, &index),
+                &RigidTransform::identity(),
+            )
+        };
+        // A box's corners: half a turn about any of its axes maps the box onto itself.
+        let mut corners = Vec::new();
+        for x in [-0.5, 0.5] {
+            for y in [-0.3, 0.3] {
+                for z in [-0.2, 0.2] {
+                    corners.push(Point3::new(x, y, z));
+                }
+            }
+        }
+        assert!((share(corners) - 1.0).abs() < 1e-12);
+        // Three arms of different lengths along the axes: no turn fits a point.
+        let arms: Vec<Point3<f64>> = (1..=10)
+            .flat_map(|i| {
+                let d = 0.05 * i as f64;
+                [
+                    Point3::new(d, 0.0, 0.0),
+                    Point3::new(0.0, 0.5 * d, 0.0),
+                    Point3::new(0.0, 0.0, 0.25 * d),
+                ]
+            })
+            .collect();
+        assert!(share(arms) < 0.2);
     }
 
     #[test]

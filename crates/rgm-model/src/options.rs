@@ -9,17 +9,18 @@
 //! | `icp` | [`IcpConfig`] (its own refinement) |
 //! | `fgr`, `fgr+icp` | [`FgrConfig`], [`Refined`]`<FgrConfig>` |
 //! | `rgm`, `rgm+icp` | [`Normalised`]`<RgmRegistrar>`, `Normalised<Refined<RgmRegistrar>>` |
-//! | `auto` | `Normalised<BestOf[Normalised<RgmRegistrar>, FgrConfig]>` |
-//! | `auto+icp` | `Normalised<AtResolution<BestOf[Refined<Normalised<RgmRegistrar>>, Refined<FgrConfig>]>>` |
+//! | `auto` | `Normalised<BestOf[FgrConfig, Normalised<RgmRegistrar>]>` |
+//! | `auto+icp` | `Normalised<AtResolution<BestOf[Refined<FgrConfig>, Refined<Normalised<RgmRegistrar>>]>>` |
 //!
 //! RGM refines in the network's frame (distances in unit-sphere units for any input); `auto`
-//! runs both methods in that frame, on two thinnings of a dense pair
+//! runs both methods in that frame, on two thinnings of a dense pair, as a cascade: FGR first,
+//! and the network only when FGR's result overlaps less than [`MethodOptions::accept`]
 //! ([`rgm_geom::best_of::BestOf`]).
 
 use std::path::PathBuf;
 use std::str::FromStr;
 
-use rgm_geom::best_of::{BestOf, SCORE_DISTANCE};
+use rgm_geom::best_of::{Acceptance, BestOf, ACCEPT, SCORE_DISTANCE};
 use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::icp::{self, IcpConfig};
 use rgm_geom::refine::{RefineConfig, ResolutionConfig};
@@ -45,8 +46,8 @@ pub enum MethodName {
     Fgr,
     /// The RGM network: the built-in model or given weights.
     Rgm,
-    /// RGM and FGR, each refined, and the better by a score without ground truth
-    /// ([`rgm_geom::best_of`]).
+    /// FGR, and RGM where FGR's result may be wrong, each refined, and the better by a score
+    /// without ground truth ([`rgm_geom::best_of`]).
     #[default]
     Auto,
 }
@@ -72,9 +73,10 @@ impl MethodName {
             Self::Fgr => "Fast Global Registration on FPFH features".into(),
             Self::Rgm => "The RGM network: the model built into rgm, or --weights".into(),
             Self::Auto => format!(
-                "RGM and FGR on the same pair, each refined, and the result that overlaps \
-                 better (both clouds' share of points within {SCORE_DISTANCE} of the other, in \
-                 the unit-sphere frame): `rgm register`'s default"
+                "FGR, then RGM when FGR's result overlaps less than --accept (both clouds' \
+                 share of points within {SCORE_DISTANCE} of the other, in the unit-sphere \
+                 frame), each refined, and the result that overlaps better: `rgm register`'s \
+                 default"
             ),
         }
     }
@@ -138,6 +140,10 @@ pub struct MethodOptions {
     /// ([`Method::refined`]); on by default, as in `rgm register` (the paper's protocol, and
     /// `rgm eval`, turn it off). ICP is its own refinement and ignores it.
     pub refine: bool,
+    /// `auto` takes FGR's result without running the network when it scores at least this
+    /// ([`rgm_geom::best_of::overlap_score`], 0 to 2) and does not fit as well turned
+    /// ([`ACCEPT`]); `f64::INFINITY` runs both on every pair.
+    pub accept: f64,
 }
 
 impl Default for MethodOptions {
@@ -152,6 +158,7 @@ impl Default for MethodOptions {
             passes: None,
             precision: Precision::F32,
             refine: true,
+            accept: ACCEPT.score,
         }
     }
 }
@@ -175,7 +182,13 @@ impl MethodOptions {
             (MethodName::Rgm, Some(refine)) => Method::new(Normalised {
                 inner: Refined::new(self.build_rgm()?, refine),
             }),
-            (MethodName::Auto, refine) => auto(self.build_rgm()?, refine),
+            (MethodName::Auto, refine) => {
+                let accept = Acceptance {
+                    score: self.accept,
+                    ..ACCEPT
+                };
+                auto(self.build_rgm()?, refine, accept)
+            }
         })
     }
 
@@ -195,6 +208,15 @@ impl MethodOptions {
         }
         if self.passes == Some(0) {
             return invalid("passes must be at least 1");
+        }
+        if self.method != MethodName::Auto && self.accept != ACCEPT.score {
+            return invalid("accept applies to the auto method only");
+        }
+        if self.accept.is_nan() || self.accept < 0.0 {
+            return invalid(&format!(
+                "accept must be a score of at least 0 (inf: always both), not {}",
+                self.accept
+            ));
         }
         Ok(())
     }
@@ -223,10 +245,11 @@ impl MethodOptions {
     }
 }
 
-/// `auto` (`auto+icp` with `refine`): RGM's candidate and FGR's in the network's frame, each
-/// refined with `refine`, the better by the overlap score on two thinnings of a dense pair, and
-/// the winner refined at a dense pair's own resolution.
-pub fn auto(rgm: RgmRegistrar, refine: Option<RefineConfig>) -> Method {
+/// `auto` (`auto+icp` with `refine`): FGR's candidate in the network's frame, and RGM's when
+/// `accept` does not take FGR's (the network is most of the time), each refined with `refine`;
+/// the better by the overlap score on two thinnings of a dense pair, and the winner refined at
+/// a dense pair's own resolution.
+pub fn auto(rgm: RgmRegistrar, refine: Option<RefineConfig>, accept: Acceptance) -> Method {
     let rgm = Normalised { inner: rgm };
     let fgr = FgrConfig::default();
     let best_of = |candidates: [Box<dyn DynRegistrar<MethodError>>; 2], scoring_distance| BestOf {
@@ -234,17 +257,18 @@ pub fn auto(rgm: RgmRegistrar, refine: Option<RefineConfig>) -> Method {
         candidates: candidates.into(),
         thinnings: vec![Thinning::Voxels, Thinning::Cells],
         scoring_distance,
+        accept,
     };
     let Some(refine) = refine else {
         return Method::new(Normalised {
-            inner: best_of([Box::new(rgm), Box::new(fgr)], SCORE_DISTANCE),
+            inner: best_of([Box::new(fgr), Box::new(rgm)], SCORE_DISTANCE),
         });
     };
     let finest = refine.finest_distance();
     let candidates = best_of(
         [
-            Box::new(Refined::new(rgm, refine.clone())),
-            Box::new(Refined::new(fgr, refine)),
+            Box::new(Refined::new(fgr, refine.clone())),
+            Box::new(Refined::new(rgm, refine)),
         ],
         finest,
     );

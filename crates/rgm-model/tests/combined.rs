@@ -1,5 +1,6 @@
 //! The combined method (`rgm register`'s default): the candidate that overlaps better wins, a
-//! failed candidate leaves the other, and the pair's size does not matter.
+//! result that overlaps enough spares the network, a failed candidate leaves the other, and the
+//! pair's size does not matter.
 
 use std::path::PathBuf;
 
@@ -35,20 +36,63 @@ fn clean_pair() -> rgm_data::Pair {
         .unwrap()
 }
 
+/// `auto+icp` with the tiny network, both candidates on every pair.
 fn combined() -> Method {
-    rgm_model::options::auto(tiny_rgm(), Some(RefineConfig::default()))
+    let never = rgm_geom::best_of::Acceptance::NEVER;
+    rgm_model::options::auto(tiny_rgm(), Some(RefineConfig::default()), never)
+}
+
+/// `rgm register`'s default, but both candidates on every pair.
+fn both_candidates() -> Method {
+    MethodOptions {
+        accept: f64::INFINITY,
+        ..MethodOptions::default()
+    }
+    .build()
+    .unwrap()
 }
 
 #[test]
-fn the_candidate_that_overlaps_better_wins() {
-    // rgm register's default on a clean pair: both candidates register it; the one with the
-    // higher two-way overlap is returned, scored on the clouds as given.
+fn a_first_result_that_overlaps_enough_spares_the_network() {
+    // FGR registers the clean pair: its result overlaps nearly every point both ways, above
+    // the default's threshold, so the network does not run.
     let pair = clean_pair();
     let mut method = MethodOptions::default().build().unwrap();
     assert_eq!(method.name(), "auto+icp");
     let found = method.register(&pair.source, &pair.target).unwrap();
     let names: Vec<&str> = found.candidates.iter().map(|c| c.method.as_str()).collect();
-    assert_eq!(names, ["rgm+icp", "fgr+icp"]);
+    assert_eq!(names, ["fgr+icp"]);
+    assert!(found.candidates[0].score.unwrap() > 1.9, "{found:?}");
+    assert_eq!(found.chosen, Some(0));
+    let metrics = PairMetrics::compute(
+        &found.result.t_target_source,
+        &pair.t_target_source,
+        &pair.source,
+        &pair.target,
+    )
+    .unwrap();
+    assert!(metrics.recall && metrics.mie_r_deg < 0.05, "{metrics:?}");
+    // A threshold above any score (at most 2) runs the network too.
+    let mut method = MethodOptions {
+        accept: 2.5,
+        ..MethodOptions::default()
+    }
+    .build()
+    .unwrap();
+    let found = method.register(&pair.source, &pair.target).unwrap();
+    assert_eq!(found.candidates.len(), 2);
+}
+
+#[test]
+fn the_candidate_that_overlaps_better_wins() {
+    // Both candidates register the clean pair; the one with the higher two-way overlap is
+    // returned, scored on the clouds as given.
+    let pair = clean_pair();
+    let mut method = both_candidates();
+    assert_eq!(method.name(), "auto+icp");
+    let found = method.register(&pair.source, &pair.target).unwrap();
+    let names: Vec<&str> = found.candidates.iter().map(|c| c.method.as_str()).collect();
+    assert_eq!(names, ["fgr+icp", "rgm+icp"]);
     let scores: Vec<f64> = found.candidates.iter().map(|c| c.score.unwrap()).collect();
     let chosen = found.chosen.unwrap();
     assert!(
@@ -81,23 +125,23 @@ fn a_failed_candidate_leaves_the_other_and_both_failing_names_both() {
     let found = method
         .register(&few(&pair.source), &few(&pair.target))
         .unwrap();
-    let rgm = &found.candidates[0];
+    let rgm = &found.candidates[1];
     assert!(rgm.score.is_none(), "{rgm:?}");
     assert!(
         rgm.failure.as_deref().unwrap().contains("needs at least 5"),
         "{rgm:?}"
     );
-    assert_eq!(found.chosen, Some(1));
+    assert_eq!(found.chosen, Some(0));
     assert_eq!(
         found.result.t_target_source,
-        found.candidates[1].t_target_source
+        found.candidates[0].t_target_source
     );
     // Empty clouds: neither can run.
     let empty = PointCloud::default();
     match method.register(&empty, &empty) {
         Err(MethodError::Geom(GeomError::AllCandidatesFailed(why))) => {
             assert!(
-                why.contains("rgm+icp: ") && why.contains("fgr+icp: "),
+                why.contains("fgr+icp: ") && why.contains("rgm+icp: "),
                 "{why}"
             );
         }
@@ -160,10 +204,10 @@ fn a_dense_pair_whose_methods_agree_is_thinned_once_and_refined_at_its_resolutio
     };
     let (source, target) = (dense(&pair.source), dense(&pair.target));
     assert_eq!(source.len(), 4096);
-    let mut method = MethodOptions::default().build().unwrap();
+    let mut method = both_candidates();
     let found = method.register(&source, &target).unwrap();
     let names: Vec<&str> = found.candidates.iter().map(|c| c.method.as_str()).collect();
-    assert_eq!(names, ["rgm+icp", "fgr+icp"]);
+    assert_eq!(names, ["fgr+icp", "rgm+icp"]);
     let scores: Vec<f64> = found.candidates.iter().map(|c| c.score.unwrap()).collect();
     let chosen = found.chosen.unwrap();
     assert!(scores.iter().all(|&s| s <= scores[chosen]), "{scores:?}");
