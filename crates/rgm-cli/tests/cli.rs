@@ -383,22 +383,34 @@ fn register_runs_rgm_with_the_built_in_model() {
 }
 
 #[test]
-fn register_by_default_runs_rgm_and_fgr_and_names_the_winner() {
+fn register_by_default_runs_fgr_first_and_rgm_when_asked_and_names_the_winner() {
     let dir = scratch("auto");
     let (src, tgt) = known_pair(&dir);
     let (src, tgt) = (src.to_str().unwrap(), tgt.to_str().unwrap());
+    let names = |out: &serde_json::Value| -> Vec<String> {
+        out["candidates"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c["method"].as_str().unwrap().to_string())
+            .collect()
+    };
+    // FGR's result is taken: it overlaps nearly every point and no turned pose as well.
     let out: serde_json::Value =
         serde_json::from_str(&stdout(&rgm(&["register", src, tgt, "--json"]))).unwrap();
     assert_eq!(
         (&out["method"], &out["refined"]),
         (&"auto+icp".into(), &true.into())
     );
+    assert_eq!(names(&out), ["fgr+icp"]);
+    assert_eq!(out["chosen"], "fgr+icp");
+    // --accept inf runs both.
+    let out: serde_json::Value = serde_json::from_str(&stdout(&rgm(&[
+        "register", src, tgt, "--json", "--accept", "inf",
+    ])))
+    .unwrap();
+    assert_eq!(names(&out), ["fgr+icp", "rgm+icp"]);
     let candidates = out["candidates"].as_array().unwrap();
-    let names: Vec<&str> = candidates
-        .iter()
-        .map(|c| c["method"].as_str().unwrap())
-        .collect();
-    assert_eq!(names, ["rgm+icp", "fgr+icp"]);
     let chosen = candidates
         .iter()
         .find(|c| c["method"] == out["chosen"])
@@ -419,7 +431,7 @@ fn register_by_default_runs_rgm_and_fgr_and_names_the_winner() {
         residual.translation.norm()
     );
     // The text output lists both, the winner marked.
-    let text = stdout(&rgm(&["register", src, tgt]));
+    let text = stdout(&rgm(&["register", src, tgt, "--accept", "inf"]));
     assert!(
         text.contains("# candidate rgm+icp: overlap score"),
         "{text}"
@@ -438,6 +450,14 @@ fn rgm_options_with_another_method_are_refused() {
             "apply to the rgm and auto methods only",
         ),
         (["--method", "icp", "--refine", "--json"], "ICP already"),
+        (
+            ["--method", "rgm", "--accept", "1"],
+            "accept applies to the auto method only",
+        ),
+        (
+            ["--method", "auto", "--accept=-1", "--json"],
+            "accept must be a score of at least 0",
+        ),
     ] {
         let out = rgm(&[&["register", src, tgt][..], &args[..]].concat());
         assert!(!out.status.success());
