@@ -3,22 +3,22 @@
 //! partial and unseen-category test pairs — written to `docs/results.md` with per-pair JSON
 //! and figures.
 //!
-//! Resumable: every finished chunk of pairs is appended to its method's per-pair file at once,
-//! and a later run computes only the pairs that are missing there.
+//! Resumable ([`rgm_model::evaluate::Resumable`]): every finished chunk of pairs is appended to
+//! its method's per-pair file at once, and a later run computes only the pairs that are missing
+//! there. This file chooses the rows and writes the report.
 
 use std::collections::BTreeMap;
 use std::fs;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
-use rayon::prelude::*;
+use rgm_cli::EvaluationBar;
 use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
 use rgm_geom::refine::RefineConfig;
 use rgm_geom::registrar::{MethodId, Normalised};
-use rgm_model::evaluate::{evaluate_pair, table_header, table_row};
+use rgm_model::evaluate::{table_header, table_row, Resumable, TestPairs};
 use rgm_model::weights::{weights_dir, Manifest, ModelEntry};
 use rgm_model::{Method, MethodName, MethodOptions, PairRecord, Registrar, Summary};
 use rgm_viz::{correct_fraction, correspondence_figure, registration_figure};
@@ -132,12 +132,11 @@ struct Row {
 /// The rows of every test set, by its key.
 type Results = BTreeMap<String, Vec<Row>>;
 
-/// Where one invocation writes, and how long it may run.
+/// Where one invocation writes, and how it evaluates (its workers, its deadline).
 struct Run {
     out: PathBuf,
     limit: Option<usize>,
-    deadline: Option<Instant>,
-    pool: rayon::ThreadPool,
+    evaluation: Resumable,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -165,12 +164,14 @@ pub fn run(args: Args) -> Result<()> {
     let run = Run {
         out,
         limit: args.limit,
-        deadline: args
-            .minutes
-            .map(|m| Instant::now() + Duration::from_secs_f64(60.0 * m)),
-        pool: rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()?,
+        evaluation: Resumable {
+            pool: rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()?,
+            deadline: args
+                .minutes
+                .map(|m| Instant::now() + Duration::from_secs_f64(60.0 * m)),
+        },
     };
     let (load_before, commit_before) = (load_average(), commit(args.commit.as_deref()));
     let dataset = ModelNet40::open(&data)
@@ -184,18 +185,33 @@ pub fn run(args: Args) -> Result<()> {
     for set in TestSet::ALL {
         let shapes = test_shapes(&dataset, set, run.limit);
         let generator = PairGenerator::new(set.setting);
+        let pairs = TestPairs {
+            generator: &generator,
+            shapes: &shapes,
+        };
         let mut rows = Vec::new();
         for candidate in candidates(set, &manifest, &args.only)? {
-            let records = run.evaluate(set, &candidate, &shapes, &generator)?;
-            let matched = run.draw(set, &candidate, &records, &shapes, &generator, args.figures)?;
+            let records = run.evaluation.evaluate(
+                &run.records_path(set, &candidate.stem),
+                &candidate.method,
+                pairs,
+                &EvaluationBar::new(format!("{} {}", set.key(), candidate.name)),
+            )?;
+            let matched = run.draw(set, &candidate, &records, pairs, args.figures)?;
             // A trained model refined as `rgm eval --refine` refines it, from its own
             // transforms: the refinement alone is computed.
             let refined = match candidate.variant {
                 Some(_) => {
                     let stem = format!("{}-icp", candidate.stem);
                     let name = format!("{}+icp", candidate.name);
-                    let records = run.refine(set, &name, &stem, &records, &shapes, &generator)?;
-                    run.draw_clouds(set, &stem, &records, &shapes, &generator, args.figures)?;
+                    let records = run.evaluation.refine(
+                        &run.records_path(set, &stem),
+                        &records,
+                        &RefineConfig::default(),
+                        pairs,
+                        &EvaluationBar::new(format!("{} {name}", set.key())),
+                    )?;
+                    run.draw_clouds(set, &stem, &records, pairs, args.figures)?;
                     Some(Row {
                         name,
                         stem,
@@ -222,7 +238,7 @@ pub fn run(args: Args) -> Result<()> {
         results.insert(set.key(), rows);
     }
     let report = Report {
-        command: command_line(&args),
+        command: command_line(std::env::args()),
         commit: commit_before,
         threads,
         load: [load_before, load_average()],
@@ -410,117 +426,6 @@ impl Run {
             .join(format!("{stem}.jsonl"))
     }
 
-    /// Every pair of `shapes` evaluated with `candidate`, by pair index: those already in the
-    /// per-pair file are read back, the others computed in parallel chunks that are appended
-    /// as they finish. Fewer than all pairs when the deadline came first.
-    fn evaluate(
-        &self,
-        set: TestSet,
-        candidate: &Candidate,
-        shapes: &[&Shape],
-        generator: &PairGenerator,
-    ) -> Result<Vec<PairRecord>> {
-        self.records(
-            set,
-            &candidate.name,
-            &candidate.stem,
-            &(0..shapes.len()).collect::<Vec<_>>(),
-            || candidate.method.clone(),
-            |method, i| {
-                let pair = generator.test_pair(shapes, i)?;
-                Ok(evaluate_pair(method, i, &pair)?)
-            },
-        )
-    }
-
-    /// The records of `plain` (a trained model's) refined as `rgm eval --refine` refines them,
-    /// kept like [`Run::evaluate`]'s: the pairs of `plain` (sorted by pair index).
-    fn refine(
-        &self,
-        set: TestSet,
-        name: &str,
-        stem: &str,
-        plain: &[PairRecord],
-        shapes: &[&Shape],
-        generator: &PairGenerator,
-    ) -> Result<Vec<PairRecord>> {
-        let config = RefineConfig::default();
-        let indices: Vec<usize> = plain.iter().map(|r| r.index).collect();
-        self.records(
-            set,
-            name,
-            stem,
-            &indices,
-            || (),
-            |_, i| {
-                let start = &plain[indices.binary_search(&i).expect("an index of plain")];
-                let pair = generator.test_pair(shapes, i)?;
-                Ok(start.refined(&pair, &config)?)
-            },
-        )
-    }
-
-    /// The records of the pairs `indices` (sorted) in the per-pair file `stem` of `set`: those
-    /// already there read back, the others made by `compute` (with a state per worker from
-    /// `init`) in parallel chunks appended as they finish. Fewer when the deadline came first.
-    fn records<S>(
-        &self,
-        set: TestSet,
-        name: &str,
-        stem: &str,
-        indices: &[usize],
-        init: impl Fn() -> S + Sync + Send,
-        compute: impl Fn(&mut S, usize) -> Result<PairRecord> + Sync + Send,
-    ) -> Result<Vec<PairRecord>> {
-        let path = self.records_path(set, stem);
-        let mut records = read_records(&path)?;
-        records.retain(|r| indices.binary_search(&r.index).is_ok());
-        let done: std::collections::HashSet<usize> = records.iter().map(|r| r.index).collect();
-        let missing: Vec<usize> = indices
-            .iter()
-            .copied()
-            .filter(|i| !done.contains(i))
-            .collect();
-        if missing.is_empty() {
-            return Ok(records);
-        }
-        fs::create_dir_all(path.parent().expect("a file under results/"))?;
-        let mut file = fs::OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(&path)
-            .with_context(|| format!("opening {}", path.display()))?;
-        let bar = progress(
-            indices.len(),
-            records.len(),
-            &format!("{} {name}", set.key()),
-        );
-        let chunk = 4 * self.pool.current_num_threads();
-        for indices in missing.chunks(chunk) {
-            if self.deadline.is_some_and(|d| Instant::now() >= d) {
-                bar.abandon_with_message("stopped at the time limit");
-                break;
-            }
-            let found: Vec<PairRecord> = self.pool.install(|| {
-                indices
-                    .par_iter()
-                    .map_init(&init, |state, &i| compute(state, i))
-                    .collect::<Result<_>>()
-            })?;
-            let mut lines = String::new();
-            for record in &found {
-                lines += &serde_json::to_string(record)?;
-                lines.push('\n');
-            }
-            file.write_all(lines.as_bytes())?;
-            bar.inc(found.len() as u64);
-            records.extend(found);
-        }
-        bar.finish();
-        records.sort_by_key(|r| r.index);
-        Ok(records)
-    }
-
     /// For the first `count` pairs: the clouds before and after `candidate`'s transform
     /// ([`Run::draw_clouds`]) and, for an RGM model, its hard correspondences (the pair is
     /// registered again for them). Returns the share of correct hard correspondences of each
@@ -530,11 +435,10 @@ impl Run {
         set: TestSet,
         candidate: &Candidate,
         records: &[PairRecord],
-        shapes: &[&Shape],
-        generator: &PairGenerator,
+        pairs: TestPairs,
         count: usize,
     ) -> Result<BTreeMap<usize, f64>> {
-        self.draw_clouds(set, &candidate.stem, records, shapes, generator, count)?;
+        self.draw_clouds(set, &candidate.stem, records, pairs, count)?;
         let mut matched = BTreeMap::new();
         // The network's correspondences; a refined model's are its plain twin's.
         if candidate.method.id().base != rgm_model::pipeline::NAME || candidate.method.is_refined()
@@ -544,7 +448,7 @@ impl Run {
         let dir = self.out.join("figures").join(set.key());
         for record in records.iter().take(count) {
             let i = record.index;
-            let pair = generator.test_pair(shapes, i)?;
+            let pair = pairs.pair(i)?;
             let mut method = candidate.method.clone();
             // A failure leaves no correspondences: an empty matrix, 0 % correct.
             let found = method
@@ -567,15 +471,14 @@ impl Run {
         set: TestSet,
         stem: &str,
         records: &[PairRecord],
-        shapes: &[&Shape],
-        generator: &PairGenerator,
+        pairs: TestPairs,
         count: usize,
     ) -> Result<()> {
         let dir = self.out.join("figures").join(set.key());
         fs::create_dir_all(&dir)?;
         for record in records.iter().take(count) {
             let i = record.index;
-            let pair = generator.test_pair(shapes, i)?;
+            let pair = pairs.pair(i)?;
             let clouds = dir.join(format!("{stem}-pair{i}.png"));
             if !clouds.exists() {
                 registration_figure(&pair.source, &pair.target, &record.transform)?
@@ -591,37 +494,6 @@ impl Run {
     }
 }
 
-/// The records of a per-pair file (one JSON object per line); none when it does not exist.
-fn read_records(path: &Path) -> Result<Vec<PairRecord>> {
-    let text = match fs::read_to_string(path) {
-        Ok(text) => text,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
-        Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
-    };
-    text.lines()
-        .filter(|l| !l.trim().is_empty())
-        .enumerate()
-        .map(|(n, line)| {
-            serde_json::from_str(line).with_context(|| format!("{} line {}", path.display(), n + 1))
-        })
-        .collect()
-}
-
-/// A progress bar on stderr for `len` pairs of which `done` are finished.
-fn progress(len: usize, done: usize, what: &str) -> indicatif::ProgressBar {
-    let bar = indicatif::ProgressBar::new(len as u64);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{prefix:>24} [{bar:30}] {pos}/{len} ({elapsed}, eta {eta}) {msg}",
-        )
-        .expect("static template")
-        .progress_chars("=> "),
-    );
-    bar.set_prefix(what.to_string());
-    bar.set_position(done as u64);
-    bar
-}
-
 /// The 1-minute load average from /proc/loadavg (how busy the machine was).
 fn load_average() -> Option<f64> {
     fs::read_to_string("/proc/loadavg")
@@ -632,25 +504,24 @@ fn load_average() -> Option<f64> {
         .ok()
 }
 
-/// The command as typed, for the report.
-fn command_line(args: &Args) -> String {
-    let mut command = String::from("cargo xtask reproduce-tables");
-    if let Some(n) = args.limit {
-        command += &format!(" --limit {n}");
-    }
-    if !args.only.is_empty() {
-        command += &format!(" --only {}", args.only.join(","));
-    }
-    if args.figures != 2 {
-        command += &format!(" --figures {}", args.figures);
-    }
-    if let Some(m) = args.minutes {
-        command += &format!(" --minutes {m}");
-    }
-    if let Some(t) = args.threads {
-        command += &format!(" --threads {t}");
-    }
-    command
+/// The command as typed (`args`: the process's arguments, the program first), for the report:
+/// `cargo xtask` and the arguments, quoted for a shell where they need it.
+fn command_line(args: impl Iterator<Item = String>) -> String {
+    let quoted = args.skip(1).map(|arg| {
+        let plain = !arg.is_empty()
+            && arg
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || "-_./,=:+@%".contains(c));
+        if plain {
+            arg
+        } else {
+            format!("'{}'", arg.replace('\'', r"'\''"))
+        }
+    });
+    std::iter::once("cargo xtask".to_string())
+        .chain(quoted)
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 /// The commit the tables were made at (`given`, or git's), marked when the working tree
@@ -1106,22 +977,30 @@ mod tests {
     }
 
     #[test]
-    fn per_pair_files_are_read_back_line_by_line() {
-        let dir = std::env::temp_dir().join(format!("xtask-tables-{}", std::process::id()));
-        fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("icp.jsonl");
-        assert!(read_records(&path).unwrap().is_empty());
-        let lines: String = [record(3, true), record(1, false)]
-            .iter()
-            .map(|r| serde_json::to_string(r).unwrap() + "\n")
-            .collect();
-        fs::write(&path, lines + "\n").unwrap();
-        let back = read_records(&path).unwrap();
-        fs::write(&path, "{\"index\": 1}\n").unwrap();
-        let err = read_records(&path).unwrap_err();
-        fs::remove_dir_all(&dir).unwrap();
-        assert_eq!(back.iter().map(|r| r.index).collect::<Vec<_>>(), [3, 1]);
-        assert!(back[0].metrics.recall && !back[1].metrics.recall);
-        assert!(format!("{err:#}").contains("icp.jsonl line 1"), "{err:#}");
+    fn the_command_line_is_the_one_typed_quoted_where_a_shell_needs_it() {
+        let args = [
+            "target/debug/xtask",
+            "reproduce-tables",
+            "--only",
+            "icp,fgr+icp",
+        ]
+        .map(String::from);
+        assert_eq!(
+            command_line(args.into_iter()),
+            "cargo xtask reproduce-tables --only icp,fgr+icp"
+        );
+        let args = [
+            "xtask",
+            "reproduce-tables",
+            "--out",
+            "my results",
+            "--commit",
+            "it's",
+        ]
+        .map(String::from);
+        assert_eq!(
+            command_line(args.into_iter()),
+            r"cargo xtask reproduce-tables --out 'my results' --commit 'it'\''s'"
+        );
     }
 }

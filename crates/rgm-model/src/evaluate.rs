@@ -13,6 +13,10 @@ use rgm_geom::Registrar;
 
 use crate::Method;
 
+mod resumable;
+
+pub use resumable::{read_records, EvaluateError, Progress, Resumable, TestPairs};
+
 /// One test pair's outcome.
 #[derive(Clone, Debug)]
 pub struct PairRecord {
@@ -380,7 +384,7 @@ mod tests {
     use super::*;
     use rgm_geom::{MetricsSummary, Vector3};
 
-    fn record() -> PairRecord {
+    pub(super) fn record() -> PairRecord {
         let transform = RigidTransform::new(
             rgm_geom::euler::rotation_xyz_intrinsic(0.3, -0.2, 0.1),
             Vector3::new(0.1, 0.2, -0.3),
