@@ -9,6 +9,7 @@
 //! builds on it but the `rgm` command, xtask and the Python package (`python/`). It owns no
 //! geometry or tensor op of its own.
 
+mod by_name;
 pub mod error;
 pub mod evaluate;
 pub mod memory;

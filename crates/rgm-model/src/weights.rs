@@ -14,6 +14,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use rgm_data::Setting;
+
 use crate::error::MethodError;
 use crate::network::{Config, Edges, Rgm, Scoring, TestStatistics};
 use crate::pipeline::{PipelineConfig, RgmRegistrar};
@@ -32,11 +34,11 @@ pub fn weights_dir() -> PathBuf {
 }
 
 /// The network's structure: the full model or one of the ablations of spec §2.7.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
-#[serde(rename_all = "lowercase")]
 pub enum Variant {
     /// AIS scoring and transformer edges.
+    #[default]
     Rgm,
     /// Var1: distance scoring instead of AIS.
     Var1,
@@ -45,6 +47,17 @@ pub enum Variant {
 }
 
 impl Variant {
+    pub const ALL: [Variant; 3] = [Variant::Rgm, Variant::Var1, Variant::Var2];
+
+    /// Lower-case name, as the manifest and the command line spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Rgm => "rgm",
+            Self::Var1 => "var1",
+            Self::Var2 => "var2",
+        }
+    }
+
     /// `config` with this variant's scoring and edges (spec §2.7).
     pub fn apply(self, mut config: Config) -> Config {
         match self {
@@ -56,16 +69,33 @@ impl Variant {
     }
 }
 
+impl std::str::FromStr for Variant {
+    type Err = MethodError;
+
+    fn from_str(s: &str) -> Result<Self, MethodError> {
+        Self::ALL
+            .into_iter()
+            .find(|v| v.name() == s)
+            .ok_or_else(|| {
+                MethodError::InvalidOptions(format!(
+                    "unknown variant `{s}` (expected rgm, var1 or var2)"
+                ))
+            })
+    }
+}
+
 /// One trained model of the manifest.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ModelEntry {
     /// Short name (`partial-fast`).
     pub name: String,
-    /// The test protocol it was trained for: clean, noise or partial.
-    pub setting: String,
+    /// The test protocol it was trained for.
+    #[serde(with = "crate::by_name")]
+    pub setting: Setting,
     /// Trained on categories 0–19 only (the unseen-categories protocol).
     pub unseen: bool,
     /// Full model or ablation.
+    #[serde(with = "crate::by_name")]
     pub variant: Variant,
     /// The network sizes ([`Config::preset`]).
     pub preset: String,

@@ -19,7 +19,7 @@ use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
 use rgm_geom::refine::RefineConfig;
 use rgm_geom::registrar::{MethodId, Normalised};
 use rgm_model::evaluate::{Resumable, TestPairs};
-use rgm_model::weights::{weights_dir, Manifest, ModelEntry};
+use rgm_model::weights::{weights_dir, Manifest, ModelEntry, Variant};
 use rgm_model::{Method, MethodName, MethodOptions, PairRecord, Registrar};
 use rgm_viz::{correct_fraction, correspondence_figure, registration_figure};
 
@@ -109,8 +109,8 @@ struct Candidate {
     /// Stem of its per-pair file and figures: the name, and for a model also the training
     /// pairs its weights have seen, so that retrained weights are evaluated afresh.
     stem: String,
-    /// The RGM variant (`rgm`, `var1`, `var2`) of a trained model; `None` for ICP and FGR.
-    variant: Option<String>,
+    /// The RGM variant of a trained model; `None` for ICP and FGR.
+    variant: Option<Variant>,
     /// The training pairs of a trained model.
     pairs_seen: Option<u64>,
     method: Method,
@@ -122,7 +122,7 @@ struct Row {
     /// As [`Candidate::stem`].
     stem: String,
     /// As [`Candidate::variant`].
-    variant: Option<String>,
+    variant: Option<Variant>,
     /// As [`Candidate::pairs_seen`].
     pairs_seen: Option<u64>,
     records: Vec<PairRecord>,
@@ -327,7 +327,7 @@ fn candidates(set: TestSet, manifest: &Manifest, only: &[String]) -> Result<Vec<
         list.push(Candidate {
             name: entry.name.clone(),
             stem: format!("{}-{}pairs", entry.name, entry.pairs_seen),
-            variant: Some(variant_name(entry)),
+            variant: Some(entry.variant),
             pairs_seen: Some(entry.pairs_seen),
             method,
         });
@@ -409,15 +409,7 @@ fn models_for(manifest: &Manifest, set: TestSet) -> impl Iterator<Item = &ModelE
     manifest
         .models
         .iter()
-        .filter(move |m| m.setting == set.setting.name() && m.unseen == set.unseen)
-}
-
-/// `rgm`, `var1` or `var2`, as the manifest spells it.
-fn variant_name(entry: &ModelEntry) -> String {
-    serde_json::to_value(entry.variant)
-        .ok()
-        .and_then(|v| v.as_str().map(String::from))
-        .unwrap_or_default()
+        .filter(move |m| m.setting == set.setting && m.unseen == set.unseen)
 }
 
 impl Run {
@@ -582,7 +574,7 @@ mod tests {
         .unwrap();
         let names = |set: TestSet| {
             models_for(&manifest, set)
-                .map(|m| format!("{}:{}", m.name, variant_name(m)))
+                .map(|m| format!("{}:{}", m.name, m.variant.name()))
                 .collect::<Vec<_>>()
         };
         assert_eq!(names(TestSet::ALL[0]), ["a:rgm", "c:var1"]);

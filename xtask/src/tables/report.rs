@@ -7,7 +7,9 @@ use rgm_model::evaluate::{table_header, table_row};
 use rgm_model::weights::ModelEntry;
 use rgm_model::Summary;
 
-use super::{variant_name, Results, Row};
+use rgm_model::weights::Variant;
+
+use super::{Results, Row};
 
 /// What the results file says about the run that wrote it.
 pub(super) struct Report {
@@ -124,9 +126,9 @@ impl Report {
             md += &format!(
                 "| {} | {} | {} | {} | {} | {} | {} | {} | `{}` | {} |\n",
                 m.name,
-                m.setting,
+                m.setting.name(),
                 if m.unseen { "yes" } else { "no" },
-                variant_name(m),
+                m.variant.name(),
                 m.preset,
                 m.match_points.map_or("all".into(), |n| n.to_string()),
                 m.epochs,
@@ -189,7 +191,7 @@ impl Report {
 fn table_markdown(table: &Table, rows: &[Row]) -> String {
     let ablation_budgets: Vec<u64> = rows
         .iter()
-        .filter(|r| matches!(r.variant.as_deref(), Some("var1" | "var2")))
+        .filter(|r| matches!(r.variant, Some(Variant::Var1 | Variant::Var2)))
         .filter_map(|r| r.pairs_seen)
         .collect();
     let mut lines = String::new();
@@ -206,7 +208,7 @@ fn table_markdown(table: &Table, rows: &[Row]) -> String {
         };
         let name = match (&row.variant, row.pairs_seen) {
             (Some(variant), Some(pairs)) if table.ablation => {
-                format!("{} ({variant}, {pairs} pairs)", row.name)
+                format!("{} ({}, {pairs} pairs)", row.name, variant.name())
             }
             _ => row.name.clone(),
         };
@@ -285,11 +287,11 @@ mod tests {
         }
     }
 
-    fn row(name: &str, variant: Option<&str>, records: Vec<PairRecord>, total: usize) -> Row {
+    fn row(name: &str, variant: Option<Variant>, records: Vec<PairRecord>, total: usize) -> Row {
         Row {
             name: name.into(),
             stem: name.into(),
-            variant: variant.map(String::from),
+            variant,
             pairs_seen: variant.map(|_| 100),
             records,
             total,
@@ -326,13 +328,13 @@ mod tests {
     fn the_ablation_lists_the_variants_at_equal_budget_by_name() {
         let longer = Row {
             pairs_seen: Some(900),
-            ..row("partial-fast", Some("rgm"), vec![record(0, true)], 1)
+            ..row("partial-fast", Some(Variant::Rgm), vec![record(0, true)], 1)
         };
         let rows = [
             row("icp", None, vec![record(0, true)], 1),
             longer,
-            row("partial-fast-e1", Some("rgm"), vec![record(0, true)], 1),
-            row("partial-var1", Some("var1"), vec![record(0, false)], 1),
+            row("partial-fast-e1", Some(Variant::Rgm), vec![record(0, true)], 1),
+            row("partial-var1", Some(Variant::Var1), vec![record(0, false)], 1),
         ];
         let md = table_markdown(&TABLES[4], &rows);
         assert!(md.contains("| partial-fast-e1 (rgm, 100 pairs) "), "{md}");

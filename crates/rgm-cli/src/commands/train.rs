@@ -124,7 +124,7 @@ impl Args {
             .workers
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
         Ok(TrainConfig {
-            setting: self.setting.name().to_string(),
+            setting: self.setting,
             unseen: self.unseen,
             network,
             match_points: (self.match_points > 0).then_some(self.match_points),
