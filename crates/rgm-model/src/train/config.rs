@@ -100,6 +100,23 @@ pub struct TrainConfig {
     pub init: Option<PathBuf>,
 }
 
+/// The network sizes `rgm train` trains by default ([`Config::preset`]): the built-in model's.
+pub const DEFAULT_PRESET: &str = "fast";
+
+impl Default for TrainConfig {
+    /// What `rgm train` runs when given no option, the built-in model's recipe: the paper's
+    /// schedule on partial pairs with the [`DEFAULT_PRESET`] sizes, each cloud cut to 384 points
+    /// for matching, validated with each cloud's own batch-norm statistics (as it trains).
+    fn default() -> Self {
+        let network = Config::preset(DEFAULT_PRESET).expect("a known preset");
+        Self {
+            match_points: Some(384),
+            test_statistics: TestStatistics::Cloud,
+            ..Self::paper(Setting::Partial, network)
+        }
+    }
+}
+
 impl TrainConfig {
     /// The paper's schedule (spec §3: SGD, momentum 0.9, lr 1e-3, batch 4, 200 epochs, ×0.2 at
     /// 120 and 140) for `setting` with `network`'s sizes, on both cores.
