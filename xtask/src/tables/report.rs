@@ -3,6 +3,7 @@
 
 use std::path::Path;
 
+use rgm_geom::refine::RefineConfig;
 use rgm_model::evaluate::{table_header, table_row};
 use rgm_model::weights::ModelEntry;
 use rgm_model::Summary;
@@ -81,7 +82,7 @@ impl Report {
             crate::bench::machine_description(),
             self.threads
         );
-        md += DATA_NOTES;
+        md += &data_notes();
         md += "- **RGM's test-time procedure** is the reference code's (spec §4): a chain of 2 \
                passes moving the source toward the target and one moving the target toward the \
                source, the correspondences both chains end with (cycle consistency), one \
@@ -235,7 +236,9 @@ fn table_markdown(table: &Table, rows: &[Row]) -> String {
 }
 
 /// The notes on data, pairs and metrics that every results file carries.
-const DATA_NOTES: &str = "\
+fn data_notes() -> String {
+    format!(
+        "\
 - **Data**: ModelNet40 with 1,024 points per shape (`../shared/data/modelnet40_npy1024`), \
 official split: 2,468 test shapes, 1,266 of them in the unseen-category test split (categories \
 20–39). The paper draws its 1,024 points from a 2,048-point release; source and target start \
@@ -248,15 +251,38 @@ anisotropic (Euler angles in degrees, per axis). CCD follows the authors' code (
 Euclidean distances, means), not the paper's formula. Recall: MAE(R) < 1° and MAE(t) < 0.1.
 - **Methods**: ICP point-to-point from the identity; FGR on FPFH features; both with Open3D's \
 settings (see baselines.md for the agreement with Open3D). `+icp` rows: the method's transform \
-refined as `rgm register` refines it (`rgm_geom::refine`: trimmed point-to-plane ICP on the \
-full clouds, pairs closer than 0.2, 0.1, then 0.05, 10 iterations each, the closest 80 % of \
-them fitted, then point-to-point ICP at 0.05 and 0.03); the paper reports no refined rows. A \
+refined as `rgm register` refines it (`rgm_geom::refine`: {refinement}); the paper reports no refined rows. A \
 trained model's `+icp` row refines the transforms of its own row (what `rgm eval --refine` \
 gives, without running the network twice; its time adds the refinement's). \
 `auto+icp`: `rgm register`'s default, RGM with the built-in model and FGR, both refined so, and \
-per pair the result with the larger two-way overlap (`rgm_model::combined`). The paper's learned \
+per pair the result with the larger two-way overlap (`rgm_geom::best_of`). The paper's learned \
 peers (RPM-Net, IDAM, DeepGMR) are not reproduced here.
-";
+",
+        refinement = refinement()
+    )
+}
+
+/// The refinement of the `+icp` rows in words, from the settings it runs with
+/// ([`RefineConfig::default`]).
+fn refinement() -> String {
+    let config = RefineConfig::default();
+    let list = |values: &[f64], last: &str| match values {
+        [] => String::new(),
+        [one] => one.to_string(),
+        [most @ .., end] => {
+            let most: Vec<String> = most.iter().map(f64::to_string).collect();
+            format!("{}{last}{end}", most.join(", "))
+        }
+    };
+    format!(
+        "trimmed point-to-plane ICP on the full clouds, pairs closer than {}, {} iterations \
+         each, the closest {:.0} % of them fitted, then point-to-point ICP at {}",
+        list(&config.distances, ", then "),
+        config.iterations,
+        100.0 * config.trim,
+        list(&config.point_distances, " and ")
+    )
+}
 
 #[cfg(test)]
 mod tests {
@@ -333,8 +359,18 @@ mod tests {
         let rows = [
             row("icp", None, vec![record(0, true)], 1),
             longer,
-            row("partial-fast-e1", Some(Variant::Rgm), vec![record(0, true)], 1),
-            row("partial-var1", Some(Variant::Var1), vec![record(0, false)], 1),
+            row(
+                "partial-fast-e1",
+                Some(Variant::Rgm),
+                vec![record(0, true)],
+                1,
+            ),
+            row(
+                "partial-var1",
+                Some(Variant::Var1),
+                vec![record(0, false)],
+                1,
+            ),
         ];
         let md = table_markdown(&TABLES[4], &rows);
         assert!(md.contains("| partial-fast-e1 (rgm, 100 pairs) "), "{md}");
@@ -346,5 +382,14 @@ mod tests {
         let partial = table_markdown(&TABLES[2], &rows);
         assert!(partial.contains("| partial-fast "), "{partial}");
         assert!(partial.contains("| partial-var1 "), "{partial}");
+    }
+
+    #[test]
+    fn the_notes_describe_the_refinement_it_runs_with() {
+        assert!(data_notes().contains(
+            "(`rgm_geom::refine`: trimmed point-to-plane ICP on the full clouds, pairs closer \
+             than 0.2, 0.1, then 0.05, 10 iterations each, the closest 80 % of them fitted, then \
+             point-to-point ICP at 0.05 and 0.03); the paper reports no refined rows."
+        ));
     }
 }
