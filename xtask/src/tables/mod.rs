@@ -19,7 +19,7 @@ use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
 use rgm_geom::refine::RefineConfig;
 use rgm_geom::registrar::{MethodId, Normalised};
 use rgm_model::evaluate::{Resumable, TestPairs};
-use rgm_model::weights::{weights_dir, Manifest, ModelEntry, Variant};
+use rgm_model::weights::{weights_dir, Manifest, ModelEntry, Variant, WeightsFile};
 use rgm_model::{Method, MethodName, MethodOptions, PairRecord, Registrar};
 use rgm_viz::{correct_fraction, correspondence_figure, registration_figure};
 
@@ -370,22 +370,20 @@ fn check_only(manifest: &Manifest, only: &[String]) -> Result<()> {
     Ok(())
 }
 
-/// `entry` with its weights on disk: a file named `git:REV:PATH` (weights a commit of the
-/// history holds, e.g. an earlier built-in model, kept out of the tree so that git does not count
-/// the same bytes again, or a run's weights that its folder has since replaced) is written once
-/// to `target/git-weights/` by `git show`.
+/// `entry` with its weights on disk: a file of the git history ([`WeightsFile::Git`]) is
+/// written once to `target/git-weights/` by `git show`.
 fn from_history(entry: &ModelEntry) -> Result<ModelEntry> {
-    let Some(object) = entry.file.strip_prefix("git:") else {
+    let WeightsFile::Git { revision, path } = &entry.file else {
         return Ok(entry.clone());
     };
     let dir = project_root().join("target/git-weights");
     // Named by the revision too, so that a manifest pinning the name to another commit does
     // not read the earlier extraction.
-    let revision = object.split(':').next().unwrap_or_default();
-    let path = dir.join(format!("{}-{revision}.safetensors", entry.name));
-    if !path.exists() {
+    let extracted = dir.join(format!("{}-{revision}.safetensors", entry.name));
+    if !extracted.exists() {
+        let object = format!("{revision}:{path}");
         let out = Command::new("git")
-            .args(["show", object])
+            .args(["show", &object])
             .current_dir(project_root())
             .output()
             .context("running git show")?;
@@ -396,10 +394,10 @@ fn from_history(entry: &ModelEntry) -> Result<ModelEntry> {
             String::from_utf8_lossy(&out.stderr)
         );
         fs::create_dir_all(&dir)?;
-        fs::write(&path, out.stdout)?;
+        fs::write(&extracted, out.stdout)?;
     }
     Ok(ModelEntry {
-        file: path.to_string_lossy().into_owned(),
+        file: WeightsFile::Path(extracted),
         ..entry.clone()
     })
 }
