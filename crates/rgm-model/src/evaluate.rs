@@ -1,4 +1,6 @@
-//! Running a method over the benchmark's test pairs and scoring it (spec §5).
+//! Running a method over the benchmark's test pairs and scoring it (spec §5): one pair
+//! ([`evaluate_pair`]), many kept in a per-pair file that a later run resumes ([`Resumable`]),
+//! their means ([`Summary`]) and the tables' rows.
 
 use std::time::Instant;
 
