@@ -1,7 +1,8 @@
 //! `cargo xtask <chore>`: the runner of benchmarks and reproductions.
 //!
 //! Layering rule: xtask drives the other crates through cargo and their libraries (rgm-model's
-//! methods, evaluation and figures; rgm-data's pairs); it holds no algorithm of its own.
+//! methods and evaluation, rgm-data's pairs, rgm-viz's figures, rgm-cli's progress bars); it
+//! chooses what to run and writes the reports, and holds no algorithm of its own.
 
 mod bench;
 mod snapshot;

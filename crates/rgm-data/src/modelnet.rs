@@ -283,8 +283,8 @@ fn read_hdf5_numbers(
 const MAX_FAST_ELEMENTS: usize = 1 << 30;
 
 /// Fast path for chunked float32 3-D datasets (the release's `data`, stored in chunks such as
-/// (128, 128, 1)): decodes each chunk and copies its rows into place, about 3× faster than the
-/// library's element-wise assembly. `Ok(None)` when the dataset is not of that kind. Chunks never
+/// (128, 128, 1)): decodes each chunk and copies its rows into place instead of the library's
+/// element-wise assembly. `Ok(None)` when the dataset is not of that kind. Chunks never
 /// written keep 0, HDF5's default fill value. // (d0·d1·d2,)
 fn read_chunked_f32_3d(
     dataset: &hdf5_reader::Dataset,

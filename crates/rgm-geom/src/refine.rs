@@ -3,7 +3,8 @@
 //! What a global method (FGR, the RGM network) hands over is usually within 5–20° of the truth
 //! on partial scans. Open3D-style point-to-point ICP ([`crate::icp`]) converges slowly from there
 //! and is pulled off by the points outside the overlap. This refinement differs in three ways,
-//! each measured to help on ModelNet40 partial pairs (docs/training/README.md, session 4):
+//! each shown to help on ModelNet40 partial pairs (docs/training/README.md, "a refinement that
+//! suits partial scans"):
 //! - **point-to-plane**: each moved source point `p` paired with its nearest target point `q`
 //!   (normal `n`) contributes the residual `(q − p)·n`; the linearised step (small rotation
 //!   `ω`, translation `τ`) solves the 6×6 normal equations of `Σ ((p × n)·ω + n·τ − (q − p)·n)²`;

@@ -1,4 +1,6 @@
-//! Running a method over the benchmark's test pairs and scoring it (spec §5).
+//! Running a method over the benchmark's test pairs and scoring it (spec §5): one pair
+//! ([`evaluate_pair`]), many kept in a per-pair file that a later run resumes ([`Resumable`]),
+//! their means ([`Summary`]) and the tables' rows.
 
 use std::time::Instant;
 
@@ -12,6 +14,10 @@ use rgm_geom::refine::{self, RefineConfig};
 use rgm_geom::Registrar;
 
 use crate::Method;
+
+mod resumable;
+
+pub use resumable::{read_records, EvaluateError, Progress, Resumable, TestPairs};
 
 /// One test pair's outcome.
 #[derive(Clone, Debug)]
@@ -380,7 +386,7 @@ mod tests {
     use super::*;
     use rgm_geom::{MetricsSummary, Vector3};
 
-    fn record() -> PairRecord {
+    pub(super) fn record() -> PairRecord {
         let transform = RigidTransform::new(
             rgm_geom::euler::rotation_xyz_intrinsic(0.3, -0.2, 0.1),
             Vector3::new(0.1, 0.2, -0.3),

@@ -3,12 +3,14 @@
 //! ([`train`]) and checkpoints ([`weights`]). [`options`] composes every method users can name
 //! (ICP, FGR, RGM, and `rgm register`'s default, RGM and FGR side by side) from the
 //! registrars and wrappers of rgm-geom and this crate, into one [`method::Method`];
-//! [`evaluate`] runs a method over the benchmark's test pairs and scores it.
+//! [`evaluate`] runs a method over the benchmark's test pairs and scores it, resumably for long
+//! runs (per-pair record files).
 //!
 //! Layering rule: rgm-model builds on rgm-geom, rgm-nn, rgm-match and rgm-data, and nothing
 //! builds on it but the `rgm` command, xtask and the Python package (`python/`). It owns no
 //! geometry or tensor op of its own.
 
+mod by_name;
 pub mod error;
 pub mod evaluate;
 pub mod memory;

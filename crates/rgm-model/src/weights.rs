@@ -14,6 +14,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use rgm_data::Setting;
+
 use crate::error::MethodError;
 use crate::network::{Config, Edges, Rgm, Scoring, TestStatistics};
 use crate::pipeline::{PipelineConfig, RgmRegistrar};
@@ -32,11 +34,11 @@ pub fn weights_dir() -> PathBuf {
 }
 
 /// The network's structure: the full model or one of the ablations of spec §2.7.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
-#[serde(rename_all = "lowercase")]
 pub enum Variant {
     /// AIS scoring and transformer edges.
+    #[default]
     Rgm,
     /// Var1: distance scoring instead of AIS.
     Var1,
@@ -45,6 +47,17 @@ pub enum Variant {
 }
 
 impl Variant {
+    pub const ALL: [Variant; 3] = [Variant::Rgm, Variant::Var1, Variant::Var2];
+
+    /// Lower-case name, as the manifest and the command line spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Rgm => "rgm",
+            Self::Var1 => "var1",
+            Self::Var2 => "var2",
+        }
+    }
+
     /// `config` with this variant's scoring and edges (spec §2.7).
     pub fn apply(self, mut config: Config) -> Config {
         match self {
@@ -56,16 +69,100 @@ impl Variant {
     }
 }
 
+impl std::str::FromStr for Variant {
+    type Err = MethodError;
+
+    fn from_str(s: &str) -> Result<Self, MethodError> {
+        Self::ALL
+            .into_iter()
+            .find(|v| v.name() == s)
+            .ok_or_else(|| {
+                MethodError::InvalidOptions(format!(
+                    "unknown variant `{s}` (expected rgm, var1 or var2)"
+                ))
+            })
+    }
+}
+
+/// Where a model's safetensors file is.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum WeightsFile {
+    /// A file relative to the manifest's folder (`partial-fast.safetensors`).
+    Path(PathBuf),
+    /// A file that a commit of the project's history holds (`git:REV:PATH` in the manifest:
+    /// an earlier built-in model, or a run's weights its folder has since replaced), kept out
+    /// of the tree so that git does not store the same bytes twice; `git show REV:PATH` writes
+    /// it out.
+    Git { revision: String, path: String },
+}
+
+impl WeightsFile {
+    /// The file on disk, for a manifest in `dir`; an error for a file of the history, which
+    /// must be written out first.
+    pub fn on_disk(&self, dir: &Path) -> Result<PathBuf, MethodError> {
+        match self {
+            Self::Path(path) => Ok(dir.join(path)),
+            Self::Git { .. } => Err(MethodError::Manifest {
+                path: dir.join("manifest.json"),
+                why: format!("{self} is in the git history, not on disk (`git show` writes it)"),
+            }),
+        }
+    }
+}
+
+impl std::fmt::Display for WeightsFile {
+    /// As the manifest spells it.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Path(path) => write!(f, "{}", path.display()),
+            Self::Git { revision, path } => write!(f, "git:{revision}:{path}"),
+        }
+    }
+}
+
+impl std::str::FromStr for WeightsFile {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        let Some(object) = s.strip_prefix("git:") else {
+            return Ok(Self::Path(PathBuf::from(s)));
+        };
+        match object.split_once(':') {
+            Some((revision, path)) if !revision.is_empty() && !path.is_empty() => Ok(Self::Git {
+                revision: revision.to_string(),
+                path: path.to_string(),
+            }),
+            _ => Err(format!("{s:?} is not git:REV:PATH")),
+        }
+    }
+}
+
+impl Serialize for WeightsFile {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.collect_str(self)
+    }
+}
+
+impl<'de> Deserialize<'de> for WeightsFile {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        String::deserialize(deserializer)?
+            .parse()
+            .map_err(serde::de::Error::custom)
+    }
+}
+
 /// One trained model of the manifest.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ModelEntry {
     /// Short name (`partial-fast`).
     pub name: String,
-    /// The test protocol it was trained for: clean, noise or partial.
-    pub setting: String,
+    /// The test protocol it was trained for.
+    #[serde(with = "crate::by_name")]
+    pub setting: Setting,
     /// Trained on categories 0–19 only (the unseen-categories protocol).
     pub unseen: bool,
     /// Full model or ablation.
+    #[serde(with = "crate::by_name")]
     pub variant: Variant,
     /// The network sizes ([`Config::preset`]).
     pub preset: String,
@@ -73,8 +170,8 @@ pub struct ModelEntry {
     /// training); `None` matches on the full clouds (chosen on validation pairs for some models
     /// trained on subsets: `docs/training/match-points/`).
     pub match_points: Option<usize>,
-    /// The safetensors file, relative to the manifest's folder.
-    pub file: String,
+    /// The safetensors file.
+    pub file: WeightsFile,
     /// Whether this is the model embedded in the binary (exactly one is).
     pub builtin: bool,
     /// The command that trained it.
@@ -154,7 +251,7 @@ impl ModelEntry {
 
     /// RGM with this model's weights, read from `dir` (the manifest's folder).
     pub fn registrar(&self, dir: &Path) -> Result<RgmRegistrar, MethodError> {
-        let network = Rgm::load(self.config()?, &dir.join(&self.file))?;
+        let network = Rgm::load(self.config()?, &self.file.on_disk(dir)?)?;
         Ok(self.registrar_of(network))
     }
 
@@ -197,7 +294,7 @@ mod tests {
         let manifest = Manifest::builtin();
         let builtin: Vec<_> = manifest.models.iter().filter(|m| m.builtin).collect();
         assert_eq!(builtin.len(), 1, "{manifest:?}");
-        assert_eq!(builtin[0].file, BUILTIN_FILE);
+        assert_eq!(builtin[0].file, WeightsFile::Path(BUILTIN_FILE.into()));
         // The file on disk is the one embedded.
         let on_disk = std::fs::read(weights_dir().join(BUILTIN_FILE)).unwrap();
         assert!(on_disk == builtin_weights());
@@ -221,10 +318,11 @@ mod tests {
     #[test]
     fn an_entry_loads_its_file_and_the_builtin_model_its_embedded_bytes() {
         let mut entry = Manifest::builtin().builtin_entry().unwrap().clone();
-        (entry.preset, entry.file) = ("tiny".into(), "rgm_tiny_state_dict.safetensors".into());
+        let file = "rgm_tiny_state_dict.safetensors";
+        (entry.preset, entry.file) = ("tiny".into(), WeightsFile::Path(file.into()));
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
         let registrar = entry.registrar(&dir).unwrap();
-        let on_disk = Rgm::<f32>::load(Config::tiny(), &dir.join(&entry.file)).unwrap();
+        let on_disk = Rgm::<f32>::load(Config::tiny(), &dir.join(file)).unwrap();
         assert_eq!(
             registrar.network.blocks[1].u_fc.weight.value,
             on_disk.blocks[1].u_fc.weight.value
@@ -256,5 +354,47 @@ mod tests {
         let err = Manifest::load(&path).unwrap_err().to_string();
         assert!(err.contains("unknown variant `var3`"), "{err}");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_weights_file_of_the_history_is_parsed_and_spelled_back_and_not_read_from_disk() {
+        let text = "git:ec2894e:crates/rgm-model/weights/partial-fast.safetensors";
+        let file: WeightsFile = text.parse().unwrap();
+        assert_eq!(
+            file,
+            WeightsFile::Git {
+                revision: "ec2894e".into(),
+                path: "crates/rgm-model/weights/partial-fast.safetensors".into()
+            }
+        );
+        assert_eq!(file.to_string(), text);
+        assert_eq!(serde_json::to_value(&file).unwrap(), text);
+        let err = file.on_disk(Path::new("w")).unwrap_err().to_string();
+        assert!(
+            err.contains(&format!("{text} is in the git history")),
+            "{err}"
+        );
+        let plain: WeightsFile = "a.safetensors".parse().unwrap();
+        assert_eq!(
+            plain.on_disk(Path::new("w")).unwrap(),
+            Path::new("w/a.safetensors")
+        );
+        assert!("git:abc".parse::<WeightsFile>().is_err());
+        // Every file of the shipped manifest is spelled back as the manifest spells it.
+        let text = std::fs::read_to_string(weights_dir().join("manifest.json")).unwrap();
+        let read: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let files: Vec<String> = Manifest::builtin()
+            .models
+            .iter()
+            .map(|m| m.file.to_string())
+            .collect();
+        let spelled: Vec<&str> = read["models"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|m| m["file"].as_str().unwrap())
+            .collect();
+        assert_eq!(files, spelled);
+        assert!(files.iter().any(|f| f.starts_with("git:")), "{files:?}");
     }
 }

@@ -1,5 +1,6 @@
 //! exp over a slice, vectorised for f32: the attention's softmax and Sinkhorn's log-sum-exp take
-//! one exponential per score, and libm's scalar `expf` was a seventh of the test-time procedure.
+//! one exponential per score, enough of them that libm's scalar `expf` is a large share of the
+//! test-time procedure (docs/speed.md, "A vectorised exp").
 //!
 //! The f32 form is Cephes' `expf` written without branches so that the compiler vectorises it:
 //! n = round(x·log₂e), r = x − n·ln 2 (in two parts), e^r by a degree-7 polynomial, times 2ⁿ built

@@ -5,6 +5,7 @@
 //! rgm); the code itself is one job, kept in one place.
 
 use crate::bf16::{bf16_bits, bf16_to_f32};
+use crate::param::{try_visit_buffers, try_visit_params};
 use crate::{NnError, Parameters, Result, Scalar};
 use ndarray::{ArrayD, ArrayViewD, IxDyn};
 use safetensors::tensor::{Dtype, TensorView};
@@ -340,40 +341,30 @@ pub fn load_params<T: Scalar>(path: &Path, model: &mut dyn Parameters<T>) -> Res
     let (_, header) =
         SafeTensors::read_metadata(&buffer).map_err(|source| not_safetensors(path, source))?;
     let metadata = header.metadata().clone().unwrap_or_default();
-    let mut err = None;
-    let mut fill = |name: &str, mut dst: ndarray::ArrayViewMutD<'_, T>| {
-        if err.is_some() {
-            return;
-        }
-        let Ok(view) = file.tensor(name) else {
-            err = Some(NnError::MissingTensor {
-                path: path.to_path_buf(),
-                name: name.to_string(),
-            });
-            return;
-        };
+    let fill = |name: &str, mut dst: ndarray::ArrayViewMutD<'_, T>| -> Result<()> {
+        let view = file.tensor(name).map_err(|_| NnError::MissingTensor {
+            path: path.to_path_buf(),
+            name: name.to_string(),
+        })?;
         let (got, want) = (view.shape(), dst.shape());
         let trailing_ones = got.len() >= want.len() && got[want.len()..].iter().all(|&d| d == 1);
         if !trailing_ones || &got[..want.len()] != want {
-            err = Some(NnError::TensorShape {
+            return Err(NnError::TensorShape {
                 path: path.to_path_buf(),
                 name: name.to_string(),
                 expected: want.to_vec(),
                 got: got.to_vec(),
             });
-            return;
         }
-        match to_array::<T>(path, name, &view, &metadata) {
-            Ok(t) => dst.assign(
-                &t.into_shape_with_order(want.to_vec())
-                    .expect("same number of values"),
-            ),
-            Err(e) => err = Some(e),
-        }
+        let t = to_array::<T>(path, name, &view, &metadata)?;
+        dst.assign(
+            &t.into_shape_with_order(want.to_vec())
+                .expect("same number of values"),
+        );
+        Ok(())
     };
-    model.visit_params("", &mut |name, p| fill(name, p.value));
-    model.visit_buffers("", &mut |name, b| fill(name, b));
-    err.map_or(Ok(()), Err)
+    try_visit_params(model, "", |name, p| fill(name, p.value))?;
+    try_visit_buffers(model, "", fill)
 }
 #[cfg(test)]
 mod tests {

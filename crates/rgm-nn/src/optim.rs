@@ -2,7 +2,7 @@
 //! multi-step learning-rate schedule, and their state in safetensors files for resuming.
 
 use crate::io::{read_tensors, write_tensors, NamedViews};
-use crate::param::ParamViewMut;
+use crate::param::{try_visit_params, ParamViewMut};
 use crate::{NnError, Parameters, Result, Scalar};
 use ndarray::{ArrayD, Zip};
 use std::collections::HashMap;
@@ -35,11 +35,7 @@ impl<T: Scalar> Slots<T> {
         mut f: impl FnMut(&mut [ArrayD<T>], ParamViewMut<'_, T>),
     ) -> Result<()> {
         let mut i = 0;
-        let mut err = None;
-        model.visit_params("", &mut |name, p| {
-            if err.is_some() {
-                return;
-            }
+        try_visit_params(model, "", |name, p| {
             if i == self.names.len() {
                 self.names.push(name.to_string());
                 self.tensors.push(
@@ -50,7 +46,7 @@ impl<T: Scalar> Slots<T> {
                 );
             }
             if self.names[i] != name || self.tensors[i][0].shape() != p.value.shape() {
-                err = Some(NnError::InvalidArgument {
+                return Err(NnError::InvalidArgument {
                     op,
                     why: format!(
                         "parameter {i} is {name:?} {:?}, the optimiser state has {:?} {:?}",
@@ -59,12 +55,11 @@ impl<T: Scalar> Slots<T> {
                         self.tensors[i][0].shape()
                     ),
                 });
-                return;
             }
             f(&mut self.tensors[i], p);
             i += 1;
-        });
-        err.map_or(Ok(()), Err)
+            Ok(())
+        })
     }
 
     /// The state as `kind.parameter_name` tensors, and the metadata entry listing the order.

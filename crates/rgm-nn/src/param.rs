@@ -86,11 +86,76 @@ pub trait Parameters<T: Scalar> {
     }
 }
 
+/// [`Parameters::visit_params`] with a visitor that can fail (loading a tensor that does not
+/// fit): after the first error no parameter is handed to `f` again, and that error is returned.
+pub fn try_visit_params<T: Scalar, E>(
+    model: &mut (impl Parameters<T> + ?Sized),
+    prefix: &str,
+    mut f: impl FnMut(&str, ParamViewMut<'_, T>) -> Result<(), E>,
+) -> Result<(), E> {
+    let mut result = Ok(());
+    model.visit_params(prefix, &mut |name, p| {
+        if result.is_ok() {
+            result = f(name, p);
+        }
+    });
+    result
+}
+
+/// [`Parameters::visit_buffers`] with a visitor that can fail, as [`try_visit_params`].
+pub fn try_visit_buffers<T: Scalar, E>(
+    model: &mut (impl Parameters<T> + ?Sized),
+    prefix: &str,
+    mut f: impl FnMut(&str, ArrayViewMutD<'_, T>) -> Result<(), E>,
+) -> Result<(), E> {
+    let mut result = Ok(());
+    model.visit_buffers(prefix, &mut |name, b| {
+        if result.is_ok() {
+            result = f(name, b);
+        }
+    });
+    result
+}
+
 /// `prefix.name`, or `name` when the prefix is empty.
 pub fn join_name(prefix: &str, name: &str) -> String {
     if prefix.is_empty() {
         name.to_string()
     } else {
         format!("{prefix}.{name}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::BatchNorm;
+
+    #[test]
+    fn a_failing_visitor_stops_at_its_first_error() {
+        // Batch norm's parameters are weight, bias; its buffers running_mean, running_var.
+        let mut bn = BatchNorm::<f32>::new(2);
+        let mut seen = Vec::new();
+        let result = try_visit_params(&mut bn, "bn", |name, mut p| {
+            seen.push(name.to_string());
+            if name == "bn.weight" {
+                return Err(format!("{name} refused"));
+            }
+            p.value.fill(7.0);
+            Ok(())
+        });
+        assert_eq!(result, Err("bn.weight refused".to_string()));
+        assert_eq!(seen, ["bn.weight"]);
+        assert_eq!(bn.bias.value, ndarray::array![0.0f32, 0.0]);
+
+        let mut seen = Vec::new();
+        let result = try_visit_buffers(&mut bn, "", |name, mut b| {
+            seen.push(name.to_string());
+            b.fill(3.0);
+            Ok::<(), String>(())
+        });
+        assert_eq!(result, Ok(()));
+        assert_eq!(seen, ["running_mean", "running_var"]);
+        assert_eq!(bn.running_var, ndarray::array![3.0f32, 3.0]);
     }
 }

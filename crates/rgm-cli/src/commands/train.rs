@@ -6,19 +6,20 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use rgm_data::{ModelNet40, Setting};
 use rgm_model::network::{Config, TestStatistics};
-use rgm_model::train::{Event, LogRecord, OptimizerKind, TrainConfig, Trainer, ValSample};
+use rgm_model::train::{
+    Event, LogRecord, OptimizerKind, TrainConfig, Trainer, ValSample, DEFAULT_PRESET,
+};
 use rgm_model::weights::Variant;
 
 use crate::{checked_precision, progress};
 
-/// The paper's schedule (spec §3, [`TrainConfig::paper`]): the defaults of the options below
-/// that it sets.
-fn paper() -> TrainConfig {
-    TrainConfig::paper(Setting::Partial, Config::fast())
+/// What `rgm train` runs when given no option ([`TrainConfig::default`]: the built-in model's
+/// recipe, the paper's schedule of spec §3): the defaults of the options below.
+fn defaults() -> TrainConfig {
+    TrainConfig::default()
 }
 
-/// Options of `rgm train`. Defaults are the paper's schedule (spec §3) on the `fast` preset,
-/// matching on 384-point clouds, validating with each cloud's own batch-norm statistics.
+/// Options of `rgm train`, defaults from [`defaults`].
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The ModelNet40 `.npy` tree (e.g. ../shared/data/modelnet40_npy1024).
@@ -29,24 +30,24 @@ pub struct Args {
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
     /// The pair protocol to train on.
-    #[arg(long, value_enum, default_value_t = Setting::Partial)]
+    #[arg(long, value_enum, default_value_t = defaults().setting)]
     setting: Setting,
     /// Train and validate on categories 0–19 only (the unseen-categories protocol).
     #[arg(long)]
     unseen: bool,
     /// Network sizes: paper, small, fast or tiny.
-    #[arg(long, default_value = "fast", value_name = "NAME")]
+    #[arg(long, default_value = DEFAULT_PRESET, value_name = "NAME")]
     preset: String,
     /// The network: rgm, or one of the paper's ablations (spec §2.7): var1 scores pairs by
     /// feature distance (no affinity matrix, no instance norm), var2 connects every point to
     /// every other (no transformer edges).
-    #[arg(long, value_enum, default_value_t = Variant::Rgm)]
+    #[arg(long, value_enum, default_value_t = Variant::default())]
     variant: Variant,
     /// Cut each cloud of a pair to at most N points for matching (0: the whole clouds).
-    #[arg(long, default_value_t = 384, value_name = "N")]
+    #[arg(long, default_value_t = defaults().match_points.unwrap_or(0), value_name = "N")]
     match_points: usize,
     /// Epochs in all.
-    #[arg(long, default_value_t = paper().epochs)]
+    #[arg(long, default_value_t = defaults().epochs)]
     epochs: usize,
     /// Stop once epoch N is validated and saved, leaving the run's schedule (--epochs,
     /// --milestones) as it is; running again with a larger N goes on. The training queue
@@ -54,30 +55,30 @@ pub struct Args {
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     until_epoch: Option<u64>,
     /// Pairs per optimiser step.
-    #[arg(long, default_value_t = paper().batch)]
+    #[arg(long, default_value_t = defaults().batch)]
     batch: usize,
     /// The optimiser.
-    #[arg(long, value_enum, default_value_t = paper().optimizer)]
+    #[arg(long, value_enum, default_value_t = defaults().optimizer)]
     optimizer: OptimizerKind,
     /// Learning rate before the first milestone.
-    #[arg(long, default_value_t = paper().lr)]
+    #[arg(long, default_value_t = defaults().lr)]
     lr: f64,
     /// SGD momentum.
-    #[arg(long, default_value_t = paper().momentum)]
+    #[arg(long, default_value_t = defaults().momentum)]
     momentum: f64,
     /// L2 weight decay.
-    #[arg(long, default_value_t = paper().weight_decay)]
+    #[arg(long, default_value_t = defaults().weight_decay)]
     weight_decay: f64,
     /// Epochs at which the learning rate is multiplied by --gamma.
     #[arg(
         long,
         value_delimiter = ',',
-        default_values_t = paper().milestones,
+        default_values_t = defaults().milestones,
         value_name = "E,E"
     )]
     milestones: Vec<usize>,
     /// Learning-rate factor at each milestone.
-    #[arg(long, default_value_t = paper().gamma)]
+    #[arg(long, default_value_t = defaults().gamma)]
     gamma: f64,
     /// Use only the first N training shapes per epoch.
     #[arg(long, value_name = "N")]
@@ -90,25 +91,25 @@ pub struct Args {
     /// first (the split's first N, which is ordered by category: a few categories only; what
     /// runs started before this option validated on). May change when resuming: the first
     /// validation on the new sample then becomes the best.
-    #[arg(long, value_enum, default_value_t = paper().val_sample)]
+    #[arg(long, value_enum, default_value_t = defaults().val_sample)]
     val_sample: ValSample,
     /// Worker threads (default: one per core).
     #[arg(long, value_name = "N")]
     workers: Option<usize>,
     /// Save the last checkpoint every N batches.
-    #[arg(long, default_value_t = paper().checkpoint_every, value_name = "N")]
+    #[arg(long, default_value_t = defaults().checkpoint_every, value_name = "N")]
     checkpoint_every: usize,
     /// Seed of the initial weights and of the shape order.
-    #[arg(long, default_value_t = paper().seed)]
+    #[arg(long, default_value_t = defaults().seed)]
     seed: u64,
     /// Batch-norm statistics at validation: cloud (each cloud's own, as rgm trains) or running
     /// (the running averages, PyTorch's eval()). May change when resuming.
-    #[arg(long, value_enum, default_value_t = TestStatistics::Cloud)]
+    #[arg(long, value_enum, default_value_t = defaults().test_statistics)]
     test_statistics: TestStatistics,
     /// The network's matrix products in training and validation: f32, or bf16 on the
     /// processor's AMX or AVX-512 BF16 units (weights, optimiser, reductions and loss stay
     /// f32). May change when resuming.
-    #[arg(long, value_name = "f32|bf16", default_value_t = paper().precision)]
+    #[arg(long, value_name = "f32|bf16", default_value_t = defaults().precision)]
     precision: rgm_nn::Precision,
     /// Start a new run from these weights (a .safetensors of the same network) instead of
     /// the seeded initialisation: fine-tuning, e.g. the noise model from the partial one.
@@ -124,7 +125,7 @@ impl Args {
             .workers
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
         Ok(TrainConfig {
-            setting: self.setting.name().to_string(),
+            setting: self.setting,
             unseen: self.unseen,
             network,
             match_points: (self.match_points > 0).then_some(self.match_points),

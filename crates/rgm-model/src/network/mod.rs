@@ -33,7 +33,7 @@ pub use transformer::{EdgeTransformer, EdgeTransformerCache, Stack, StackCache};
 use ndarray::{Array2, ArrayD, ArrayView2, ArrayViewD, ArrayViewMutD};
 use rand::{rngs::StdRng, SeedableRng};
 use rgm_match::{bce_backward, bce_forward, Correspondences};
-use rgm_nn::param::{join_name, ParamView, ParamViewMut};
+use rgm_nn::param::{join_name, try_visit_buffers, try_visit_params, ParamView, ParamViewMut};
 use rgm_nn::precision::{self, Precision};
 use rgm_nn::{Parameters, Scalar};
 use std::collections::HashMap;
@@ -171,32 +171,26 @@ impl<T: Element> Rgm<T> {
     /// A `(out, in, 1, 1)` tensor fills an `(out, in)` weight; tensors the network does not use
     /// (`num_batches_tracked`, ...) are ignored; a missing or mis-shaped one is an error.
     pub fn load_tensors(&mut self, tensors: &HashMap<String, ArrayD<T>>) -> Result<()> {
-        let mut err = None;
-        let mut fill = |name: &str, mut dst: ArrayViewMutD<'_, T>| {
-            if err.is_some() {
-                return;
-            }
-            let Some(t) = tensors.get(name) else {
-                err = Some(NetworkError::MissingTensor {
+        let fill = |name: &str, mut dst: ArrayViewMutD<'_, T>| {
+            let t = tensors
+                .get(name)
+                .ok_or_else(|| NetworkError::MissingTensor {
                     name: name.to_string(),
-                });
-                return;
-            };
+                })?;
             let conv_1x1 =
                 t.ndim() == 4 && t.shape()[2..] == [1, 1] && t.shape()[..2] == *dst.shape();
-            if t.shape() == dst.shape() || conv_1x1 {
-                dst.iter_mut().zip(t.iter()).for_each(|(d, &v)| *d = v);
-            } else {
-                err = Some(NetworkError::TensorShape {
+            if t.shape() != dst.shape() && !conv_1x1 {
+                return Err(NetworkError::TensorShape {
                     name: name.to_string(),
                     expected: dst.shape().to_vec(),
                     got: t.shape().to_vec(),
                 });
             }
+            dst.iter_mut().zip(t.iter()).for_each(|(d, &v)| *d = v);
+            Ok(())
         };
-        self.visit_params("", &mut |name, p| fill(name, p.value));
-        self.visit_buffers("", &mut fill);
-        err.map_or(Ok(()), Err)
+        try_visit_params(self, "", |name, p| fill(name, p.value))?;
+        try_visit_buffers(self, "", fill)
     }
 
     /// Runs the network on X (N, 3) and Y (M, 3); C̃ is then [`RgmCache::c_soft`]. `Mode::Train`

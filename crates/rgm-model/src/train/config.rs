@@ -46,8 +46,9 @@ impl OptimizerKind {
 /// Everything that defines a training run; saved as `config.json` in the run folder.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TrainConfig {
-    /// "clean", "noise" or "partial" (spec §1).
-    pub setting: String,
+    /// The pair protocol (spec §1).
+    #[serde(with = "crate::by_name")]
+    pub setting: Setting,
     /// Train and validate on categories 0–19 only.
     pub unseen: bool,
     /// The network's sizes.
@@ -91,7 +92,7 @@ pub struct TrainConfig {
     /// The network's matrix products in training and validation: f32, or bf16 where the
     /// processor has AMX or AVX-512 BF16 (weights, optimiser state, reductions and the loss
     /// stay f32). A compute choice, not a setting of the run: it may change on resume.
-    #[serde(default, with = "precision_name")]
+    #[serde(default, with = "crate::by_name")]
     pub precision: Precision,
     /// Weights a new run starts from instead of the seeded initialisation (fine-tuning, e.g.
     /// the noise model from the partial one). Only the start: a resumed run loads its own.
@@ -99,17 +100,20 @@ pub struct TrainConfig {
     pub init: Option<PathBuf>,
 }
 
-/// [`Precision`] in `config.json` by name ("f32", "bf16"); absent in runs saved before it.
-mod precision_name {
-    use rgm_nn::Precision;
-    use serde::{de::Error, Deserialize, Deserializer, Serializer};
+/// The network sizes `rgm train` trains by default ([`Config::preset`]): the built-in model's.
+pub const DEFAULT_PRESET: &str = "fast";
 
-    pub fn serialize<S: Serializer>(p: &Precision, s: S) -> Result<S::Ok, S::Error> {
-        s.serialize_str(p.name())
-    }
-
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Precision, D::Error> {
-        String::deserialize(d)?.parse().map_err(D::Error::custom)
+impl Default for TrainConfig {
+    /// What `rgm train` runs when given no option, the built-in model's recipe: the paper's
+    /// schedule on partial pairs with the [`DEFAULT_PRESET`] sizes, each cloud cut to 384 points
+    /// for matching, validated with each cloud's own batch-norm statistics (as it trains).
+    fn default() -> Self {
+        let network = Config::preset(DEFAULT_PRESET).expect("a known preset");
+        Self {
+            match_points: Some(384),
+            test_statistics: TestStatistics::Cloud,
+            ..Self::paper(Setting::Partial, network)
+        }
     }
 }
 
@@ -118,7 +122,7 @@ impl TrainConfig {
     /// 120 and 140) for `setting` with `network`'s sizes, on both cores.
     pub fn paper(setting: Setting, network: Config) -> Self {
         Self {
-            setting: setting.name().to_string(),
+            setting,
             unseen: false,
             network,
             match_points: None,
@@ -142,15 +146,7 @@ impl TrainConfig {
         }
     }
 
-    /// The pair setting, parsed.
-    pub fn pair_setting(&self) -> Result<Setting> {
-        self.setting.parse().map_err(|_| TrainError::Config {
-            why: format!("unknown setting {:?}", self.setting),
-        })
-    }
-
     pub(super) fn validate(&self) -> Result<()> {
-        self.pair_setting()?;
         self.network.validate()?;
         let why = if self.epochs == 0 {
             "epochs must be positive"

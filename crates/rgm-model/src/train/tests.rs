@@ -635,3 +635,16 @@ fn numeric_settings_out_of_range_are_refused_by_name() {
         assert!(!dir.join("config.json").exists(), "nothing saved");
     }
 }
+
+#[test]
+fn the_default_training_is_the_built_in_models_recipe() {
+    let manifest = crate::weights::Manifest::builtin();
+    let builtin = manifest.builtin_entry().unwrap();
+    let default = TrainConfig::default();
+    assert_eq!(builtin.preset, super::DEFAULT_PRESET);
+    assert_eq!(builtin.setting, default.setting);
+    assert!(!builtin.unseen && !default.unseen);
+    assert_eq!(builtin.match_points, default.match_points);
+    assert_eq!(builtin.test_statistics, default.test_statistics);
+    assert_eq!(builtin.config().unwrap(), default.network);
+}

@@ -139,7 +139,7 @@ impl Trainer {
         dataset: &ModelNet40,
         on_event: &mut dyn FnMut(Event) -> ControlFlow<()>,
     ) -> Result<()> {
-        let setting = self.config.pair_setting()?;
+        let setting = self.config.setting;
         let generator = PairGenerator::new(setting);
         let mut train = dataset.split(Split::Train, self.config.unseen);
         train.truncate(self.config.train_shapes.unwrap_or(usize::MAX));

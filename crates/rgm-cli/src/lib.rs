@@ -1,0 +1,59 @@
+//! What the `rgm` command (`src/main.rs`) shares with the project's runner (`cargo xtask`): its
+//! progress bars, one look for every long task.
+
+use std::sync::OnceLock;
+
+use indicatif::{ProgressBar, ProgressStyle};
+
+/// A progress bar on stderr for `len` steps of `what` (hidden when stderr is not a terminal).
+pub fn progress(len: usize, what: &str) -> ProgressBar {
+    let bar = ProgressBar::new(len as u64);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{prefix} [{bar:30}] {pos}/{len} {msg} ({elapsed}, eta {eta})",
+        )
+        .expect("static template")
+        .progress_chars("=> "),
+    );
+    bar.set_prefix(what.to_string());
+    bar
+}
+
+/// A resumable evaluation's progress ([`rgm_model::evaluate::Progress`]) as a [`progress`] bar
+/// labelled `what`, drawn only once pairs are computed (none when every pair is read back).
+pub struct EvaluationBar {
+    what: String,
+    bar: OnceLock<ProgressBar>,
+}
+
+impl EvaluationBar {
+    pub fn new(what: impl Into<String>) -> Self {
+        Self {
+            what: what.into(),
+            bar: OnceLock::new(),
+        }
+    }
+}
+
+impl rgm_model::evaluate::Progress for EvaluationBar {
+    fn start(&self, total: usize, done: usize) {
+        let bar = self.bar.get_or_init(|| progress(total, &self.what));
+        bar.set_position(done as u64);
+    }
+
+    fn advance(&self) {
+        if let Some(bar) = self.bar.get() {
+            bar.inc(1);
+        }
+    }
+
+    fn finish(&self, complete: bool) {
+        if let Some(bar) = self.bar.get() {
+            if complete {
+                bar.finish();
+            } else {
+                bar.abandon_with_message("stopped at the time limit");
+            }
+        }
+    }
+}

@@ -1,0 +1,669 @@
+//! `cargo xtask reproduce-tables`: the paper's Tables 1–5 on ModelNet40 from this project's own
+//! runs — ICP, FGR and every trained RGM model of the weights manifest on the clean, noise,
+//! partial and unseen-category test pairs — written to `docs/results.md` with per-pair JSON
+//! and figures.
+//!
+//! Resumable ([`rgm_model::evaluate::Resumable`]): every finished chunk of pairs is appended to
+//! its method's per-pair file at once, and a later run computes only the pairs that are missing
+//! there. This file chooses the rows and writes the report.
+
+use std::collections::BTreeMap;
+use std::fs;
+use std::path::PathBuf;
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+use rgm_cli::EvaluationBar;
+use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
+use rgm_geom::refine::RefineConfig;
+use rgm_geom::registrar::{MethodId, Normalised};
+use rgm_model::evaluate::{Resumable, TestPairs};
+use rgm_model::weights::{weights_dir, Manifest, ModelEntry, Variant, WeightsFile};
+use rgm_model::{Method, MethodName, MethodOptions, PairRecord, Registrar};
+use rgm_viz::{correct_fraction, correspondence_figure, registration_figure};
+
+use crate::project_root;
+use report::Report;
+
+mod report;
+
+/// Options of `cargo xtask reproduce-tables`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// The ModelNet40 `.npy` tree [default: ../shared/data/modelnet40_npy1024 beside the
+    /// repository].
+    #[arg(long, env = "RGM_DATA", value_name = "DIR")]
+    data: Option<PathBuf>,
+    /// Only the first N test pairs of every setting: a quick look, written under
+    /// target/reproduce-tables/limit-N/ so that docs/ keeps the full tables.
+    #[arg(long, value_name = "N")]
+    limit: Option<usize>,
+    /// Only these rows (`icp`, `fgr`, `fgr+icp`, `auto+icp` or a model of the manifest, which
+    /// brings its `+icp` row): a new model's rows without recomputing the others' missing
+    /// pairs. Written under target/reproduce-tables/ unless --out says otherwise.
+    #[arg(long, value_delimiter = ',', value_name = "NAME,NAME")]
+    only: Vec<String>,
+    /// Where results.md, results/ and figures/ go [default: docs/, or
+    /// target/reproduce-tables/limit-N[-only-NAMES]/ with --limit or --only].
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
+    /// Test pairs per setting drawn as figures (the first ones).
+    #[arg(long, default_value_t = 2, value_name = "N")]
+    figures: usize,
+    /// Start no new chunk of pairs after this many minutes; the tables then state how many
+    /// pairs each row covers, and the next run carries on from there.
+    #[arg(long, value_name = "MINUTES")]
+    minutes: Option<f64>,
+    /// Worker threads, each with its own copy of the method [default: every core].
+    #[arg(long, value_name = "N")]
+    threads: Option<usize>,
+    /// The commit this tree is, for a copy of it without its git history (another machine);
+    /// by default `git rev-parse`, marked when the code has uncommitted changes.
+    #[arg(long, value_name = "REV")]
+    commit: Option<String>,
+}
+
+/// One protocol of test pairs (spec §1): a setting on the whole test split or on the unseen
+/// categories.
+#[derive(Clone, Copy, Debug)]
+struct TestSet {
+    setting: Setting,
+    unseen: bool,
+}
+
+impl TestSet {
+    /// In the order they are computed: partial-to-partial first (the paper's headline and the
+    /// ablation's setting), so that a run cut short by `--minutes` has it.
+    const ALL: [TestSet; 4] = [
+        TestSet::seen(Setting::Partial),
+        TestSet {
+            setting: Setting::Partial,
+            unseen: true,
+        },
+        TestSet::seen(Setting::Clean),
+        TestSet::seen(Setting::Noise),
+    ];
+
+    const fn seen(setting: Setting) -> Self {
+        Self {
+            setting,
+            unseen: false,
+        }
+    }
+
+    /// The name used in tables and paths: `clean`, `noise`, `partial`, `partial-unseen`.
+    fn key(&self) -> String {
+        format!(
+            "{}{}",
+            self.setting.name(),
+            if self.unseen { "-unseen" } else { "" }
+        )
+    }
+}
+
+/// A method to evaluate and the name of its rows and files.
+struct Candidate {
+    /// Row name: `icp`, `fgr`, or the model's manifest name.
+    name: String,
+    /// Stem of its per-pair file and figures: the name, and for a model also the training
+    /// pairs its weights have seen, so that retrained weights are evaluated afresh.
+    stem: String,
+    /// The RGM variant of a trained model; `None` for ICP and FGR.
+    variant: Option<Variant>,
+    /// The training pairs of a trained model.
+    pairs_seen: Option<u64>,
+    method: Method,
+}
+
+/// One row of a table: a method's records on a test set of `total` pairs.
+struct Row {
+    name: String,
+    /// As [`Candidate::stem`].
+    stem: String,
+    /// As [`Candidate::variant`].
+    variant: Option<Variant>,
+    /// As [`Candidate::pairs_seen`].
+    pairs_seen: Option<u64>,
+    records: Vec<PairRecord>,
+    total: usize,
+    /// For an RGM model: the share of correct hard correspondences on each drawn pair, by
+    /// pair index.
+    matched: BTreeMap<usize, f64>,
+}
+
+/// The rows of every test set, by its key.
+type Results = BTreeMap<String, Vec<Row>>;
+
+/// Where one invocation writes, and how it evaluates (its workers, its deadline).
+struct Run {
+    out: PathBuf,
+    limit: Option<usize>,
+    evaluation: Resumable,
+}
+
+pub fn run(args: Args) -> Result<()> {
+    let root = project_root();
+    let data = args
+        .data
+        .clone()
+        .unwrap_or_else(|| root.join("../shared/data/modelnet40_npy1024"));
+    let part = [
+        args.limit.map(|n| format!("limit-{n}")),
+        (!args.only.is_empty()).then(|| format!("only-{}", args.only.join("-"))),
+    ]
+    .into_iter()
+    .flatten()
+    .collect::<Vec<_>>()
+    .join("-");
+    let out = match &args.out {
+        Some(dir) => dir.clone(),
+        None if part.is_empty() => root.join("docs"),
+        None => root.join("target/reproduce-tables").join(part),
+    };
+    let threads = args
+        .threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let run = Run {
+        out,
+        limit: args.limit,
+        evaluation: Resumable {
+            pool: rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()?,
+            deadline: args
+                .minutes
+                .map(|m| Instant::now() + Duration::from_secs_f64(60.0 * m)),
+        },
+    };
+    let (load_before, commit_before) = (load_average(), commit(args.commit.as_deref()));
+    let dataset = ModelNet40::open(&data)
+        .with_context(|| format!("opening ModelNet40 at {}", data.display()))?;
+    let manifest_path = weights_dir().join("manifest.json");
+    let manifest = Manifest::load(&manifest_path)?;
+    // Each worker runs one network: OpenBLAS must not start threads of its own under them.
+    rgm_nn::threads::set_blas_threads(1);
+    let mut results = Results::new();
+    check_only(&manifest, &args.only)?;
+    for set in TestSet::ALL {
+        let shapes = test_shapes(&dataset, set, run.limit);
+        let generator = PairGenerator::new(set.setting);
+        let pairs = TestPairs {
+            generator: &generator,
+            shapes: &shapes,
+        };
+        let mut rows = Vec::new();
+        for candidate in candidates(set, &manifest, &args.only)? {
+            let records = run.evaluation.evaluate(
+                &run.records_path(set, &candidate.stem),
+                &candidate.method,
+                pairs,
+                &EvaluationBar::new(format!("{} {}", set.key(), candidate.name)),
+            )?;
+            let matched = run.draw(set, &candidate, &records, pairs, args.figures)?;
+            // A trained model refined as `rgm eval --refine` refines it, from its own
+            // transforms: the refinement alone is computed.
+            let refined = match candidate.variant {
+                Some(_) => {
+                    let stem = format!("{}-icp", candidate.stem);
+                    let name = format!("{}+icp", candidate.name);
+                    let records = run.evaluation.refine(
+                        &run.records_path(set, &stem),
+                        &records,
+                        &RefineConfig::default(),
+                        pairs,
+                        &EvaluationBar::new(format!("{} {name}", set.key())),
+                    )?;
+                    run.draw_clouds(set, &stem, &records, pairs, args.figures)?;
+                    Some(Row {
+                        name,
+                        stem,
+                        variant: None,
+                        pairs_seen: None,
+                        records,
+                        total: shapes.len(),
+                        matched: BTreeMap::new(),
+                    })
+                }
+                None => None,
+            };
+            rows.push(Row {
+                name: candidate.name,
+                stem: candidate.stem,
+                variant: candidate.variant,
+                pairs_seen: candidate.pairs_seen,
+                records,
+                total: shapes.len(),
+                matched,
+            });
+            rows.extend(refined);
+        }
+        results.insert(set.key(), rows);
+    }
+    let report = Report {
+        command: command_line(std::env::args()),
+        commit: commit_before,
+        threads,
+        load: [load_before, load_average()],
+        figures: args.figures,
+        models: manifest.models,
+    };
+    let path = run.out.join("results.md");
+    fs::write(&path, report.markdown(&results, &run.out))
+        .with_context(|| format!("writing {}", path.display()))?;
+    println!("wrote {}", path.display());
+    Ok(())
+}
+
+/// The test shapes of `set`, cut to `limit`.
+fn test_shapes(dataset: &ModelNet40, set: TestSet, limit: Option<usize>) -> Vec<&Shape> {
+    let mut shapes = dataset.split(Split::Test, set.unseen);
+    shapes.truncate(limit.unwrap_or(usize::MAX));
+    shapes
+}
+
+/// ICP or FGR (refined when `refine`) as `rgm register --method` builds it.
+/// Its row is named as the method names itself, its files with `-` for `+`.
+fn classical(method: MethodName, refine: bool) -> Result<Candidate> {
+    let method = MethodOptions {
+        method,
+        refine,
+        ..MethodOptions::default()
+    }
+    .build()?;
+    Ok(Candidate {
+        name: method.name(),
+        stem: method.name().replace('+', "-"),
+        variant: None,
+        pairs_seen: None,
+        method,
+    })
+}
+
+/// The name of `rgm register`'s default row (RGM and FGR, refined), known before its weights
+/// are read.
+fn default_row() -> String {
+    MethodId {
+        base: rgm_model::options::AUTO,
+        refined: true,
+    }
+    .to_string()
+}
+
+/// The methods of the tables of `set`: ICP and FGR (identity initialisation, Open3D's
+/// settings; spec §6), on partial pairs also FGR refined by `rgm_geom::refine` (the classical
+/// pipeline RGM competes with there; on clean and noisy pairs FGR alone registers nearly every
+/// pair, docs/results.md),
+/// `rgm register`'s default (`auto+icp`: RGM with the built-in model and FGR, both refined, the
+/// better by its score), then every model of the manifest trained for `set`, as the paper runs
+/// it (unrefined; [`run`] adds each model refined, `<name>+icp`, from its own transforms).
+///
+/// Only the rows named in `only` when it is not empty: the others' methods are not even built
+/// (a model's weights are not read).
+fn candidates(set: TestSet, manifest: &Manifest, only: &[String]) -> Result<Vec<Candidate>> {
+    let wanted = |name: &str| only.is_empty() || only.iter().any(|o| o == name);
+    let mut list = vec![
+        classical(MethodName::Icp, false)?,
+        classical(MethodName::Fgr, false)?,
+    ];
+    if set.setting == Setting::Partial {
+        list.push(classical(MethodName::Fgr, true)?);
+    }
+    // `rgm register`'s default on every test set, named by the built-in model it runs.
+    if let Some(builtin) = manifest.builtin_entry().filter(|_| wanted(&default_row())) {
+        list.push(Candidate {
+            name: default_row(),
+            stem: format!("auto-{}-{}pairs-icp", builtin.name, builtin.pairs_seen),
+            variant: None,
+            pairs_seen: None,
+            method: MethodOptions::default().build()?,
+        });
+    }
+    for entry in models_for(manifest, set).filter(|e| wanted(&e.name)) {
+        let method = from_history(entry)?
+            .registrar(&weights_dir())
+            .map(|registrar| Method::new(Normalised { inner: registrar }))
+            .with_context(|| format!("loading the model {}", entry.name))?;
+        list.push(Candidate {
+            name: entry.name.clone(),
+            stem: format!("{}-{}pairs", entry.name, entry.pairs_seen),
+            variant: Some(entry.variant),
+            pairs_seen: Some(entry.pairs_seen),
+            method,
+        });
+    }
+    list.retain(|c| wanted(&c.name));
+    Ok(list)
+}
+
+/// An error naming the rows of `only` that no test set has.
+fn check_only(manifest: &Manifest, only: &[String]) -> Result<()> {
+    let classical = [
+        (MethodName::Icp, false),
+        (MethodName::Fgr, false),
+        (MethodName::Fgr, true),
+    ]
+    .map(|(name, refined)| {
+        MethodId {
+            base: name.name(),
+            refined,
+        }
+        .to_string()
+    });
+    let rows: Vec<String> = classical.into_iter().chain([default_row()]).collect();
+    let known: Vec<&str> = rows
+        .iter()
+        .map(String::as_str)
+        .chain(manifest.models.iter().map(|m| m.name.as_str()))
+        .collect();
+    let unknown: Vec<&str> = only
+        .iter()
+        .map(String::as_str)
+        .filter(|name| !known.contains(name))
+        .collect();
+    anyhow::ensure!(
+        unknown.is_empty(),
+        "--only {}: no such row (the rows are {} and the models of the manifest)",
+        unknown.join(","),
+        rows.join(", ")
+    );
+    Ok(())
+}
+
+/// `entry` with its weights on disk: a file of the git history ([`WeightsFile::Git`]) is
+/// written once to `target/git-weights/` by `git show`.
+fn from_history(entry: &ModelEntry) -> Result<ModelEntry> {
+    let WeightsFile::Git { revision, path } = &entry.file else {
+        return Ok(entry.clone());
+    };
+    let dir = project_root().join("target/git-weights");
+    // Named by the revision too, so that a manifest pinning the name to another commit does
+    // not read the earlier extraction.
+    let extracted = dir.join(format!("{}-{revision}.safetensors", entry.name));
+    if !extracted.exists() {
+        let object = format!("{revision}:{path}");
+        let out = Command::new("git")
+            .args(["show", &object])
+            .current_dir(project_root())
+            .output()
+            .context("running git show")?;
+        anyhow::ensure!(
+            out.status.success(),
+            "the weights of {}: git show {object} failed: {}",
+            entry.name,
+            String::from_utf8_lossy(&out.stderr)
+        );
+        fs::create_dir_all(&dir)?;
+        fs::write(&extracted, out.stdout)?;
+    }
+    Ok(ModelEntry {
+        file: WeightsFile::Path(extracted),
+        ..entry.clone()
+    })
+}
+
+/// The manifest's models trained for `set`'s setting and categories.
+fn models_for(manifest: &Manifest, set: TestSet) -> impl Iterator<Item = &ModelEntry> {
+    manifest
+        .models
+        .iter()
+        .filter(move |m| m.setting == set.setting && m.unseen == set.unseen)
+}
+
+impl Run {
+    /// The per-pair file of one method on one test set.
+    fn records_path(&self, set: TestSet, stem: &str) -> PathBuf {
+        self.out
+            .join("results")
+            .join(set.key())
+            .join(format!("{stem}.jsonl"))
+    }
+
+    /// For the first `count` pairs: the clouds before and after `candidate`'s transform
+    /// ([`Run::draw_clouds`]) and, for an RGM model, its hard correspondences (the pair is
+    /// registered again for them). Returns the share of correct hard correspondences of each
+    /// pair drawn for an RGM model.
+    fn draw(
+        &self,
+        set: TestSet,
+        candidate: &Candidate,
+        records: &[PairRecord],
+        pairs: TestPairs,
+        count: usize,
+    ) -> Result<BTreeMap<usize, f64>> {
+        self.draw_clouds(set, &candidate.stem, records, pairs, count)?;
+        let mut matched = BTreeMap::new();
+        // The network's correspondences; a refined model's are its plain twin's.
+        if candidate.method.id().base != rgm_model::pipeline::NAME || candidate.method.is_refined()
+        {
+            return Ok(matched);
+        }
+        let dir = self.out.join("figures").join(set.key());
+        for record in records.iter().take(count) {
+            let i = record.index;
+            let pair = pairs.pair(i)?;
+            let mut method = candidate.method.clone();
+            // A failure leaves no correspondences: an empty matrix, 0 % correct.
+            let found = method
+                .register(&pair.source, &pair.target)
+                .map(|found| found.correspondences)
+                .unwrap_or_default();
+            let found = &found[..];
+            correspondence_figure(&pair.correspondence, found, 36)?
+                .write_png(dir.join(format!("{}-matrix-pair{i}.png", candidate.stem)))?;
+            matched.insert(i, correct_fraction(&pair.correspondence, found));
+        }
+        Ok(matched)
+    }
+
+    /// For the first `count` pairs: the clouds before and after the transform of the method
+    /// whose files are named `stem`, and the pair's ground-truth correspondence matrix.
+    /// Existing pictures are kept.
+    fn draw_clouds(
+        &self,
+        set: TestSet,
+        stem: &str,
+        records: &[PairRecord],
+        pairs: TestPairs,
+        count: usize,
+    ) -> Result<()> {
+        let dir = self.out.join("figures").join(set.key());
+        fs::create_dir_all(&dir)?;
+        for record in records.iter().take(count) {
+            let i = record.index;
+            let pair = pairs.pair(i)?;
+            let clouds = dir.join(format!("{stem}-pair{i}.png"));
+            if !clouds.exists() {
+                registration_figure(&pair.source, &pair.target, &record.transform)?
+                    .write_png(&clouds)?;
+            }
+            let truth = dir.join(format!("truth-pair{i}.png"));
+            if !truth.exists() {
+                correspondence_figure(&pair.correspondence, &pair.correspondence.pairs, 36)?
+                    .write_png(&truth)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The 1-minute load average from /proc/loadavg (how busy the machine was).
+fn load_average() -> Option<f64> {
+    fs::read_to_string("/proc/loadavg")
+        .ok()?
+        .split_whitespace()
+        .next()?
+        .parse()
+        .ok()
+}
+
+/// The command as typed (`args`: the process's arguments, the program first), for the report:
+/// `cargo xtask` and the arguments, quoted for a shell where they need it.
+fn command_line(args: impl Iterator<Item = String>) -> String {
+    let quoted = args.skip(1).map(|arg| {
+        let plain = !arg.is_empty()
+            && arg
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || "-_./,=:+@%".contains(c));
+        if plain {
+            arg
+        } else {
+            format!("'{}'", arg.replace('\'', r"'\''"))
+        }
+    });
+    std::iter::once("cargo xtask".to_string())
+        .chain(quoted)
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// The commit the tables were made at (`given`, or git's), marked when the working tree
+/// differs from it.
+fn commit(given: Option<&str>) -> String {
+    if let Some(rev) = given {
+        return format!("`{rev}` (a copy of its tree, without git)");
+    }
+    let git = |args: &[&str]| {
+        Command::new("git")
+            .args(args)
+            .current_dir(project_root())
+            .output()
+            .ok()
+            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+            .unwrap_or_default()
+    };
+    let hash = git(&["rev-parse", "--short", "HEAD"]);
+    let dirty = !git(&[
+        "status",
+        "--porcelain",
+        "--",
+        "crates",
+        "xtask",
+        "Cargo.lock",
+    ])
+    .is_empty();
+    format!(
+        "`{hash}`{}",
+        if dirty {
+            " (with uncommitted changes to the code)"
+        } else {
+            ""
+        }
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_test_set_gets_the_models_trained_for_it() {
+        let entry = |name: &str, setting: &str, unseen: bool, variant: &str| {
+            serde_json::json!({"name": name, "setting": setting, "unseen": unseen,
+                "variant": variant, "preset": "tiny", "match_points": null, "file": "x",
+                "builtin": false, "trained_with": "rgm train", "epochs": 1.0, "pairs_seen": 8})
+        };
+        let manifest: Manifest = serde_json::from_value(serde_json::json!({"models": [
+            entry("a", "partial", false, "rgm"),
+            entry("b", "partial", true, "rgm"),
+            entry("c", "partial", false, "var1"),
+            entry("d", "clean", false, "var2"),
+        ]}))
+        .unwrap();
+        let names = |set: TestSet| {
+            models_for(&manifest, set)
+                .map(|m| format!("{}:{}", m.name, m.variant.name()))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(names(TestSet::ALL[0]), ["a:rgm", "c:var1"]);
+        assert_eq!(names(TestSet::ALL[1]), ["b:rgm"]);
+        assert_eq!(names(TestSet::ALL[2]), ["d:var2"]);
+        assert!(names(TestSet::ALL[3]).is_empty());
+    }
+
+    #[test]
+    fn only_keeps_the_named_rows_and_refuses_unknown_names() {
+        let manifest: Manifest = serde_json::from_value(serde_json::json!({"models": []})).unwrap();
+        let names = |set: TestSet, only: &[&str]| {
+            let only: Vec<String> = only.iter().map(|s| s.to_string()).collect();
+            candidates(set, &manifest, &only)
+                .unwrap()
+                .into_iter()
+                .map(|c| c.name)
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(
+            names(TestSet::ALL[0], &["fgr+icp", "icp"]),
+            ["icp", "fgr+icp"]
+        );
+        assert!(names(TestSet::ALL[2], &["fgr+icp"]).is_empty());
+        assert_eq!(names(TestSet::ALL[2], &[]), ["icp", "fgr"]);
+        assert!(check_only(&manifest, &["icp".into(), "fgr+icp".into()]).is_ok());
+        let err = check_only(&manifest, &["icp".into(), "var9".into()]).unwrap_err();
+        assert!(
+            err.to_string().starts_with("--only var9: no such row"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn fgr_refined_by_icp_is_a_row_of_the_partial_tables_only() {
+        let manifest: Manifest = serde_json::from_value(serde_json::json!({"models": []})).unwrap();
+        let names = |set: TestSet| {
+            let list = candidates(set, &manifest, &[]).unwrap();
+            list.iter()
+                .map(|c| (c.name.clone(), c.method.name()))
+                .map(|(a, b)| format!("{a}={b}"))
+                .collect::<Vec<_>>()
+        };
+        let partial = names(TestSet::ALL[0]);
+        assert_eq!(partial.last().unwrap(), "fgr+icp=fgr+icp");
+        assert_eq!(names(TestSet::ALL[1]), partial);
+        assert_eq!(names(TestSet::ALL[2]), ["icp=icp", "fgr=fgr"]);
+    }
+
+    #[test]
+    fn every_table_has_the_default_of_rgm_register() {
+        // Only the default's row: the models of the manifest that earlier commits hold
+        // (`git:REV:PATH`) are not read, so that a shallow clone passes too.
+        let manifest = Manifest::builtin();
+        for set in TestSet::ALL {
+            let list = candidates(set, &manifest, &[default_row()]).unwrap();
+            let default = list.iter().find(|c| c.name == "auto+icp").unwrap();
+            assert_eq!(default.method.name(), "auto+icp", "{}", set.key());
+            assert!(
+                default.stem.starts_with("auto-partial-fast-"),
+                "{}",
+                default.stem
+            );
+        }
+    }
+
+    #[test]
+    fn the_command_line_is_the_one_typed_quoted_where_a_shell_needs_it() {
+        let args = [
+            "target/debug/xtask",
+            "reproduce-tables",
+            "--only",
+            "icp,fgr+icp",
+        ]
+        .map(String::from);
+        assert_eq!(
+            command_line(args.into_iter()),
+            "cargo xtask reproduce-tables --only icp,fgr+icp"
+        );
+        let args = [
+            "xtask",
+            "reproduce-tables",
+            "--out",
+            "my results",
+            "--commit",
+            "it's",
+        ]
+        .map(String::from);
+        assert_eq!(
+            command_line(args.into_iter()),
+            r"cargo xtask reproduce-tables --out 'my results' --commit 'it'\''s'"
+        );
+    }
+}
