@@ -11,6 +11,7 @@ use std::process::ExitCode;
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
+pub use rgm_cli::progress;
 use rgm_data::{
     ModelNet40, PairGenerator, ScanFolder, ScanPair, ScanPairConfig, Setting, Shape, Split,
 };
@@ -354,20 +355,6 @@ pub fn read_cloud(path: &Path) -> anyhow::Result<rgm_geom::PointCloud> {
         eprintln!("rgm: {warning}");
     }
     Ok(cloud)
-}
-
-/// A progress bar on stderr for `len` steps of `what` (hidden when stderr is not a terminal).
-pub fn progress(len: usize, what: &str) -> indicatif::ProgressBar {
-    let bar = indicatif::ProgressBar::new(len as u64);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{prefix} [{bar:30}] {pos}/{len} {msg} ({elapsed}, eta {eta})",
-        )
-        .expect("static template")
-        .progress_chars("=> "),
-    );
-    bar.set_prefix(what.to_string());
-    bar
 }
 
 /// Fails now, before the work, when `path` cannot be written (its folder is missing, it is a
