@@ -26,8 +26,9 @@ use rgm_nn::Precision;
 struct Cli {
     #[command(subcommand)]
     command: Command,
-    /// Threads one command may use: `rgm register` runs its candidates (RGM and FGR) side by
-    /// side on them, and `--workers` of `register --pairs` and `rgm eval` defaults to it
+    /// Threads one command may use: `rgm register` runs the network's attention on them (and
+    /// both candidates side by side with --accept inf), and `--workers` of `register --pairs`
+    /// and `rgm eval` defaults to it
     /// (`rgm train` has its own --workers) [default: one per core; the `RAYON_NUM_THREADS`
     /// variable sets it too].
     #[arg(long, global = true, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
@@ -155,7 +156,7 @@ fn refine_help() -> String {
 /// What a command runs when the options leave it open.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Defaults {
-    /// `rgm register`'s: [`MethodOptions::default`], RGM and FGR combined, refined.
+    /// `rgm register`'s: [`MethodOptions::default`], FGR and RGM as a cascade, refined.
     Register,
     /// The paper's protocol (`rgm eval`): RGM, unrefined.
     Paper,
