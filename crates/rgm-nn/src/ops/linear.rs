@@ -125,6 +125,24 @@ impl<T: Scalar> Linear<T> {
         } else {
             mat_mul(T::one(), &dout, weight, T::one(), &mut dinp);
         }
+        self.backward_params(dout, inp)
+    }
+
+    /// Adds the weight and bias gradients of [`Linear::backward`] only, for a layer whose
+    /// input needs no gradient (the network's input). Shapes as [`Linear::backward`].
+    pub fn backward_params(
+        &mut self,
+        dout: ArrayView2<'_, T>,
+        inp: ArrayView2<'_, T>,
+    ) -> Result<()> {
+        let rows = inp.nrows();
+        check_shape("linear backward", "inp", inp.shape(), &[rows, self.c_in()])?;
+        check_shape(
+            "linear backward",
+            "dout",
+            dout.shape(),
+            &[rows, self.c_out()],
+        )?;
         mat_mul(T::one(), &dout.t(), &inp, T::one(), &mut self.weight.grad);
         if let Some(b) = &mut self.bias {
             for row in dout.rows() {
@@ -270,7 +288,12 @@ mod tests {
         crate::relu_backward(want.view_mut(), dinp.view(), inp.view()).unwrap();
         assert_eq!(dpre.mapv(f32::to_bits), want.mapv(f32::to_bits));
         assert_eq!(a.weight.grad, b.weight.grad);
-        assert_eq!(a.bias.unwrap().grad, b.bias.unwrap().grad);
+        assert_eq!(a.bias.unwrap().grad, b.bias.as_ref().unwrap().grad);
+        let mut c = lin.clone();
+        c.backward_params(dout.view(), inp.view()).unwrap();
+        assert_eq!(c.weight.grad, b.weight.grad);
+        assert_eq!(c.bias.unwrap().grad, b.bias.unwrap().grad);
+        assert!(c.weight.grad.iter().any(|&g| g != 0.0));
     }
 
     #[test]
