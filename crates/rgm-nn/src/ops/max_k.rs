@@ -30,28 +30,33 @@ pub fn max_k_forward<T: Scalar>(
         cache.argmax = Array2::zeros((n, c));
     }
     // Slices of contiguous rows, so that each neighbour's comparison runs as one vector loop
-    // over the channels.
+    // over the channels; a point's K rows are one slice.
     let inp = inp.as_standard_layout(); // (N*K, C)
-    let row = |i: usize| inp.row(i).to_slice().expect("standard layout");
+    let groups = inp
+        .as_slice()
+        .expect("standard layout")
+        .chunks_exact((k * c).max(1)); // N of (K, C)
     let mut best = vec![T::zero(); c]; // (C)
-    for p in 0..n {
-        let arg = cache
-            .argmax
-            .row_mut(p)
-            .into_slice()
-            .expect("standard layout"); // (C)
-        best.copy_from_slice(row(p * k));
+    for ((group, mut arg), mut out) in groups
+        .zip(cache.argmax.rows_mut())
+        .zip(out.rows_mut())
+    {
+        let arg = arg.as_slice_mut().expect("standard layout"); // (C)
+        let mut rows = group.chunks_exact(c.max(1));
+        best.copy_from_slice(rows.next().expect("K ≥ 1 rows per point"));
         arg.fill(0);
-        for j in 1..k {
-            let j32 = j as u32;
+        for (j, row) in (1u32..).zip(rows) {
             // Branch-free selects, so the loop vectorises.
-            for ((b, a), &x) in best.iter_mut().zip(arg.iter_mut()).zip(row(p * k + j)) {
+            for ((b, a), &x) in best.iter_mut().zip(arg.iter_mut()).zip(row) {
                 let greater = x > *b;
                 *b = if greater { x } else { *b };
-                *a = if greater { j32 } else { *a };
+                *a = if greater { j } else { *a };
             }
         }
-        out.row_mut(p).assign(&ArrayView1::from(&best[..]));
+        match out.as_slice_mut() {
+            Some(out) => out.copy_from_slice(&best),
+            None => out.assign(&ArrayView1::from(&best[..])),
+        }
     }
     Ok(())
 }
@@ -116,6 +121,10 @@ mod tests {
         assert_eq!(wide.slice(ndarray::s![.., 2..5]), plain);
         assert_eq!(other.argmax, cache.argmax);
         assert!(wide.slice(ndarray::s![.., ..2]).iter().all(|&v| v == -1.0));
+        // Into a transposed output (rows with columns apart).
+        let mut out_t = Array2::zeros((3, 4));
+        max_k_forward(out_t.view_mut().reversed_axes(), x.view(), 5, &mut other).unwrap();
+        assert_eq!(out_t.t(), plain);
     }
 
     #[test]
