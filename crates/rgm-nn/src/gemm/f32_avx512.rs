@@ -184,7 +184,13 @@ fn product(
                 // the last applies the ReLU.
                 let (beta, bias) = if p0 == 0 { (beta, bias) } else { (1.0, None) };
                 let last = p0 + kc == k;
-                let (relu, keep) = (finish.relu && last, finish.keep.filter(|_| last));
+                let keep = finish.keep.filter(|_| last);
+                let tile: Tile = match (finish.relu && last, keep.is_some()) {
+                    (false, false) => micro_tile::<false, false>,
+                    (true, false) => micro_tile::<true, false>,
+                    (false, true) => micro_tile::<false, true>,
+                    (true, true) => micro_tile::<true, true>,
+                };
                 for i0 in (0..m).step_by(MR) {
                     let rows = MR.min(m - i0);
                     let a_mem = if rows == MR {
@@ -217,24 +223,23 @@ fn product(
                             },
                             ..c_mem
                         };
-                        // (i0, j) of y, which has C's shape.
-                        let keep = keep.map(|(y, rows)| {
-                            (y.wrapping_offset(i0 as isize * rows + j as isize), rows)
-                        });
+                        // (i0, j) of y, which has C's shape (unread without it).
+                        let (y, y_rows) = keep.unwrap_or((std::ptr::null(), 0));
+                        let y_tile = (y.wrapping_offset(i0 as isize * y_rows + j as isize), y_rows);
                         // SAFETY: `available()` was checked above; `a_mem` reaches kc columns
-                        // of 8 rows, the strip kc rows of 32, `c_tile` (and `keep`) rows ×
-                        // cols of `c` (and y).
+                        // of 8 rows, the strip kc rows of 32, `c_tile` (and `y_tile` where
+                        // `tile` reads it) rows × cols of `c` (and y), whose rows are
+                        // contiguous where y is read.
                         let tile_bias = bias.map(|bias| &bias[j..j + NR]);
                         unsafe {
-                            micro_tile(
+                            tile(
                                 kc,
                                 a_mem,
                                 b_strip,
                                 alpha,
                                 beta,
                                 tile_bias,
-                                relu,
-                                keep,
+                                y_tile,
                                 c_tile,
                                 (rows, cols),
                             )
@@ -409,35 +414,48 @@ unsafe fn transpose_16x16(r: &mut [std::arch::x86_64::__m512; 16]) {
     }
 }
 
+/// A [`micro_tile`] instance, chosen per panel.
+type Tile = unsafe fn(
+    usize,
+    Strided<*const f32>,
+    &[f32],
+    f32,
+    f32,
+    Option<&[f32]>,
+    (*const f32, isize),
+    Strided<*mut f32>,
+    (usize, usize),
+);
+
 /// One 8 × 32 block: `c = alpha · (a · b_strip) + beta · c (+ bias)`, then `max(·, 0)` if
-/// `relu`, then `⊙ [y > 0]` where `keep` gives y's block and row stride, over the first
+/// `RELU`, then `⊙ [y > 0]` if `KEEP` (`y` = y's block and row stride), over the first
 /// `rows × cols` of the block (`beta = 0` ignores what `c` held; `bias` holds the block's 32
-/// columns' values). `a` is 8 rows × kc; rows past `rows` may be
-/// anything finite or packed zeros, as they are never written.
+/// columns' values). `a` is 8 rows × kc; rows past `rows` may be anything finite or packed
+/// zeros, as they are never written. One instance per finish: the plain one's write-back
+/// stays short enough to unroll, with the accumulators in their registers.
 ///
 /// # Safety
 /// The processor must have AVX-512 F; `a` reaches 8 rows of kc values, `b` holds `kc · 32`
-/// values, `c` (and y) reaches `rows × cols` values, `rows ≤ 8`, `cols ≤ 32`; with `keep`,
-/// C's rows are contiguous.
+/// values, `c` (and y if `KEEP`) reaches `rows × cols` values, `rows ≤ 8`, `cols ≤ 32`; if
+/// `KEEP`, C's rows are contiguous.
 // Each scalar its own argument, so that all arrive in registers (an aggregate of them would
 // pass through memory, and loading it stalls each call).
 #[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx512f")]
-unsafe fn micro_tile(
+unsafe fn micro_tile<const RELU: bool, const KEEP: bool>(
     kc: usize,
     a: Strided<*const f32>,
     b: &[f32],
     alpha: f32,
     beta: f32,
     bias: Option<&[f32]>,
-    relu: bool,
-    keep: Option<(*const f32, isize)>,
+    (y, y_rows): (*const f32, isize),
     c: Strided<*mut f32>,
     (rows, cols): (usize, usize),
 ) {
     use std::arch::x86_64::*;
     debug_assert!(b.len() == kc * NR && rows <= MR && cols <= NR);
-    debug_assert!(keep.is_none() || c.cols == 1);
+    debug_assert!(!KEEP || c.cols == 1);
     if c.cols == 1 {
         // The block's rows of C and the next block's to the right, fetched while the products
         // run (the write-backs read or write them; C is often far from this core's caches).
@@ -480,44 +498,56 @@ unsafe fn micro_tile(
                 (1u16 << len) - 1
             }
         });
-        // Loops of constant length (rows past `rows` skipped inside), so that they unroll and
-        // every accumulator stays in its register.
-        for r in 0..MR {
-            if r >= rows {
-                break;
-            }
-            for (h, &mask) in masks.iter().enumerate() {
-                if mask == 0 {
-                    continue;
+        // Row r of the block, if it lies in C.
+        macro_rules! write_row {
+            ($r:literal) => {
+                if $r < rows {
+                    for (h, &mask) in masks.iter().enumerate() {
+                        if mask == 0 {
+                            continue;
+                        }
+                        // SAFETY: row r, columns 16h.. of the block are inside `c`.
+                        let at = unsafe { c.ptr.offset($r * c.rows + 16 * h as isize) };
+                        let mut v = _mm512_mul_ps(valpha, acc[2 * $r + h]);
+                        if beta != 0.0 {
+                            // SAFETY: the mask covers the `len` values of this row from `at`.
+                            let old = unsafe { _mm512_maskz_loadu_ps(mask, at) };
+                            v = _mm512_fmadd_ps(vbeta, old, v);
+                        }
+                        if let Some(bias) = bias {
+                            // SAFETY: `bias` holds 32 values.
+                            let bias = unsafe { _mm512_loadu_ps(bias.as_ptr().add(16 * h)) };
+                            v = _mm512_add_ps(v, bias);
+                        }
+                        if RELU {
+                            // max(v, 0) gives 0 for NaN and -0, as ReLU.
+                            v = _mm512_max_ps(v, _mm512_setzero_ps());
+                        }
+                        if KEEP {
+                            // SAFETY: as `at`, in y.
+                            let y = unsafe {
+                                _mm512_maskz_loadu_ps(mask, y.offset($r * y_rows + 16 * h as isize))
+                            };
+                            let positive = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(y, _mm512_setzero_ps());
+                            v = _mm512_maskz_mov_ps(positive, v);
+                        }
+                        // SAFETY: as above.
+                        unsafe { _mm512_mask_storeu_ps(at, mask, v) };
+                    }
                 }
-                // SAFETY: row r, columns 16h.. of the block are inside `c`.
-                let at = unsafe { c.ptr.offset(r as isize * c.rows + 16 * h as isize) };
-                let mut v = _mm512_mul_ps(valpha, acc[2 * r + h]);
-                if beta != 0.0 {
-                    // SAFETY: the mask covers the `len` values of this row from `at`.
-                    let old = unsafe { _mm512_maskz_loadu_ps(mask, at) };
-                    v = _mm512_fmadd_ps(vbeta, old, v);
-                }
-                if let Some(bias) = bias {
-                    // SAFETY: `bias` holds 32 values.
-                    v = _mm512_add_ps(v, unsafe { _mm512_loadu_ps(bias.as_ptr().add(16 * h)) });
-                }
-                if relu {
-                    // max(v, 0) gives 0 for NaN and -0, as ReLU.
-                    v = _mm512_max_ps(v, _mm512_setzero_ps());
-                }
-                if let Some((y, y_rows)) = keep {
-                    // SAFETY: as `at`, in y.
-                    let y = unsafe {
-                        _mm512_maskz_loadu_ps(mask, y.offset(r as isize * y_rows + 16 * h as isize))
-                    };
-                    let positive = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(y, _mm512_setzero_ps());
-                    v = _mm512_maskz_mov_ps(positive, v);
-                }
-                // SAFETY: as above.
-                unsafe { _mm512_mask_storeu_ps(at, mask, v) };
-            }
+            };
         }
+        // Unrolled by hand, so that every accumulator stays in its register (a loop over the
+        // rows keeps them on the stack once the write-back grows).
+        const _: () = assert!(MR == 8, "one write_row! per row");
+        write_row!(0);
+        write_row!(1);
+        write_row!(2);
+        write_row!(3);
+        write_row!(4);
+        write_row!(5);
+        write_row!(6);
+        write_row!(7);
     } else {
         let mut block = [0f32; MR * NR]; // (8, 32) row-major
         for (v, chunk) in acc.iter().zip(block.chunks_exact_mut(16)) {
@@ -531,7 +561,7 @@ unsafe fn micro_tile(
                 let v = block[r * NR + j];
                 let v = if beta == 0.0 { v } else { v + beta * *x };
                 let v = bias.map_or(v, |bias| v + bias[j]);
-                *x = if relu && !(v > 0.0) { 0.0 } else { v };
+                *x = if RELU && !(v > 0.0) { 0.0 } else { v };
             }
         }
     }

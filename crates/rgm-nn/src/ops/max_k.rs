@@ -37,10 +37,7 @@ pub fn max_k_forward<T: Scalar>(
         .expect("standard layout")
         .chunks_exact((k * c).max(1)); // N of (K, C)
     let mut best = vec![T::zero(); c]; // (C)
-    for ((group, mut arg), mut out) in groups
-        .zip(cache.argmax.rows_mut())
-        .zip(out.rows_mut())
-    {
+    for ((group, mut arg), mut out) in groups.zip(cache.argmax.rows_mut()).zip(out.rows_mut()) {
         let arg = arg.as_slice_mut().expect("standard layout"); // (C)
         let mut rows = group.chunks_exact(c.max(1));
         best.copy_from_slice(rows.next().expect("K ≥ 1 rows per point"));
