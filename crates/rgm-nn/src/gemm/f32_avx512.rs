@@ -466,6 +466,12 @@ unsafe fn micro_tile<const RELU: bool, const KEEP: bool>(
             _mm_prefetch::<_MM_HINT_T0>(at.wrapping_add(16) as *const i8);
             _mm_prefetch::<_MM_HINT_T0>(at.wrapping_add(32) as *const i8);
             _mm_prefetch::<_MM_HINT_T0>(at.wrapping_add(48) as *const i8);
+            if KEEP {
+                // y's row too (a ReLU output of the forward pass, long out of cache).
+                let y_at = y.wrapping_offset(r as isize * y_rows);
+                _mm_prefetch::<_MM_HINT_T0>(y_at as *const i8);
+                _mm_prefetch::<_MM_HINT_T0>(y_at.wrapping_add(16) as *const i8);
+            }
         }
     }
     let mut acc = [_mm512_setzero_ps(); 2 * MR]; // (8, 2) vectors: row r, columns 16h..16h + 16
