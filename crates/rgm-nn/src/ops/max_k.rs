@@ -29,8 +29,7 @@ pub fn max_k_forward<T: Scalar>(
     if cache.argmax.dim() != (n, c) {
         cache.argmax = Array2::zeros((n, c));
     }
-    // Slices of contiguous rows, so that each neighbour's comparison runs as one vector loop
-    // over the channels; a point's K rows are one slice.
+    // A point's K rows as one slice, its channels compared in chunks (see `max_of_chunk`).
     let inp = inp.as_standard_layout(); // (N*K, C)
     let groups = inp
         .as_slice()
@@ -39,16 +38,14 @@ pub fn max_k_forward<T: Scalar>(
     let mut best = vec![T::zero(); c]; // (C)
     for ((group, mut arg), mut out) in groups.zip(cache.argmax.rows_mut()).zip(out.rows_mut()) {
         let arg = arg.as_slice_mut().expect("standard layout"); // (C)
-        let mut rows = group.chunks_exact(c.max(1));
-        best.copy_from_slice(rows.next().expect("K ≥ 1 rows per point"));
-        arg.fill(0);
-        for (j, row) in (1u32..).zip(rows) {
-            // Branch-free selects, so the loop vectorises.
-            for ((b, a), &x) in best.iter_mut().zip(arg.iter_mut()).zip(row) {
-                let greater = x > *b;
-                *b = if greater { x } else { *b };
-                *a = if greater { j } else { *a };
-            }
+                                                                // LANES channels at a time in local arrays, so that the comparisons run as vector
+                                                                // selects in registers; the channels past the last whole chunk one at a time.
+        let whole = c - c % LANES;
+        for c0 in (0..whole).step_by(LANES) {
+            max_of_chunk::<T, LANES>(group, c, c0, &mut best[c0..], &mut arg[c0..]);
+        }
+        for c0 in whole..c {
+            max_of_chunk::<T, 1>(group, c, c0, &mut best[c0..], &mut arg[c0..]);
         }
         match out.as_slice_mut() {
             Some(out) => out.copy_from_slice(&best),
@@ -56,6 +53,36 @@ pub fn max_k_forward<T: Scalar>(
         }
     }
     Ok(())
+}
+
+/// Channels per chunk of [`max_k_forward`]: one 512-bit vector of f32.
+const LANES: usize = 16;
+
+/// The max over a point's K rows `group` (K, C) of channels `c0..c0 + W` into `best` and its
+/// first winning row into `arg`; ties go to the first row.
+fn max_of_chunk<T: Scalar, const W: usize>(
+    group: &[T],
+    c: usize,
+    c0: usize,
+    best: &mut [T],
+    arg: &mut [u32],
+) {
+    let mut rows = group.chunks_exact(c).map(|row| &row[c0..c0 + W]);
+    let mut b: [T; W] = rows
+        .next()
+        .expect("K ≥ 1 rows per point")
+        .try_into()
+        .expect("W values");
+    let mut a = [0u32; W];
+    for (j, row) in (1u32..).zip(rows) {
+        for l in 0..W {
+            let greater = row[l] > b[l];
+            b[l] = if greater { row[l] } else { b[l] };
+            a[l] = if greater { j } else { a[l] };
+        }
+    }
+    best[..W].copy_from_slice(&b);
+    arg[..W].copy_from_slice(&a);
 }
 
 /// Differentiates the max: the gradient flows to the winning neighbour only,
@@ -102,6 +129,27 @@ mod tests {
         let mut dx = Array2::zeros((3, 2));
         max_k_backward(dx.view_mut(), array![[2.0, 3.0]].view(), 3, &cache).unwrap();
         assert_eq!(dx, array![[2.0, 0.0], [0.0, 3.0], [0.0, 0.0]]);
+    }
+
+    #[test]
+    fn the_chunks_give_the_first_maximum_of_every_channel() {
+        // C = 37: two chunks of 16 and 5 single channels; values on a coarse grid, so that
+        // ties are frequent.
+        let (n, k, c) = (3, 7, 37);
+        let x = Array2::from_shape_fn((n * k, c), |(i, j)| ((i * 13 + j * 7) % 5) as f32);
+        let (mut out, mut cache) = (Array2::zeros((n, c)), MaxKCache::default());
+        max_k_forward(out.view_mut(), x.view(), k, &mut cache).unwrap();
+        for (p, ch) in (0..n).flat_map(|p| (0..c).map(move |ch| (p, ch))) {
+            let column: Vec<f32> = (0..k).map(|j| x[[p * k + j, ch]]).collect();
+            let max = column.iter().copied().fold(f32::MIN, f32::max);
+            let first = column.iter().position(|&v| v == max).unwrap();
+            assert_eq!(out[[p, ch]], max, "point {p}, channel {ch}");
+            assert_eq!(
+                cache.argmax[[p, ch]] as usize,
+                first,
+                "point {p}, channel {ch}"
+            );
+        }
     }
 
     #[test]
