@@ -567,7 +567,11 @@ unsafe fn micro_tile<const RELU: bool, const KEEP: bool>(
                 let v = block[r * NR + j];
                 let v = if beta == 0.0 { v } else { v + beta * *x };
                 let v = bias.map_or(v, |bias| v + bias[j]);
-                *x = if RELU && !(v > 0.0) { 0.0 } else { v };
+                *x = match RELU {
+                    true if v > 0.0 => v,
+                    true => 0.0, // NaN and -0 too, as ReLU
+                    false => v,
+                };
             }
         }
     }
