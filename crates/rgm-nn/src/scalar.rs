@@ -1,7 +1,8 @@
 //! The element types the ops run in: f32 for compute, f64 for the gradient checks.
 
+use crate::gemm::Then;
 use ndarray::linalg::general_mat_mul;
-use ndarray::{ArrayView1, ArrayView2, ArrayViewMut2, LinalgScalar, ScalarOperand};
+use ndarray::{ArrayView2, ArrayViewMut2, LinalgScalar, ScalarOperand};
 use num_traits::{Float, NumAssign};
 
 /// A float element type of the ops (implemented for f32 and f64).
@@ -30,11 +31,11 @@ pub trait Scalar:
         beta: Self,
         c: ArrayViewMut2<'_, Self>,
     );
-    /// `c = a · b + bias` in this type's way: see [`crate::gemm::mat_mul_bias`].
-    fn mat_mul_bias(
+    /// `c = a · b` finished by `then` in this type's way: see [`crate::gemm::mat_mul_then`].
+    fn mat_mul_then(
         a: ArrayView2<'_, Self>,
         b: ArrayView2<'_, Self>,
-        bias: ArrayView1<'_, Self>,
+        then: Then<'_, Self>,
         c: ArrayViewMut2<'_, Self>,
     );
     /// Replaces every value by its exponential: libm's in f64, [`crate::exp`]'s vectorised
@@ -59,13 +60,13 @@ impl Scalar for f32 {
     ) {
         crate::gemm::mat_mul_f32(alpha, a, b, beta, c);
     }
-    fn mat_mul_bias(
+    fn mat_mul_then(
         a: ArrayView2<'_, Self>,
         b: ArrayView2<'_, Self>,
-        bias: ArrayView1<'_, Self>,
+        then: Then<'_, Self>,
         c: ArrayViewMut2<'_, Self>,
     ) {
-        crate::gemm::mat_mul_bias_f32(a, b, bias, c);
+        crate::gemm::mat_mul_then_f32(a, b, then, c);
     }
     fn exp_in_place(xs: &mut [Self]) {
         crate::exp::exp_f32_in_place(xs);
@@ -89,13 +90,13 @@ impl Scalar for f64 {
     ) {
         general_mat_mul(alpha, &a, &b, beta, &mut c);
     }
-    fn mat_mul_bias(
+    fn mat_mul_then(
         a: ArrayView2<'_, Self>,
         b: ArrayView2<'_, Self>,
-        bias: ArrayView1<'_, Self>,
+        then: Then<'_, Self>,
         c: ArrayViewMut2<'_, Self>,
     ) {
-        crate::gemm::bias_then_mat_mul(a, b, bias, c);
+        crate::gemm::then_by_passes(a, b, then, c);
     }
     fn exp_in_place(xs: &mut [Self]) {
         xs.iter_mut().for_each(|x| *x = x.exp());

@@ -11,12 +11,12 @@ use rgm_match::{
     AffinityConfig, InstNorm, InstNormCache, InstNormConfig, SinkhornCache, SinkhornConfig,
     Var1Config,
 };
-use rgm_nn::gemm::mat_mul;
+use rgm_nn::gemm::{mat_mul, mat_mul_then, Then};
 use rgm_nn::param::{join_name, ParamView, ParamViewMut};
 use rgm_nn::{
     l1_normalize_columns_backward, l1_normalize_columns_forward, matmul_backward, matmul_forward,
-    relu_backward, relu_in_place, softmax_rows_backward, softmax_rows_forward, L1NormalizeCache,
-    Linear, Parameters,
+    relu_backward, softmax_rows_backward, softmax_rows_forward, L1NormalizeCache, Linear,
+    Parameters,
 };
 
 /// The learned scoring of a block.
@@ -62,7 +62,6 @@ struct Side<T> {
     dadj: Array2<T>,      // (R, R)
     dadj_norm: Array2<T>, // (R, R)
     dh: Array2<T>,        // (R, Q)
-    da: Array2<T>,        // (R, Q)
     dfp: Array2<T>,       // (R, Q)
     dcat: Array2<T>,      // (R, 2Q)
 }
@@ -85,7 +84,6 @@ impl<T: Element> Side<T> {
             dadj: z(r, r),
             dadj_norm: z(r, r),
             dh: z(r, q),
-            da: z(r, q),
             dfp: z(r, q),
             dcat: z(r, 2 * q),
         }
@@ -227,35 +225,35 @@ impl<T: Element> Block<T> {
 
     /// F' = Ê·ReLU(f_adj(F)) + ReLU(f_self(F)) for one side. `f`: (R, C).
     fn gconv_forward(&self, side: &mut Side<T>, f: ArrayView2<'_, T>) -> Result<()> {
-        // ReLU in place: the backward reads its output only.
-        self.a_fc.forward(side.a_adj.view_mut(), f)?;
-        relu_in_place(side.a_adj.view_mut());
-        self.u_fc.forward(side.a_self.view_mut(), f)?;
-        relu_in_place(side.a_self.view_mut());
+        // The ReLUs in the products' write-backs: the backward reads their outputs only.
+        self.a_fc.forward_relu(side.a_adj.view_mut(), f)?;
+        self.u_fc.forward_relu(side.a_self.view_mut(), f)?;
         matmul_forward(side.fp.view_mut(), side.adj_norm.view(), side.a_adj.view())?;
         side.fp += &side.a_self;
         Ok(())
     }
 
-    /// Adds into `df` (R, C) and `side.dadj_norm` the gradient of [`Self::gconv_forward`] given
-    /// `side.dfp`, in reverse: the Ê product, ReLU, f_adj; then ReLU, f_self.
+    /// Adds into `df` (R, C) the gradient of [`Self::gconv_forward`] given `side.dfp`, and
+    /// writes Ê's into `side.dadj_norm`, in reverse: the Ê product, ReLU, f_adj; then ReLU,
+    /// f_self.
     fn gconv_backward(
         &mut self,
         mut df: ArrayViewMut2<'_, T>,
         side: &mut Side<T>,
         f: ArrayView2<'_, T>,
     ) -> Result<()> {
-        side.dadj_norm.fill(T::zero());
-        side.da.fill(T::zero());
-        side.dh.fill(T::zero());
-        matmul_backward(
-            side.dadj_norm.view_mut(),
-            side.da.view_mut(),
-            side.dfp.view(),
-            side.adj_norm.view(),
-            side.a_adj.view(),
-        )?;
-        relu_backward(side.dh.view_mut(), side.da.view(), side.a_adj.view())?;
+        // F'_adj = Ê A, A = ReLU(H)  →  dÊ = dF' Aᵀ, dH = (Êᵀ dF') ⊙ [A > 0] (ReLU's backward in
+        // the product's write-back)
+        let dfp = side.dfp.view();
+        mat_mul(
+            T::one(),
+            &dfp,
+            &side.a_adj.t(),
+            T::zero(),
+            &mut side.dadj_norm,
+        );
+        let relu_grad = Then::ReluGrad(side.a_adj.view());
+        mat_mul_then(&side.adj_norm.t(), &dfp, relu_grad, &mut side.dh);
         self.a_fc.backward(df.view_mut(), side.dh.view(), f)?;
         side.dh.fill(T::zero());
         relu_backward(side.dh.view_mut(), side.dfp.view(), side.a_self.view())?;

@@ -49,10 +49,10 @@ pub struct FeaturerCache<T> {
     max_k: Vec<MaxKCache>,      // 4
     /// (N, ΣC + E) the output: node features (the four maxima) then edge features.
     pub features: Array2<T>,
-    dact: Vec<Array2<T>>,    // 5, as act
     dpre: Vec<Array2<T>>,    // 5, as pre
     dnormed: Vec<Array2<T>>, // 5, as normed
     dnode: Array2<T>,        // (N, ΣC)
+    dmax: Array2<T>,         // (N, C_i) one block of dnode through its ReLU
 }
 
 impl<T: Element> PointFeaturer<T> {
@@ -156,7 +156,10 @@ impl<T: Element> PointFeaturer<T> {
 
     /// Adds the parameter gradients of one cloud's pass, given `dfeatures` (N, ΣC + E), walking
     /// the forward in reverse: edge ReLU, bn5, conv5 (into the node features), then for layer
-    /// 4 down to 1 the max over K, ReLU, batch norm and convolution.
+    /// 4 down to 1 the max over K, ReLU, batch norm and convolution. A convolution's input is
+    /// the previous layer's ReLU output, so its backward goes through that ReLU in the
+    /// product's write-back; the max's gradient then adds to it. The first convolution's input
+    /// (the edge rows) needs no gradient.
     pub fn backward(
         &mut self,
         dfeatures: ArrayView2<'_, T>,
@@ -164,17 +167,19 @@ impl<T: Element> PointFeaturer<T> {
     ) -> Result<()> {
         let (n, k, node) = (cache.idx.nrows(), self.k, self.node_width());
         let widths: Vec<usize> = self.convs.iter().map(|c| c.c_out()).collect();
-        cache.dact.resize_with(5, Default::default);
         cache.dpre.resize_with(5, Default::default);
         cache.dnormed.resize_with(5, Default::default);
         for i in 0..5 {
+            // Batch norm's backward adds into dpre; each dnormed but the last two is written
+            // by the next convolution's backward.
             let shape = cache.pre[i].dim();
             zeroed(&mut cache.dpre[i], shape);
-            zeroed(&mut cache.dnormed[i], shape);
-            let shape = cache.act[i].dim();
-            zeroed(&mut cache.dact[i], shape);
+            match i {
+                3 | 4 => zeroed(&mut cache.dnormed[i], shape),
+                _ => shaped(&mut cache.dnormed[i], shape),
+            }
         }
-        zeroed(&mut cache.dnode, (n, node));
+        shaped(&mut cache.dnode, (n, node));
         // features[:, ..ΣC] = node  →  dnode = dfeatures[:, ..ΣC] (plus conv5's below)
         cache.dnode.assign(&dfeatures.slice(s![.., ..node]));
         // features[:, ΣC..] = ReLU(bn5(conv5(node)))
@@ -197,17 +202,21 @@ impl<T: Element> PointFeaturer<T> {
         let mut offset = node;
         for i in (0..4).rev() {
             offset -= widths[i];
-            // node[:, block] = max_k(act_i); act_i = ReLU(bn_i(conv_i(act_{i−1})))
+            // node[:, block] = max_k(act_{i+1}), act_{i+1} = ReLU(normed_i): the ReLU's
+            // backward on the maxima (the ReLU output at the winning neighbour is the
+            // maximum), then the max's, added to conv_{i+1}'s part of dnormed_i.
+            let block = s![.., offset..offset + widths[i]];
+            zeroed(&mut cache.dmax, (n, widths[i]));
+            relu_backward(
+                cache.dmax.view_mut(),
+                cache.dnode.slice(block),
+                cache.features.slice(block),
+            )?;
             max_k_backward(
-                cache.dact[i + 1].view_mut(),
-                cache.dnode.slice(s![.., offset..offset + widths[i]]),
+                cache.dnormed[i].view_mut(),
+                cache.dmax.view(),
                 k,
                 &cache.max_k[i],
-            )?;
-            relu_backward(
-                cache.dnormed[i].view_mut(),
-                cache.dact[i + 1].view(),
-                cache.act[i + 1].view(),
             )?;
             self.bns[i].backward(
                 cache.dpre[i].view_mut(),
@@ -215,11 +224,15 @@ impl<T: Element> PointFeaturer<T> {
                 cache.pre[i].view(),
                 &cache.bn[i],
             )?;
-            self.convs[i].backward(
-                cache.dact[i].view_mut(),
-                cache.dpre[i].view(),
-                cache.act[i].view(),
-            )?;
+            // act_i = ReLU(normed_{i−1}) for i > 0: dnormed_{i−1} written through that ReLU.
+            match i {
+                0 => self.convs[0].backward_params(cache.dpre[0].view(), cache.act[0].view())?,
+                _ => self.convs[i].backward_through_relu(
+                    cache.dnormed[i - 1].view_mut(),
+                    cache.dpre[i].view(),
+                    cache.act[i].view(),
+                )?,
+            }
         }
         Ok(())
     }

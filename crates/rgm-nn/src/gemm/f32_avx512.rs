@@ -13,6 +13,7 @@
 //! The result is the f32 product up to the order of the additions: each entry of C is
 //! accumulated over K in order within a panel of [`KC`], panels added in order.
 
+use super::Then;
 use ndarray::{ArrayView1, ArrayView2, ArrayViewMut2};
 use std::cell::RefCell;
 
@@ -62,37 +63,77 @@ pub fn f32_mat_mul(
     beta: f32,
     c: ArrayViewMut2<'_, f32>,
 ) {
-    product(alpha, a, b, beta, None, c);
+    product(alpha, a, b, beta, Finish::default(), c);
 }
 
-/// `c = a · b + bias` in f32, `bias` (N) added to every row in the product's write-back (the
-/// value `f32_mat_mul(1, a, b, 1, c)` gives with `c` holding the bias in every row, without
-/// that pass over C). What `c` held is ignored. Panics as [`f32_mat_mul`], or if `bias` does
-/// not have N values.
-pub fn f32_mat_mul_bias(
+/// `c = a · b` finished by `then` in the product's write-back (see [`Then`]): the values
+/// [`super::then_by_passes`] gives, bit for bit, without its passes over C. Panics as
+/// [`f32_mat_mul`], or if `then`'s bias or `y` does not match C.
+pub fn f32_mat_mul_then(
     a: ArrayView2<'_, f32>,
     b: ArrayView2<'_, f32>,
-    bias: ArrayView1<'_, f32>,
+    then: Then<'_, f32>,
     c: ArrayViewMut2<'_, f32>,
 ) {
-    assert_eq!(
-        bias.len(),
-        b.ncols(),
-        "f32_mat_mul_bias: bias of {} values, {} columns",
-        bias.len(),
-        b.ncols()
-    );
-    product(1.0, a, b, 0.0, Some(bias), c);
+    let n = b.ncols();
+    match then {
+        Then::Layer { bias, relu } => {
+            if let Some(bias) = &bias {
+                assert_eq!(
+                    bias.len(),
+                    n,
+                    "f32_mat_mul_then: bias of {} values, {n} columns",
+                    bias.len()
+                );
+            }
+            let finish = Finish {
+                bias,
+                relu,
+                ..Finish::default()
+            };
+            product(1.0, a, b, 0.0, finish, c);
+        }
+        Then::ReluGrad(y) => {
+            assert_eq!(
+                y.dim(),
+                c.dim(),
+                "f32_mat_mul_then: y {:?}, c {:?}",
+                y.shape(),
+                c.shape()
+            );
+            if y.strides()[1] != 1 || c.strides()[1] != 1 {
+                // The masked write-back reads rows of y and writes rows of C as vectors.
+                return super::then_by_passes(a, b, then, c);
+            }
+            let finish = Finish {
+                keep: Some((y.as_ptr(), y.strides()[0])),
+                ..Finish::default()
+            };
+            product(1.0, a, b, 0.0, finish, c);
+        }
+    }
 }
 
-/// `c = alpha · a · b + beta · c (+ bias in every row)`: [`f32_mat_mul`] and
-/// [`f32_mat_mul_bias`].
+/// What the write-back of [`product`] does besides `alpha · a · b + beta · c`.
+#[derive(Clone, Copy, Default)]
+struct Finish<'a> {
+    /// Added to every row (N values), with the first panel along K.
+    bias: Option<ArrayView1<'a, f32>>,
+    /// `max(·, 0)` on the final values, with the last panel along K.
+    relu: bool,
+    /// `(y, y's row stride)`: the final values kept only where `y` (M, N, rows contiguous,
+    /// C's rows contiguous too) is positive, with the last panel along K.
+    keep: Option<(*const f32, isize)>,
+}
+
+/// `c = alpha · a · b + beta · c`, finished as `finish` says: [`f32_mat_mul`] and
+/// [`f32_mat_mul_then`].
 fn product(
     alpha: f32,
     a: ArrayView2<'_, f32>,
     b: ArrayView2<'_, f32>,
     beta: f32,
-    bias: Option<ArrayView1<'_, f32>>,
+    finish: Finish<'_>,
     mut c: ArrayViewMut2<'_, f32>,
 ) {
     let (m, n) = super::check_shapes("f32_mat_mul", &a, &b, &c);
@@ -102,9 +143,12 @@ fn product(
         return;
     }
     if k == 0 {
-        scale(c.view_mut(), beta); // alpha · (empty sum) = 0
-        if let Some(bias) = bias {
+        scale(c.view_mut(), beta); // alpha · (empty sum) = 0, kept or not
+        if let Some(bias) = finish.bias {
             c += &bias;
+        }
+        if finish.relu {
+            c.mapv_inplace(|x| if x > 0.0 { x } else { 0.0 });
         }
         return;
     }
@@ -119,7 +163,7 @@ fn product(
     PACKED.with(|packed| {
         let packed = &mut *packed.borrow_mut();
         // The bias padded with zeros to whole 32-column strips, so that every tile reads 32.
-        let bias = bias.map(|bias| {
+        let bias = finish.bias.map(|bias| {
             packed.bias.clear();
             packed.bias.extend(bias.iter());
             packed.bias.resize(n.next_multiple_of(NR), 0.0);
@@ -136,8 +180,17 @@ fn product(
                         &mut packed.b,
                     )
                 };
-                // The first panel along K applies beta and the bias; the later ones add to it.
+                // The first panel along K applies beta and the bias; the later ones add to it;
+                // the last applies the ReLU.
                 let (beta, bias) = if p0 == 0 { (beta, bias) } else { (1.0, None) };
+                let last = p0 + kc == k;
+                let keep = finish.keep.filter(|_| last);
+                let tile: Tile = match (finish.relu && last, keep.is_some()) {
+                    (false, false) => micro_tile::<false, false>,
+                    (true, false) => micro_tile::<true, false>,
+                    (false, true) => micro_tile::<false, true>,
+                    (true, true) => micro_tile::<true, true>,
+                };
                 for i0 in (0..m).step_by(MR) {
                     let rows = MR.min(m - i0);
                     let a_mem = if rows == MR {
@@ -170,17 +223,23 @@ fn product(
                             },
                             ..c_mem
                         };
+                        // (i0, j) of y, which has C's shape (unread without it).
+                        let (y, y_rows) = keep.unwrap_or((std::ptr::null(), 0));
+                        let y_tile = (y.wrapping_offset(i0 as isize * y_rows + j as isize), y_rows);
                         // SAFETY: `available()` was checked above; `a_mem` reaches kc columns
-                        // of 8 rows, the strip kc rows of 32, `c_tile` rows × cols of `c`.
+                        // of 8 rows, the strip kc rows of 32, `c_tile` (and `y_tile` where
+                        // `tile` reads it) rows × cols of `c` (and y), whose rows are
+                        // contiguous where y is read.
                         let tile_bias = bias.map(|bias| &bias[j..j + NR]);
                         unsafe {
-                            micro_tile(
+                            tile(
                                 kc,
                                 a_mem,
                                 b_strip,
                                 alpha,
                                 beta,
                                 tile_bias,
+                                y_tile,
                                 c_tile,
                                 (rows, cols),
                             )
@@ -355,30 +414,48 @@ unsafe fn transpose_16x16(r: &mut [std::arch::x86_64::__m512; 16]) {
     }
 }
 
-/// One 8 × 32 block: `c = alpha · (a · b_strip) + beta · c (+ bias)` over the first
+/// A [`micro_tile`] instance, chosen per panel.
+type Tile = unsafe fn(
+    usize,
+    Strided<*const f32>,
+    &[f32],
+    f32,
+    f32,
+    Option<&[f32]>,
+    (*const f32, isize),
+    Strided<*mut f32>,
+    (usize, usize),
+);
+
+/// One 8 × 32 block: `c = alpha · (a · b_strip) + beta · c (+ bias)`, then `max(·, 0)` if
+/// `RELU`, then `⊙ [y > 0]` if `KEEP` (`y` = y's block and row stride), over the first
 /// `rows × cols` of the block (`beta = 0` ignores what `c` held; `bias` holds the block's 32
 /// columns' values). `a` is 8 rows × kc; rows past `rows` may be anything finite or packed
-/// zeros, as they are never written.
+/// zeros, as they are never written. One instance per finish: the plain one's write-back
+/// stays short enough to unroll, with the accumulators in their registers.
 ///
 /// # Safety
 /// The processor must have AVX-512 F; `a` reaches 8 rows of kc values, `b` holds `kc · 32`
-/// values, `c` reaches `rows × cols` values, `rows ≤ 8`, `cols ≤ 32`.
+/// values, `c` (and y if `KEEP`) reaches `rows × cols` values, `rows ≤ 8`, `cols ≤ 32`; if
+/// `KEEP`, C's rows are contiguous.
 // Each scalar its own argument, so that all arrive in registers (an aggregate of them would
 // pass through memory, and loading it stalls each call).
 #[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx512f")]
-unsafe fn micro_tile(
+unsafe fn micro_tile<const RELU: bool, const KEEP: bool>(
     kc: usize,
     a: Strided<*const f32>,
     b: &[f32],
     alpha: f32,
     beta: f32,
     bias: Option<&[f32]>,
+    (y, y_rows): (*const f32, isize),
     c: Strided<*mut f32>,
     (rows, cols): (usize, usize),
 ) {
     use std::arch::x86_64::*;
     debug_assert!(b.len() == kc * NR && rows <= MR && cols <= NR);
+    debug_assert!(!KEEP || c.cols == 1);
     if c.cols == 1 {
         // The block's rows of C and the next block's to the right, fetched while the products
         // run (the write-backs read or write them; C is often far from this core's caches).
@@ -389,6 +466,12 @@ unsafe fn micro_tile(
             _mm_prefetch::<_MM_HINT_T0>(at.wrapping_add(16) as *const i8);
             _mm_prefetch::<_MM_HINT_T0>(at.wrapping_add(32) as *const i8);
             _mm_prefetch::<_MM_HINT_T0>(at.wrapping_add(48) as *const i8);
+            if KEEP {
+                // y's row too (a ReLU output of the forward pass, long out of cache).
+                let y_at = y.wrapping_offset(r as isize * y_rows);
+                _mm_prefetch::<_MM_HINT_T0>(y_at as *const i8);
+                _mm_prefetch::<_MM_HINT_T0>(y_at.wrapping_add(16) as *const i8);
+            }
         }
     }
     let mut acc = [_mm512_setzero_ps(); 2 * MR]; // (8, 2) vectors: row r, columns 16h..16h + 16
@@ -421,32 +504,56 @@ unsafe fn micro_tile(
                 (1u16 << len) - 1
             }
         });
-        // Loops of constant length (rows past `rows` skipped inside), so that they unroll and
-        // every accumulator stays in its register.
-        for r in 0..MR {
-            if r >= rows {
-                break;
-            }
-            for (h, &mask) in masks.iter().enumerate() {
-                if mask == 0 {
-                    continue;
+        // Row r of the block, if it lies in C.
+        macro_rules! write_row {
+            ($r:literal) => {
+                if $r < rows {
+                    for (h, &mask) in masks.iter().enumerate() {
+                        if mask == 0 {
+                            continue;
+                        }
+                        // SAFETY: row r, columns 16h.. of the block are inside `c`.
+                        let at = unsafe { c.ptr.offset($r * c.rows + 16 * h as isize) };
+                        let mut v = _mm512_mul_ps(valpha, acc[2 * $r + h]);
+                        if beta != 0.0 {
+                            // SAFETY: the mask covers the `len` values of this row from `at`.
+                            let old = unsafe { _mm512_maskz_loadu_ps(mask, at) };
+                            v = _mm512_fmadd_ps(vbeta, old, v);
+                        }
+                        if let Some(bias) = bias {
+                            // SAFETY: `bias` holds 32 values.
+                            let bias = unsafe { _mm512_loadu_ps(bias.as_ptr().add(16 * h)) };
+                            v = _mm512_add_ps(v, bias);
+                        }
+                        if RELU {
+                            // max(v, 0) gives 0 for NaN and -0, as ReLU.
+                            v = _mm512_max_ps(v, _mm512_setzero_ps());
+                        }
+                        if KEEP {
+                            // SAFETY: as `at`, in y.
+                            let y = unsafe {
+                                _mm512_maskz_loadu_ps(mask, y.offset($r * y_rows + 16 * h as isize))
+                            };
+                            let positive = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(y, _mm512_setzero_ps());
+                            v = _mm512_maskz_mov_ps(positive, v);
+                        }
+                        // SAFETY: as above.
+                        unsafe { _mm512_mask_storeu_ps(at, mask, v) };
+                    }
                 }
-                // SAFETY: row r, columns 16h.. of the block are inside `c`.
-                let at = unsafe { c.ptr.offset(r as isize * c.rows + 16 * h as isize) };
-                let mut v = _mm512_mul_ps(valpha, acc[2 * r + h]);
-                if beta != 0.0 {
-                    // SAFETY: the mask covers the `len` values of this row from `at`.
-                    let old = unsafe { _mm512_maskz_loadu_ps(mask, at) };
-                    v = _mm512_fmadd_ps(vbeta, old, v);
-                }
-                if let Some(bias) = bias {
-                    // SAFETY: `bias` holds 32 values.
-                    v = _mm512_add_ps(v, unsafe { _mm512_loadu_ps(bias.as_ptr().add(16 * h)) });
-                }
-                // SAFETY: as above.
-                unsafe { _mm512_mask_storeu_ps(at, mask, v) };
-            }
+            };
         }
+        // Unrolled by hand, so that every accumulator stays in its register (a loop over the
+        // rows keeps them on the stack once the write-back grows).
+        const _: () = assert!(MR == 8, "one write_row! per row");
+        write_row!(0);
+        write_row!(1);
+        write_row!(2);
+        write_row!(3);
+        write_row!(4);
+        write_row!(5);
+        write_row!(6);
+        write_row!(7);
     } else {
         let mut block = [0f32; MR * NR]; // (8, 32) row-major
         for (v, chunk) in acc.iter().zip(block.chunks_exact_mut(16)) {
@@ -459,7 +566,12 @@ unsafe fn micro_tile(
                 let x = unsafe { &mut *c.ptr.offset(r as isize * c.rows + j as isize * c.cols) };
                 let v = block[r * NR + j];
                 let v = if beta == 0.0 { v } else { v + beta * *x };
-                *x = bias.map_or(v, |bias| v + bias[j]);
+                let v = bias.map_or(v, |bias| v + bias[j]);
+                *x = match RELU {
+                    true if v > 0.0 => v,
+                    true => 0.0, // NaN and -0 too, as ReLU
+                    false => v,
+                };
             }
         }
     }

@@ -28,7 +28,7 @@ mod f32_avx512;
 mod kernels;
 
 #[cfg(target_arch = "x86_64")]
-pub use f32_avx512::{f32_mat_mul, f32_mat_mul_bias};
+pub use f32_avx512::{f32_mat_mul, f32_mat_mul_then};
 pub use kernels::{backend, register_peak_loop};
 
 /// Whether this processor runs [`f32_mat_mul`] (x86-64 with AVX-512 F).
@@ -47,9 +47,7 @@ use crate::bf16::bf16_bits;
 use crate::precision::{self, Precision};
 use crate::Scalar;
 use ndarray::linalg::general_mat_mul;
-use ndarray::{
-    s, ArrayBase, ArrayView1, ArrayView2, ArrayViewMut2, Axis, Data, DataMut, Ix1, Ix2, Zip,
-};
+use ndarray::{s, ArrayBase, ArrayView1, ArrayView2, ArrayViewMut2, Axis, Data, DataMut, Ix2, Zip};
 use std::cell::RefCell;
 
 /// `c = alpha · a · b + beta · c`, `a`: (M, K), `b`: (K, N), `c`: (M, N), in the calling
@@ -70,51 +68,81 @@ pub fn mat_mul<T, S1, S2, S3>(
     T::mat_mul(alpha, a.view(), b.view(), beta, c.view_mut());
 }
 
-/// `c = a · b + bias`, `bias` (N) added to every row (a layer's bias): the value of [`mat_mul`]
-/// with `beta = 1` into a C that holds the bias in every row. Where the f32 product runs on
-/// AVX-512 the bias is added in the product's write-back, one pass over C fewer. What `c` held
-/// is ignored.
-pub fn mat_mul_bias<T, S1, S2, S3, S4>(
+/// How [`mat_mul_then`] finishes the product `a · b` (M, N).
+#[derive(Clone, Copy, Debug)]
+pub enum Then<'a, T> {
+    /// A layer: `bias` (N, if any) added to every row, then `max(·, 0)` if `relu`.
+    Layer {
+        bias: Option<ArrayView1<'a, T>>,
+        relu: bool,
+    },
+    /// ReLU's backward through the product: the entries kept where `y` (M, N), a ReLU's
+    /// output, is positive and zero elsewhere (zero gradient at 0, as PyTorch).
+    ReluGrad(ArrayView2<'a, T>),
+}
+
+/// `c = a · b` finished as `then` says; what `c` held is ignored.
+/// Where the f32 product runs on AVX-512 the bias, the ReLU and ReLU's backward are applied
+/// in the product's write-back, bit for bit what [`then_by_passes`] gives with passes over C.
+/// Panics if the shapes disagree.
+pub fn mat_mul_then<T, S1, S2, S3>(
     a: &ArrayBase<S1, Ix2>,
     b: &ArrayBase<S2, Ix2>,
-    bias: &ArrayBase<S3, Ix1>,
-    c: &mut ArrayBase<S4, Ix2>,
+    then: Then<'_, T>,
+    c: &mut ArrayBase<S3, Ix2>,
 ) where
     T: Scalar,
     S1: Data<Elem = T>,
     S2: Data<Elem = T>,
-    S3: Data<Elem = T>,
-    S4: DataMut<Elem = T>,
+    S3: DataMut<Elem = T>,
 {
-    T::mat_mul_bias(a.view(), b.view(), bias.view(), c.view_mut());
+    T::mat_mul_then(a.view(), b.view(), then, c.view_mut());
 }
 
-/// [`mat_mul_bias`] as C filled with the bias, then [`mat_mul`] adding to it (every type and
-/// product but the f32 one on AVX-512).
-pub(crate) fn bias_then_mat_mul<T: Scalar>(
+/// [`mat_mul_then`] as [`mat_mul`] and passes over C (every type and product but the f32 one
+/// on AVX-512): for a layer, C filled with the bias, the product added to it, the ReLU; for
+/// ReLU's backward, the product, then the entries where `y ≤ 0` set to zero.
+pub(crate) fn then_by_passes<T: Scalar>(
     a: ArrayView2<'_, T>,
     b: ArrayView2<'_, T>,
-    bias: ArrayView1<'_, T>,
+    then: Then<'_, T>,
     mut c: ArrayViewMut2<'_, T>,
 ) {
-    c.assign(&bias);
-    T::mat_mul(T::one(), a, b, T::one(), c);
+    let kept = |x: T, y: T| if y > T::zero() { x } else { T::zero() };
+    match then {
+        Then::Layer { bias, relu } => {
+            match bias {
+                Some(bias) => {
+                    c.assign(&bias);
+                    T::mat_mul(T::one(), a, b, T::one(), c.view_mut());
+                }
+                None => T::mat_mul(T::one(), a, b, T::zero(), c.view_mut()),
+            }
+            if relu {
+                c.mapv_inplace(|x| kept(x, x));
+            }
+        }
+        Then::ReluGrad(y) => {
+            T::mat_mul(T::one(), a, b, T::zero(), c.view_mut());
+            Zip::from(c).and(y).for_each(|c, &y| *c = kept(*c, y));
+        }
+    }
 }
 
-/// [`mat_mul_bias`] for f32: in the AVX-512 product's write-back when [`mat_mul_f32`] would
-/// run that product, [`bias_then_mat_mul`] otherwise.
-pub(crate) fn mat_mul_bias_f32(
+/// [`mat_mul_then`] for f32: in the AVX-512 product's write-back when [`mat_mul_f32`] would
+/// run that product, [`then_by_passes`] otherwise.
+pub(crate) fn mat_mul_then_f32(
     a: ArrayView2<'_, f32>,
     b: ArrayView2<'_, f32>,
-    bias: ArrayView1<'_, f32>,
+    then: Then<'_, f32>,
     c: ArrayViewMut2<'_, f32>,
 ) {
     let bf16 = precision::current() == Precision::Bf16 && bf16_available();
     if !bf16 && f32_avx512_available() {
         #[cfg(target_arch = "x86_64")]
-        f32_mat_mul_bias(a, b, bias, c);
+        f32_mat_mul_then(a, b, then, c);
     } else {
-        bias_then_mat_mul(a, b, bias, c);
+        then_by_passes(a, b, then, c);
     }
 }
 
@@ -621,42 +649,101 @@ mod tests {
         }
     }
 
+    /// Each kind of [`Then`] with `bias` or `y`.
+    fn finishes<'a, T: Scalar>(bias: ArrayView1<'a, T>, y: ArrayView2<'a, T>) -> [Then<'a, T>; 4] {
+        [
+            Then::Layer {
+                bias: Some(bias),
+                relu: false,
+            },
+            Then::Layer {
+                bias: Some(bias),
+                relu: true,
+            },
+            Then::Layer {
+                bias: None,
+                relu: true,
+            },
+            Then::ReluGrad(y),
+        ]
+    }
+
+    /// What `then` should give on `product` (= a · b), by the definitions.
+    fn finished<T: Scalar>(then: Then<'_, T>, product: &Array2<T>) -> Array2<T> {
+        let relu = |x: T| if x > T::zero() { x } else { T::zero() };
+        match then {
+            Then::Layer { bias, relu: r } => {
+                let with_bias = bias.map_or(product.clone(), |bias| product + &bias);
+                if r {
+                    with_bias.mapv(relu)
+                } else {
+                    with_bias
+                }
+            }
+            Then::ReluGrad(y) => {
+                let mut kept = product.clone();
+                Zip::from(&mut kept)
+                    .and(y)
+                    .for_each(|p, &y| *p = if y > T::zero() { *p } else { T::zero() });
+                kept
+            }
+        }
+    }
+
     #[test]
-    fn the_bias_in_the_write_back_gives_the_product_into_a_c_holding_it_bit_for_bit() {
-        // Every shape of the bf16 tests, two panels along K (300), a B given transposed and a
-        // C with columns apart (the kernel's strided write-back); a C of NaN is ignored.
+    fn the_write_back_finishes_give_the_bits_of_the_passes() {
+        // Every shape of the bf16 tests, two panels along K (300: the ReLU and the mask on the
+        // final sum), a B given transposed and a C with columns apart (the kernel's strided
+        // write-back; the passes for ReLU's backward).
         let shapes = SHAPES.iter().copied().chain([(37, 300, 45)]);
-        for (seed, (m, k, n)) in (100u64..).step_by(4).zip(shapes) {
+        for (seed, (m, k, n)) in (100u64..).step_by(5).zip(shapes) {
             let (a, bt, bias) = (
                 uniform(m, k, seed),
                 uniform(n, k, seed + 1),
                 uniform(1, n, seed + 2),
             );
-            let bias = bias.row(0);
-            let mut want = Array2::zeros((m, n));
-            want.assign(&bias);
-            mat_mul(1.0, &a, &bt.t(), 1.0, &mut want);
-            let mut got = Array2::from_elem((m, n), f32::NAN);
-            mat_mul_bias(&a, &bt.t(), &bias, &mut got);
-            assert_eq!(got, want, "({m}, {k}, {n})");
-            let mut got_t = Array2::from_elem((n, m), f32::NAN);
-            mat_mul_bias(&a, &bt.t(), &bias, &mut got_t.view_mut().reversed_axes());
-            assert_eq!(got_t.t(), want, "({m}, {k}, {n}) into a transposed C");
-            // The fallback gives the same bits on every machine.
-            let mut fallback = Array2::from_elem((m, n), f32::NAN);
-            bias_then_mat_mul(a.view(), bt.t(), bias, fallback.view_mut());
-            assert_eq!(fallback, want, "({m}, {k}, {n}) fallback");
+            let y = uniform(m, n, seed + 3);
+            let product = a.dot(&bt.t()); // (M, N)
+                                          // What C held is ignored, even NaN.
+            let nan = Array2::from_elem((m, n), f32::NAN);
+            for then in finishes(bias.row(0), y.view()) {
+                let mut want = nan.clone();
+                then_by_passes(a.view(), bt.t(), then, want.view_mut());
+                let expected = finished(then, &product);
+                assert!(
+                    want.abs_diff_eq(&expected, 1e-4),
+                    "({m}, {k}, {n}) {then:?}: the passes give {want}, not {expected}"
+                );
+                let mut got = nan.clone();
+                mat_mul_then(&a, &bt.t(), then, &mut got);
+                let bits = |c: ArrayView2<'_, f32>| c.mapv(f32::to_bits);
+                assert_eq!(
+                    bits(got.view()),
+                    bits(want.view()),
+                    "({m}, {k}, {n}) {then:?}"
+                );
+                let mut got_t = nan.t().to_owned();
+                mat_mul_then(&a, &bt.t(), then, &mut got_t.view_mut().reversed_axes());
+                assert_eq!(
+                    bits(got_t.t()),
+                    bits(want.view()),
+                    "({m}, {k}, {n}) {then:?} into a transposed C"
+                );
+            }
         }
-        // f64 (BLAS): the bias plus the product.
+        // f64 (BLAS and the passes).
         let (a, b) = (
             uniform(9, 5, 120).mapv(f64::from),
             uniform(5, 3, 121).mapv(f64::from),
         );
+        let y = uniform(9, 3, 122).mapv(f64::from);
         let bias = ndarray::array![0.5, -1.0, 2.0];
-        let mut c = Array2::from_elem((9, 3), f64::NAN);
-        mat_mul_bias(&a, &b, &bias, &mut c);
-        let want = a.dot(&b) + &bias;
-        assert!(c.abs_diff_eq(&want, 1e-12), "{c}");
+        for then in finishes(bias.view(), y.view()) {
+            let mut c = Array2::from_elem((9, 3), f64::NAN);
+            mat_mul_then(&a, &b, then, &mut c);
+            let want = finished(then, &a.dot(&b));
+            assert!(c.abs_diff_eq(&want, 1e-12), "{then:?}: {c}");
+        }
     }
 
     #[test]

@@ -1,7 +1,6 @@
 //! The transformer's position-wise feed-forward: `Linear(C, F) → ReLU → Linear(F, C)`.
 
 use super::linear::Linear;
-use super::relu::{relu_backward, relu_in_place};
 use crate::param::{join_name, ParamView, ParamViewMut};
 use crate::{Parameters, Result, Scalar};
 use ndarray::{Array2, ArrayView2, ArrayViewMut2};
@@ -18,8 +17,7 @@ pub struct FeedForward<T: Scalar> {
 #[derive(Clone, Debug, Default)]
 pub struct FeedForwardCache<T> {
     pub active: Array2<T>, // (R, F) after the ReLU (the ReLU's backward needs no more)
-    dactive: Array2<T>,    // (R, F)
-    dhidden: Array2<T>,    // (R, F)
+    dhidden: Array2<T>,    // (R, F) before the ReLU
 }
 
 impl<T: Scalar> FeedForward<T> {
@@ -32,7 +30,7 @@ impl<T: Scalar> FeedForward<T> {
         }
     }
 
-    /// `out`, `inp`: (R, C).
+    /// `out`, `inp`: (R, C). The ReLU runs in `w_1`'s write-back.
     pub fn forward(
         &self,
         out: ArrayViewMut2<'_, T>,
@@ -43,12 +41,12 @@ impl<T: Scalar> FeedForward<T> {
         if cache.active.dim() != shape {
             cache.active = Array2::zeros(shape);
         }
-        self.w_1.forward(cache.active.view_mut(), inp)?;
-        relu_in_place(cache.active.view_mut());
+        self.w_1.forward_relu(cache.active.view_mut(), inp)?;
         self.w_2.forward(out, cache.active.view())
     }
 
-    /// Chains the backwards of `w_2`, the ReLU and `w_1` (see each). Inputs as given to forward.
+    /// Chains the backwards of `w_2` through the ReLU and of `w_1` (see each). Inputs as given
+    /// to forward.
     pub fn backward(
         &mut self,
         dinp: ArrayViewMut2<'_, T>,
@@ -57,19 +55,11 @@ impl<T: Scalar> FeedForward<T> {
         cache: &mut FeedForwardCache<T>,
     ) -> Result<()> {
         let shape = cache.active.dim();
-        for buf in [&mut cache.dactive, &mut cache.dhidden] {
-            if buf.dim() != shape {
-                *buf = Array2::zeros(shape);
-            }
-            buf.fill(T::zero());
+        if cache.dhidden.dim() != shape {
+            cache.dhidden = Array2::zeros(shape);
         }
         self.w_2
-            .backward(cache.dactive.view_mut(), dout, cache.active.view())?;
-        relu_backward(
-            cache.dhidden.view_mut(),
-            cache.dactive.view(),
-            cache.active.view(),
-        )?;
+            .backward_through_relu(cache.dhidden.view_mut(), dout, cache.active.view())?;
         self.w_1.backward(dinp, cache.dhidden.view(), inp)
     }
 }

@@ -1,7 +1,7 @@
 //! Linear layer / 1×1 convolution on `(rows, C)` matrices, with or without bias.
 
 use crate::error::check_shape;
-use crate::gemm::{mat_mul, mat_mul_bias};
+use crate::gemm::{mat_mul, mat_mul_then, Then};
 use crate::init;
 use crate::param::{join_name, ParamView, ParamViewMut};
 use crate::{Param, Parameters, Result, Scalar};
@@ -45,14 +45,29 @@ impl<T: Scalar> Linear<T> {
     }
 
     /// `out = inp · weightᵀ + bias`. `out`: (R, C_out), `inp`: (R, C_in).
-    pub fn forward(&self, mut out: ArrayViewMut2<'_, T>, inp: ArrayView2<'_, T>) -> Result<()> {
+    pub fn forward(&self, out: ArrayViewMut2<'_, T>, inp: ArrayView2<'_, T>) -> Result<()> {
+        self.forward_then(out, inp, false)
+    }
+
+    /// `out = ReLU(inp · weightᵀ + bias)`, the ReLU in the product's write-back: the value of
+    /// [`Linear::forward`] and [`crate::relu_in_place`], bit for bit, one pass over `out`
+    /// fewer. Shapes as [`Linear::forward`].
+    pub fn forward_relu(&self, out: ArrayViewMut2<'_, T>, inp: ArrayView2<'_, T>) -> Result<()> {
+        self.forward_then(out, inp, true)
+    }
+
+    fn forward_then(
+        &self,
+        mut out: ArrayViewMut2<'_, T>,
+        inp: ArrayView2<'_, T>,
+        relu: bool,
+    ) -> Result<()> {
         let rows = inp.nrows();
         check_shape("linear forward", "inp", inp.shape(), &[rows, self.c_in()])?;
         check_shape("linear forward", "out", out.shape(), &[rows, self.c_out()])?;
-        match &self.bias {
-            Some(b) => mat_mul_bias(&inp, &self.weight.value.t(), &b.value, &mut out),
-            None => mat_mul(T::one(), &inp, &self.weight.value.t(), T::zero(), &mut out),
-        }
+        let bias = self.bias.as_ref().map(|b| b.value.view());
+        let then = Then::Layer { bias, relu };
+        mat_mul_then(&inp, &self.weight.value.t(), then, &mut out);
         Ok(())
     }
 
@@ -61,9 +76,34 @@ impl<T: Scalar> Linear<T> {
     /// `dinp`: (R, C_in), `dout`: (R, C_out), `inp`: (R, C_in) as given to forward.
     pub fn backward(
         &mut self,
+        dinp: ArrayViewMut2<'_, T>,
+        dout: ArrayView2<'_, T>,
+        inp: ArrayView2<'_, T>,
+    ) -> Result<()> {
+        self.backward_then(dinp, dout, inp, false)
+    }
+
+    /// Differentiates `out = ReLU(pre) · weightᵀ + bias` given `inp = ReLU(pre)`, this layer's
+    /// input: `dpre = (dout · weight) ⊙ [inp > 0]` (zero gradient at 0, as PyTorch), ReLU's
+    /// backward in the product's write-back; the weight and bias gradients added as
+    /// [`Linear::backward`]. `dpre` is written, not added to (what it held is ignored): the
+    /// value of [`Linear::backward`] into a zeroed scratch, then [`crate::relu_backward`] into
+    /// a zeroed `dpre`, without the scratch and the passes. Shapes as [`Linear::backward`].
+    pub fn backward_through_relu(
+        &mut self,
+        dpre: ArrayViewMut2<'_, T>,
+        dout: ArrayView2<'_, T>,
+        inp: ArrayView2<'_, T>,
+    ) -> Result<()> {
+        self.backward_then(dpre, dout, inp, true)
+    }
+
+    fn backward_then(
+        &mut self,
         mut dinp: ArrayViewMut2<'_, T>,
         dout: ArrayView2<'_, T>,
         inp: ArrayView2<'_, T>,
+        through_relu: bool,
     ) -> Result<()> {
         let rows = inp.nrows();
         check_shape("linear backward", "inp", inp.shape(), &[rows, self.c_in()])?;
@@ -79,7 +119,30 @@ impl<T: Scalar> Linear<T> {
             dout.shape(),
             &[rows, self.c_out()],
         )?;
-        mat_mul(T::one(), &dout, &self.weight.value, T::one(), &mut dinp);
+        let weight = &self.weight.value;
+        if through_relu {
+            mat_mul_then(&dout, weight, Then::ReluGrad(inp), &mut dinp);
+        } else {
+            mat_mul(T::one(), &dout, weight, T::one(), &mut dinp);
+        }
+        self.backward_params(dout, inp)
+    }
+
+    /// Adds the weight and bias gradients of [`Linear::backward`] only, for a layer whose
+    /// input needs no gradient (the network's input). Shapes as [`Linear::backward`].
+    pub fn backward_params(
+        &mut self,
+        dout: ArrayView2<'_, T>,
+        inp: ArrayView2<'_, T>,
+    ) -> Result<()> {
+        let rows = inp.nrows();
+        check_shape("linear backward", "inp", inp.shape(), &[rows, self.c_in()])?;
+        check_shape(
+            "linear backward",
+            "dout",
+            dout.shape(),
+            &[rows, self.c_out()],
+        )?;
         mat_mul(T::one(), &dout.t(), &inp, T::one(), &mut self.weight.grad);
         if let Some(b) = &mut self.bias {
             for row in dout.rows() {
@@ -161,6 +224,76 @@ mod tests {
                 },
             );
         }
+    }
+
+    #[test]
+    fn backward_through_relu_matches_finite_differences() {
+        // out = ReLU(pre) · Wᵀ + b; no entry of pre within the step of the kink at 0.
+        let pre = uniform(&[9, 5], 4).mapv(|v: f64| if v.abs() < 0.01 { 0.5 } else { v });
+        let inputs = vec![pre, uniform(&[3, 5], 5), uniform(&[3], 6)];
+        let layer = |i: &[ArrayD<f64>]| {
+            let b = i[2].clone().into_dimensionality::<Ix1>().unwrap();
+            Linear::from_values(ix2(&i[1]), Some(b)).unwrap()
+        };
+        let relu = |i: &[ArrayD<f64>]| ix2(&i[0]).mapv(|x| x.max(0.0));
+        assert_gradients(
+            "linear through relu",
+            1e-6,
+            &inputs,
+            &mut |i| {
+                let mut out = Array2::zeros((9, 3));
+                layer(i).forward(out.view_mut(), relu(i).view()).unwrap();
+                out.into_dyn()
+            },
+            &mut |i, dout| {
+                let mut lin = layer(i);
+                let mut dpre = Array2::zeros((9, 5));
+                lin.backward_through_relu(dpre.view_mut(), ix2(dout).view(), relu(i).view())
+                    .unwrap();
+                vec![
+                    dpre.into_dyn(),
+                    lin.weight.grad.into_dyn(),
+                    lin.bias.unwrap().grad.into_dyn(),
+                ]
+            },
+        );
+    }
+
+    #[test]
+    fn the_fused_relus_give_the_unfused_bits() {
+        // f32, sizes past the AVX-512 product's panels (K = 300 > 256); a third of the inputs
+        // and of the hidden units at or below zero.
+        let mut rng = StdRng::seed_from_u64(7);
+        let lin = Linear::<f32>::new(300, 40, true, &mut rng);
+        let inp = Array2::from_shape_fn((37, 300), |(i, j)| ((i * 7 + j * 3) % 11) as f32 - 3.0);
+        let mut fused = Array2::from_elem((37, 40), f32::NAN);
+        lin.forward_relu(fused.view_mut(), inp.view()).unwrap();
+        let mut unfused = Array2::zeros((37, 40));
+        lin.forward(unfused.view_mut(), inp.view()).unwrap();
+        crate::relu_in_place(unfused.view_mut());
+        assert_eq!(fused.mapv(f32::to_bits), unfused.mapv(f32::to_bits));
+        assert!(unfused.iter().any(|&x| x == 0.0) && unfused.iter().any(|&x| x > 0.0));
+        // Backward through the ReLU of `inp`, which has zeros and negatives (as no ReLU output
+        // has, but the mask reads only the sign).
+        let dout = Array2::from_shape_fn((37, 40), |(i, j)| ((i * 5 + j) % 9) as f32 * 0.25 - 1.0);
+        let mut a = lin.clone();
+        let mut dpre = Array2::from_elem((37, 300), f32::NAN); // written, not added to
+        a.backward_through_relu(dpre.view_mut(), dout.view(), inp.view())
+            .unwrap();
+        let mut b = lin.clone();
+        let mut dinp = Array2::zeros((37, 300));
+        b.backward(dinp.view_mut(), dout.view(), inp.view())
+            .unwrap();
+        let mut want = Array2::zeros((37, 300));
+        crate::relu_backward(want.view_mut(), dinp.view(), inp.view()).unwrap();
+        assert_eq!(dpre.mapv(f32::to_bits), want.mapv(f32::to_bits));
+        assert_eq!(a.weight.grad, b.weight.grad);
+        assert_eq!(a.bias.unwrap().grad, b.bias.as_ref().unwrap().grad);
+        let mut c = lin.clone();
+        c.backward_params(dout.view(), inp.view()).unwrap();
+        assert_eq!(c.weight.grad, b.weight.grad);
+        assert_eq!(c.bias.unwrap().grad, b.bias.unwrap().grad);
+        assert!(c.weight.grad.iter().any(|&g| g != 0.0));
     }
 
     #[test]

@@ -29,31 +29,60 @@ pub fn max_k_forward<T: Scalar>(
     if cache.argmax.dim() != (n, c) {
         cache.argmax = Array2::zeros((n, c));
     }
-    // Slices of contiguous rows, so that each neighbour's comparison runs as one vector loop
-    // over the channels.
+    // A point's K rows as one slice, its channels compared in chunks (see `max_of_chunk`).
     let inp = inp.as_standard_layout(); // (N*K, C)
-    let row = |i: usize| inp.row(i).to_slice().expect("standard layout");
+    let groups = inp
+        .as_slice()
+        .expect("standard layout")
+        .chunks_exact((k * c).max(1)); // N of (K, C)
     let mut best = vec![T::zero(); c]; // (C)
-    for p in 0..n {
-        let arg = cache
-            .argmax
-            .row_mut(p)
-            .into_slice()
-            .expect("standard layout"); // (C)
-        best.copy_from_slice(row(p * k));
-        arg.fill(0);
-        for j in 1..k {
-            let j32 = j as u32;
-            // Branch-free selects, so the loop vectorises.
-            for ((b, a), &x) in best.iter_mut().zip(arg.iter_mut()).zip(row(p * k + j)) {
-                let greater = x > *b;
-                *b = if greater { x } else { *b };
-                *a = if greater { j32 } else { *a };
-            }
+    for ((group, mut arg), mut out) in groups.zip(cache.argmax.rows_mut()).zip(out.rows_mut()) {
+        let arg = arg.as_slice_mut().expect("standard layout"); // (C)
+                                                                // LANES channels at a time in local arrays, so that the comparisons run as vector
+                                                                // selects in registers; the channels past the last whole chunk one at a time.
+        let whole = c - c % LANES;
+        for c0 in (0..whole).step_by(LANES) {
+            max_of_chunk::<T, LANES>(group, c, c0, &mut best[c0..], &mut arg[c0..]);
         }
-        out.row_mut(p).assign(&ArrayView1::from(&best[..]));
+        for c0 in whole..c {
+            max_of_chunk::<T, 1>(group, c, c0, &mut best[c0..], &mut arg[c0..]);
+        }
+        match out.as_slice_mut() {
+            Some(out) => out.copy_from_slice(&best),
+            None => out.assign(&ArrayView1::from(&best[..])),
+        }
     }
     Ok(())
+}
+
+/// Channels per chunk of [`max_k_forward`]: one 512-bit vector of f32.
+const LANES: usize = 16;
+
+/// The max over a point's K rows `group` (K, C) of channels `c0..c0 + W` into `best` and its
+/// first winning row into `arg`; ties go to the first row.
+fn max_of_chunk<T: Scalar, const W: usize>(
+    group: &[T],
+    c: usize,
+    c0: usize,
+    best: &mut [T],
+    arg: &mut [u32],
+) {
+    let mut rows = group.chunks_exact(c).map(|row| &row[c0..c0 + W]);
+    let mut b: [T; W] = rows
+        .next()
+        .expect("K ≥ 1 rows per point")
+        .try_into()
+        .expect("W values");
+    let mut a = [0u32; W];
+    for (j, row) in (1u32..).zip(rows) {
+        for l in 0..W {
+            let greater = row[l] > b[l];
+            b[l] = if greater { row[l] } else { b[l] };
+            a[l] = if greater { j } else { a[l] };
+        }
+    }
+    best[..W].copy_from_slice(&b);
+    arg[..W].copy_from_slice(&a);
 }
 
 /// Differentiates the max: the gradient flows to the winning neighbour only,
@@ -103,6 +132,27 @@ mod tests {
     }
 
     #[test]
+    fn the_chunks_give_the_first_maximum_of_every_channel() {
+        // C = 37: two chunks of 16 and 5 single channels; values on a coarse grid, so that
+        // ties are frequent.
+        let (n, k, c) = (3, 7, 37);
+        let x = Array2::from_shape_fn((n * k, c), |(i, j)| ((i * 13 + j * 7) % 5) as f32);
+        let (mut out, mut cache) = (Array2::zeros((n, c)), MaxKCache::default());
+        max_k_forward(out.view_mut(), x.view(), k, &mut cache).unwrap();
+        for (p, ch) in (0..n).flat_map(|p| (0..c).map(move |ch| (p, ch))) {
+            let column: Vec<f32> = (0..k).map(|j| x[[p * k + j, ch]]).collect();
+            let max = column.iter().copied().fold(f32::MIN, f32::max);
+            let first = column.iter().position(|&v| v == max).unwrap();
+            assert_eq!(out[[p, ch]], max, "point {p}, channel {ch}");
+            assert_eq!(
+                cache.argmax[[p, ch]] as usize,
+                first,
+                "point {p}, channel {ch}"
+            );
+        }
+    }
+
+    #[test]
     fn any_layout_gives_the_same_max() {
         // A transposed input and a column block of a wider output (as the featurer writes its
         // node features) against standard arrays.
@@ -116,6 +166,10 @@ mod tests {
         assert_eq!(wide.slice(ndarray::s![.., 2..5]), plain);
         assert_eq!(other.argmax, cache.argmax);
         assert!(wide.slice(ndarray::s![.., ..2]).iter().all(|&v| v == -1.0));
+        // Into a transposed output (rows with columns apart).
+        let mut out_t = Array2::zeros((3, 4));
+        max_k_forward(out_t.view_mut().reversed_axes(), x.view(), 5, &mut other).unwrap();
+        assert_eq!(out_t.t(), plain);
     }
 
     #[test]
