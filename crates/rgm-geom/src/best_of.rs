@@ -206,10 +206,10 @@ impl<E: From<GeomError> + ToString + Send> Registrar<E> for BestOf<E> {
         // The candidates that run together: all of them, or in a cascade the first alone and
         // then the rest.
         let n = self.candidates.len();
-        let waves = if self.accept.score.is_finite() && n > 1 {
-            vec![0..1, 1..n]
+        let split = if self.accept.score.is_finite() {
+            n.min(1)
         } else {
-            vec![0..n]
+            n
         };
         let mut candidates = Vec::new();
         let mut best: Option<Best> = None;
@@ -217,7 +217,10 @@ impl<E: From<GeomError> + ToString + Send> Registrar<E> for BestOf<E> {
         'thinnings: for &how in thinnings {
             let (s, t) = (thinned(source, how), thinned(target, how));
             let mut found = Vec::with_capacity(n); // this thinning's transforms
-            for wave in waves.iter().cloned() {
+            for wave in [0..split, split..n] {
+                if wave.is_empty() {
+                    continue;
+                }
                 // The candidates of a wave are independent until scored: they run side by
                 // side, each on a core of its own when there are cores to spare, and are
                 // scored in their order.
