@@ -28,7 +28,8 @@ pub const MIN_OVERLAP: f64 = 0.1;
 
 /// When `rgm register`'s default takes its cheap candidate (FGR) without running the network
 /// ([`BestOf::accept`]): the cheapest on validation pairs that kept the recall and the share off
-/// by more than 45° of running both within 0.1 points (`docs/training/default-study/`).
+/// by more than 45° of running both within 0.1 points
+/// (`docs/training/default-study/cascade-1980-validation.md`).
 pub const ACCEPT: Acceptance = Acceptance {
     score: 0.55,
     turned_share: 0.3,
