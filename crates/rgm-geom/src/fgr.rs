@@ -36,6 +36,7 @@
 
 use nalgebra::{Matrix3, Matrix6, Point3, Vector3, Vector6};
 use rand::{rngs::StdRng, Rng, SeedableRng};
+use rayon::prelude::*;
 
 use crate::euler::rotation_xyz_extrinsic;
 use crate::fpfh::{features, Fpfh, FpfhConfig};
@@ -136,9 +137,11 @@ pub fn register_with_progress(
     let small_target = downsampled(target, config.max_points);
     // The fractions are rough shares of the time on a million points.
     report("features", 0.15);
-    let source_features = features(&small_source.points, &config.normals, &config.fpfh);
-    report("features", 0.2);
-    let target_features = features(&small_target.points, &config.normals, &config.fpfh);
+    // The two clouds' features are independent: side by side when there are cores to spare.
+    let (source_features, target_features) = rayon::join(
+        || features(&small_source.points, &config.normals, &config.fpfh),
+        || features(&small_target.points, &config.normals, &config.fpfh),
+    );
     report("matching", 0.25);
     let matches = mutual_matches_reporting(&source_features, &target_features, &mut |rows| {
         report("matching", 0.25 + 0.3 * rows)
@@ -280,22 +283,45 @@ fn mutual_matches_reporting(
     target: &[Fpfh],
     rows_done: &mut dyn FnMut(f64),
 ) -> Vec<(usize, usize)> {
-    // One pass over the (N, M) squared distances keeps each row's and each column's minimum.
+    // One pass over the (N, M) squared distances keeps each row's and each column's minimum,
+    // in blocks of rows that run side by side, a wave of them per thread at a time.
     let mut row_best = vec![(f64::INFINITY, usize::MAX); source.len()]; // (N,)
     let mut col_best = vec![(f64::INFINITY, usize::MAX); target.len()]; // (M,)
-    let every = source.len().div_ceil(64).max(1);
-    for (i, a) in source.iter().enumerate() {
-        if i % every == 0 {
-            rows_done(i as f64 / source.len() as f64);
-        }
-        for (j, b) in target.iter().enumerate() {
-            let d2 = squared_distance(a, b);
-            // Strict `<` while i and j ascend keeps the lowest index among ties.
-            if d2 < row_best[i].0 {
-                row_best[i] = (d2, j);
-            }
-            if d2 < col_best[j].0 {
-                col_best[j] = (d2, i);
+    let rows_per_block = source.len().div_ceil(64).max(1);
+    let blocks: Vec<(usize, &[Fpfh])> = source
+        .chunks(rows_per_block)
+        .enumerate()
+        .map(|(b, rows)| (b * rows_per_block, rows))
+        .collect();
+    for wave in blocks.chunks(rayon::current_num_threads().max(1)) {
+        rows_done(wave[0].0 as f64 / source.len() as f64);
+        let found: Vec<(Vec<(f64, usize)>, Vec<(f64, usize)>)> = wave
+            .par_iter()
+            .map(|&(first, rows)| {
+                let mut rows_best = vec![(f64::INFINITY, usize::MAX); rows.len()]; // (B,)
+                let mut cols_best = vec![(f64::INFINITY, usize::MAX); target.len()]; // (M,)
+                for (r, a) in rows.iter().enumerate() {
+                    for (j, b) in target.iter().enumerate() {
+                        let d2 = squared_distance(a, b);
+                        // Strict `<` while rows and j ascend keeps the lowest index among ties.
+                        if d2 < rows_best[r].0 {
+                            rows_best[r] = (d2, j);
+                        }
+                        if d2 < cols_best[j].0 {
+                            cols_best[j] = (d2, first + r);
+                        }
+                    }
+                }
+                (rows_best, cols_best)
+            })
+            .collect();
+        // Blocks merged in row order, strictly: a tie keeps the earlier block's row.
+        for (&(first, _), (rows_best, cols_best)) in wave.iter().zip(found) {
+            row_best[first..first + rows_best.len()].copy_from_slice(&rows_best);
+            for (best, block) in col_best.iter_mut().zip(cols_best) {
+                if block.0 < best.0 {
+                    *best = block;
+                }
             }
         }
     }

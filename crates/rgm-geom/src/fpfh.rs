@@ -17,6 +17,7 @@
 //! decides the sign of θ on the last bit.
 
 use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
 
 use crate::knn::{KnnIndex, Neighbourhoods};
 use crate::normals::{estimate_normals, normals_from_neighbourhoods, NormalsConfig};
@@ -132,11 +133,12 @@ fn fpfh_from_neighbourhoods(
     let n = points.len();
     let around = |i: usize| neighbourhoods.get(i);
 
+    // Each point's histograms are its own: the points run side by side.
     let mut spfh = vec![[0.0; FPFH_LEN]; n]; // (N, 33)
-    for (i, hist) in spfh.iter_mut().enumerate() {
+    spfh.par_iter_mut().enumerate().for_each(|(i, hist)| {
         let nb = around(i);
         if nb.len() < 2 {
-            continue;
+            return;
         }
         let increment = 100.0 / (nb.len() - 1) as f64;
         for &(j, _) in &nb[1..] {
@@ -146,13 +148,13 @@ fn fpfh_from_neighbourhoods(
             hist[BINS + bin(phi, -1.0, 2.0)] += increment;
             hist[2 * BINS + bin(theta, -1.0, 2.0)] += increment;
         }
-    }
+    });
 
     let mut fpfh = vec![[0.0; FPFH_LEN]; n]; // (N, 33)
-    for (i, out) in fpfh.iter_mut().enumerate() {
+    fpfh.par_iter_mut().enumerate().for_each(|(i, out)| {
         let nb = around(i);
         if nb.len() < 2 {
-            continue;
+            return;
         }
         // Σ SPFH_j / d²_j over the neighbours (a point coinciding with this one is skipped), and
         // each block's total, accumulated in Open3D's order.
@@ -184,7 +186,7 @@ fn fpfh_from_neighbourhoods(
                 *o = *o * scale + s;
             }
         }
-    }
+    });
     fpfh
 }
 

@@ -10,6 +10,7 @@
 //! rgm); the code itself is one job, kept in one place.
 
 use nalgebra::Point3;
+use rayon::prelude::*;
 
 use crate::{GeomError, Result};
 
@@ -239,16 +240,32 @@ pub struct Neighbourhoods {
 }
 
 impl Neighbourhoods {
-    /// [`KnnIndex::hybrid`] for each of `queries`.
+    /// [`KnnIndex::hybrid`] for each of `queries`: blocks of queries side by side, joined in
+    /// order.
     pub fn hybrid(index: &KnnIndex, queries: &[Point3<f64>], radius: f64, max_nn: usize) -> Self {
+        const BLOCK: usize = 256;
+        let k = max_nn.min(index.len());
+        let blocks: Vec<(Vec<usize>, Vec<(usize, f64)>)> = queries
+            .par_chunks(BLOCK)
+            .map(|block| {
+                let mut ends = Vec::with_capacity(block.len()); // (B,)
+                let mut items = Vec::with_capacity(block.len() * k); // (ΣK over the block,)
+                let mut found = Vec::with_capacity(k);
+                for q in block {
+                    index.hybrid_squared_into(q, radius, max_nn, &mut found);
+                    items.extend_from_slice(&found);
+                    ends.push(items.len());
+                }
+                (ends, items)
+            })
+            .collect();
         let mut offsets = Vec::with_capacity(queries.len() + 1);
-        let mut items = Vec::with_capacity(queries.len() * max_nn.min(index.len()));
-        let mut found = Vec::with_capacity(max_nn.min(index.len()));
+        let mut items = Vec::with_capacity(blocks.iter().map(|b| b.1.len()).sum());
         offsets.push(0);
-        for q in queries {
-            index.hybrid_squared_into(q, radius, max_nn, &mut found);
-            items.extend_from_slice(&found);
-            offsets.push(items.len());
+        for (ends, block_items) in blocks {
+            let base = items.len();
+            offsets.extend(ends.iter().map(|end| base + end));
+            items.extend(block_items);
         }
         Self { offsets, items }
     }

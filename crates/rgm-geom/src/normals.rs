@@ -11,6 +11,7 @@
 //! the normals equal Open3D's bit for bit (checked on ModelNet40 `airplane_0627`).
 
 use nalgebra::{Matrix3, Point3, Vector3};
+use rayon::prelude::*;
 
 use crate::knn::{KnnIndex, Neighbourhoods};
 
@@ -52,7 +53,7 @@ pub fn normals_from_neighbourhoods(
     let n = points.len().max(1) as f64;
     let centroid: Vector3<f64> = points.iter().map(|p| p.coords).sum::<Vector3<f64>>() / n;
     points
-        .iter()
+        .par_iter()
         .enumerate()
         .map(|(i, p)| {
             let around = neighbourhoods.get_within(i, config.radius, config.max_nn);
