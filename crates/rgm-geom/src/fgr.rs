@@ -277,7 +277,11 @@ pub fn mutual_matches(source: &[Fpfh], target: &[Fpfh]) -> Vec<(usize, usize)> {
     mutual_matches_reporting(source, target, &mut |_| {})
 }
 
-/// [`mutual_matches`], telling `rows_done` the fraction of source rows done every 1/64.
+/// A row's or a column's nearest so far: (squared distance, index).
+type Nearest = (f64, usize);
+
+/// [`mutual_matches`], telling `rows_done` the fraction of source rows done before each wave of
+/// blocks (a block is 1/64 of the rows).
 fn mutual_matches_reporting(
     source: &[Fpfh],
     target: &[Fpfh],
@@ -295,7 +299,7 @@ fn mutual_matches_reporting(
         .collect();
     for wave in blocks.chunks(rayon::current_num_threads().max(1)) {
         rows_done(wave[0].0 as f64 / source.len() as f64);
-        let found: Vec<(Vec<(f64, usize)>, Vec<(f64, usize)>)> = wave
+        let found: Vec<(Vec<Nearest>, Vec<Nearest>)> = wave
             .par_iter()
             .map(|&(first, rows)| {
                 let mut rows_best = vec![(f64::INFINITY, usize::MAX); rows.len()]; // (B,)

@@ -245,7 +245,9 @@ impl Neighbourhoods {
     pub fn hybrid(index: &KnnIndex, queries: &[Point3<f64>], radius: f64, max_nn: usize) -> Self {
         const BLOCK: usize = 256;
         let k = max_nn.min(index.len());
-        let blocks: Vec<(Vec<usize>, Vec<(usize, f64)>)> = queries
+        // Per block: where each query's neighbours end, and the neighbours.
+        type Block = (Vec<usize>, Vec<(usize, f64)>);
+        let blocks: Vec<Block> = queries
             .par_chunks(BLOCK)
             .map(|block| {
                 let mut ends = Vec::with_capacity(block.len()); // (B,)
