@@ -290,7 +290,8 @@ def register(
         target: the cloud to move it onto, float32 or float64, shape (M, 3). Clouds of any
             size and scale work: RGM moves both into its unit-sphere frame with one common
             scale, and reports the transform in the clouds' own units.
-        method: ``"auto"`` (RGM and FGR, the better by its overlap score), ``"rgm"``,
+        method: ``"auto"`` (FGR, and RGM where FGR's result is doubtful, the better by its
+            overlap score), ``"rgm"``,
             ``"fgr"`` or ``"icp"``. Default: the method of ``rgm register``
             (``rgm.DEFAULT_METHOD``, ``"auto"``).
         refine: refine the transform of RGM or FGR (both, with ``"auto"``) by ICP on the full

@@ -39,15 +39,17 @@ struct Cli {
 enum Command {
     /// Find the rigid transform that maps SRC onto TGT and print it as a 4×4 matrix.
     ///
-    /// By default (--method auto) runs both RGM, with the partial-to-partial model built into
-    /// rgm (or --weights), and FGR, refines each with ICP, and returns the one whose result
-    /// overlaps better; the output names both candidates and their scores. --method rgm, fgr or
-    /// icp runs one method; --no-refine skips the refinement; docs/results.md compares them.
-    /// Clouds of any size, scale and density: unless already in the unit-sphere frame, both are
-    /// centred and scaled by one factor into it, clouds denser than ModelNet40's 1,024 points
-    /// are thinned to 1,024 (two ways by default, each method running on both: four candidates,
-    /// those of the second thinning named …/cells), RGM matches on 384 random points of each,
-    /// and the transform is reported for the clouds as given.
+    /// By default (--method auto) runs FGR, refined with ICP, and where its result overlaps
+    /// too little or fits as well turned about one of the source's axes (--accept) also RGM,
+    /// with the partial-to-partial model built into rgm (or --weights), refined the same way,
+    /// and returns the one whose result overlaps better; the output names the candidates and
+    /// their scores. --method rgm, fgr or icp runs one method; --no-refine skips the
+    /// refinement; docs/results.md compares them. Clouds of any size, scale and density:
+    /// unless already in the unit-sphere frame, both are centred and scaled by one factor into
+    /// it, clouds denser than ModelNet40's 1,024 points are thinned to 1,024 (a second way,
+    /// its candidates named …/cells, when no result of the first is taken and the candidates
+    /// disagree), RGM matches on 384 random points of each, and the transform is reported for
+    /// the clouds as given.
     /// The winner on a thinned pair is refined further on the clouds as given, point to plane
     /// at their own point spacing. Reads PLY (ascii or binary), OFF, XYZ/CSV text and .npy
     /// files, gzip-compressed ones too (`scan.ply.gz`).

@@ -1,7 +1,7 @@
 //! rgm-model — RGM put together from the layers below: the network ([`network`]), its
 //! test-time procedure as a [`rgm_geom::Registrar`] ([`pipeline`], spec §4), training
 //! ([`train`]) and checkpoints ([`weights`]). [`options`] composes every method users can name
-//! (ICP, FGR, RGM, and `rgm register`'s default, RGM and FGR side by side) from the
+//! (ICP, FGR, RGM, and `rgm register`'s default, FGR and RGM as a cascade) from the
 //! registrars and wrappers of rgm-geom and this crate, into one [`method::Method`];
 //! [`evaluate`] runs a method over the benchmark's test pairs and scores it, resumably for long
 //! runs (per-pair record files).

@@ -34,7 +34,7 @@ use crate::method::Method;
 use crate::network::{Config, TestStatistics};
 use crate::pipeline::{self, RgmRegistrar};
 
-/// The name of RGM and FGR side by side ([`MethodName::Auto`]).
+/// The name of FGR and RGM as a cascade ([`MethodName::Auto`]).
 pub const AUTO: &str = "auto";
 
 /// The registration methods selectable by name.
@@ -118,7 +118,7 @@ pub const WEIGHTS_MATCH_POINTS: usize = 1024;
 /// A method and its options; `None` leaves an option at the method's own default.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MethodOptions {
-    /// The method (RGM and FGR combined by default).
+    /// The method (FGR and RGM as a cascade by default).
     pub method: MethodName,
     /// RGM weights (for `rgm` and `auto`): a safetensors file with the authors' parameter
     /// names; `None`: the model built into rgm ([`crate::weights::builtin_method`]).
