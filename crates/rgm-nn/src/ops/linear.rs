@@ -105,19 +105,12 @@ impl<T: Scalar> Linear<T> {
         inp: ArrayView2<'_, T>,
         through_relu: bool,
     ) -> Result<()> {
-        let rows = inp.nrows();
-        check_shape("linear backward", "inp", inp.shape(), &[rows, self.c_in()])?;
+        let rows = self.check_backward(dout, inp)?;
         check_shape(
             "linear backward",
             "dinp",
             dinp.shape(),
             &[rows, self.c_in()],
-        )?;
-        check_shape(
-            "linear backward",
-            "dout",
-            dout.shape(),
-            &[rows, self.c_out()],
         )?;
         let weight = &self.weight.value;
         if through_relu {
@@ -128,13 +121,8 @@ impl<T: Scalar> Linear<T> {
         self.backward_params(dout, inp)
     }
 
-    /// Adds the weight and bias gradients of [`Linear::backward`] only, for a layer whose
-    /// input needs no gradient (the network's input). Shapes as [`Linear::backward`].
-    pub fn backward_params(
-        &mut self,
-        dout: ArrayView2<'_, T>,
-        inp: ArrayView2<'_, T>,
-    ) -> Result<()> {
+    /// Checks a backward's `inp` (R, C_in) and `dout` (R, C_out); returns R.
+    fn check_backward(&self, dout: ArrayView2<'_, T>, inp: ArrayView2<'_, T>) -> Result<usize> {
         let rows = inp.nrows();
         check_shape("linear backward", "inp", inp.shape(), &[rows, self.c_in()])?;
         check_shape(
@@ -143,6 +131,17 @@ impl<T: Scalar> Linear<T> {
             dout.shape(),
             &[rows, self.c_out()],
         )?;
+        Ok(rows)
+    }
+
+    /// Adds the weight and bias gradients of [`Linear::backward`] only, for a layer whose
+    /// input needs no gradient (the network's input). Shapes as [`Linear::backward`].
+    pub fn backward_params(
+        &mut self,
+        dout: ArrayView2<'_, T>,
+        inp: ArrayView2<'_, T>,
+    ) -> Result<()> {
+        self.check_backward(dout, inp)?;
         mat_mul(T::one(), &dout.t(), &inp, T::one(), &mut self.weight.grad);
         if let Some(b) = &mut self.bias {
             for row in dout.rows() {
