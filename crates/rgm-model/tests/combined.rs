@@ -9,7 +9,9 @@ use rgm_geom::best_of::MIN_OVERLAP;
 use rgm_geom::refine::RefineConfig;
 use rgm_geom::{GeomError, PairMetrics, Point3, PointCloud, RigidTransform};
 use rgm_model::network::{Config, Rgm};
-use rgm_model::{Method, MethodError, MethodOptions, PipelineConfig, Registrar, RgmRegistrar};
+use rgm_model::{
+    Method, MethodError, MethodOptions, PipelineConfig, Registrar, Registration, RgmRegistrar,
+};
 
 /// The tiny network of `tests/fixtures` (random weights: its transforms are poor).
 fn tiny_rgm() -> RgmRegistrar {
@@ -36,6 +38,22 @@ fn clean_pair() -> rgm_data::Pair {
         .unwrap()
 }
 
+/// The names of the candidates `found` ran, in order.
+fn candidate_names(found: &Registration) -> Vec<&str> {
+    found.candidates.iter().map(|c| c.method.as_str()).collect()
+}
+
+/// The paper's metrics of `found`'s transform on `pair`.
+fn metrics_against_truth(found: &Registration, pair: &rgm_data::Pair) -> PairMetrics {
+    PairMetrics::compute(
+        &found.result.t_target_source,
+        &pair.t_target_source,
+        &pair.source,
+        &pair.target,
+    )
+    .unwrap()
+}
+
 /// `auto+icp` with the tiny network, both candidates on every pair.
 fn combined() -> Method {
     let never = rgm_geom::best_of::Acceptance::NEVER;
@@ -60,17 +78,11 @@ fn a_first_result_that_overlaps_enough_spares_the_network() {
     let mut method = MethodOptions::default().build().unwrap();
     assert_eq!(method.name(), "auto+icp");
     let found = method.register(&pair.source, &pair.target).unwrap();
-    let names: Vec<&str> = found.candidates.iter().map(|c| c.method.as_str()).collect();
+    let names = candidate_names(&found);
     assert_eq!(names, ["fgr+icp"]);
     assert!(found.candidates[0].score.unwrap() > 1.9, "{found:?}");
     assert_eq!(found.chosen, Some(0));
-    let metrics = PairMetrics::compute(
-        &found.result.t_target_source,
-        &pair.t_target_source,
-        &pair.source,
-        &pair.target,
-    )
-    .unwrap();
+    let metrics = metrics_against_truth(&found, &pair);
     assert!(metrics.recall && metrics.mie_r_deg < 0.05, "{metrics:?}");
     // A threshold above any score (at most 2) runs the network too.
     let mut method = MethodOptions {
@@ -91,7 +103,7 @@ fn the_candidate_that_overlaps_better_wins() {
     let mut method = both_candidates();
     assert_eq!(method.name(), "auto+icp");
     let found = method.register(&pair.source, &pair.target).unwrap();
-    let names: Vec<&str> = found.candidates.iter().map(|c| c.method.as_str()).collect();
+    let names = candidate_names(&found);
     assert_eq!(names, ["fgr+icp", "rgm+icp"]);
     let scores: Vec<f64> = found.candidates.iter().map(|c| c.score.unwrap()).collect();
     let chosen = found.chosen.unwrap();
@@ -103,13 +115,7 @@ fn the_candidate_that_overlaps_better_wins() {
         found.result.t_target_source,
         found.candidates[chosen].t_target_source
     );
-    let metrics = PairMetrics::compute(
-        &found.result.t_target_source,
-        &pair.t_target_source,
-        &pair.source,
-        &pair.target,
-    )
-    .unwrap();
+    let metrics = metrics_against_truth(&found, &pair);
     assert!(metrics.recall && metrics.mie_r_deg < 0.05, "{metrics:?}");
     // Scored as Open3D scores ICP at the refinement's finest distance: every point.
     assert_eq!(found.result.fitness, 1.0);
@@ -206,7 +212,7 @@ fn a_dense_pair_whose_methods_agree_is_thinned_once_and_refined_at_its_resolutio
     assert_eq!(source.len(), 4096);
     let mut method = both_candidates();
     let found = method.register(&source, &target).unwrap();
-    let names: Vec<&str> = found.candidates.iter().map(|c| c.method.as_str()).collect();
+    let names = candidate_names(&found);
     assert_eq!(names, ["fgr+icp", "rgm+icp"]);
     let scores: Vec<f64> = found.candidates.iter().map(|c| c.score.unwrap()).collect();
     let chosen = found.chosen.unwrap();
@@ -218,13 +224,7 @@ fn a_dense_pair_whose_methods_agree_is_thinned_once_and_refined_at_its_resolutio
     let winner = found.candidates[chosen].t_target_source;
     assert_ne!(result, winner);
     assert!(winner.inverse().compose(&result).rotation_angle_deg() < 1.0);
-    let metrics = PairMetrics::compute(
-        &found.result.t_target_source,
-        &pair.t_target_source,
-        &pair.source,
-        &pair.target,
-    )
-    .unwrap();
+    let metrics = metrics_against_truth(&found, &pair);
     assert!(metrics.recall, "{metrics:?}");
 }
 

@@ -286,6 +286,16 @@ mod tests {
         }
     }
 
+    /// ICP, the cheapest method: what these tests run.
+    fn icp() -> Method {
+        MethodOptions {
+            method: MethodName::Icp,
+            ..MethodOptions::default()
+        }
+        .build()
+        .unwrap()
+    }
+
     fn temp_dir(name: &str) -> PathBuf {
         let dir = std::env::temp_dir().join(format!("rgm-resumable-{name}-{}", std::process::id()));
         let _ = fs::remove_dir_all(&dir);
@@ -303,12 +313,7 @@ mod tests {
             generator: &generator,
             shapes: &shapes,
         };
-        let method = MethodOptions {
-            method: MethodName::Icp,
-            ..MethodOptions::default()
-        }
-        .build()
-        .unwrap();
+        let method = icp();
         let whole = Counted::default();
         let all = run(None).evaluate(&path, &method, pairs, &whole).unwrap();
         assert_eq!(all.iter().map(|r| r.index).collect::<Vec<_>>(), [0, 1, 2]);
@@ -367,12 +372,7 @@ mod tests {
             generator: &generator,
             shapes: &shapes,
         };
-        let method = MethodOptions {
-            method: MethodName::Icp,
-            ..MethodOptions::default()
-        }
-        .build()
-        .unwrap();
+        let method = icp();
         let progress = Counted::default();
         let records = run(Some(Instant::now()))
             .evaluate(&path, &method, pairs, &progress)
