@@ -53,20 +53,16 @@ impl Acceptance {
     };
 
     /// Whether `transform`, which scores `score` on the pair, ends the cascade; its
-    /// [`turned_share`] is measured on `thinned`, the pair as the candidates saw it (at most a
-    /// few thousand points, whatever the pair's density).
+    /// [`turned_share`] is measured on `source` and `target` with their trees, the pair as the
+    /// candidates saw it (at most a few thousand points, whatever the pair's density).
     pub fn takes(
         &self,
         score: f64,
-        thinned: (&PointCloud, &PointCloud),
+        source: (&PointCloud, &KnnIndex),
+        target: (&PointCloud, &KnnIndex),
         transform: &RigidTransform,
     ) -> bool {
-        if score < self.score {
-            return false;
-        }
-        let (s, t) = thinned;
-        let (si, ti) = (KnnIndex::new(&s.points), KnnIndex::new(&t.points));
-        turned_share((s, &si), (t, &ti), transform) <= self.turned_share
+        score >= self.score && turned_share(source, target, transform) <= self.turned_share
     }
 }
 
@@ -217,6 +213,9 @@ impl<E: From<GeomError> + ToString + Send> Registrar<E> for BestOf<E> {
         let mut chosen = None;
         'thinnings: for &how in thinnings {
             let (s, t) = (thinned(source, how), thinned(target, how));
+            // The thinned pair's trees, built once a dense pair's result is worth testing; a
+            // pair that is not thinned has its own already.
+            let thinned_trees = std::cell::OnceCell::new();
             let mut found = Vec::with_capacity(n); // this thinning's transforms
             for wave in [0..split, split..n] {
                 if wave.is_empty() {
@@ -266,7 +265,20 @@ impl<E: From<GeomError> + ToString + Send> Registrar<E> for BestOf<E> {
                         }),
                     }
                 }
-                if best.is_some_and(|(b, found, _)| self.accept.takes(b, (&s, &t), &found)) {
+                let taken = best.is_some_and(|(b, found, _)| {
+                    b >= self.accept.score && {
+                        let (si, ti) = if dense {
+                            let (si, ti) = thinned_trees.get_or_init(|| {
+                                (KnnIndex::new(&s.points), KnnIndex::new(&t.points))
+                            });
+                            (si, ti)
+                        } else {
+                            (&source_index, &target_index)
+                        };
+                        self.accept.takes(b, (&s, si), (&t, ti), &found)
+                    }
+                });
+                if taken {
                     break 'thinnings;
                 }
             }
