@@ -14,8 +14,8 @@
 //!
 //! RGM refines in the network's frame (distances in unit-sphere units for any input); `auto`
 //! runs both methods in that frame, on two thinnings of a dense pair, as a cascade: FGR first,
-//! and the network only when FGR's result overlaps less than [`MethodOptions::accept`]
-//! ([`rgm_geom::best_of::BestOf`]).
+//! and the network only when FGR's result overlaps less than [`MethodOptions::accept`] or fits
+//! as well turned about one of the source's axes ([`rgm_geom::best_of::Acceptance`]).
 
 use std::path::PathBuf;
 use std::str::FromStr;
@@ -75,8 +75,8 @@ impl MethodName {
             Self::Auto => format!(
                 "FGR, then RGM when FGR's result overlaps less than --accept (both clouds' \
                  share of points within {SCORE_DISTANCE} of the other, in the unit-sphere \
-                 frame), each refined, and the result that overlaps better: `rgm register`'s \
-                 default"
+                 frame) or fits as well turned about one of the source's axes, each refined, \
+                 and the result that overlaps better: `rgm register`'s default"
             ),
         }
     }
@@ -246,7 +246,7 @@ impl MethodOptions {
 }
 
 /// `auto` (`auto+icp` with `refine`): FGR's candidate in the network's frame, and RGM's when
-/// `accept` does not take FGR's (the network is most of the time), each refined with `refine`;
+/// `accept` does not take FGR's (the network costs most of the time), each refined with `refine`;
 /// the better by the overlap score on two thinnings of a dense pair, and the winner refined at
 /// a dense pair's own resolution.
 pub fn auto(rgm: RgmRegistrar, refine: Option<RefineConfig>, accept: Acceptance) -> Method {
