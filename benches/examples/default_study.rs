@@ -349,6 +349,9 @@ struct Tried {
     ms: f64,
 }
 
+/// The distances of the dump's looser overlap scores (unit-sphere units).
+const LOOSE_DISTANCES: [f64; 3] = [0.03, 0.04, 0.05];
+
 fn cascade(
     generator: &PairGenerator,
     shapes: &[&rgm_data::Shape],
@@ -357,7 +360,8 @@ fn cascade(
 ) -> Result<(), Box<dyn std::error::Error>> {
     use std::io::Write;
     // One line per pair for other thresholds: index, then per candidate (FGR, RGM) score,
-    // recall, MIE(R) and ms, then FGR's turned share.
+    // recall, MIE(R) and ms, then FGR's turned share, then FGR's overlap score at each of
+    // `LOOSE_DISTANCES` (a whole overlap that noise hides at the default's distance).
     let mut dump = dump.map(std::fs::File::create).transpose()?;
     // Both candidates on every pair, FGR's first, so that any cascade can be read off.
     let mut method = MethodOptions {
@@ -390,6 +394,14 @@ fn cascade(
         let (si, ti) = (KnnIndex::new(&s.points), KnnIndex::new(&t.points));
         let fgr = frame.redo(&found.candidates[0].t_target_source);
         let turned = turned_share((&s, &si), (&t, &ti), &fgr);
+        let loose: Vec<String> = LOOSE_DISTANCES
+            .iter()
+            .map(|&d| {
+                let there = score(&s.points, &ti, &fgr, d, None).fitness;
+                let back = score(&t.points, &si, &fgr.inverse(), d, None).fitness;
+                (there + back).to_string()
+            })
+            .collect();
         let both = [tried(0), tried(1)];
         if let Some(file) = &mut dump {
             let fields: Vec<String> = both
@@ -401,7 +413,12 @@ fn cascade(
                     )
                 })
                 .collect();
-            writeln!(file, "{i} {} {turned}", fields.join(" "))?;
+            writeln!(
+                file,
+                "{i} {} {turned} {}",
+                fields.join(" "),
+                loose.join(" ")
+            )?;
         }
         pairs.push((both, turned));
         if (done + 1) % 50 == 0 {
