@@ -40,7 +40,8 @@ enum Command {
     /// Find the rigid transform that maps SRC onto TGT and print it as a 4×4 matrix.
     ///
     /// By default (--method auto) runs FGR, refined with ICP, and where its result overlaps
-    /// too little or fits as well turned about one of the source's axes (--accept) also RGM,
+    /// too little or, short of a whole overlap, fits as well turned about one of the source's
+    /// axes (--accept) also RGM,
     /// with the partial-to-partial model built into rgm (or --weights), refined the same way,
     /// and returns the one whose result overlaps better; the output names the candidates and
     /// their scores. --method rgm, fgr or icp runs one method; --no-refine skips the
@@ -130,7 +131,8 @@ pub struct MethodArgs {
     precision: Precision,
     /// auto: take FGR's result without running the network when its overlap score (both
     /// clouds' share of points on the other, 0 to 2) reaches SCORE and the shape does not fit as
-    /// well turned about one of its axes; `inf` runs both methods on every pair (slower).
+    /// well turned about one of its axes (or the clouds lie wholly on each other); `inf` runs
+    /// both methods on every pair (slower).
     #[arg(long, value_name = "SCORE", default_value_t = MethodOptions::default().accept)]
     accept: f64,
 }

@@ -14,8 +14,9 @@
 //!
 //! RGM refines in the network's frame (distances in unit-sphere units for any input); `auto`
 //! runs both methods in that frame, on two thinnings of a dense pair, as a cascade: FGR first,
-//! and the network only when FGR's result overlaps less than [`MethodOptions::accept`] or fits
-//! as well turned about one of the source's axes ([`rgm_geom::best_of::Acceptance`]).
+//! and the network only when FGR's result overlaps less than [`MethodOptions::accept`] or, short
+//! of a whole overlap, fits as well turned about one of the source's axes
+//! ([`rgm_geom::best_of::Acceptance`]).
 
 use std::path::PathBuf;
 use std::str::FromStr;
@@ -75,7 +76,8 @@ impl MethodName {
             Self::Auto => format!(
                 "FGR, then RGM when FGR's result overlaps less than --accept (both clouds' \
                  share of points within {SCORE_DISTANCE} of the other, in the unit-sphere \
-                 frame) or fits as well turned about one of the source's axes, each refined, \
+                 frame) or, short of a whole overlap, fits as well turned about one of the \
+                 source's axes, each refined, \
                  and the result that overlaps better: `rgm register`'s default"
             ),
         }
@@ -141,8 +143,8 @@ pub struct MethodOptions {
     /// `rgm eval`, turn it off). ICP is its own refinement and ignores it.
     pub refine: bool,
     /// `auto` takes FGR's result without running the network when it scores at least this
-    /// ([`rgm_geom::best_of::overlap_score`], 0 to 2) and does not fit as well turned
-    /// ([`ACCEPT`]); `f64::INFINITY` runs both on every pair.
+    /// ([`rgm_geom::best_of::overlap_score`], 0 to 2) and overlaps wholly or does not fit as
+    /// well turned ([`ACCEPT`]); `f64::INFINITY` runs both on every pair.
     pub accept: f64,
 }
 
