@@ -17,7 +17,7 @@ use crate::Method;
 
 mod resumable;
 
-pub use resumable::{read_records, EvaluateError, Progress, Resumable, TestPairs};
+pub use resumable::{convert_json_records, EvaluateError, Progress, Resumable, TestPairs};
 
 /// One test pair's outcome.
 #[derive(Clone, Debug)]

@@ -1,15 +1,16 @@
 //! `cargo xtask reproduce-tables`: the paper's Tables 1–5 on ModelNet40 from this project's own
 //! runs — ICP, FGR and every trained RGM model of the weights manifest on the clean, noise,
-//! partial and unseen-category test pairs — written to `docs/results.md` with per-pair JSON
+//! partial and unseen-category test pairs — written to `docs/results.md` with per-pair records
 //! and figures.
 //!
 //! Resumable ([`rgm_model::evaluate::Resumable`]): every finished chunk of pairs is appended to
-//! its method's per-pair file at once, and a later run computes only the pairs that are missing
-//! there. This file chooses the rows and writes the report.
+//! its row's per-pair file at once, and a later run computes only the pairs that are missing
+//! there, or every pair of a row whose inputs ([`Candidate::inputs`]) changed. This file
+//! chooses the rows and writes the report.
 
 use std::collections::BTreeMap;
 use std::fs;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
@@ -18,7 +19,7 @@ use rgm_cli::EvaluationBar;
 use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
 use rgm_geom::refine::RefineConfig;
 use rgm_geom::registrar::{MethodId, Normalised};
-use rgm_model::evaluate::{Resumable, TestPairs};
+use rgm_model::evaluate::{convert_json_records, Resumable, TestPairs};
 use rgm_model::weights::{weights_dir, Manifest, ModelEntry, Variant, WeightsFile};
 use rgm_model::{Method, MethodName, MethodOptions, PairRecord, Registrar};
 use rgm_viz::{correct_fraction, correspondence_figure, registration_figure};
@@ -113,7 +114,22 @@ struct Candidate {
     variant: Option<Variant>,
     /// The training pairs of a trained model.
     pairs_seen: Option<u64>,
+    /// What its records depend on besides the code, kept in its per-pair file: the method's
+    /// options and, for a model, its weights (by their CRC-32, since a manifest entry may
+    /// point into a run whose weights move on).
+    inputs: String,
     method: Method,
+}
+
+impl Candidate {
+    /// The name, stem and inputs of its refined row (`<name>+icp`).
+    fn refined(&self, config: &RefineConfig) -> (String, String, String) {
+        (
+            format!("{}+icp", self.name),
+            format!("{}-icp", self.stem),
+            format!("{}; refined with {config:?}", self.inputs),
+        )
+    }
 }
 
 /// One row of a table: a method's records on a test set of `total` pairs.
@@ -196,6 +212,7 @@ pub fn run(args: Args) -> Result<()> {
         for candidate in candidates(set, &manifest, &args.only)? {
             let records = run.evaluation.evaluate(
                 &run.records_path(set, &candidate.stem),
+                &candidate.inputs,
                 &candidate.method,
                 pairs,
                 &EvaluationBar::new(format!("{} {}", set.key(), candidate.name)),
@@ -205,12 +222,13 @@ pub fn run(args: Args) -> Result<()> {
             // transforms: the refinement alone is computed.
             let refined = match candidate.variant {
                 Some(_) => {
-                    let stem = format!("{}-icp", candidate.stem);
-                    let name = format!("{}+icp", candidate.name);
+                    let config = RefineConfig::default();
+                    let (name, stem, inputs) = candidate.refined(&config);
                     let records = run.evaluation.refine(
                         &run.records_path(set, &stem),
+                        &inputs,
                         &records,
-                        &RefineConfig::default(),
+                        &config,
                         pairs,
                         &EvaluationBar::new(format!("{} {name}", set.key())),
                     )?;
@@ -265,19 +283,39 @@ fn test_shapes(dataset: &ModelNet40, set: TestSet, limit: Option<usize>) -> Vec<
 /// ICP or FGR (refined when `refine`) as `rgm register --method` builds it.
 /// Its row is named as the method names itself, its files with `-` for `+`.
 fn classical(method: MethodName, refine: bool) -> Result<Candidate> {
-    let method = MethodOptions {
+    let options = MethodOptions {
         method,
         refine,
         ..MethodOptions::default()
-    }
-    .build()?;
+    };
+    let method = options.build()?;
     Ok(Candidate {
         name: method.name(),
         stem: method.name().replace('+', "-"),
         variant: None,
         pairs_seen: None,
+        inputs: format!("{options:?}"),
         method,
     })
+}
+
+/// A model of the manifest as a row's inputs ([`Candidate::inputs`]): what it runs with and
+/// its weights, read from disk.
+fn model_inputs(entry: &ModelEntry) -> Result<String> {
+    let path = from_history(entry)?.file.on_disk(&weights_dir())?;
+    let bytes = fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
+    let mut crc = flate2::Crc::new();
+    crc.update(&bytes);
+    Ok(format!(
+        "{} ({}, preset {}, match points {:?}, {:?} statistics), weights {} of CRC-32 {:08x}",
+        entry.name,
+        entry.variant.name(),
+        entry.preset,
+        entry.match_points,
+        entry.test_statistics,
+        entry.file,
+        crc.sum()
+    ))
 }
 
 /// The name of `rgm register`'s default row (RGM and FGR, refined), known before its weights
@@ -311,12 +349,14 @@ fn candidates(set: TestSet, manifest: &Manifest, only: &[String]) -> Result<Vec<
     }
     // `rgm register`'s default on every test set, named by the built-in model it runs.
     if let Some(builtin) = manifest.builtin_entry().filter(|_| wanted(&default_row())) {
+        let options = MethodOptions::default();
         list.push(Candidate {
             name: default_row(),
             stem: format!("auto-{}-{}pairs-icp", builtin.name, builtin.pairs_seen),
             variant: None,
             pairs_seen: None,
-            method: MethodOptions::default().build()?,
+            inputs: format!("{options:?}, built-in model {}", model_inputs(builtin)?),
+            method: options.build()?,
         });
     }
     for entry in models_for(manifest, set).filter(|e| wanted(&e.name)) {
@@ -329,6 +369,7 @@ fn candidates(set: TestSet, manifest: &Manifest, only: &[String]) -> Result<Vec<
             stem: format!("{}-{}pairs", entry.name, entry.pairs_seen),
             variant: Some(entry.variant),
             pairs_seen: Some(entry.pairs_seen),
+            inputs: model_inputs(entry)?,
             method,
         });
     }
@@ -413,10 +454,7 @@ fn models_for(manifest: &Manifest, set: TestSet) -> impl Iterator<Item = &ModelE
 impl Run {
     /// The per-pair file of one method on one test set.
     fn records_path(&self, set: TestSet, stem: &str) -> PathBuf {
-        self.out
-            .join("results")
-            .join(set.key())
-            .join(format!("{stem}.jsonl"))
+        records_path(&self.out, set, stem)
     }
 
     /// For the first `count` pairs: the clouds before and after `candidate`'s transform
@@ -485,6 +523,55 @@ impl Run {
         }
         Ok(())
     }
+}
+
+/// The per-pair file of one row on one test set in the results folder `out`: gzip'd JSON
+/// lines ([`rgm_model::evaluate::Resumable`]).
+fn records_path(out: &Path, set: TestSet, stem: &str) -> PathBuf {
+    out.join("results")
+        .join(set.key())
+        .join(format!("{stem}.jsonl.gz"))
+}
+
+/// `cargo xtask convert-records`: the per-pair files of `out/results/` in the JSON lines of
+/// every field that reproduce-tables wrote before, converted to its compact files with the
+/// inputs of the rows as this tree builds them, each checked (the records scored again on
+/// their regenerated pairs equal the old ones) before the old file is deleted.
+pub fn convert(out: &Path, data: &Path) -> Result<()> {
+    let dataset = ModelNet40::open(data)
+        .with_context(|| format!("opening ModelNet40 at {}", data.display()))?;
+    let manifest = Manifest::load(&weights_dir().join("manifest.json"))?;
+    for set in TestSet::ALL {
+        let shapes = test_shapes(&dataset, set, None);
+        let generator = PairGenerator::new(set.setting);
+        let pairs = TestPairs {
+            generator: &generator,
+            shapes: &shapes,
+        };
+        for candidate in candidates(set, &manifest, &[])? {
+            let (_, refined_stem, refined_inputs) = candidate.refined(&RefineConfig::default());
+            let rows = [
+                (candidate.stem.clone(), candidate.inputs.clone()),
+                (refined_stem, refined_inputs),
+            ];
+            for (stem, inputs) in rows {
+                let new = records_path(out, set, &stem);
+                let old = new.with_extension("");
+                if !old.exists() {
+                    continue;
+                }
+                let count = convert_json_records(&old, &new, &inputs, pairs)?;
+                fs::remove_file(&old)?;
+                println!(
+                    "{}: {count} records, {} bytes, was {}",
+                    new.display(),
+                    fs::metadata(&new)?.len(),
+                    old.display()
+                );
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The 1-minute load average from /proc/loadavg (how busy the machine was).

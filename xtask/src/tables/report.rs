@@ -99,10 +99,14 @@ impl Report {
             load(self.load[0]),
             load(self.load[1])
         );
-        md += "- **Per-pair records**: `results/<setting>/<method>.jsonl` (for a trained model \
-               `<name>-<training pairs seen>pairs.jsonl`), one JSON object per pair (the fields \
-               of `rgm eval --json`). A later run computes only the pairs \
-               missing there; delete a file to recompute it.\n\n";
+        md += "- **Per-pair records**: `results/<setting>/<method>.jsonl.gz` (for a trained \
+               model `<name>-<training pairs seen>pairs.jsonl.gz`), gzip'd JSON lines (`zcat` \
+               shows them): a header naming the row's inputs (the method's options, a model's \
+               weights and their CRC-32), then per pair its index, the transform found (3 × 4, \
+               full precision), the time, the correspondences and any failure; the ground truth \
+               and the metrics are computed again from the pair, which `rgm-data` regenerates \
+               from its index. A later run computes only the pairs missing there, and every \
+               pair of a row whose inputs changed; delete a file to recompute it.\n\n";
         md += &self.models_markdown();
         for table in &TABLES {
             md += &format!("## Table {}: {}\n\n", table.number, table.caption);

@@ -1,17 +1,29 @@
-//! Resumable evaluation: a method's records on a set of test pairs kept in a per-pair file (one
-//! JSON object per line, the fields of [`PairRecord`]), appended chunk by chunk as the pairs
-//! are computed, so that an evaluation stopped at its deadline, or killed, carries on where it
-//! stopped: a later one reads the file back and computes only the pairs missing there.
+//! Resumable evaluation: a method's records on a set of test pairs kept in a per-pair file, so
+//! that an evaluation stopped at its deadline, or killed, carries on where it stopped: a later
+//! one reads the file back and computes only the pairs missing there.
+//!
+//! The file is gzip'd JSON lines, small enough to commit: a [`Header`] naming the inputs the
+//! records were made from, then one [`Line`] per pair holding only what the pair cannot give
+//! back (the transform, the time, the correspondences, the failure). The ground truth and the
+//! metrics are computed again from the regenerated test pair when the file is read. Each
+//! finished chunk of pairs is appended as a gzip member of its own, so that a killed run loses
+//! at most the chunk it was writing; when the evaluation stops, the file is written again as
+//! one member, which compresses far better.
 
 use std::collections::HashSet;
 use std::fs;
-use std::io::Write;
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use flate2::read::MultiGzDecoder;
+use flate2::write::GzEncoder;
+use flate2::Compression;
 use rayon::prelude::*;
 use rgm_data::{Pair, PairGenerator, Shape};
 use rgm_geom::refine::RefineConfig;
+use rgm_geom::{Matrix4, RigidTransform};
+use serde::{Deserialize, Serialize};
 
 use super::{evaluate_pair, PairRecord};
 use crate::Method;
@@ -25,13 +37,16 @@ pub enum EvaluateError {
         path: PathBuf,
         error: std::io::Error,
     },
-    /// A line of the per-pair file is not a record.
+    /// A line of the per-pair file is not a record, or its header not a header.
     #[error("{} line {line}: {error}", path.display())]
     Record {
         path: PathBuf,
         line: usize,
-        error: serde_json::Error,
+        error: String,
     },
+    /// The per-pair file is of a format this code does not read.
+    #[error("{}: per-pair file version {version}, this code reads {VERSION}", path.display())]
+    Version { path: PathBuf, version: u32 },
     /// A test pair could not be made.
     #[error(transparent)]
     Data(#[from] rgm_data::DataError),
@@ -93,17 +108,21 @@ pub struct Resumable {
 
 impl Resumable {
     /// Every pair of `pairs` evaluated with `method` ([`evaluate_pair`]), sorted by pair
-    /// index, kept in the per-pair file `path`.
+    /// index, kept in the per-pair file `path`. `inputs` names what the records depend on
+    /// besides the code (the method's options, its weights): records of the file made from
+    /// other inputs are computed again.
     pub fn evaluate(
         &self,
         path: &Path,
+        inputs: &str,
         method: &Method,
         pairs: TestPairs,
         progress: &dyn Progress,
     ) -> Result<Vec<PairRecord>, EvaluateError> {
         let indices: Vec<usize> = (0..pairs.len()).collect();
         self.records(
-            path,
+            (path, inputs),
+            pairs,
             &indices,
             progress,
             || method.clone(),
@@ -113,10 +132,11 @@ impl Resumable {
 
     /// The records of `plain` refined as `rgm eval --refine` refines them
     /// ([`PairRecord::refined`]: the network is not run again), for the pairs `plain` has,
-    /// kept in the per-pair file `path`.
+    /// kept in the per-pair file `path` of `inputs` (as in [`Resumable::evaluate`]).
     pub fn refine(
         &self,
         path: &Path,
+        inputs: &str,
         plain: &[PairRecord],
         config: &RefineConfig,
         pairs: TestPairs,
@@ -126,7 +146,8 @@ impl Resumable {
         plain.sort_by_key(|r| r.index);
         let indices: Vec<usize> = plain.iter().map(|r| r.index).collect();
         self.records(
-            path,
+            (path, inputs),
+            pairs,
             &indices,
             progress,
             || (),
@@ -137,21 +158,32 @@ impl Resumable {
         )
     }
 
-    /// The records of the pairs `indices` (sorted) in the per-pair file `path`, sorted by pair
-    /// index: those already there read back, the others made by `compute` (with a state per
-    /// worker from `init`) in parallel chunks appended as they finish. Fewer when the deadline
-    /// came first.
+    /// The records of the pairs `indices` (sorted) kept in the per-pair file `path` of
+    /// `inputs`, sorted by pair index: those already there read back and scored on their
+    /// pairs, the others made by `compute` (with a state per worker from `init`) in parallel
+    /// chunks appended as they finish. Fewer when the deadline came first.
     fn records<S>(
         &self,
-        path: &Path,
+        (path, inputs): (&Path, &str),
+        pairs: TestPairs,
         indices: &[usize],
         progress: &dyn Progress,
         init: impl Fn() -> S + Sync + Send,
         compute: impl Fn(&mut S, usize) -> Result<PairRecord, EvaluateError> + Sync + Send,
     ) -> Result<Vec<PairRecord>, EvaluateError> {
-        let mut records = read_records(path)?;
-        records.retain(|r| indices.binary_search(&r.index).is_ok());
-        let done: HashSet<usize> = records.iter().map(|r| r.index).collect();
+        let file = read_file(path)?;
+        let mut lines = match file.inputs {
+            Some(found) if found == inputs => file.lines,
+            _ => Vec::new(),
+        };
+        let mut records: Vec<PairRecord> = self.pool.install(|| {
+            lines
+                .par_iter()
+                .filter(|line| indices.binary_search(&line.index).is_ok())
+                .map(|line| Ok(line.record(&pairs.pair(line.index)?)?))
+                .collect::<Result<_, EvaluateError>>()
+        })?;
+        let done: HashSet<usize> = lines.iter().map(|l| l.index).collect();
         let missing: Vec<usize> = indices
             .iter()
             .copied()
@@ -165,15 +197,11 @@ impl Resumable {
             if let Some(folder) = path.parent() {
                 fs::create_dir_all(folder).map_err(io)?;
             }
-            let mut file = fs::OpenOptions::new()
-                .create(true)
-                .append(true)
-                .open(path)
-                .map_err(io)?;
             progress.start(indices.len(), records.len());
             // Chunks several times the workers long keep them all busy between two appends.
             let chunk = 4 * self.pool.current_num_threads();
             let mut complete = true;
+            let mut computed = false;
             for indices in missing.chunks(chunk) {
                 if self.deadline.is_some_and(|d| Instant::now() >= d) {
                     complete = false;
@@ -189,13 +217,22 @@ impl Resumable {
                         })
                         .collect::<Result<_, _>>()
                 })?;
-                let mut lines = String::new();
-                for record in &found {
-                    lines += &serde_json::to_string(record).expect("a record serialises");
-                    lines.push('\n');
+                let new: Vec<Line> = found.iter().map(Line::of).collect();
+                // The first chunk writes the file anew: its header, the lines read back (a
+                // cut member dropped, stale records gone), the chunk; later ones append.
+                if computed {
+                    append(path, &new).map_err(io)?;
+                    lines.extend(new);
+                } else {
+                    lines.extend(new);
+                    write_file(path, inputs, &lines).map_err(io)?;
                 }
-                file.write_all(lines.as_bytes()).map_err(io)?;
                 records.extend(found);
+                computed = true;
+            }
+            if computed {
+                lines.sort_by_key(|l| l.index);
+                write_file(path, inputs, &lines).map_err(io)?;
             }
             progress.finish(complete);
         }
@@ -204,30 +241,229 @@ impl Resumable {
     }
 }
 
-/// The records of a per-pair file (one JSON object per line, blank lines skipped), in the
-/// file's order; none when the file does not exist.
-pub fn read_records(path: &Path) -> Result<Vec<PairRecord>, EvaluateError> {
-    let text = match fs::read_to_string(path) {
-        Ok(text) => text,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
-        Err(error) => {
-            return Err(EvaluateError::Io {
-                path: path.to_path_buf(),
-                error,
+/// The format of the per-pair files this code writes and reads.
+const VERSION: u32 = 1;
+
+/// The first line of a per-pair file.
+#[derive(Serialize, Deserialize)]
+struct Header {
+    /// [`VERSION`].
+    version: u32,
+    /// What its records were made from besides the code ([`Resumable::evaluate`]).
+    inputs: String,
+}
+
+/// A pair's line in a per-pair file: what its [`PairRecord`] holds that the test pair cannot
+/// give back.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct Line {
+    index: usize,
+    /// The first three rows (R | t) of the predicted `t_target_source`, at f64's full
+    /// precision so that the metrics are computed again bit for bit.
+    transform: [[f64; 4]; 3],
+    time_ms: f64,
+    correspondences: usize,
+    failure: Option<String>,
+}
+
+impl Line {
+    fn of(record: &PairRecord) -> Self {
+        let rows = record.transform.to_rows();
+        Self {
+            index: record.index,
+            transform: [rows[0], rows[1], rows[2]],
+            time_ms: record.time_ms,
+            correspondences: record.correspondences,
+            failure: record.failure.clone(),
+        }
+    }
+
+    fn transform(&self) -> rgm_geom::Result<RigidTransform> {
+        let rows = &self.transform;
+        let m = Matrix4::from_fn(|i, j| match rows.get(i) {
+            Some(row) => row[j],
+            None => [0.0, 0.0, 0.0, 1.0][j],
+        });
+        RigidTransform::from_matrix4(&m, 1e-6)
+    }
+
+    /// The record of this line on its test pair `pair`.
+    fn record(&self, pair: &Pair) -> rgm_geom::Result<PairRecord> {
+        PairRecord::score(
+            self.index,
+            pair,
+            self.transform()?,
+            self.time_ms,
+            self.correspondences,
+            self.failure.clone(),
+        )
+    }
+}
+
+/// A per-pair file as read back.
+struct PerPairFile {
+    /// The header's inputs; `None` when there is no file or it was cut inside its header.
+    inputs: Option<String>,
+    lines: Vec<Line>,
+}
+
+/// The per-pair file `path`, in the file's order. A run killed while it appended leaves the
+/// last gzip member cut: the lines before the cut are kept, and the next chunk computed writes
+/// the file anew.
+fn read_file(path: &Path) -> Result<PerPairFile, EvaluateError> {
+    let io = |error| EvaluateError::Io {
+        path: path.to_path_buf(),
+        error,
+    };
+    let bytes = match fs::read(path) {
+        Ok(bytes) => bytes,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Ok(PerPairFile {
+                inputs: None,
+                lines: Vec::new(),
             })
         }
+        Err(error) => return Err(io(error)),
     };
-    text.lines()
+    let mut text = Vec::new();
+    match MultiGzDecoder::new(&bytes[..]).read_to_end(&mut text) {
+        Ok(_) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => {
+            let whole_lines = text.iter().rposition(|&b| b == b'\n').map_or(0, |n| n + 1);
+            text.truncate(whole_lines);
+        }
+        Err(error) => return Err(io(error)),
+    }
+    let text = String::from_utf8(text)
+        .map_err(|e| io(std::io::Error::new(std::io::ErrorKind::InvalidData, e)))?;
+    let error = |line: usize, error: String| EvaluateError::Record {
+        path: path.to_path_buf(),
+        line: line + 1,
+        error,
+    };
+    let mut lines = text.lines().enumerate();
+    let Some((_, header)) = lines.next() else {
+        return Ok(PerPairFile {
+            inputs: None,
+            lines: Vec::new(),
+        });
+    };
+    let header: Header = serde_json::from_str(header).map_err(|e| error(0, e.to_string()))?;
+    if header.version != VERSION {
+        return Err(EvaluateError::Version {
+            path: path.to_path_buf(),
+            version: header.version,
+        });
+    }
+    let lines = lines
+        .map(|(n, text)| {
+            let line: Line = serde_json::from_str(text).map_err(|e| error(n, e.to_string()))?;
+            line.transform().map_err(|e| error(n, e.to_string()))?;
+            Ok(line)
+        })
+        .collect::<Result<_, EvaluateError>>()?;
+    Ok(PerPairFile {
+        inputs: Some(header.inputs),
+        lines,
+    })
+}
+
+/// `lines` as JSON lines.
+fn json_lines<T: Serialize>(lines: &[T]) -> String {
+    lines
+        .iter()
+        .map(|line| serde_json::to_string(line).expect("a line serialises") + "\n")
+        .collect()
+}
+
+/// `text` as one gzip member (no time stamp: the same text, the same bytes).
+fn gzip(text: &str) -> Vec<u8> {
+    let mut gz = GzEncoder::new(Vec::new(), Compression::best());
+    gz.write_all(text.as_bytes()).expect("writing to memory");
+    gz.finish().expect("writing to memory")
+}
+
+/// The per-pair file `path` of `inputs` holding `lines`, in one gzip member, written beside it
+/// and renamed so that a run killed meanwhile leaves the old file whole.
+fn write_file(path: &Path, inputs: &str, lines: &[Line]) -> std::io::Result<()> {
+    let header = Header {
+        version: VERSION,
+        inputs: inputs.to_string(),
+    };
+    let temporary = path.with_extension("gz.tmp");
+    fs::write(
+        &temporary,
+        gzip(&(json_lines(&[header]) + &json_lines(lines))),
+    )?;
+    fs::rename(&temporary, path)
+}
+
+/// `lines` appended to the per-pair file `path`, a gzip member of their own.
+fn append(path: &Path, lines: &[Line]) -> std::io::Result<()> {
+    fs::OpenOptions::new()
+        .append(true)
+        .open(path)?
+        .write_all(&gzip(&json_lines(lines)))
+}
+
+/// The per-pair file `old` of the format before [`VERSION`] 1 (JSON lines of every field of a
+/// [`PairRecord`], `rgm eval --json`'s) written as the per-pair file `new` of `inputs` and
+/// read back: an error unless every record read back and scored on its pair regenerated from
+/// `pairs` equals the old one. Returns how many records there are.
+pub fn convert_json_records(
+    old: &Path,
+    new: &Path,
+    inputs: &str,
+    pairs: TestPairs,
+) -> Result<usize, EvaluateError> {
+    let text = fs::read_to_string(old).map_err(|error| EvaluateError::Io {
+        path: old.to_path_buf(),
+        error,
+    })?;
+    let records: Vec<PairRecord> = text
+        .lines()
         .enumerate()
         .filter(|(_, l)| !l.trim().is_empty())
         .map(|(n, line)| {
             serde_json::from_str(line).map_err(|error| EvaluateError::Record {
-                path: path.to_path_buf(),
+                path: old.to_path_buf(),
                 line: n + 1,
-                error,
+                error: error.to_string(),
             })
         })
-        .collect()
+        .collect::<Result<_, _>>()?;
+    let lines: Vec<Line> = records.iter().map(Line::of).collect();
+    write_file(new, inputs, &lines).map_err(|error| EvaluateError::Io {
+        path: new.to_path_buf(),
+        error,
+    })?;
+    let back = read_file(new)?;
+    assert_eq!(back.inputs.as_deref(), Some(inputs));
+    assert_eq!(back.lines, lines);
+    records
+        .par_iter()
+        .zip(&back.lines)
+        .enumerate()
+        .try_for_each(|(n, (was, line))| {
+            let now = line.record(&pairs.pair(line.index)?)?;
+            let same = now.index == was.index
+                && now.transform.to_rows() == was.transform.to_rows()
+                && now.ground_truth.to_rows() == was.ground_truth.to_rows()
+                && now.metrics == was.metrics
+                && now.time_ms == was.time_ms
+                && now.correspondences == was.correspondences
+                && now.failure == was.failure;
+            if same {
+                Ok(())
+            } else {
+                Err(EvaluateError::Record {
+                    path: new.to_path_buf(),
+                    line: n + 2,
+                    error: format!("scored again: {now:?}, was {was:?}"),
+                })
+            }
+        })?;
+    Ok(records.len())
 }
 
 #[cfg(test)]
@@ -302,112 +538,267 @@ mod tests {
         dir
     }
 
+    /// Clean test pairs of wavy shapes.
+    struct Fixture {
+        shapes: Vec<Shape>,
+        generator: PairGenerator,
+    }
+
+    impl Fixture {
+        fn new(count: usize) -> Self {
+            Self {
+                shapes: (0..count).map(shape).collect(),
+                generator: PairGenerator::new(Setting::Clean),
+            }
+        }
+
+        fn with<T>(&self, f: impl FnOnce(TestPairs) -> T) -> T {
+            let shapes: Vec<&Shape> = self.shapes.iter().collect();
+            f(TestPairs {
+                generator: &self.generator,
+                shapes: &shapes,
+            })
+        }
+    }
+
+    /// Every field of two records equal, bit for bit.
+    fn assert_same(a: &[PairRecord], b: &[PairRecord]) {
+        assert_eq!(a.len(), b.len());
+        for (a, b) in a.iter().zip(b) {
+            assert_eq!(a.index, b.index);
+            assert_eq!(a.transform.to_rows(), b.transform.to_rows());
+            assert_eq!(a.ground_truth.to_rows(), b.ground_truth.to_rows());
+            assert_eq!(a.metrics, b.metrics);
+            assert_eq!(a.time_ms.to_bits(), b.time_ms.to_bits());
+            assert_eq!(a.correspondences, b.correspondences);
+            assert_eq!(a.failure, b.failure);
+        }
+    }
+
     #[test]
     fn a_resumed_evaluation_computes_only_the_missing_pairs_and_equals_a_whole_one() {
         let dir = temp_dir("resume");
-        let path = dir.join("results/clean/icp.jsonl");
-        let shapes: Vec<Shape> = (0..3).map(shape).collect();
-        let shapes: Vec<&Shape> = shapes.iter().collect();
-        let generator = PairGenerator::new(Setting::Clean);
-        let pairs = TestPairs {
-            generator: &generator,
-            shapes: &shapes,
-        };
+        let path = dir.join("results/clean/icp.jsonl.gz");
+        let fixture = Fixture::new(3);
         let method = icp();
-        let whole = Counted::default();
-        let all = run(None).evaluate(&path, &method, pairs, &whole).unwrap();
-        assert_eq!(all.iter().map(|r| r.index).collect::<Vec<_>>(), [0, 1, 2]);
-        assert_eq!(*whole.started.lock().unwrap(), [(3, 0)]);
-        assert_eq!(whole.advanced.load(Ordering::Relaxed), 3);
-        assert_eq!(*whole.finished.lock().unwrap(), [true]);
+        fixture.with(|pairs| {
+            let whole = Counted::default();
+            let all = run(None)
+                .evaluate(&path, "icp", &method, pairs, &whole)
+                .unwrap();
+            assert_eq!(all.iter().map(|r| r.index).collect::<Vec<_>>(), [0, 1, 2]);
+            assert_eq!(*whole.started.lock().unwrap(), [(3, 0)]);
+            assert_eq!(whole.advanced.load(Ordering::Relaxed), 3);
+            assert_eq!(*whole.finished.lock().unwrap(), [true]);
 
-        // Keep the file's pair 1 only: a resumed evaluation computes pairs 0 and 2 again.
-        let text = fs::read_to_string(&path).unwrap();
-        let kept: String = text
-            .lines()
-            .filter(|l| l.starts_with("{\"index\":1,"))
-            .map(|l| format!("{l}\n"))
-            .collect();
-        assert_eq!(kept.lines().count(), 1, "{text}");
-        fs::write(&path, kept).unwrap();
-        let resumed = Counted::default();
-        let again = run(None).evaluate(&path, &method, pairs, &resumed).unwrap();
-        assert_eq!(*resumed.started.lock().unwrap(), [(3, 1)]);
-        assert_eq!(resumed.advanced.load(Ordering::Relaxed), 2);
-        assert_eq!(read_records(&path).unwrap().len(), 3);
-        for (a, b) in all.iter().zip(&again) {
-            assert_eq!(a.index, b.index);
-            assert_eq!(a.transform.to_rows(), b.transform.to_rows());
-            assert_eq!(a.metrics, b.metrics);
-        }
+            // Nothing missing: nothing computed, nothing reported, and the records scored
+            // from the file's transforms are those of the evaluation, bit for bit.
+            let idle = Counted::default();
+            let again = run(None)
+                .evaluate(&path, "icp", &method, pairs, &idle)
+                .unwrap();
+            assert!(idle.started.lock().unwrap().is_empty());
+            assert_same(&again, &all);
 
-        // Nothing missing: nothing computed, nothing reported.
-        let idle = Counted::default();
-        let third = run(None).evaluate(&path, &method, pairs, &idle).unwrap();
-        assert_eq!(third.len(), 3);
-        assert!(idle.started.lock().unwrap().is_empty());
+            // Keep the file's pair 1 only: a resumed evaluation computes pairs 0 and 2 again.
+            let kept = read_file(&path).unwrap().lines;
+            write_file(&path, "icp", &kept[1..2]).unwrap();
+            let resumed = Counted::default();
+            let again = run(None)
+                .evaluate(&path, "icp", &method, pairs, &resumed)
+                .unwrap();
+            assert_eq!(*resumed.started.lock().unwrap(), [(3, 1)]);
+            assert_eq!(resumed.advanced.load(Ordering::Relaxed), 2);
+            assert_eq!(read_file(&path).unwrap().lines.len(), 3);
+            for (a, b) in all.iter().zip(&again) {
+                assert_eq!(a.transform.to_rows(), b.transform.to_rows());
+                assert_eq!(a.metrics, b.metrics);
+            }
 
-        // Refined from the records: the refinement's own file, every pair of the records.
-        let refined_path = dir.join("results/clean/icp-icp.jsonl");
-        let config = RefineConfig::default();
-        let refined = run(None)
-            .refine(&refined_path, &all[..2], &config, pairs, &())
-            .unwrap();
-        assert_eq!(refined.iter().map(|r| r.index).collect::<Vec<_>>(), [0, 1]);
-        assert!(refined
-            .iter()
-            .zip(&all)
-            .all(|(r, a)| r.time_ms >= a.time_ms));
+            // Other inputs (another option, other weights): every pair computed again.
+            let changed = Counted::default();
+            run(None)
+                .evaluate(&path, "icp, other options", &method, pairs, &changed)
+                .unwrap();
+            assert_eq!(*changed.started.lock().unwrap(), [(3, 0)]);
+            let file = read_file(&path).unwrap();
+            assert_eq!(file.inputs.as_deref(), Some("icp, other options"));
+            assert_eq!(file.lines.len(), 3);
+
+            // Refined from the records: the refinement's own file, every pair of the records.
+            let refined_path = dir.join("results/clean/icp-icp.jsonl.gz");
+            let config = RefineConfig::default();
+            let refined = run(None)
+                .refine(
+                    &refined_path,
+                    "icp; refined",
+                    &all[..2],
+                    &config,
+                    pairs,
+                    &(),
+                )
+                .unwrap();
+            assert_eq!(refined.iter().map(|r| r.index).collect::<Vec<_>>(), [0, 1]);
+            assert!(refined
+                .iter()
+                .zip(&all)
+                .all(|(r, a)| r.time_ms >= a.time_ms));
+            let back = run(None)
+                .refine(
+                    &refined_path,
+                    "icp; refined",
+                    &all[..2],
+                    &config,
+                    pairs,
+                    &(),
+                )
+                .unwrap();
+            assert_same(&back, &refined);
+        });
         fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
-    fn a_passed_deadline_starts_no_chunk() {
+    fn a_file_cut_anywhere_reads_back_as_its_whole_lines_and_resumes_to_the_whole() {
+        let dir = temp_dir("cut");
+        fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("icp.jsonl.gz");
+        let fixture = Fixture::new(3);
+        let method = icp();
+        fixture.with(|pairs| {
+            let all = run(None)
+                .evaluate(&path, "icp", &method, pairs, &())
+                .unwrap();
+            // As a run writes it: the first chunk with the header, then a member per chunk.
+            let lines: Vec<Line> = all.iter().map(Line::of).collect();
+            write_file(&path, "icp", &lines[..1]).unwrap();
+            append(&path, &lines[1..2]).unwrap();
+            append(&path, &lines[2..]).unwrap();
+            let bytes = fs::read(&path).unwrap();
+            // The longest cut keeping n whole lines, for each n.
+            let mut longest = [0; 4];
+            for end in 0..=bytes.len() {
+                fs::write(&path, &bytes[..end]).unwrap();
+                let file = read_file(&path).unwrap();
+                let n = file.lines.len();
+                assert_eq!(file.lines, lines[..n], "cut at {end}");
+                assert!(file.inputs.is_some() || n == 0);
+                longest[n] = end;
+            }
+            assert!(longest.windows(2).all(|w| w[0] < w[1]), "{longest:?}");
+
+            // Cut inside the second pair's member: pairs 1 and 2 computed again.
+            fs::write(&path, &bytes[..longest[1]]).unwrap();
+            assert_eq!(read_file(&path).unwrap().lines.len(), 1);
+            let resumed = Counted::default();
+            let again = run(None)
+                .evaluate(&path, "icp", &method, pairs, &resumed)
+                .unwrap();
+            assert_eq!(*resumed.started.lock().unwrap(), [(3, 1)]);
+            assert_same(&again[..1], &all[..1]);
+            for (a, b) in all.iter().zip(&again) {
+                assert_eq!(a.transform.to_rows(), b.transform.to_rows());
+            }
+            // Written anew as one member.
+            let whole = fs::read(&path).unwrap();
+            let file = read_file(&path).unwrap();
+            assert_eq!(file.lines.len(), 3);
+            let one = gzip(
+                &(json_lines(&[Header {
+                    version: VERSION,
+                    inputs: "icp".into(),
+                }]) + &json_lines(&file.lines)),
+            );
+            assert_eq!(whole, one);
+        });
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_passed_deadline_starts_no_chunk_and_writes_nothing() {
         let dir = temp_dir("deadline");
-        let path = dir.join("x.jsonl");
-        let shapes = [shape(0)];
-        let shapes: Vec<&Shape> = shapes.iter().collect();
-        let generator = PairGenerator::new(Setting::Clean);
-        let pairs = TestPairs {
-            generator: &generator,
-            shapes: &shapes,
-        };
+        let path = dir.join("x.jsonl.gz");
+        let fixture = Fixture::new(1);
         let method = icp();
         let progress = Counted::default();
-        let records = run(Some(Instant::now()))
-            .evaluate(&path, &method, pairs, &progress)
-            .unwrap();
+        let records = fixture.with(|pairs| {
+            run(Some(Instant::now()))
+                .evaluate(&path, "icp", &method, pairs, &progress)
+                .unwrap()
+        });
         assert!(records.is_empty());
         assert_eq!(*progress.finished.lock().unwrap(), [false]);
         assert_eq!(progress.advanced.load(Ordering::Relaxed), 0);
-        fs::remove_dir_all(&dir).unwrap();
+        assert!(!path.exists());
+        let _ = fs::remove_dir_all(&dir);
     }
 
     #[test]
-    fn per_pair_files_are_read_back_line_by_line() {
+    fn a_line_that_is_not_a_record_is_named_and_other_versions_are_refused() {
         let dir = temp_dir("read");
         fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("icp.jsonl");
-        assert!(read_records(&path).unwrap().is_empty());
-        let mut records = [super::super::tests::record(), super::super::tests::record()];
-        records[0].index = 3;
-        records[1].index = 1;
-        records[1].metrics.recall = true;
-        let lines: String = records
-            .iter()
-            .map(|r| serde_json::to_string(r).unwrap() + "\n")
-            .collect();
-        fs::write(&path, lines + "\n").unwrap();
-        let back = read_records(&path).unwrap();
-        fs::write(&path, "\n{\"index\": 1}\n").unwrap();
-        let err = read_records(&path).unwrap_err();
+        let path = dir.join("icp.jsonl.gz");
+        let record = super::super::tests::record();
+        let header = r#"{"version":1,"inputs":"icp"}"#;
+        fs::write(&path, gzip(&format!("{header}\n{{\"index\": 1}}\n"))).unwrap();
+        let missing = read_file(&path).err().unwrap();
+        let mut line = Line::of(&record);
+        line.transform[0][0] = 2.0;
+        fs::write(&path, gzip(&(format!("{header}\n") + &json_lines(&[line])))).unwrap();
+        let not_rigid = read_file(&path).err().unwrap();
+        fs::write(&path, gzip("{\"version\":2,\"inputs\":\"icp\"}\n")).unwrap();
+        let version = read_file(&path).err().unwrap();
         fs::remove_dir_all(&dir).unwrap();
-        assert_eq!(back.iter().map(|r| r.index).collect::<Vec<_>>(), [3, 1]);
-        assert!(!back[0].metrics.recall && back[1].metrics.recall);
-        // The file's own line number, blank lines counted.
         assert!(
-            err.to_string().contains("icp.jsonl line 2: missing field"),
-            "{err}"
+            missing
+                .to_string()
+                .contains("icp.jsonl.gz line 2: missing field"),
+            "{missing}"
         );
+        assert!(
+            not_rigid.to_string().contains("icp.jsonl.gz line 2: "),
+            "{not_rigid}"
+        );
+        assert!(
+            version
+                .to_string()
+                .ends_with("per-pair file version 2, this code reads 1"),
+            "{version}"
+        );
+    }
+
+    #[test]
+    fn a_file_of_the_old_format_converts_to_records_scored_the_same() {
+        let dir = temp_dir("convert");
+        fs::create_dir_all(&dir).unwrap();
+        let (old, new) = (dir.join("icp.jsonl"), dir.join("icp.jsonl.gz"));
+        let fixture = Fixture::new(2);
+        let method = icp();
+        fixture.with(|pairs| {
+            let all = run(None)
+                .evaluate(&dir.join("fresh.jsonl.gz"), "icp", &method, pairs, &())
+                .unwrap();
+            let text: String = all
+                .iter()
+                .map(|r| serde_json::to_string(r).unwrap() + "\n")
+                .collect();
+            fs::write(&old, &text).unwrap();
+            assert_eq!(convert_json_records(&old, &new, "icp", pairs).unwrap(), 2);
+            let back = run(Some(Instant::now()))
+                .evaluate(&new, "icp", &method, pairs, &())
+                .unwrap();
+            assert_same(&back, &all);
+            // An old record whose metrics are not those of its transform is refused.
+            let mut wrong = all.clone();
+            wrong[1].metrics.mie_r_deg += 1e-12;
+            let text: String = wrong
+                .iter()
+                .map(|r| serde_json::to_string(r).unwrap() + "\n")
+                .collect();
+            fs::write(&old, &text).unwrap();
+            let err = convert_json_records(&old, &new, "icp", pairs).unwrap_err();
+            assert!(err.to_string().contains("line 3: scored again"), "{err}");
+        });
+        fs::remove_dir_all(&dir).unwrap();
     }
 }
