@@ -29,8 +29,6 @@ enum Command {
     ReproduceTables(tables::Args),
     /// Make the training runs under runs/ small enough to commit (Adam moments in bf16).
     SnapshotRuns(snapshot::Args),
-    /// Convert docs/results/'s per-pair files of the format before the compact one, once.
-    ConvertRecords,
 }
 
 fn main() -> ExitCode {
@@ -38,10 +36,6 @@ fn main() -> ExitCode {
         Command::Bench(args) => bench::run(args),
         Command::ReproduceTables(args) => tables::run(args),
         Command::SnapshotRuns(args) => snapshot::run(args),
-        Command::ConvertRecords => tables::convert(
-            &project_root().join("docs"),
-            &project_root().join("../shared/data/modelnet40_npy1024"),
-        ),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

@@ -19,7 +19,7 @@ use rgm_cli::EvaluationBar;
 use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
 use rgm_geom::refine::RefineConfig;
 use rgm_geom::registrar::{MethodId, Normalised};
-use rgm_model::evaluate::{convert_json_records, Resumable, TestPairs};
+use rgm_model::evaluate::{Resumable, TestPairs};
 use rgm_model::weights::{weights_dir, Manifest, ModelEntry, Variant, WeightsFile};
 use rgm_model::{Method, MethodName, MethodOptions, PairRecord, Registrar};
 use rgm_viz::{correct_fraction, correspondence_figure, registration_figure};
@@ -531,59 +531,6 @@ fn records_path(out: &Path, set: TestSet, stem: &str) -> PathBuf {
     out.join("results")
         .join(set.key())
         .join(format!("{stem}.jsonl.gz"))
-}
-
-/// `cargo xtask convert-records`: the per-pair files of `out/results/` in the JSON lines of
-/// every field that reproduce-tables wrote before, converted to its compact files, each checked
-/// (the records scored again on their regenerated pairs equal the old ones) before the old file
-/// is deleted. A file of a row this tree has gets the row's inputs as this tree builds them; one
-/// of a row it no longer has (a model the manifest has moved on from) gets inputs no row has,
-/// so that it is computed again should such a row come back.
-pub fn convert(out: &Path, data: &Path) -> Result<()> {
-    let dataset = ModelNet40::open(data)
-        .with_context(|| format!("opening ModelNet40 at {}", data.display()))?;
-    let manifest = Manifest::load(&weights_dir().join("manifest.json"))?;
-    for set in TestSet::ALL {
-        let shapes = test_shapes(&dataset, set, None);
-        let generator = PairGenerator::new(set.setting);
-        let pairs = TestPairs {
-            generator: &generator,
-            shapes: &shapes,
-        };
-        let mut inputs = BTreeMap::new();
-        for candidate in candidates(set, &manifest, &[])? {
-            let (_, stem, refined) = candidate.refined(&RefineConfig::default());
-            inputs.insert(stem, refined);
-            inputs.insert(candidate.stem, candidate.inputs);
-        }
-        let dir = out.join("results").join(set.key());
-        let Ok(files) = fs::read_dir(&dir) else {
-            continue;
-        };
-        for file in files {
-            let old = file?.path();
-            let Some(stem) = old
-                .file_name()
-                .and_then(|n| n.to_str()?.strip_suffix(".jsonl"))
-            else {
-                continue;
-            };
-            let new = records_path(out, set, stem);
-            let row_inputs = inputs.get(stem).map_or(
-                "not recorded (converted from the format before the inputs were kept)",
-                String::as_str,
-            );
-            let was = fs::metadata(&old)?.len();
-            let count = convert_json_records(&old, &new, row_inputs, pairs)?;
-            fs::remove_file(&old)?;
-            let now = fs::metadata(&new)?.len();
-            println!(
-                "{}: {count} records, {now} bytes, were {was}",
-                new.display()
-            );
-        }
-    }
-    Ok(())
 }
 
 /// The 1-minute load average from /proc/loadavg (how busy the machine was).

@@ -406,66 +406,6 @@ fn append(path: &Path, lines: &[Line]) -> std::io::Result<()> {
         .write_all(&gzip(&json_lines(lines)))
 }
 
-/// The per-pair file `old` of the format before [`VERSION`] 1 (JSON lines of every field of a
-/// [`PairRecord`], `rgm eval --json`'s) written as the per-pair file `new` of `inputs` and
-/// read back: an error unless every record read back and scored on its pair regenerated from
-/// `pairs` equals the old one. Returns how many records there are.
-pub fn convert_json_records(
-    old: &Path,
-    new: &Path,
-    inputs: &str,
-    pairs: TestPairs,
-) -> Result<usize, EvaluateError> {
-    let text = fs::read_to_string(old).map_err(|error| EvaluateError::Io {
-        path: old.to_path_buf(),
-        error,
-    })?;
-    let records: Vec<PairRecord> = text
-        .lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty())
-        .map(|(n, line)| {
-            serde_json::from_str(line).map_err(|error| EvaluateError::Record {
-                path: old.to_path_buf(),
-                line: n + 1,
-                error: error.to_string(),
-            })
-        })
-        .collect::<Result<_, _>>()?;
-    let lines: Vec<Line> = records.iter().map(Line::of).collect();
-    write_file(new, inputs, &lines).map_err(|error| EvaluateError::Io {
-        path: new.to_path_buf(),
-        error,
-    })?;
-    let back = read_file(new)?;
-    assert_eq!(back.inputs.as_deref(), Some(inputs));
-    assert_eq!(back.lines, lines);
-    records
-        .par_iter()
-        .zip(&back.lines)
-        .enumerate()
-        .try_for_each(|(n, (was, line))| {
-            let now = line.record(&pairs.pair(line.index)?)?;
-            let same = now.index == was.index
-                && now.transform.to_rows() == was.transform.to_rows()
-                && now.ground_truth.to_rows() == was.ground_truth.to_rows()
-                && now.metrics == was.metrics
-                && now.time_ms == was.time_ms
-                && now.correspondences == was.correspondences
-                && now.failure == was.failure;
-            if same {
-                Ok(())
-            } else {
-                Err(EvaluateError::Record {
-                    path: new.to_path_buf(),
-                    line: n + 2,
-                    error: format!("scored again: {now:?}, was {was:?}"),
-                })
-            }
-        })?;
-    Ok(records.len())
-}
-
 #[cfg(test)]
 mod tests {
     use std::sync::atomic::{AtomicUsize, Ordering};
@@ -765,40 +705,5 @@ mod tests {
                 .ends_with("per-pair file version 2, this code reads 1"),
             "{version}"
         );
-    }
-
-    #[test]
-    fn a_file_of_the_old_format_converts_to_records_scored_the_same() {
-        let dir = temp_dir("convert");
-        fs::create_dir_all(&dir).unwrap();
-        let (old, new) = (dir.join("icp.jsonl"), dir.join("icp.jsonl.gz"));
-        let fixture = Fixture::new(2);
-        let method = icp();
-        fixture.with(|pairs| {
-            let all = run(None)
-                .evaluate(&dir.join("fresh.jsonl.gz"), "icp", &method, pairs, &())
-                .unwrap();
-            let text: String = all
-                .iter()
-                .map(|r| serde_json::to_string(r).unwrap() + "\n")
-                .collect();
-            fs::write(&old, &text).unwrap();
-            assert_eq!(convert_json_records(&old, &new, "icp", pairs).unwrap(), 2);
-            let back = run(Some(Instant::now()))
-                .evaluate(&new, "icp", &method, pairs, &())
-                .unwrap();
-            assert_same(&back, &all);
-            // An old record whose metrics are not those of its transform is refused.
-            let mut wrong = all.clone();
-            wrong[1].metrics.mie_r_deg += 1e-12;
-            let text: String = wrong
-                .iter()
-                .map(|r| serde_json::to_string(r).unwrap() + "\n")
-                .collect();
-            fs::write(&old, &text).unwrap();
-            let err = convert_json_records(&old, &new, "icp", pairs).unwrap_err();
-            assert!(err.to_string().contains("line 3: scored again"), "{err}");
-        });
-        fs::remove_dir_all(&dir).unwrap();
     }
 }
