@@ -39,7 +39,7 @@ use rand::{rngs::StdRng, Rng, SeedableRng};
 use rayon::prelude::*;
 
 use crate::euler::rotation_xyz_extrinsic;
-use crate::fpfh::{features, Fpfh, FpfhConfig};
+use crate::fpfh::{features, Fpfh, FpfhConfig, FPFH_LEN};
 use crate::icp::check_clouds;
 use crate::normals::NormalsConfig;
 use crate::registration::{score, RegistrationResult};
@@ -289,6 +289,7 @@ fn mutual_matches_reporting(
 ) -> Vec<(usize, usize)> {
     // One pass over the (N, M) squared distances keeps each row's and each column's minimum,
     // in blocks of rows that run side by side, a wave of them per thread at a time.
+    let tiles = feature_tiles(target); // (⌈M/T⌉, 33, T)
     let mut row_best = vec![(f64::INFINITY, usize::MAX); source.len()]; // (N,)
     let mut col_best = vec![(f64::INFINITY, usize::MAX); target.len()]; // (M,)
     let rows_per_block = source.len().div_ceil(64).max(1);
@@ -304,15 +305,17 @@ fn mutual_matches_reporting(
             .map(|&(first, rows)| {
                 let mut rows_best = vec![(f64::INFINITY, usize::MAX); rows.len()]; // (B,)
                 let mut cols_best = vec![(f64::INFINITY, usize::MAX); target.len()]; // (M,)
-                for (r, a) in rows.iter().enumerate() {
-                    for (j, b) in target.iter().enumerate() {
-                        let d2 = squared_distance(a, b);
+                for (r, (a, best)) in rows.iter().zip(&mut rows_best).enumerate() {
+                    for (tile, cols) in tiles.iter().zip(cols_best.chunks_mut(TILE)) {
+                        let d2 = tile_squared_distances(a, tile);
                         // Strict `<` while rows and j ascend keeps the lowest index among ties.
-                        if d2 < rows_best[r].0 {
-                            rows_best[r] = (d2, j);
-                        }
-                        if d2 < cols_best[j].0 {
-                            cols_best[j] = (d2, first + r);
+                        for ((&d2, col), j) in d2.iter().zip(cols).zip(tile.first..) {
+                            if d2 < best.0 {
+                                *best = (d2, j);
+                            }
+                            if d2 < col.0 {
+                                *col = (d2, first + r);
+                            }
                         }
                     }
                 }
@@ -337,23 +340,62 @@ fn mutual_matches_reporting(
         .collect()
 }
 
-/// `‖a − b‖²` with four independent partial sums (a serial sum would stall on each addition).
+/// Target features per tile of the matching: one source feature is compared with `TILE` target
+/// features at once, lane by lane (independent sums, so vector instructions compute them).
+const TILE: usize = 4;
+
+/// `TILE` consecutive target features, channel-major: `channels[c][l]` is channel c of feature
+/// `first + l`. The last tile's missing features are zero (their lanes are never read).
+struct FeatureTile {
+    first: usize,
+    channels: [[f64; TILE]; FPFH_LEN], // (33, T)
+}
+
+/// `features` in tiles of `TILE`. // (⌈M/T⌉,)
+fn feature_tiles(features: &[Fpfh]) -> Vec<FeatureTile> {
+    features
+        .chunks(TILE)
+        .enumerate()
+        .map(|(t, chunk)| {
+            let mut channels = [[0.0; TILE]; FPFH_LEN];
+            for (l, feature) in chunk.iter().enumerate() {
+                for (c, v) in feature.iter().enumerate() {
+                    channels[c][l] = *v;
+                }
+            }
+            FeatureTile {
+                first: t * TILE,
+                channels,
+            }
+        })
+        .collect()
+}
+
+/// `‖a − b‖²` for each feature b of `tile`, each with four independent partial sums (a serial
+/// sum would stall on each addition) joined as `(s₀ + s₁) + (s₂ + s₃) + rest`. // (T,)
 #[inline]
-fn squared_distance(a: &Fpfh, b: &Fpfh) -> f64 {
-    let mut acc = [0.0; 4];
-    let whole = a.len() / 4 * 4;
-    for k in (0..whole).step_by(4) {
-        for lane in 0..4 {
-            let d = a[k + lane] - b[k + lane];
-            acc[lane] += d * d;
+fn tile_squared_distances(a: &Fpfh, tile: &FeatureTile) -> [f64; TILE] {
+    let mut acc = [[0.0; TILE]; 4]; // (4, T)
+    let whole = FPFH_LEN / 4 * 4;
+    for (xs, columns) in a[..whole]
+        .chunks_exact(4)
+        .zip(tile.channels[..whole].chunks_exact(4))
+    {
+        for ((sums, x), column) in acc.iter_mut().zip(xs).zip(columns) {
+            for (s, y) in sums.iter_mut().zip(column) {
+                let d = x - y;
+                *s += d * d;
+            }
         }
     }
-    let rest: f64 = a[whole..]
-        .iter()
-        .zip(&b[whole..])
-        .map(|(x, y)| (x - y) * (x - y))
-        .sum();
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) + rest
+    let mut rest = [0.0; TILE];
+    for (x, column) in a[whole..].iter().zip(&tile.channels[whole..]) {
+        for (s, y) in rest.iter_mut().zip(column) {
+            let d = x - y;
+            *s += d * d;
+        }
+    }
+    std::array::from_fn(|l| (acc[0][l] + acc[1][l]) + (acc[2][l] + acc[3][l]) + rest[l])
 }
 
 /// The tuple test of step 3 on `matches` (source index, target index).

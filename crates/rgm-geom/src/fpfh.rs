@@ -92,11 +92,12 @@ fn dot(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
     a.x * b.x + a.y * b.y + a.z * b.z
 }
 
-/// The bin of `value` in [lo, lo + width) split into 11, clamped to the valid bins.
+/// The bin of `value` in [lo, lo + width) split into 11, clamped to the valid bins: the floor,
+/// as the cast's truncation towards zero and saturation at 0 give it for the valid bins (and a
+/// libm `floor` call is costly).
 #[inline]
 fn bin(value: f64, lo: f64, width: f64) -> usize {
-    let b = (BINS as f64 * (value - lo) / width).floor();
-    b.clamp(0.0, (BINS - 1) as f64) as usize
+    ((BINS as f64 * (value - lo) / width) as usize).min(BINS - 1)
 }
 
 /// FPFH features of a bare cloud: normals by [`estimate_normals`], then [`compute_fpfh`],
@@ -159,19 +160,20 @@ fn fpfh_from_neighbourhoods(
         // Σ SPFH_j / d²_j over the neighbours (a point coinciding with this one is skipped), and
         // each block's total, accumulated in Open3D's order.
         let mut block_sums = [0.0; 3];
+        let mut weighted = [0.0; FPFH_LEN]; // (33,)
         for &(j, d2) in &nb[1..] {
             if d2 == 0.0 {
                 continue;
             }
-            for ((o, s), sum) in out
-                .chunks_exact_mut(BINS)
-                .zip(spfh[j].chunks_exact(BINS))
-                .zip(&mut block_sums)
-            {
-                for (oc, sc) in o.iter_mut().zip(s) {
-                    let weighted = sc / d2;
-                    *sum += weighted;
-                    *oc += weighted;
+            // The 33 divisions and additions into `out` are independent (vector instructions
+            // do them); each block's sum is one chain, in bin order.
+            for ((w, o), s) in weighted.iter_mut().zip(out.iter_mut()).zip(&spfh[j]) {
+                *w = s / d2;
+                *o += *w;
+            }
+            for (sum, block) in block_sums.iter_mut().zip(weighted.chunks_exact(BINS)) {
+                for w in block {
+                    *sum += w;
                 }
             }
         }
