@@ -305,20 +305,7 @@ fn mutual_matches_reporting(
             .map(|&(first, rows)| {
                 let mut rows_best = vec![(f64::INFINITY, usize::MAX); rows.len()]; // (B,)
                 let mut cols_best = vec![(f64::INFINITY, usize::MAX); target.len()]; // (M,)
-                for (r, (a, best)) in rows.iter().zip(&mut rows_best).enumerate() {
-                    for (tile, cols) in tiles.iter().zip(cols_best.chunks_mut(TILE)) {
-                        let d2 = tile_squared_distances(a, tile);
-                        // Strict `<` while rows and j ascend keeps the lowest index among ties.
-                        for ((&d2, col), j) in d2.iter().zip(cols).zip(tile.first..) {
-                            if d2 < best.0 {
-                                *best = (d2, j);
-                            }
-                            if d2 < col.0 {
-                                *col = (d2, first + r);
-                            }
-                        }
-                    }
-                }
+                nearest_in_block(first, rows, &tiles, &mut rows_best, &mut cols_best);
                 (rows_best, cols_best)
             })
             .collect();
@@ -340,12 +327,70 @@ fn mutual_matches_reporting(
         .collect()
 }
 
+/// Each row's nearest tile lane and each column's nearest row between the source rows `rows`
+/// (the first is row `first`) and every target tile, into `rows_best` (B,) and `cols_best` (M,).
+fn nearest_in_block(
+    first: usize,
+    rows: &[Fpfh],
+    tiles: &[FeatureTile],
+    rows_best: &mut [Nearest],
+    cols_best: &mut [Nearest],
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2.
+        return unsafe { nearest_in_block_avx2(first, rows, tiles, rows_best, cols_best) };
+    }
+    nearest_in_block_any(first, rows, tiles, rows_best, cols_best)
+}
+
+/// [`nearest_in_block`] compiled with AVX2: the same operations (never fused), wider vectors.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn nearest_in_block_avx2(
+    first: usize,
+    rows: &[Fpfh],
+    tiles: &[FeatureTile],
+    rows_best: &mut [Nearest],
+    cols_best: &mut [Nearest],
+) {
+    nearest_in_block_any(first, rows, tiles, rows_best, cols_best)
+}
+
+/// [`nearest_in_block`] for any CPU.
+#[inline(always)]
+fn nearest_in_block_any(
+    first: usize,
+    rows: &[Fpfh],
+    tiles: &[FeatureTile],
+    rows_best: &mut [Nearest],
+    cols_best: &mut [Nearest],
+) {
+    for (r, (a, best)) in rows.iter().zip(rows_best).enumerate() {
+        for (tile, cols) in tiles.iter().zip(cols_best.chunks_mut(TILE)) {
+            let d2 = tile_squared_distances(a, tile);
+            // Strict `<` while rows and j ascend keeps the lowest index among ties: the row's,
+            // the first lane at the tile's minimum (exact, in any order).
+            let tile_min = d2.iter().copied().fold(f64::INFINITY, f64::min);
+            if tile_min < best.0 {
+                let l = d2.iter().position(|&d| d == tile_min).unwrap_or(0);
+                *best = (tile_min, tile.first + l);
+            }
+            for (&d2, col) in d2.iter().zip(cols) {
+                if d2 < col.0 {
+                    *col = (d2, first + r);
+                }
+            }
+        }
+    }
+}
+
 /// Target features per tile of the matching: one source feature is compared with `TILE` target
 /// features at once, lane by lane (independent sums, so vector instructions compute them).
 const TILE: usize = 4;
 
 /// `TILE` consecutive target features, channel-major: `channels[c][l]` is channel c of feature
-/// `first + l`. The last tile's missing features are zero (their lanes are never read).
+/// `first + l`. The last tile's missing features are infinite: their lanes are never nearest.
 struct FeatureTile {
     first: usize,
     channels: [[f64; TILE]; FPFH_LEN], // (33, T)
@@ -357,7 +402,7 @@ fn feature_tiles(features: &[Fpfh]) -> Vec<FeatureTile> {
         .chunks(TILE)
         .enumerate()
         .map(|(t, chunk)| {
-            let mut channels = [[0.0; TILE]; FPFH_LEN];
+            let mut channels = [[f64::INFINITY; TILE]; FPFH_LEN];
             for (l, feature) in chunk.iter().enumerate() {
                 for (c, v) in feature.iter().enumerate() {
                     channels[c][l] = *v;
@@ -373,7 +418,7 @@ fn feature_tiles(features: &[Fpfh]) -> Vec<FeatureTile> {
 
 /// `‖a − b‖²` for each feature b of `tile`, each with four independent partial sums (a serial
 /// sum would stall on each addition) joined as `(s₀ + s₁) + (s₂ + s₃) + rest`. // (T,)
-#[inline]
+#[inline(always)]
 fn tile_squared_distances(a: &Fpfh, tile: &FeatureTile) -> [f64; TILE] {
     let mut acc = [[0.0; TILE]; 4]; // (4, T)
     let whole = FPFH_LEN / 4 * 4;

@@ -167,9 +167,11 @@ fn fpfh_from_neighbourhoods(
             }
             // The 33 divisions and additions into `out` are independent (vector instructions
             // do them); each block's sum is one chain, in bin order.
-            for ((w, o), s) in weighted.iter_mut().zip(out.iter_mut()).zip(&spfh[j]) {
+            for (w, s) in weighted.iter_mut().zip(&spfh[j]) {
                 *w = s / d2;
-                *o += *w;
+            }
+            for (o, w) in out.iter_mut().zip(&weighted) {
+                *o += w;
             }
             for (sum, block) in block_sums.iter_mut().zip(weighted.chunks_exact(BINS)) {
                 for w in block {
