@@ -387,7 +387,7 @@ fn nearest_in_block_any(
 
 /// Target features per tile of the matching: one source feature is compared with `TILE` target
 /// features at once, lane by lane (independent sums, so vector instructions compute them).
-const TILE: usize = 4;
+const TILE: usize = 8;
 
 /// `TILE` consecutive target features, channel-major: `channels[c][l]` is channel c of feature
 /// `first + l`. The last tile's missing features are infinite: their lanes are never nearest.
