@@ -591,6 +591,36 @@ mod tests {
         f
     }
 
+    /// The tiled matching against a brute-force one, on features of small integers (exact
+    /// sums, many ties) and sizes that leave the last tile partial.
+    #[test]
+    fn mutual_matches_match_brute_force_with_ties() {
+        let mut rng = StdRng::seed_from_u64(5);
+        let mut random = |n: usize| -> Vec<Fpfh> {
+            (0..n)
+                .map(|_| std::array::from_fn(|_| rng.gen_range(0..3) as f64))
+                .collect()
+        };
+        let (source, target) = (random(37), random(2 * TILE + 3));
+        let d2 = |a: &Fpfh, b: &Fpfh| a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>();
+        // The first index at the least distance, by plain scans.
+        let nearest = |a: &Fpfh, others: &[Fpfh]| {
+            (0..others.len()).fold(0, |best, j| {
+                if d2(a, &others[j]) < d2(a, &others[best]) {
+                    j
+                } else {
+                    best
+                }
+            })
+        };
+        let expected: Vec<(usize, usize)> = (0..source.len())
+            .map(|i| (i, nearest(&source[i], &target)))
+            .filter(|&(i, j)| nearest(&target[j], &source) == i)
+            .collect();
+        assert!(expected.len() > 2, "{expected:?}");
+        assert_eq!(mutual_matches(&source, &target), expected);
+    }
+
     #[test]
     fn mutual_matches_by_hand() {
         // Source features at 0, 10, 20 on channel 0; target at 1, 2, 19 (and 30).
