@@ -146,7 +146,8 @@ impl KnnIndex {
         if k == 0 || self.nodes.is_empty() {
             return;
         }
-        let mut best = Best::new(k, r2, out);
+        // No more than the points: the buffer's `2k` then neither overflows nor over-allocates.
+        let mut best = Best::new(k.min(self.len()), r2, out);
         self.search(
             0,
             &[query.x, query.y, query.z],
