@@ -39,7 +39,7 @@ use rand::{rngs::StdRng, Rng, SeedableRng};
 use rayon::prelude::*;
 
 use crate::euler::rotation_xyz_extrinsic;
-use crate::fpfh::{features, Fpfh, FpfhConfig};
+use crate::fpfh::{features, Fpfh, FpfhConfig, FPFH_LEN};
 use crate::icp::check_clouds;
 use crate::normals::NormalsConfig;
 use crate::registration::{score, RegistrationResult};
@@ -289,6 +289,7 @@ fn mutual_matches_reporting(
 ) -> Vec<(usize, usize)> {
     // One pass over the (N, M) squared distances keeps each row's and each column's minimum,
     // in blocks of rows that run side by side, a wave of them per thread at a time.
+    let tiles = feature_tiles(target); // (⌈M/T⌉, 33, T)
     let mut row_best = vec![(f64::INFINITY, usize::MAX); source.len()]; // (N,)
     let mut col_best = vec![(f64::INFINITY, usize::MAX); target.len()]; // (M,)
     let rows_per_block = source.len().div_ceil(64).max(1);
@@ -304,18 +305,7 @@ fn mutual_matches_reporting(
             .map(|&(first, rows)| {
                 let mut rows_best = vec![(f64::INFINITY, usize::MAX); rows.len()]; // (B,)
                 let mut cols_best = vec![(f64::INFINITY, usize::MAX); target.len()]; // (M,)
-                for (r, a) in rows.iter().enumerate() {
-                    for (j, b) in target.iter().enumerate() {
-                        let d2 = squared_distance(a, b);
-                        // Strict `<` while rows and j ascend keeps the lowest index among ties.
-                        if d2 < rows_best[r].0 {
-                            rows_best[r] = (d2, j);
-                        }
-                        if d2 < cols_best[j].0 {
-                            cols_best[j] = (d2, first + r);
-                        }
-                    }
-                }
+                nearest_in_block(first, rows, &tiles, &mut rows_best, &mut cols_best);
                 (rows_best, cols_best)
             })
             .collect();
@@ -337,23 +327,120 @@ fn mutual_matches_reporting(
         .collect()
 }
 
-/// `‖a − b‖²` with four independent partial sums (a serial sum would stall on each addition).
-#[inline]
-fn squared_distance(a: &Fpfh, b: &Fpfh) -> f64 {
-    let mut acc = [0.0; 4];
-    let whole = a.len() / 4 * 4;
-    for k in (0..whole).step_by(4) {
-        for lane in 0..4 {
-            let d = a[k + lane] - b[k + lane];
-            acc[lane] += d * d;
+/// Each row's nearest tile lane and each column's nearest row between the source rows `rows`
+/// (the first is row `first`) and every target tile, into `rows_best` (B,) and `cols_best` (M,).
+fn nearest_in_block(
+    first: usize,
+    rows: &[Fpfh],
+    tiles: &[FeatureTile],
+    rows_best: &mut [Nearest],
+    cols_best: &mut [Nearest],
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2.
+        return unsafe { nearest_in_block_avx2(first, rows, tiles, rows_best, cols_best) };
+    }
+    nearest_in_block_any(first, rows, tiles, rows_best, cols_best)
+}
+
+/// [`nearest_in_block`] compiled with AVX2: the same operations (never fused), wider vectors.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn nearest_in_block_avx2(
+    first: usize,
+    rows: &[Fpfh],
+    tiles: &[FeatureTile],
+    rows_best: &mut [Nearest],
+    cols_best: &mut [Nearest],
+) {
+    nearest_in_block_any(first, rows, tiles, rows_best, cols_best)
+}
+
+/// [`nearest_in_block`] for any CPU.
+#[inline(always)]
+fn nearest_in_block_any(
+    first: usize,
+    rows: &[Fpfh],
+    tiles: &[FeatureTile],
+    rows_best: &mut [Nearest],
+    cols_best: &mut [Nearest],
+) {
+    for (r, (a, best)) in rows.iter().zip(rows_best).enumerate() {
+        for (tile, cols) in tiles.iter().zip(cols_best.chunks_mut(TILE)) {
+            let d2 = tile_squared_distances(a, tile);
+            // Strict `<` while rows and j ascend keeps the lowest index among ties: the row's,
+            // the first lane at the tile's minimum (exact, in any order).
+            let tile_min = d2.iter().copied().fold(f64::INFINITY, f64::min);
+            if tile_min < best.0 {
+                let l = d2.iter().position(|&d| d == tile_min).unwrap_or(0);
+                *best = (tile_min, tile.first + l);
+            }
+            for (&d2, col) in d2.iter().zip(cols) {
+                if d2 < col.0 {
+                    *col = (d2, first + r);
+                }
+            }
         }
     }
-    let rest: f64 = a[whole..]
-        .iter()
-        .zip(&b[whole..])
-        .map(|(x, y)| (x - y) * (x - y))
-        .sum();
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) + rest
+}
+
+/// Target features per tile of the matching: one source feature is compared with `TILE` target
+/// features at once, lane by lane (independent sums, so vector instructions compute them).
+const TILE: usize = 8;
+
+/// `TILE` consecutive target features, channel-major: `channels[c][l]` is channel c of feature
+/// `first + l`. The last tile's missing features are infinite: their lanes are never nearest.
+struct FeatureTile {
+    first: usize,
+    channels: [[f64; TILE]; FPFH_LEN], // (33, T)
+}
+
+/// `features` in tiles of `TILE`. // (⌈M/T⌉,)
+fn feature_tiles(features: &[Fpfh]) -> Vec<FeatureTile> {
+    features
+        .chunks(TILE)
+        .enumerate()
+        .map(|(t, chunk)| {
+            let mut channels = [[f64::INFINITY; TILE]; FPFH_LEN];
+            for (l, feature) in chunk.iter().enumerate() {
+                for (c, v) in feature.iter().enumerate() {
+                    channels[c][l] = *v;
+                }
+            }
+            FeatureTile {
+                first: t * TILE,
+                channels,
+            }
+        })
+        .collect()
+}
+
+/// `‖a − b‖²` for each feature b of `tile`, each with four independent partial sums (a serial
+/// sum would stall on each addition) joined as `(s₀ + s₁) + (s₂ + s₃) + rest`. // (T,)
+#[inline(always)]
+fn tile_squared_distances(a: &Fpfh, tile: &FeatureTile) -> [f64; TILE] {
+    let mut acc = [[0.0; TILE]; 4]; // (4, T)
+    let whole = FPFH_LEN / 4 * 4;
+    for (xs, columns) in a[..whole]
+        .chunks_exact(4)
+        .zip(tile.channels[..whole].chunks_exact(4))
+    {
+        for ((sums, x), column) in acc.iter_mut().zip(xs).zip(columns) {
+            for (s, y) in sums.iter_mut().zip(column) {
+                let d = x - y;
+                *s += d * d;
+            }
+        }
+    }
+    let mut rest = [0.0; TILE];
+    for (x, column) in a[whole..].iter().zip(&tile.channels[whole..]) {
+        for (s, y) in rest.iter_mut().zip(column) {
+            let d = x - y;
+            *s += d * d;
+        }
+    }
+    std::array::from_fn(|l| (acc[0][l] + acc[1][l]) + (acc[2][l] + acc[3][l]) + rest[l])
 }
 
 /// The tuple test of step 3 on `matches` (source index, target index).
@@ -502,6 +589,36 @@ mod tests {
             f[c] = v;
         }
         f
+    }
+
+    /// The tiled matching against a brute-force one, on features of small integers (exact
+    /// sums, many ties) and sizes that leave the last tile partial.
+    #[test]
+    fn mutual_matches_match_brute_force_with_ties() {
+        let mut rng = StdRng::seed_from_u64(5);
+        let mut random = |n: usize| -> Vec<Fpfh> {
+            (0..n)
+                .map(|_| std::array::from_fn(|_| rng.gen_range(0..3) as f64))
+                .collect()
+        };
+        let (source, target) = (random(37), random(2 * TILE + 3));
+        let d2 = |a: &Fpfh, b: &Fpfh| a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>();
+        // The first index at the least distance, by plain scans.
+        let nearest = |a: &Fpfh, others: &[Fpfh]| {
+            (0..others.len()).fold(0, |best, j| {
+                if d2(a, &others[j]) < d2(a, &others[best]) {
+                    j
+                } else {
+                    best
+                }
+            })
+        };
+        let expected: Vec<(usize, usize)> = (0..source.len())
+            .map(|i| (i, nearest(&source[i], &target)))
+            .filter(|&(i, j)| nearest(&target[j], &source) == i)
+            .collect();
+        assert!(expected.len() > 2, "{expected:?}");
+        assert_eq!(mutual_matches(&source, &target), expected);
     }
 
     #[test]

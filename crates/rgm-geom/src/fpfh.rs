@@ -92,11 +92,12 @@ fn dot(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
     a.x * b.x + a.y * b.y + a.z * b.z
 }
 
-/// The bin of `value` in [lo, lo + width) split into 11, clamped to the valid bins.
+/// The bin of `value` in [lo, lo + width) split into 11, clamped to the valid bins: the floor,
+/// as the cast's truncation towards zero and saturation at 0 give it for the valid bins (and a
+/// libm `floor` call is costly).
 #[inline]
 fn bin(value: f64, lo: f64, width: f64) -> usize {
-    let b = (BINS as f64 * (value - lo) / width).floor();
-    b.clamp(0.0, (BINS - 1) as f64) as usize
+    ((BINS as f64 * (value - lo) / width) as usize).min(BINS - 1)
 }
 
 /// FPFH features of a bare cloud: normals by [`estimate_normals`], then [`compute_fpfh`],
@@ -153,41 +154,72 @@ fn fpfh_from_neighbourhoods(
     let mut fpfh = vec![[0.0; FPFH_LEN]; n]; // (N, 33)
     fpfh.par_iter_mut().enumerate().for_each(|(i, out)| {
         let nb = around(i);
-        if nb.len() < 2 {
-            return;
-        }
-        // Σ SPFH_j / d²_j over the neighbours (a point coinciding with this one is skipped), and
-        // each block's total, accumulated in Open3D's order.
-        let mut block_sums = [0.0; 3];
-        for &(j, d2) in &nb[1..] {
-            if d2 == 0.0 {
-                continue;
-            }
-            for ((o, s), sum) in out
-                .chunks_exact_mut(BINS)
-                .zip(spfh[j].chunks_exact(BINS))
-                .zip(&mut block_sums)
-            {
-                for (oc, sc) in o.iter_mut().zip(s) {
-                    let weighted = sc / d2;
-                    *sum += weighted;
-                    *oc += weighted;
-                }
-            }
-        }
-        // Each block rescaled to sum to 100, plus the point's own SPFH.
-        for ((block, own), sum) in out
-            .chunks_exact_mut(BINS)
-            .zip(spfh[i].chunks_exact(BINS))
-            .zip(block_sums)
-        {
-            let scale = if sum != 0.0 { 100.0 / sum } else { 0.0 };
-            for (o, s) in block.iter_mut().zip(own) {
-                *o = *o * scale + s;
-            }
+        if nb.len() >= 2 {
+            weigh_neighbours(out, &spfh[i], &nb[1..], &spfh);
         }
     });
     fpfh
+}
+
+/// One point's FPFH into `out` (zero): its `own` SPFH plus its neighbours' (index, squared
+/// distance) SPFHs `spfh` weighted as step 3 says.
+fn weigh_neighbours(out: &mut Fpfh, own: &Fpfh, neighbours: &[(usize, f64)], spfh: &[Fpfh]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2.
+        return unsafe { weigh_neighbours_avx2(out, own, neighbours, spfh) };
+    }
+    weigh_neighbours_any(out, own, neighbours, spfh)
+}
+
+/// [`weigh_neighbours`] compiled with AVX2: the same operations (never fused), wider vectors.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn weigh_neighbours_avx2(
+    out: &mut Fpfh,
+    own: &Fpfh,
+    neighbours: &[(usize, f64)],
+    spfh: &[Fpfh],
+) {
+    weigh_neighbours_any(out, own, neighbours, spfh)
+}
+
+/// [`weigh_neighbours`] for any CPU.
+#[inline(always)]
+fn weigh_neighbours_any(out: &mut Fpfh, own: &Fpfh, neighbours: &[(usize, f64)], spfh: &[Fpfh]) {
+    // Σ SPFH_j / d²_j over the neighbours (a point coinciding with this one is skipped), and
+    // each block's total, accumulated in Open3D's order.
+    let mut block_sums = [0.0; 3];
+    let mut weighted = [0.0; FPFH_LEN]; // (33,)
+    for &(j, d2) in neighbours {
+        if d2 == 0.0 {
+            continue;
+        }
+        // The 33 divisions and additions into `out` are independent (vector instructions
+        // do them); each block's sum is one chain, in bin order.
+        for (w, s) in weighted.iter_mut().zip(&spfh[j]) {
+            *w = s / d2;
+        }
+        for (o, w) in out.iter_mut().zip(&weighted) {
+            *o += w;
+        }
+        for (sum, block) in block_sums.iter_mut().zip(weighted.chunks_exact(BINS)) {
+            for w in block {
+                *sum += w;
+            }
+        }
+    }
+    // Each block rescaled to sum to 100, plus the point's own SPFH.
+    for ((block, own), sum) in out
+        .chunks_exact_mut(BINS)
+        .zip(own.chunks_exact(BINS))
+        .zip(block_sums)
+    {
+        let scale = if sum != 0.0 { 100.0 / sum } else { 0.0 };
+        for (o, s) in block.iter_mut().zip(own) {
+            *o = *o * scale + s;
+        }
+    }
 }
 
 #[cfg(test)]

@@ -146,14 +146,16 @@ impl KnnIndex {
         if k == 0 || self.nodes.is_empty() {
             return;
         }
+        // No more than the points: the buffer's `2k` then neither overflows nor over-allocates.
+        let mut best = Best::new(k.min(self.len()), r2, out);
         self.search(
             0,
             &[query.x, query.y, query.z],
             0.0,
             &mut [0.0; 3],
-            &mut Best { k, r2, heap: out },
+            &mut best,
         );
-        sort_by_distance_then_index(out);
+        best.finish();
     }
 
     /// Every point strictly closer than `radius` to `query`, sorted by distance, ties by index.
@@ -320,32 +322,60 @@ impl Found for Nearest {
     }
 }
 
-/// The `k` first points with squared distance below `r2`, in a max-heap by [`is_before`].
+/// The `k` first points with squared distance below `r2`, gathered unordered in `buf`: when it
+/// holds `2k`, a selection cuts it back to the `k` first (cheaper than keeping a heap), and
+/// `bound`, the last of those, then turns away every candidate after it.
 struct Best<'a> {
     k: usize,
     r2: f64,
-    heap: &'a mut Vec<(usize, f64)>,
+    bound: (usize, f64),
+    buf: &'a mut Vec<(usize, f64)>,
+}
+
+impl<'a> Best<'a> {
+    fn new(k: usize, r2: f64, buf: &'a mut Vec<(usize, f64)>) -> Self {
+        buf.clear();
+        buf.reserve(2 * k);
+        Self {
+            k,
+            r2,
+            bound: (usize::MAX, f64::INFINITY),
+            buf,
+        }
+    }
+
+    /// Keeps the `k` first of `buf`, unordered.
+    fn cut(&mut self) {
+        if self.buf.len() > self.k {
+            self.buf
+                .select_nth_unstable_by(self.k - 1, by_distance_then_index);
+            self.buf.truncate(self.k);
+        }
+    }
+
+    /// The `k` first, sorted.
+    fn finish(mut self) {
+        self.cut();
+        self.buf.sort_unstable_by(by_distance_then_index);
+    }
 }
 
 impl Found for Best<'_> {
     #[inline]
     fn offer(&mut self, candidate: (usize, f64)) {
-        if !(candidate.1 < self.r2) {
+        if !(candidate.1 < self.r2 && is_before(candidate, self.bound)) {
             return;
         }
-        if self.heap.len() < self.k {
-            heap_push(self.heap, candidate);
-        } else if is_before(candidate, self.heap[0]) {
-            heap_replace_top(self.heap, candidate);
+        self.buf.push(candidate);
+        if self.buf.len() == 2 * self.k {
+            self.cut();
+            self.bound = self.buf[self.k - 1];
         }
     }
     #[inline]
     fn may_improve(&self, cell_d2: f64) -> bool {
-        if self.heap.len() < self.k {
-            cell_d2 < self.r2
-        } else {
-            cell_d2 <= self.heap[0].1
-        }
+        // `<=`: a point as far as the bound may still come before it on its index.
+        cell_d2 < self.r2 && cell_d2 <= self.bound.1
     }
 }
 
@@ -365,41 +395,6 @@ impl Found for Within<'_> {
     #[inline]
     fn may_improve(&self, cell_d2: f64) -> bool {
         cell_d2 < self.r2
-    }
-}
-
-/// Pushes onto a max-heap ordered by [`is_before`].
-fn heap_push(heap: &mut Vec<(usize, f64)>, item: (usize, f64)) {
-    heap.push(item);
-    let mut i = heap.len() - 1;
-    while i > 0 {
-        let parent = (i - 1) / 2;
-        if !is_before(heap[parent], heap[i]) {
-            break;
-        }
-        heap.swap(parent, i);
-        i = parent;
-    }
-}
-
-/// Replaces the top (the last in order) of a non-empty max-heap and restores the heap.
-fn heap_replace_top(heap: &mut [(usize, f64)], item: (usize, f64)) {
-    heap[0] = item;
-    let mut i = 0;
-    loop {
-        let (l, r) = (2 * i + 1, 2 * i + 2);
-        let mut largest = i;
-        if l < heap.len() && is_before(heap[largest], heap[l]) {
-            largest = l;
-        }
-        if r < heap.len() && is_before(heap[largest], heap[r]) {
-            largest = r;
-        }
-        if largest == i {
-            return;
-        }
-        heap.swap(i, largest);
-        i = largest;
     }
 }
 
@@ -455,9 +450,15 @@ fn is_before(a: (usize, f64), b: (usize, f64)) -> bool {
     a.1 < b.1 || (a.1 == b.1 && a.0 < b.0)
 }
 
+/// The order of results as a comparison: by distance, ties by index.
+#[inline]
+fn by_distance_then_index(a: &(usize, f64), b: &(usize, f64)) -> std::cmp::Ordering {
+    a.1.total_cmp(&b.1).then(a.0.cmp(&b.0))
+}
+
 /// Sorts (index, distance) pairs by distance, ties by index.
 fn sort_by_distance_then_index(items: &mut [(usize, f64)]) {
-    items.sort_unstable_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+    items.sort_unstable_by(by_distance_then_index);
 }
 
 /// The (N, K) kNN graph of a cloud, flat row-major: row i lists the K nearest points of point i,
