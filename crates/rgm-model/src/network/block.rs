@@ -3,7 +3,7 @@
 
 use super::config::{Config, Edges, Scoring};
 use super::transformer::{EdgeTransformer, EdgeTransformerCache};
-use super::{Element, Result};
+use super::{both, Element, Result};
 use ndarray::{s, Array2, ArrayView2, ArrayViewMut2};
 use rand::Rng;
 use rgm_match::{
@@ -261,24 +261,28 @@ impl<T: Element> Block<T> {
         Ok(())
     }
 
-    /// Runs the block on F_X (N, C), F_Y (M, C) into `cache` (C̃ and the output features).
+    /// Runs the block on F_X (N, C), F_Y (M, C) into `cache` (C̃ and the output features);
+    /// with `side_by_side`, the two clouds' edges and graph convolutions run side by side on
+    /// rayon's pool.
     pub fn forward(
         &self,
         fx: ArrayView2<'_, T>,
         fy: ArrayView2<'_, T>,
         cache: &mut BlockCache<T>,
+        side_by_side: bool,
     ) -> Result<()> {
-        self.graph_forward(fx, fy, cache)?;
+        self.graph_forward(fx, fy, cache, side_by_side)?;
         self.match_forward(cache)
     }
 
-    /// The block on (Y, X) after its pass on (X, Y) in `swapped`, into `cache` (sized (M, N)):
-    /// what `forward(fy, fx, cache)` gives, bit for bit, without recomputing the edges and the
-    /// graph convolutions. They see one cloud and the other's encoding through the same
-    /// weights in both directions, so the (Y, X) pass's F'_Y, F'_X are the (X, Y) pass's; the
-    /// scoring, Sinkhorn and cross convolution run anew (Sinkhorn normalises rows first, so
-    /// its result on Sᵀ is not the transpose of its result on S). No backward follows.
-    pub fn forward_swapped(
+    /// Takes into `cache` (sized (M, N)) the graph features of the block's pass on (X, Y) in
+    /// `swapped`, for a pass on (Y, X): after it, [`Block::match_forward`] gives what
+    /// `forward(fy, fx, cache)` gives, bit for bit, without recomputing the edges and the graph
+    /// convolutions. They see one cloud and the other's encoding through the same weights in
+    /// both directions, so the (Y, X) pass's F'_Y, F'_X are the (X, Y) pass's; the scoring,
+    /// Sinkhorn and cross convolution run anew (Sinkhorn normalises rows first, so its result
+    /// on Sᵀ is not the transpose of its result on S). No backward follows.
+    pub fn graph_from_swapped(
         &self,
         swapped: &BlockCache<T>,
         cache: &mut BlockCache<T>,
@@ -286,7 +290,7 @@ impl<T: Element> Block<T> {
         let (n, m) = swapped.dims;
         if cache.dims != (m, n) {
             return Err(rgm_nn::NnError::Shape {
-                op: "rgm block forward_swapped",
+                op: "rgm block graph_from_swapped",
                 what: "cache",
                 expected: vec![m, n],
                 got: vec![cache.dims.0, cache.dims.1],
@@ -295,35 +299,45 @@ impl<T: Element> Block<T> {
         }
         cache.x.fp.assign(&swapped.y.fp);
         cache.y.fp.assign(&swapped.x.fp);
-        self.match_forward(cache)
+        Ok(())
     }
 
-    /// Edges and intra-graph convolutions: F'_X (N, Q), F'_Y (M, Q) into `cache`.
-    fn graph_forward(
+    /// Edges and intra-graph convolutions: F'_X (N, Q), F'_Y (M, Q) into `cache`, the two
+    /// sides side by side on rayon's pool when `side_by_side`.
+    pub fn graph_forward(
         &self,
         fx: ArrayView2<'_, T>,
         fy: ArrayView2<'_, T>,
         cache: &mut BlockCache<T>,
+        side_by_side: bool,
     ) -> Result<()> {
-        let (x, y) = (&mut cache.x, &mut cache.y);
-        match &self.transformer {
+        let edges = match &self.transformer {
             Some(tf) => {
-                tf.forward(fx, fy, &mut cache.transformer)?;
-                edges_forward(x, cache.transformer.tx().view())?;
-                edges_forward(y, cache.transformer.ty().view())?;
+                tf.forward(fx, fy, &mut cache.transformer, side_by_side)?;
+                Some((cache.transformer.tx().view(), cache.transformer.ty().view()))
             }
-            None => {
-                full_adjacency(&mut x.adj_norm);
-                full_adjacency(&mut y.adj_norm);
+            None => None,
+        };
+        // One side: its edges (the transformer's T, or all of them), then its convolution.
+        let side = |side: &mut Side<T>, f: ArrayView2<'_, T>, t: Option<ArrayView2<'_, T>>| {
+            match t {
+                Some(t) => edges_forward(side, t)?,
+                None => full_adjacency(&mut side.adj_norm),
             }
-        }
-        self.gconv_forward(x, fx)?;
-        self.gconv_forward(y, fy)
+            self.gconv_forward(side, f)
+        };
+        let (x, y) = (&mut cache.x, &mut cache.y);
+        let (a, b) = both(
+            side_by_side,
+            || side(x, fx, edges.map(|(tx, _)| tx)),
+            || side(y, fy, edges.map(|(_, ty)| ty)),
+        );
+        a.and(b)
     }
 
     /// Scoring of F'_X, F'_Y (AIS or Var1), Sinkhorn → C̃, and the cross-graph convolution
     /// when the block has one, all in `cache`.
-    fn match_forward(&self, cache: &mut BlockCache<T>) -> Result<()> {
+    pub fn match_forward(&self, cache: &mut BlockCache<T>) -> Result<()> {
         let (x, y) = (&mut cache.x, &mut cache.y);
         match &self.scorer {
             Scorer::Ais {

@@ -2,7 +2,7 @@
 //! (the annotated transformer's, one layer each, no dropout), run in both directions with the
 //! same weights: T_X = decoder(X, encoder(Y)), T_Y = decoder(Y, encoder(X)).
 
-use super::{shaped, zeroed, Element, Result};
+use super::{both, shaped, zeroed, Element, Result};
 use ndarray::{Array2, ArrayView2, ArrayViewMut2};
 use rand::Rng;
 use rgm_nn::param::{join_name, ParamView, ParamViewMut};
@@ -260,20 +260,30 @@ impl<T: Element> EdgeTransformer<T> {
     }
 
     /// T_X = decoder(F_X, encoder(F_Y)), T_Y = decoder(F_Y, encoder(F_X)).
-    /// `fx`: (N, C), `fy`: (M, C).
+    /// `fx`: (N, C), `fy`: (M, C). With `side_by_side`, the two encoders run side by side on
+    /// rayon's pool, then the two decoders.
     pub fn forward(
         &self,
         fx: ArrayView2<'_, T>,
         fy: ArrayView2<'_, T>,
         cache: &mut EdgeTransformerCache<T>,
+        side_by_side: bool,
     ) -> Result<()> {
-        self.encoder.forward(fx, fx, &mut cache.enc_x)?;
-        self.encoder.forward(fy, fy, &mut cache.enc_y)?;
-        self.decoder
-            .forward(fx, cache.enc_y.out.view(), &mut cache.dec_x)?;
-        self.decoder
-            .forward(fy, cache.enc_x.out.view(), &mut cache.dec_y)?;
-        Ok(())
+        let (enc_x, enc_y) = (&mut cache.enc_x, &mut cache.enc_y);
+        let (a, b) = both(
+            side_by_side,
+            || self.encoder.forward(fx, fx, enc_x),
+            || self.encoder.forward(fy, fy, enc_y),
+        );
+        a.and(b)?;
+        let (mem_x, mem_y) = (cache.enc_y.out.view(), cache.enc_x.out.view());
+        let (dec_x, dec_y) = (&mut cache.dec_x, &mut cache.dec_y);
+        let (a, b) = both(
+            side_by_side,
+            || self.decoder.forward(fx, mem_x, dec_x),
+            || self.decoder.forward(fy, mem_y, dec_y),
+        );
+        a.and(b)
     }
 
     /// Adds into `dfx` (N, C), `dfy` (M, C) the gradients given `dtx` (N, C), `dty` (M, C):
