@@ -268,4 +268,35 @@ mod tests {
             }
         );
     }
+
+    #[test]
+    fn scores_and_refinements_are_the_same_bits_on_one_and_two_threads() {
+        // 1,024 points: several blocks of nearest-point searches, spread over the pool.
+        let target = airplane();
+        let mut rng = StdRng::seed_from_u64(7);
+        let g = RigidTransform::random(&mut rng, 20.0, 0.2);
+        let source = moved_and_jittered(&target, &g, &mut rng);
+        let index = KnnIndex::new(&target.points);
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let mut pairs = Vec::new();
+                let scored = score(&source.points, &index, &g.inverse(), 0.05, Some(&mut pairs));
+                let refined = refine::refine(
+                    &source,
+                    &target,
+                    &RigidTransform::identity(),
+                    &refine::RefineConfig::default(),
+                )
+                .unwrap();
+                (scored, pairs, refined)
+            })
+        };
+        let one = run(1);
+        assert!(one.0.inlier_count > 500, "{:?}", one.0);
+        assert_eq!(one, run(2));
+    }
 }

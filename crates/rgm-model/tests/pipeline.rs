@@ -14,7 +14,9 @@ use rgm_geom::registrar::{Normalised, Refined};
 use rgm_geom::{Point3, PointCloud, RigidTransform, Vector3};
 use rgm_match::{hard_match, MatchConfig};
 use rgm_model::evaluate::evaluate_pair;
-use rgm_model::network::{Config, Edges, FeaturerCache, Mode, Rgm, RgmCache, Scoring};
+use rgm_model::network::{
+    Config, Edges, FeaturerCache, Mode, Rgm, RgmCache, Scoring, TestStatistics,
+};
 use rgm_model::{Method, MethodError, PipelineConfig, Registrar, RgmRegistrar};
 
 /// RGM as `rgm register --method rgm --no-refine` runs it: in the network's frame.
@@ -468,4 +470,31 @@ fn clouds_smaller_than_the_neighbourhood_are_a_clear_error() {
             needed: 5
         }
     ));
+}
+
+#[test]
+fn one_two_and_three_threads_register_to_the_same_bits() {
+    // The chains, the clouds' features and each block's sides run side by side on a pool of
+    // several threads; every piece is computed as on one thread. Both batch-norm statistics.
+    let (source, target) = fixture_pair();
+    for statistics in [TestStatistics::Running, TestStatistics::Cloud] {
+        let mut network = Rgm::<f32>::load(Config::tiny(), &fixture()).unwrap();
+        network.featurer.test_statistics = statistics;
+        let outcomes: Vec<_> = [1, 2, 3]
+            .map(|threads| {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let mut registrar = normalised(network.clone(), PipelineConfig::default());
+                let found = pool
+                    .install(|| registrar.register(&source, &target))
+                    .unwrap();
+                (found.result, found.correspondences)
+            })
+            .into();
+        assert!(!outcomes[0].1.is_empty());
+        assert_eq!(outcomes[0], outcomes[1], "{statistics:?}");
+        assert_eq!(outcomes[0], outcomes[2], "{statistics:?}");
+    }
 }
