@@ -261,17 +261,17 @@ impl<T: Element> Block<T> {
         Ok(())
     }
 
-    /// Runs the block on F_X (N, C), F_Y (M, C) into `cache` (C̃ and the output features);
-    /// with `side_by_side`, the two clouds' edges and graph convolutions run side by side on
-    /// rayon's pool.
+    /// Runs the block on F_X (N, C), F_Y (M, C) into `cache` (C̃ and the output features).
+    /// At `test_time` (no backward follows) the two clouds' edges and graph convolutions run
+    /// side by side on rayon's pool.
     pub fn forward(
         &self,
         fx: ArrayView2<'_, T>,
         fy: ArrayView2<'_, T>,
         cache: &mut BlockCache<T>,
-        side_by_side: bool,
+        test_time: bool,
     ) -> Result<()> {
-        self.graph_forward(fx, fy, cache, side_by_side)?;
+        self.graph_forward(fx, fy, cache, test_time)?;
         self.match_forward(cache)
     }
 
@@ -302,18 +302,18 @@ impl<T: Element> Block<T> {
         Ok(())
     }
 
-    /// Edges and intra-graph convolutions: F'_X (N, Q), F'_Y (M, Q) into `cache`, the two
-    /// sides side by side on rayon's pool when `side_by_side`.
+    /// Edges and intra-graph convolutions: F'_X (N, Q), F'_Y (M, Q) into `cache`; at
+    /// `test_time` (no backward follows) the two sides side by side on rayon's pool.
     pub fn graph_forward(
         &self,
         fx: ArrayView2<'_, T>,
         fy: ArrayView2<'_, T>,
         cache: &mut BlockCache<T>,
-        side_by_side: bool,
+        test_time: bool,
     ) -> Result<()> {
         let edges = match &self.transformer {
             Some(tf) => {
-                tf.forward(fx, fy, &mut cache.transformer, side_by_side)?;
+                tf.forward(fx, fy, &mut cache.transformer, test_time)?;
                 Some((cache.transformer.tx().view(), cache.transformer.ty().view()))
             }
             None => None,
@@ -328,7 +328,7 @@ impl<T: Element> Block<T> {
         };
         let (x, y) = (&mut cache.x, &mut cache.y);
         let (a, b) = both(
-            side_by_side,
+            test_time,
             || side(x, fx, edges.map(|(tx, _)| tx)),
             || side(y, fy, edges.map(|(_, ty)| ty)),
         );

@@ -243,8 +243,9 @@ impl<T: Element> Rgm<T> {
     }
 
     /// The blocks of an evaluation-mode forward on the local features `fx` (N, ΣC + E) and
-    /// `fy` (M, ΣC + E) made by [`Rgm::features`]; C̃ is then [`RgmCache::c_soft`]. Each
-    /// block's two sides run side by side on rayon's pool. No backward follows such a pass.
+    /// `fy` (M, ΣC + E) made by [`Rgm::features`]; C̃ is then [`RgmCache::c_soft`]. No
+    /// backward follows such a pass: each block's two sides run side by side on rayon's pool,
+    /// and the attention weights are not kept.
     pub fn forward_from_features(
         &self,
         fx: ArrayView2<'_, T>,
@@ -312,28 +313,29 @@ impl<T: Element> Rgm<T> {
         }
     }
 
-    /// The L blocks on `fx` (N, C), `fy` (M, C), into `blocks`.
+    /// The L blocks on `fx` (N, C), `fy` (M, C), into `blocks`; at `test_time` no backward
+    /// follows ([`Block::forward`]).
     fn forward_blocks(
         &self,
         fx: ArrayView2<'_, T>,
         fy: ArrayView2<'_, T>,
         blocks: &mut Vec<BlockCache<T>>,
-        side_by_side: bool,
+        test_time: bool,
     ) -> Result<()> {
         let _precision = precision::enter(self.precision);
         self.size_blocks(blocks, (fx.nrows(), fy.nrows()));
-        self.blocks[0].graph_forward(fx, fy, &mut blocks[0], side_by_side)?;
-        self.blocks_after_graph(blocks, side_by_side)
+        self.blocks[0].graph_forward(fx, fy, &mut blocks[0], test_time)?;
+        self.blocks_after_graph(blocks, test_time)
     }
 
     /// The rest of the L blocks once block 0's graph features are in `blocks[0]`: its
     /// scoring, Sinkhorn and cross convolution, then blocks 1 to L − 1.
-    fn blocks_after_graph(&self, blocks: &mut [BlockCache<T>], side_by_side: bool) -> Result<()> {
+    fn blocks_after_graph(&self, blocks: &mut [BlockCache<T>], test_time: bool) -> Result<()> {
         self.blocks[0].match_forward(&mut blocks[0])?;
         for b in 1..self.blocks.len() {
             let (done, rest) = blocks.split_at_mut(b);
             let (fx, fy) = done[b - 1].outputs(self.blocks[b - 1].cross.is_some());
-            self.blocks[b].forward(fx, fy, &mut rest[0], side_by_side)?;
+            self.blocks[b].forward(fx, fy, &mut rest[0], test_time)?;
         }
         Ok(())
     }
