@@ -308,7 +308,7 @@ impl<T: Element> Rgm<T> {
     fn size_blocks(&self, blocks: &mut Vec<BlockCache<T>>, dims: (usize, usize)) {
         if blocks.len() != self.blocks.len() || blocks.first().map(|b| b.dims()) != Some(dims) {
             *blocks = (0..self.blocks.len())
-                .map(|b| BlockCache::new(&self.config, b, dims.0, dims.1))
+                .map(|_| BlockCache::new(&self.config, dims.0, dims.1))
                 .collect();
         }
     }
