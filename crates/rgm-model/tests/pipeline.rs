@@ -181,7 +181,7 @@ fn the_reverse_pass_reusing_block_0_is_bit_identical_to_running_it() {
     let (x, y) = (tensor("input.x"), tensor("input.y"));
     // Unequal sizes, so a transposed shape cannot pass unnoticed.
     let y = y.slice(ndarray::s![..40, ..]).to_owned();
-    for mut network in variants {
+    for network in variants {
         let (mut fx, mut fy) = (FeaturerCache::default(), FeaturerCache::default());
         network.features(x.view(), &mut fx).unwrap();
         network.features(y.view(), &mut fy).unwrap();
