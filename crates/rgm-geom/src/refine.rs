@@ -31,7 +31,7 @@ use nalgebra::{Matrix6, Point3, Rotation3, Vector3, Vector6};
 
 use crate::icp::{self, check_clouds, IcpConfig};
 use crate::normals::{estimate_normals, normal_at, NormalsConfig};
-use crate::registration::{score, RegistrationResult};
+use crate::registration::{nearest_each, score, RegistrationResult};
 use crate::{GeomError, KnnIndex, PointCloud, Result, RigidTransform};
 
 /// Settings of [`refine`]. Distances are in the clouds' units; the defaults suit shapes scaled
@@ -116,8 +116,7 @@ pub fn refine(
     let index = KnnIndex::new(&target.points);
     let normals = estimate_normals(&target.points, &index, &config.normals); // (M,)
     let mut transform = *initial;
-    let mut moved: Vec<Point3<f64>> = Vec::with_capacity(source.len()); // (N,) source under `transform`
-    let mut pairs: Vec<(usize, usize, f64)> = Vec::with_capacity(source.len()); // (P,) i, j, distance
+    let mut scratch = PlaneScratch::default();
     let mut iterations = 0;
     let mut converged = false; // whether the last stage ended on a negligible step
     let plane = PlaneFit {
@@ -134,7 +133,7 @@ pub fn refine(
             residual_gate: None,
             negligible: 1e-9,
         };
-        let outcome = plane.run(&stage, &mut transform, &mut moved, &mut pairs);
+        let outcome = plane.run(&stage, &mut transform, &mut scratch);
         iterations += outcome.iterations;
         converged = outcome.converged;
         if !outcome.solvable {
@@ -189,6 +188,14 @@ enum TargetNormals<'a> {
     },
 }
 
+/// The buffers of point-to-plane stages, reused from one iteration to the next.
+#[derive(Default)]
+struct PlaneScratch {
+    moved: Vec<Point3<f64>>, // (N,) the source under the current transform
+    nearest: Vec<Option<(usize, f64)>>, // (N,) each moved point's nearest target point
+    pairs: Vec<(usize, usize, f64)>, // (P,) i, j, distance
+}
+
 /// One point-to-plane stage.
 struct PlaneStage {
     /// Pairs farther apart than this are not found.
@@ -223,27 +230,37 @@ impl PlaneFit<'_> {
         }
     }
 
-    /// Runs `stage` from `transform`, updating it; `moved` and `pairs` are scratch buffers.
+    /// Runs `stage` from `transform`, updating it; `scratch` holds its buffers.
     fn run(
         &self,
         stage: &PlaneStage,
         transform: &mut RigidTransform,
-        moved: &mut Vec<Point3<f64>>,         // (N,)
-        pairs: &mut Vec<(usize, usize, f64)>, // (P,) i, j, distance
+        scratch: &mut PlaneScratch,
     ) -> StageOutcome {
         let mut outcome = StageOutcome {
             iterations: 0,
             converged: false,
             solvable: true,
         };
+        let PlaneScratch {
+            moved,
+            nearest,
+            pairs,
+        } = scratch;
         for _ in 0..stage.iterations {
             moved.clear();
             moved.extend(self.source.points.iter().map(|p| transform.apply(p)));
+            let source = &self.source.points;
+            nearest_each(source, self.index, transform, stage.max_distance, nearest);
             pairs.clear();
-            pairs.extend(moved.iter().enumerate().filter_map(|(i, p)| {
-                let (j, d) = self.index.nearest_within(p, stage.max_distance)?;
+            // The gate in order on this thread: lazy normals are computed on first use.
+            pairs.extend(nearest.iter().enumerate().filter_map(|(i, &found)| {
+                let (j, d) = found?;
                 let within = stage.residual_gate.is_none_or(|gate| {
-                    (self.target.points[j] - p).dot(&self.normal(j)).abs() <= gate
+                    (self.target.points[j] - moved[i])
+                        .dot(&self.normal(j))
+                        .abs()
+                        <= gate
                 });
                 within.then_some((i, j, d))
             }));
@@ -271,14 +288,26 @@ impl PlaneFit<'_> {
     /// The median absolute point-to-plane residual of the source's points under `transform`
     /// that have a target point within `max_distance`; `None` when none has.
     fn median_residual(&self, transform: &RigidTransform, max_distance: f64) -> Option<f64> {
+        let mut nearest = Vec::new(); // (N,)
+        nearest_each(
+            &self.source.points,
+            self.index,
+            transform,
+            max_distance,
+            &mut nearest,
+        );
         let mut residuals: Vec<f64> = self
             .source
             .points
             .iter()
-            .filter_map(|p| {
-                let p = transform.apply(p);
-                let (j, _) = self.index.nearest_within(&p, max_distance)?;
-                Some((self.target.points[j] - p).dot(&self.normal(j)).abs())
+            .zip(&nearest)
+            .filter_map(|(p, &found)| {
+                let (j, _) = found?;
+                Some(
+                    (self.target.points[j] - transform.apply(p))
+                        .dot(&self.normal(j))
+                        .abs(),
+                )
             })
             .collect();
         if residuals.is_empty() {
@@ -390,8 +419,7 @@ pub fn refine_at_resolution(
         },
     };
     let mut transform = *initial;
-    let mut moved = Vec::with_capacity(source.len()); // (N,)
-    let mut pairs = Vec::with_capacity(source.len()); // (P,)
+    let mut scratch = PlaneScratch::default();
     let mut iterations = 0;
     let mut stage = PlaneStage {
         max_distance: 0.0,
@@ -402,7 +430,7 @@ pub fn refine_at_resolution(
     };
     for &max_distance in &distances {
         stage.max_distance = max_distance;
-        let outcome = plane.run(&stage, &mut transform, &mut moved, &mut pairs);
+        let outcome = plane.run(&stage, &mut transform, &mut scratch);
         iterations += outcome.iterations;
         if !outcome.solvable {
             return Ok((transform, iterations));
@@ -410,9 +438,7 @@ pub fn refine_at_resolution(
     }
     if let Some(median) = plane.median_residual(&transform, finest) {
         stage.residual_gate = Some(config.noise_sigmas * 1.4826 * median);
-        iterations += plane
-            .run(&stage, &mut transform, &mut moved, &mut pairs)
-            .iterations;
+        iterations += plane.run(&stage, &mut transform, &mut scratch).iterations;
     }
     Ok((transform, iterations))
 }

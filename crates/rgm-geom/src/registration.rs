@@ -1,6 +1,7 @@
 //! What every registration method returns, and Open3D's way of scoring a transform.
 
 use nalgebra::Point3;
+use rayon::prelude::*;
 
 use crate::{KnnIndex, RigidTransform};
 
@@ -46,10 +47,12 @@ pub fn score(
     if let Some(p) = pairs.as_deref_mut() {
         p.clear();
     }
+    let mut found = Vec::new(); // (N,)
+    nearest_each(source, target, transform, max_distance, &mut found);
     let mut count = 0;
     let mut sum_d2 = 0.0;
-    for (i, x) in source.iter().enumerate() {
-        if let Some((j, d)) = target.nearest_within(&transform.apply(x), max_distance) {
+    for (i, &nearest) in found.iter().enumerate() {
+        if let Some((j, d)) = nearest {
             count += 1;
             sum_d2 += d * d;
             if let Some(p) = pairs.as_deref_mut() {
@@ -70,6 +73,33 @@ pub fn score(
             (sum_d2 / count as f64).sqrt()
         },
     }
+}
+
+/// Points searched per piece of work in [`nearest_each`]: a fixed number, so that the pieces
+/// are the same on any number of threads.
+const NEAREST_BLOCK: usize = 256;
+
+/// `found[i]`: the nearest point of `target` strictly closer than `max_distance` to
+/// `source[i]` moved by `transform`, as (index, distance). Blocks of points are searched side
+/// by side on rayon's pool, each point's search its own, so the result is the same on any
+/// number of threads.
+pub(crate) fn nearest_each(
+    source: &[Point3<f64>],
+    target: &KnnIndex,
+    transform: &RigidTransform,
+    max_distance: f64,
+    found: &mut Vec<Option<(usize, f64)>>, // (N,)
+) {
+    found.clear();
+    found.resize(source.len(), None);
+    found
+        .par_chunks_mut(NEAREST_BLOCK)
+        .zip(source.par_chunks(NEAREST_BLOCK))
+        .for_each(|(found, points)| {
+            for (nearest, p) in found.iter_mut().zip(points) {
+                *nearest = target.nearest_within(&transform.apply(p), max_distance);
+            }
+        });
 }
 
 impl RegistrationResult {
@@ -237,5 +267,36 @@ mod tests {
                 inlier_rmse: 0.0
             }
         );
+    }
+
+    #[test]
+    fn scores_and_refinements_are_the_same_bits_on_one_and_two_threads() {
+        // 1,024 points: several blocks of nearest-point searches, spread over the pool.
+        let target = airplane();
+        let mut rng = StdRng::seed_from_u64(7);
+        let g = RigidTransform::random(&mut rng, 20.0, 0.2);
+        let source = moved_and_jittered(&target, &g, &mut rng);
+        let index = KnnIndex::new(&target.points);
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let mut pairs = Vec::new();
+                let scored = score(&source.points, &index, &g.inverse(), 0.05, Some(&mut pairs));
+                let refined = refine::refine(
+                    &source,
+                    &target,
+                    &RigidTransform::identity(),
+                    &refine::RefineConfig::default(),
+                )
+                .unwrap();
+                (scored, pairs, refined)
+            })
+        };
+        let one = run(1);
+        assert!(one.0.inlier_count > 500, "{:?}", one.0);
+        assert_eq!(one, run(2));
     }
 }

@@ -13,7 +13,11 @@
 //! once per distinct cloud: X and Y once each, and each moved copy once (2 + 2(P − 1) feature
 //! passes for P passes instead of 4P). The reverse chain's first pass (Y, X) reuses the forward
 //! chain's first pass (X, Y) for block 0's edges and graph convolutions
-//! ([`Rgm::forward_reverse`]).
+//! ([`Rgm::forward_both`]).
+//!
+//! On rayon's pool, what is independent runs side by side: the two clouds' features, the two
+//! chains, and inside each block the two clouds' sides. Each piece is computed as on one
+//! thread, so the result is the same bits on any number of threads.
 
 use std::time::Instant;
 
@@ -28,7 +32,7 @@ use rgm_match::{hard_match, Correspondences, MatchConfig};
 use rgm_nn::{Parameters, Precision};
 
 use crate::error::MethodError;
-use crate::network::{FeaturerCache, Rgm, RgmCache};
+use crate::network::{both, FeaturerCache, Rgm, RgmCache};
 
 /// Test-time settings; the defaults are the paper's.
 #[derive(Clone, Debug, PartialEq)]
@@ -99,7 +103,9 @@ fn subsample(len: usize, count: Option<usize>, seed: u64) -> Vec<usize> {
     }
 }
 
-/// Wall time of each stage of one registration, in seconds (summed over passes).
+/// Wall time of each stage of one registration, in seconds (summed over passes, and over the
+/// two chains, which run side by side on a pool of several threads: the total can then exceed
+/// the registration's wall time).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct StageTimes {
     /// Subsampling and conversion of the clouds.
@@ -122,6 +128,16 @@ impl StageTimes {
     }
 }
 
+impl std::ops::AddAssign for StageTimes {
+    fn add_assign(&mut self, other: Self) {
+        self.prepare += other.prepare;
+        self.features += other.features;
+        self.blocks += other.blocks;
+        self.matching += other.matching;
+        self.kabsch += other.kabsch;
+    }
+}
+
 /// Seconds since `start`, added to `stage`.
 fn add_since(stage: &mut f64, start: Instant) {
     *stage += start.elapsed().as_secs_f64();
@@ -136,10 +152,16 @@ pub struct RgmRegistrar {
     pub config: PipelineConfig,
     source_features: FeaturerCache<f32>, // the matched source X's features (N, C), once per pair
     target_features: FeaturerCache<f32>, // the matched target Y's features (M, C), once per pair
-    moved_features: FeaturerCache<f32>,  // a chain's moved cloud's features (N or M, C)
-    forward: RgmCache<f32>,              // the forward chain's pass (X', Y)
-    reverse: RgmCache<f32>,              // the reverse chain's pass (Y', X)
+    forward: ChainBuffers,               // the forward chain's: X' (N, C), pass (X', Y)
+    reverse: ChainBuffers,               // the reverse chain's: Y' (M, C), pass (Y', X)
     times: StageTimes,                   // of the last registration
+}
+
+/// One chain's buffers, its own so that the chains can run side by side.
+#[derive(Clone, Debug, Default)]
+struct ChainBuffers {
+    moved_features: FeaturerCache<f32>, // the chain's moved cloud's features (N or M, C)
+    pass: RgmCache<f32>,                // the chain's last pass (moved, partner)
 }
 
 /// A cloud as the network's (N, 3) f32 input.
@@ -165,6 +187,89 @@ impl Chain {
     }
 }
 
+/// One chain while it runs: its cloud as the passes so far moved it, and what it reads.
+struct ChainRun<'a> {
+    chain: Chain,
+    moved: PointCloud,       // the chain's own cloud after the passes so far
+    partner: &'a PointCloud, // the cloud it moves toward, which stays put
+    own_features: &'a FeaturerCache<f32>, // of its own cloud unmoved (pass 0)
+    partner_features: &'a FeaturerCache<f32>,
+    buffers: &'a mut ChainBuffers,
+    times: StageTimes,
+    /// The last pass's hard correspondences (rows of the own cloud, columns of the partner).
+    end: Option<Correspondences>,
+}
+
+impl ChainRun<'_> {
+    /// Pass `pass` (from 0) on the chain's moved cloud: its features (after pass 0), C̃ of
+    /// (moved, partner) unless `blocks_ran` already put it in the chain's buffers, its hard
+    /// correspondences, and unless the pass is the last a weighted Kabsch that moves the
+    /// cloud.
+    fn pass(
+        &mut self,
+        network: &Rgm<f32>,
+        config: &PipelineConfig,
+        pass: usize,
+        blocks_ran: bool,
+    ) -> Result<(), MethodError> {
+        let buffers = &mut *self.buffers;
+        if pass > 0 {
+            let start = Instant::now();
+            network.features(as_rows(&self.moved).view(), &mut buffers.moved_features)?;
+            add_since(&mut self.times.features, start);
+        }
+        if !blocks_ran {
+            let start = Instant::now();
+            let own = if pass > 0 {
+                &buffers.moved_features
+            } else {
+                self.own_features
+            };
+            network.forward_from_features(
+                own.features.view(),
+                self.partner_features.features.view(),
+                &mut buffers.pass,
+            )?;
+            add_since(&mut self.times.blocks, start);
+        }
+        let start = Instant::now();
+        let matching = MatchConfig {
+            inlier_threshold: config.inlier_threshold,
+        };
+        let found = hard_match(buffers.pass.c_soft(), &matching)?;
+        add_since(&mut self.times.matching, start);
+        if found.pairs().is_empty() {
+            return Err(MethodError::NoCorrespondences {
+                stage: format!("pass {} of {}", pass + 1, self.chain.describe()),
+            });
+        }
+        if pass + 1 < config.passes {
+            let step = kabsch_of(&self.moved, self.partner, found.pairs(), &mut self.times)?;
+            self.moved = self.moved.transformed(&step);
+        }
+        self.end = Some(found);
+        Ok(())
+    }
+}
+
+/// The weighted Kabsch of spec §4 that maps `a[i]` onto `b[j]` for each pair (i, j) (the
+/// weights, H's row sums, are one per pair); its time is added to `times`.
+fn kabsch_of(
+    a: &PointCloud,
+    b: &PointCloud,
+    pairs: &[(usize, usize)],
+    times: &mut StageTimes,
+) -> Result<RigidTransform, MethodError> {
+    let start = Instant::now();
+    let (from, to): (Vec<Point3<f64>>, Vec<Point3<f64>>) = pairs
+        .iter()
+        .map(|&(i, j)| (a.points[i], b.points[j]))
+        .unzip();
+    let solved = kabsch(&from, &to, &vec![1.0; from.len()])?;
+    add_since(&mut times.kabsch, start);
+    Ok(solved)
+}
+
 impl RgmRegistrar {
     /// A registrar around `network`.
     pub fn new(network: Rgm<f32>, config: PipelineConfig) -> Self {
@@ -173,9 +278,8 @@ impl RgmRegistrar {
             config,
             source_features: FeaturerCache::default(),
             target_features: FeaturerCache::default(),
-            moved_features: FeaturerCache::default(),
-            forward: RgmCache::default(),
-            reverse: RgmCache::default(),
+            forward: ChainBuffers::default(),
+            reverse: ChainBuffers::default(),
             times: StageTimes::default(),
         }
     }
@@ -183,79 +287,6 @@ impl RgmRegistrar {
     /// Where the time of the last registration went.
     pub fn stage_times(&self) -> StageTimes {
         self.times
-    }
-
-    /// Pass `pass` (from 0) of `chain` on the chain's cloud `moved` (its own cloud after the
-    /// passes before; the partner stays where it is): C̃ of (moved, partner), then its hard
-    /// correspondences (rows of `moved`, columns of the partner). Pass 0 of the reverse chain
-    /// is taken from pass 0 of the forward chain, which must be the last forward pass run.
-    fn chain_pass(
-        &mut self,
-        chain: Chain,
-        pass: usize,
-        moved: &PointCloud,
-    ) -> Result<Correspondences, MethodError> {
-        if pass > 0 {
-            let start = Instant::now();
-            self.network
-                .features(as_rows(moved).view(), &mut self.moved_features)?;
-            add_since(&mut self.times.features, start);
-        }
-        let start = Instant::now();
-        let (own, partner) = match chain {
-            Chain::Forward => (&self.source_features, &self.target_features),
-            Chain::Reverse => (&self.target_features, &self.source_features),
-        };
-        let own = if pass > 0 { &self.moved_features } else { own };
-        let (fo, fp) = (own.features.view(), partner.features.view()); // (N', C), (M', C)
-        let cache = match (chain, pass) {
-            (Chain::Forward, _) => {
-                self.network
-                    .forward_from_features(fo, fp, &mut self.forward)?;
-                &self.forward
-            }
-            (Chain::Reverse, 0) => {
-                self.network
-                    .forward_reverse(&self.forward, &mut self.reverse)?;
-                &self.reverse
-            }
-            (Chain::Reverse, _) => {
-                self.network
-                    .forward_from_features(fo, fp, &mut self.reverse)?;
-                &self.reverse
-            }
-        };
-        add_since(&mut self.times.blocks, start);
-        let start = Instant::now();
-        let matching = MatchConfig {
-            inlier_threshold: self.config.inlier_threshold,
-        };
-        let found = hard_match(cache.c_soft(), &matching)?;
-        add_since(&mut self.times.matching, start);
-        if found.pairs().is_empty() {
-            return Err(MethodError::NoCorrespondences {
-                stage: format!("pass {} of {}", pass + 1, chain.describe()),
-            });
-        }
-        Ok(found)
-    }
-
-    /// The weighted Kabsch of spec §4 that maps `a[i]` onto `b[j]` for each pair (i, j) (the
-    /// weights, H's row sums, are one per pair).
-    fn kabsch_of(
-        &mut self,
-        a: &PointCloud,
-        b: &PointCloud,
-        pairs: &[(usize, usize)],
-    ) -> Result<RigidTransform, MethodError> {
-        let start = Instant::now();
-        let (from, to): (Vec<Point3<f64>>, Vec<Point3<f64>>) = pairs
-            .iter()
-            .map(|&(i, j)| (a.points[i], b.points[j]))
-            .unzip();
-        let solved = kabsch(&from, &to, &vec![1.0; from.len()])?;
-        add_since(&mut self.times.kabsch, start);
-        Ok(solved)
     }
 
     /// The registration of `source` onto `target` (spec §4), both in the network's frame: the
@@ -298,39 +329,73 @@ impl RgmRegistrar {
         let (x_rows, y_rows) = (as_rows(&x), as_rows(&y)); // (N, 3), (M, 3)
         add_since(&mut self.times.prepare, start);
         let start = Instant::now();
-        self.network
-            .features(x_rows.view(), &mut self.source_features)?;
-        self.network
-            .features(y_rows.view(), &mut self.target_features)?;
+        let (network, config) = (&self.network, &self.config);
+        let (fx, fy) = (&mut self.source_features, &mut self.target_features);
+        let (a, b) = both(
+            true,
+            || network.features(x_rows.view(), fx),
+            || network.features(y_rows.view(), fy),
+        );
+        a.and(b)?;
         add_since(&mut self.times.features, start);
         // The chains advance side by side: pass 0 of the reverse chain reuses pass 0 of the
         // forward chain. Only the last pass's correspondences leave a chain.
-        let (mut moved_x, mut moved_y) = (x.clone(), y.clone());
-        let mut forward_end = None; // the forward chain's last H (N, M)
-        let mut reverse_end = None; // the reverse chain's last H (M, N)
-        for pass in 0..self.config.passes {
-            let last = pass + 1 == self.config.passes;
-            let found = self.chain_pass(Chain::Forward, pass, &moved_x)?;
-            if !last {
-                let step = self.kabsch_of(&moved_x, &y, found.pairs())?;
-                moved_x = moved_x.transformed(&step);
+        let cycle = config.cycle_consistency;
+        let (fx, fy) = (&self.source_features, &self.target_features);
+        let mut forward = ChainRun {
+            chain: Chain::Forward,
+            moved: x.clone(),
+            partner: &y,
+            own_features: fx,
+            partner_features: fy,
+            buffers: &mut self.forward,
+            times: StageTimes::default(),
+            end: None,
+        };
+        let mut reverse = ChainRun {
+            chain: Chain::Reverse,
+            moved: y.clone(),
+            partner: &x,
+            own_features: fy,
+            partner_features: fx,
+            buffers: &mut self.reverse,
+            times: StageTimes::default(),
+            end: None,
+        };
+        for pass in 0..config.passes {
+            // Pass 0's blocks of both chains at once, to share block 0's graph features.
+            let blocks_ran = pass == 0 && cycle;
+            if blocks_ran {
+                let start = Instant::now();
+                network.forward_both(
+                    fx.features.view(),
+                    fy.features.view(),
+                    &mut forward.buffers.pass,
+                    &mut reverse.buffers.pass,
+                )?;
+                add_since(&mut self.times.blocks, start);
             }
-            forward_end = Some(found);
-            if self.config.cycle_consistency {
-                let found = self.chain_pass(Chain::Reverse, pass, &moved_y)?;
-                if !last {
-                    let step = self.kabsch_of(&moved_y, &x, found.pairs())?;
-                    moved_y = moved_y.transformed(&step);
-                }
-                reverse_end = Some(found);
-            }
+            let (a, b) = both(
+                cycle,
+                || forward.pass(network, config, pass, blocks_ran),
+                || {
+                    if cycle {
+                        reverse.pass(network, config, pass, blocks_ran)
+                    } else {
+                        Ok(())
+                    }
+                },
+            );
+            a.and(b)?;
         }
-        let Some(forward) = forward_end else {
+        self.times += forward.times;
+        self.times += reverse.times;
+        let Some(forward) = forward.end else {
             return Err(MethodError::InvalidConfig {
                 why: "passes must be at least 1".into(),
             });
         };
-        let found = match reverse_end {
+        let found = match reverse.end {
             Some(reverse) => {
                 let start = Instant::now();
                 let kept = forward.cycle_consistent(&reverse)?;
@@ -344,7 +409,7 @@ impl RgmRegistrar {
                 stage: "cycle consistency (the two chains end with no common pair)".into(),
             });
         }
-        let total = self.kabsch_of(&x, &y, found.pairs())?;
+        let total = kabsch_of(&x, &y, found.pairs(), &mut self.times)?;
         let sum_d2: f64 = found
             .pairs()
             .iter()

@@ -14,7 +14,9 @@ use rgm_geom::registrar::{Normalised, Refined};
 use rgm_geom::{Point3, PointCloud, RigidTransform, Vector3};
 use rgm_match::{hard_match, MatchConfig};
 use rgm_model::evaluate::evaluate_pair;
-use rgm_model::network::{Config, Edges, FeaturerCache, Mode, Rgm, RgmCache, Scoring};
+use rgm_model::network::{
+    Config, Edges, FeaturerCache, Mode, Rgm, RgmCache, Scoring, TestStatistics,
+};
 use rgm_model::{Method, MethodError, PipelineConfig, Registrar, RgmRegistrar};
 
 /// RGM as `rgm register --method rgm --no-refine` runs it: in the network's frame.
@@ -179,29 +181,28 @@ fn the_reverse_pass_reusing_block_0_is_bit_identical_to_running_it() {
     let (x, y) = (tensor("input.x"), tensor("input.y"));
     // Unequal sizes, so a transposed shape cannot pass unnoticed.
     let y = y.slice(ndarray::s![..40, ..]).to_owned();
-    for mut network in variants {
+    for network in variants {
         let (mut fx, mut fy) = (FeaturerCache::default(), FeaturerCache::default());
         network.features(x.view(), &mut fx).unwrap();
         network.features(y.view(), &mut fy).unwrap();
         let (fx, fy) = (fx.features.view(), fy.features.view());
-        let (mut forward, mut plain, mut reused) = (
-            RgmCache::default(),
-            RgmCache::default(),
-            RgmCache::default(),
-        );
-        network.forward_from_features(fx, fy, &mut forward).unwrap();
-        network.forward_from_features(fy, fx, &mut plain).unwrap();
-        network.forward_reverse(&forward, &mut reused).unwrap();
-        assert_eq!(reused.c_soft().dim(), (40, 48));
-        assert_eq!(plain.c_soft(), reused.c_soft());
+        let (mut forward, mut reverse) = (RgmCache::default(), RgmCache::default());
+        let (mut plain_forward, mut plain_reverse) = (RgmCache::default(), RgmCache::default());
+        network
+            .forward_both(fx, fy, &mut forward, &mut reverse)
+            .unwrap();
+        network
+            .forward_from_features(fx, fy, &mut plain_forward)
+            .unwrap();
+        network
+            .forward_from_features(fy, fx, &mut plain_reverse)
+            .unwrap();
+        assert_eq!(reverse.c_soft().dim(), (40, 48));
+        assert_eq!(plain_forward.c_soft(), forward.c_soft());
+        assert_eq!(plain_reverse.c_soft(), reverse.c_soft());
         // Not merely the transpose of the forward's C̃ (Sinkhorn's rows-first order).
-        assert_ne!(forward.c_soft().t(), reused.c_soft());
+        assert_ne!(forward.c_soft().t(), reverse.c_soft());
     }
-    let network = Rgm::<f32>::load(Config::tiny(), &fixture()).unwrap();
-    let err = network
-        .forward_reverse(&RgmCache::default(), &mut RgmCache::default())
-        .unwrap_err();
-    assert!(err.to_string().contains("no forward pass"), "{err}");
 }
 
 #[test]
@@ -469,4 +470,31 @@ fn clouds_smaller_than_the_neighbourhood_are_a_clear_error() {
             needed: 5
         }
     ));
+}
+
+#[test]
+fn one_two_and_three_threads_register_to_the_same_bits() {
+    // The chains, the clouds' features and each block's sides run side by side on a pool of
+    // several threads; every piece is computed as on one thread. Both batch-norm statistics.
+    let (source, target) = fixture_pair();
+    for statistics in [TestStatistics::Running, TestStatistics::Cloud] {
+        let mut network = Rgm::<f32>::load(Config::tiny(), &fixture()).unwrap();
+        network.featurer.test_statistics = statistics;
+        let outcomes: Vec<_> = [1, 2, 3]
+            .map(|threads| {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let mut registrar = normalised(network.clone(), PipelineConfig::default());
+                let found = pool
+                    .install(|| registrar.register(&source, &target))
+                    .unwrap();
+                (found.result, found.correspondences)
+            })
+            .into();
+        assert!(!outcomes[0].1.is_empty());
+        assert_eq!(outcomes[0], outcomes[1], "{statistics:?}");
+        assert_eq!(outcomes[0], outcomes[2], "{statistics:?}");
+    }
 }

@@ -3,7 +3,7 @@
 
 use super::config::{Config, Edges, Scoring};
 use super::transformer::{EdgeTransformer, EdgeTransformerCache};
-use super::{Element, Result};
+use super::{both, shaped, zeroed, Element, Result};
 use ndarray::{s, Array2, ArrayView2, ArrayViewMut2};
 use rand::Rng;
 use rgm_match::{
@@ -45,8 +45,10 @@ pub struct Block<T: Element> {
     sinkhorn: SinkhornConfig,
 }
 
-/// One cloud's side of a block pass (rows R = N for X, M for Y).
-#[derive(Clone, Debug)]
+/// One cloud's side of a block pass (rows R = N for X, M for Y). The cross convolution's and
+/// the backward's buffers are empty until a pass needs them, so that a test-time pass does not
+/// touch their memory.
+#[derive(Clone, Debug, Default)]
 struct Side<T> {
     scores: Array2<T>,   // (R, R) T Tᵀ / √C
     adj: Array2<T>,      // (R, R) E = softmax_rows(scores)
@@ -67,25 +69,16 @@ struct Side<T> {
 }
 
 impl<T: Element> Side<T> {
-    fn new(r: usize, c: usize, q: usize) -> Self {
+    fn new(r: usize, q: usize) -> Self {
         let z = |rows, cols| Array2::zeros((rows, cols));
         Self {
             scores: z(r, r),
             adj: z(r, r),
             adj_norm: z(r, r),
-            l1: L1NormalizeCache::default(),
             a_adj: z(r, q),
             a_self: z(r, q),
             fp: z(r, q),
-            cat: z(r, 2 * q),
-            next: z(r, q),
-            dt: z(r, c),
-            dscores: z(r, r),
-            dadj: z(r, r),
-            dadj_norm: z(r, r),
-            dh: z(r, q),
-            dfp: z(r, q),
-            dcat: z(r, 2 * q),
+            ..Default::default()
         }
     }
 }
@@ -104,30 +97,30 @@ pub struct BlockCache<T> {
     sinkhorn: SinkhornCache<T>,
     /// (N, M) the block's soft correspondence C̃.
     pub c_soft: Array2<T>,
-    dc: Array2<T>,      // (N, M)
-    ds_norm: Array2<T>, // (N, M)
-    ds: Array2<T>,      // (N, M)
+    dc: Array2<T>,      // (N, M), empty until a backward
+    ds_norm: Array2<T>, // (N, M), empty until a backward
+    ds: Array2<T>,      // (N, M), empty until a backward
 }
 
 impl<T: Element> BlockCache<T> {
-    /// Buffers for block `b` of `config` on N source and M target points.
-    pub fn new(config: &Config, b: usize, n: usize, m: usize) -> Self {
-        let (c, q) = (config.block_width(b), config.q);
+    /// Buffers for a block of `config` on N source and M target points.
+    pub fn new(config: &Config, n: usize, m: usize) -> Self {
+        let q = config.q;
         let sinkhorn = sinkhorn_config(config);
         Self {
             dims: (n, m),
             transformer: EdgeTransformerCache::default(),
-            x: Side::new(n, c, q),
-            y: Side::new(m, c, q),
+            x: Side::new(n, q),
+            y: Side::new(m, q),
             s: Array2::zeros((n, m)),
             s_norm: Array2::zeros((n, m)),
             affinity: AffinityCache::new(n, q),
             inst_norm: InstNormCache::default(),
             sinkhorn: SinkhornCache::new(n, m, &sinkhorn),
             c_soft: Array2::zeros((n, m)),
-            dc: Array2::zeros((n, m)),
-            ds_norm: Array2::zeros((n, m)),
-            ds: Array2::zeros((n, m)),
+            dc: Array2::default((0, 0)),
+            ds_norm: Array2::default((0, 0)),
+            ds: Array2::default((0, 0)),
         }
     }
 
@@ -174,8 +167,8 @@ fn edges_forward<T: Element>(side: &mut Side<T>, t: ArrayView2<'_, T>) -> Result
 /// Adds into `side.dt` the gradient of [`edges_forward`] given `side.dadj_norm`:
 /// Z = T Tᵀ / √C  →  dT = (dZ + dZᵀ) T / √C.
 fn edges_backward<T: Element>(side: &mut Side<T>, t: ArrayView2<'_, T>) -> Result<()> {
-    side.dadj.fill(T::zero());
-    side.dscores.fill(T::zero());
+    zeroed(&mut side.dadj, side.adj.dim());
+    zeroed(&mut side.dscores, side.adj.dim());
     l1_normalize_columns_backward(
         side.dadj.view_mut(),
         side.dadj_norm.view(),
@@ -244,6 +237,8 @@ impl<T: Element> Block<T> {
     ) -> Result<()> {
         // F'_adj = Ê A, A = ReLU(H)  →  dÊ = dF' Aᵀ, dH = (Êᵀ dF') ⊙ [A > 0] (ReLU's backward in
         // the product's write-back)
+        shaped(&mut side.dadj_norm, side.adj.dim());
+        shaped(&mut side.dh, side.a_adj.dim());
         let dfp = side.dfp.view();
         mat_mul(
             T::one(),
@@ -262,23 +257,27 @@ impl<T: Element> Block<T> {
     }
 
     /// Runs the block on F_X (N, C), F_Y (M, C) into `cache` (C̃ and the output features).
+    /// At `test_time` (no backward follows) the two clouds' edges and graph convolutions run
+    /// side by side on rayon's pool.
     pub fn forward(
         &self,
         fx: ArrayView2<'_, T>,
         fy: ArrayView2<'_, T>,
         cache: &mut BlockCache<T>,
+        test_time: bool,
     ) -> Result<()> {
-        self.graph_forward(fx, fy, cache)?;
+        self.graph_forward(fx, fy, cache, test_time)?;
         self.match_forward(cache)
     }
 
-    /// The block on (Y, X) after its pass on (X, Y) in `swapped`, into `cache` (sized (M, N)):
-    /// what `forward(fy, fx, cache)` gives, bit for bit, without recomputing the edges and the
-    /// graph convolutions. They see one cloud and the other's encoding through the same
-    /// weights in both directions, so the (Y, X) pass's F'_Y, F'_X are the (X, Y) pass's; the
-    /// scoring, Sinkhorn and cross convolution run anew (Sinkhorn normalises rows first, so
-    /// its result on Sᵀ is not the transpose of its result on S). No backward follows.
-    pub fn forward_swapped(
+    /// Takes into `cache` (sized (M, N)) the graph features of the block's pass on (X, Y) in
+    /// `swapped`, for a pass on (Y, X): after it, [`Block::match_forward`] gives what
+    /// `forward(fy, fx, cache)` gives, bit for bit, without recomputing the edges and the graph
+    /// convolutions. They see one cloud and the other's encoding through the same weights in
+    /// both directions, so the (Y, X) pass's F'_Y, F'_X are the (X, Y) pass's; the scoring,
+    /// Sinkhorn and cross convolution run anew (Sinkhorn normalises rows first, so its result
+    /// on Sᵀ is not the transpose of its result on S). No backward follows.
+    pub fn graph_from_swapped(
         &self,
         swapped: &BlockCache<T>,
         cache: &mut BlockCache<T>,
@@ -286,7 +285,7 @@ impl<T: Element> Block<T> {
         let (n, m) = swapped.dims;
         if cache.dims != (m, n) {
             return Err(rgm_nn::NnError::Shape {
-                op: "rgm block forward_swapped",
+                op: "rgm block graph_from_swapped",
                 what: "cache",
                 expected: vec![m, n],
                 got: vec![cache.dims.0, cache.dims.1],
@@ -295,35 +294,45 @@ impl<T: Element> Block<T> {
         }
         cache.x.fp.assign(&swapped.y.fp);
         cache.y.fp.assign(&swapped.x.fp);
-        self.match_forward(cache)
+        Ok(())
     }
 
-    /// Edges and intra-graph convolutions: F'_X (N, Q), F'_Y (M, Q) into `cache`.
-    fn graph_forward(
+    /// Edges and intra-graph convolutions: F'_X (N, Q), F'_Y (M, Q) into `cache`; at
+    /// `test_time` (no backward follows) the two sides side by side on rayon's pool.
+    pub fn graph_forward(
         &self,
         fx: ArrayView2<'_, T>,
         fy: ArrayView2<'_, T>,
         cache: &mut BlockCache<T>,
+        test_time: bool,
     ) -> Result<()> {
-        let (x, y) = (&mut cache.x, &mut cache.y);
-        match &self.transformer {
+        let edges = match &self.transformer {
             Some(tf) => {
-                tf.forward(fx, fy, &mut cache.transformer)?;
-                edges_forward(x, cache.transformer.tx().view())?;
-                edges_forward(y, cache.transformer.ty().view())?;
+                tf.forward(fx, fy, &mut cache.transformer, test_time)?;
+                Some((cache.transformer.tx().view(), cache.transformer.ty().view()))
             }
-            None => {
-                full_adjacency(&mut x.adj_norm);
-                full_adjacency(&mut y.adj_norm);
+            None => None,
+        };
+        // One side: its edges (the transformer's T, or all of them), then its convolution.
+        let side = |side: &mut Side<T>, f: ArrayView2<'_, T>, t: Option<ArrayView2<'_, T>>| {
+            match t {
+                Some(t) => edges_forward(side, t)?,
+                None => full_adjacency(&mut side.adj_norm),
             }
-        }
-        self.gconv_forward(x, fx)?;
-        self.gconv_forward(y, fy)
+            self.gconv_forward(side, f)
+        };
+        let (x, y) = (&mut cache.x, &mut cache.y);
+        let (a, b) = both(
+            test_time,
+            || side(x, fx, edges.map(|(tx, _)| tx)),
+            || side(y, fy, edges.map(|(_, ty)| ty)),
+        );
+        a.and(b)
     }
 
     /// Scoring of F'_X, F'_Y (AIS or Var1), Sinkhorn → C̃, and the cross-graph convolution
     /// when the block has one, all in `cache`.
-    fn match_forward(&self, cache: &mut BlockCache<T>) -> Result<()> {
+    pub fn match_forward(&self, cache: &mut BlockCache<T>) -> Result<()> {
         let (x, y) = (&mut cache.x, &mut cache.y);
         match &self.scorer {
             Scorer::Ais {
@@ -358,6 +367,10 @@ impl<T: Element> Block<T> {
         if let Some(cross) = &self.cross {
             // next_X = cross(F'_X ⊕ C̃ F'_Y), next_Y = cross(F'_Y ⊕ C̃ᵀ F'_X)
             let q = x.fp.ncols();
+            for side in [&mut *x, &mut *y] {
+                shaped(&mut side.cat, (side.fp.nrows(), 2 * q));
+                shaped(&mut side.next, side.fp.dim());
+            }
             x.cat.slice_mut(s![.., ..q]).assign(&x.fp);
             y.cat.slice_mut(s![.., ..q]).assign(&y.fp);
             matmul_forward(
@@ -388,17 +401,17 @@ impl<T: Element> Block<T> {
         cache: &mut BlockCache<T>,
     ) -> Result<()> {
         let (x, y) = (&mut cache.x, &mut cache.y);
-        x.dfp.fill(T::zero());
-        y.dfp.fill(T::zero());
-        match dc_soft {
-            Some(d) => cache.dc.assign(&d),
-            None => cache.dc.fill(T::zero()),
+        zeroed(&mut x.dfp, x.fp.dim());
+        zeroed(&mut y.dfp, y.fp.dim());
+        zeroed(&mut cache.dc, cache.dims);
+        if let Some(d) = dc_soft {
+            cache.dc.assign(&d);
         }
         match (&mut self.cross, dnext) {
             (Some(cross), Some((dnx, dny))) => {
                 let q = x.fp.ncols();
                 for (side, dnext) in [(&mut *y, dny), (&mut *x, dnx)] {
-                    side.dcat.fill(T::zero());
+                    zeroed(&mut side.dcat, side.cat.dim());
                     cross.backward(side.dcat.view_mut(), dnext, side.cat.view())?;
                     side.dfp += &side.dcat.slice(s![.., ..q]);
                 }
@@ -425,7 +438,7 @@ impl<T: Element> Block<T> {
             }
             (_, None) => {}
         }
-        cache.ds_norm.fill(T::zero());
+        zeroed(&mut cache.ds_norm, cache.dims);
         sinkhorn_backward(
             cache.ds_norm.view_mut(),
             cache.dc.view(),
@@ -438,7 +451,7 @@ impl<T: Element> Block<T> {
                 affinity,
                 inst_norm,
             } => {
-                cache.ds.fill(T::zero());
+                zeroed(&mut cache.ds, cache.dims);
                 inst_norm.backward(
                     cache.ds.view_mut(),
                     cache.ds_norm.view(),
@@ -465,8 +478,8 @@ impl<T: Element> Block<T> {
         self.gconv_backward(dfy.view_mut(), y, fy)?;
         self.gconv_backward(dfx.view_mut(), x, fx)?;
         if let Some(tf) = &mut self.transformer {
-            x.dt.fill(T::zero());
-            y.dt.fill(T::zero());
+            zeroed(&mut x.dt, cache.transformer.tx().dim());
+            zeroed(&mut y.dt, cache.transformer.ty().dim());
             edges_backward(y, cache.transformer.ty().view())?;
             edges_backward(x, cache.transformer.tx().view())?;
             tf.backward(dfx, dfy, x.dt.view(), y.dt.view(), &mut cache.transformer)?;

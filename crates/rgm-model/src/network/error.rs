@@ -12,9 +12,6 @@ pub enum NetworkError {
     /// `backward` got a cache that no forward filled, or a gradient of the wrong shape.
     #[error("rgm backward: {why}")]
     Backward { why: String },
-    /// `forward_reverse` got a cache that no forward pass filled.
-    #[error("rgm forward_reverse: the given cache holds no forward pass")]
-    NoForwardPass,
     /// A weight tensor the network needs is missing.
     #[error("weights: tensor {name:?} is missing")]
     MissingTensor { name: String },

@@ -4,7 +4,7 @@
 //! batch norm and ReLU on them gives the edge features. Output: node ⊕ edge per point.
 
 use super::{shaped, zeroed, Element, Mode, Result};
-use ndarray::{s, Array2, ArrayView2};
+use ndarray::{s, Array2, ArrayView2, ArrayViewMut2};
 use rand::Rng;
 use rgm_geom::{knn_graph, Point3};
 use rgm_nn::param::{join_name, ParamView, ParamViewMut};
@@ -79,16 +79,53 @@ impl<T: Element> PointFeaturer<T> {
 
     /// Runs one cloud `points` (N, 3) into `cache.features` (N, ΣC + E). Training mode
     /// normalises with this cloud's statistics and updates the running ones; evaluation mode
-    /// uses [`PointFeaturer::test_statistics`].
+    /// is [`PointFeaturer::forward_eval`].
     pub fn forward(
         &mut self,
         points: ArrayView2<'_, T>,
         mode: Mode,
         cache: &mut FeaturerCache<T>,
     ) -> Result<()> {
-        let (n, k, node) = (points.nrows(), self.k, self.node_width());
-        let training = mode == Mode::Train;
-        let cloud_statistics = training || self.test_statistics == TestStatistics::Cloud;
+        match mode {
+            Mode::Train => {
+                let bns = &mut self.bns;
+                Self::run(self.k, &self.convs, points, cache, |i, out, inp, bn| {
+                    bns[i].forward(out, inp, true, bn)
+                })
+            }
+            Mode::Eval => self.forward_eval(points, cache),
+        }
+    }
+
+    /// The evaluation-mode pass of [`PointFeaturer::forward`], which changes nothing in the
+    /// extractor, so that clouds can run side by side: batch norm with
+    /// [`PointFeaturer::test_statistics`].
+    pub fn forward_eval(
+        &self,
+        points: ArrayView2<'_, T>,
+        cache: &mut FeaturerCache<T>,
+    ) -> Result<()> {
+        let cloud_statistics = self.test_statistics == TestStatistics::Cloud;
+        Self::run(self.k, &self.convs, points, cache, |i, out, inp, bn| {
+            self.bns[i].normalise(out, inp, cloud_statistics, bn)
+        })
+    }
+
+    /// The pass of [`PointFeaturer::forward`] with `normalise(i, out, inp, cache)` as batch
+    /// norm `i`.
+    fn run(
+        k: usize,
+        convs: &[Linear<T>],
+        points: ArrayView2<'_, T>,
+        cache: &mut FeaturerCache<T>,
+        mut normalise: impl FnMut(
+            usize,
+            ArrayViewMut2<'_, T>,
+            ArrayView2<'_, T>,
+            &mut BatchNormCache<T>,
+        ) -> rgm_nn::Result<()>,
+    ) -> Result<()> {
+        let (n, node) = (points.nrows(), convs[4].c_in());
         let cloud: Vec<Point3<f64>> = points
             .rows()
             .into_iter()
@@ -97,7 +134,7 @@ impl<T: Element> PointFeaturer<T> {
         cache.idx = Array2::from_shape_vec((n, k), knn_graph(&cloud, k)?)
             .expect("knn_graph returns N*K indices");
         let rows = |i: usize| if i < 4 { n * k } else { n };
-        let widths: Vec<usize> = self.convs.iter().map(|c| c.c_out()).collect();
+        let widths: Vec<usize> = convs.iter().map(|c| c.c_out()).collect();
         cache.act.resize_with(5, Default::default);
         cache.pre.resize_with(5, Default::default);
         cache.normed.resize_with(5, Default::default);
@@ -117,21 +154,13 @@ impl<T: Element> PointFeaturer<T> {
             } else {
                 cache.features.slice(s![.., ..node])
             };
-            self.convs[i].forward(cache.pre[i].view_mut(), inp)?;
-            // Cloud statistics at test time: a training-mode pass with momentum 0, which leaves
-            // the running statistics exactly as they are.
-            let momentum = self.bns[i].momentum;
-            if !training {
-                self.bns[i].momentum = T::zero();
-            }
-            let normed = self.bns[i].forward(
+            convs[i].forward(cache.pre[i].view_mut(), inp)?;
+            normalise(
+                i,
                 cache.normed[i].view_mut(),
                 cache.pre[i].view(),
-                cloud_statistics,
                 &mut cache.bn[i],
-            );
-            self.bns[i].momentum = momentum;
-            normed?;
+            )?;
             if i < 4 {
                 let act = &mut rest[0];
                 shaped(act, (n * k, widths[i]));

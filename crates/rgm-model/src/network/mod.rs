@@ -71,6 +71,34 @@ pub(crate) fn shaped<T: Element>(buf: &mut Array2<T>, shape: (usize, usize)) {
     }
 }
 
+/// `a` then `b` on this thread, or side by side on rayon's pool when `side_by_side`, each in
+/// the calling thread's precision of matrix products (a per-thread setting). The two must be
+/// independent: each is computed as on one thread, so the results are the same bits either way.
+pub(crate) fn both<A, B>(
+    side_by_side: bool,
+    a: impl FnOnce() -> A + Send,
+    b: impl FnOnce() -> B + Send,
+) -> (A, B)
+where
+    A: Send,
+    B: Send,
+{
+    if !side_by_side {
+        return (a(), b());
+    }
+    let current = precision::current();
+    rayon::join(
+        || {
+            let _precision = precision::enter(current);
+            a()
+        },
+        || {
+            let _precision = precision::enter(current);
+            b()
+        },
+    )
+}
+
 /// The RGM network: `pointfeaturer`, then L [`Block`]s.
 #[derive(Clone, Debug)]
 pub struct Rgm<T: Element> {
@@ -105,14 +133,6 @@ impl<T> RgmCache<T> {
             None => ArrayView2::from_shape((0, 0), &[]).expect("empty"),
         }
     }
-}
-
-/// What block 0 starts from.
-enum BlocksInput<'a, T> {
-    /// Local features F_X (N, C), F_Y (M, C).
-    Features(ArrayView2<'a, T>, ArrayView2<'a, T>),
-    /// Block 0 of the pass on the swapped pair, whose graph features it reuses.
-    Swapped(&'a BlockCache<T>),
 }
 
 fn check_cloud<T: Element>(what: &'static str, p: ArrayView2<'_, T>) -> Result<()> {
@@ -208,35 +228,67 @@ impl<T: Element> Rgm<T> {
         self.featurer.forward(x, mode, &mut cache.fx)?;
         self.featurer.forward(y, mode, &mut cache.fy)?;
         cache.from_features = false;
-        self.forward_blocks(
-            BlocksInput::Features(cache.fx.features.view(), cache.fy.features.view()),
-            &mut cache.blocks,
-        )
+        let (fx, fy) = (cache.fx.features.view(), cache.fy.features.view());
+        self.forward_blocks(fx, fy, &mut cache.blocks, false)
     }
 
     /// The local features (N, ΣC + E) of one cloud `points` (N, 3) at test time, into
     /// `cache.features`. In evaluation mode they depend on this cloud alone, so a cloud that
     /// meets several partners (the target over every pass, both clouds in the reverse pass) is
     /// run once; [`Rgm::forward_from_features`] then gives the same C̃ as [`Rgm::forward`].
-    pub fn features(
-        &mut self,
-        points: ArrayView2<'_, T>,
-        cache: &mut FeaturerCache<T>,
-    ) -> Result<()> {
+    pub fn features(&self, points: ArrayView2<'_, T>, cache: &mut FeaturerCache<T>) -> Result<()> {
         check_cloud("points", points)?;
         let _precision = precision::enter(self.precision);
-        self.featurer.forward(points, Mode::Eval, cache)
+        self.featurer.forward_eval(points, cache)
     }
 
     /// The blocks of an evaluation-mode forward on the local features `fx` (N, ΣC + E) and
-    /// `fy` (M, ΣC + E) made by [`Rgm::features`]; C̃ is then [`RgmCache::c_soft`]. No backward
-    /// follows such a pass.
+    /// `fy` (M, ΣC + E) made by [`Rgm::features`]; C̃ is then [`RgmCache::c_soft`]. No
+    /// backward follows such a pass: each block's two sides run side by side on rayon's pool,
+    /// and the attention weights are not kept.
     pub fn forward_from_features(
         &self,
         fx: ArrayView2<'_, T>,
         fy: ArrayView2<'_, T>,
         cache: &mut RgmCache<T>,
     ) -> Result<()> {
+        self.check_features(fx, fy)?;
+        cache.from_features = true;
+        self.forward_blocks(fx, fy, &mut cache.blocks, true)
+    }
+
+    /// The pass (X, Y) on `fx`, `fy` into `forward` and the reverse pass (Y, X) into `reverse`:
+    /// what [`Rgm::forward_from_features`] gives for each, bit for bit, with block 0's edges
+    /// and graph convolutions (its transformer, the widest layers) computed once and the
+    /// reverse pass's taken from the forward's ([`Block::graph_from_swapped`] says why that is
+    /// exact). The two passes then run side by side on rayon's pool. No backward follows.
+    pub fn forward_both(
+        &self,
+        fx: ArrayView2<'_, T>,
+        fy: ArrayView2<'_, T>,
+        forward: &mut RgmCache<T>,
+        reverse: &mut RgmCache<T>,
+    ) -> Result<()> {
+        self.check_features(fx, fy)?;
+        let _precision = precision::enter(self.precision);
+        let (n, m) = (fx.nrows(), fy.nrows());
+        for (cache, dims) in [(&mut *forward, (n, m)), (&mut *reverse, (m, n))] {
+            cache.from_features = true;
+            self.size_blocks(&mut cache.blocks, dims);
+        }
+        let first = &self.blocks[0];
+        first.graph_forward(fx, fy, &mut forward.blocks[0], true)?;
+        first.graph_from_swapped(&forward.blocks[0], &mut reverse.blocks[0])?;
+        let (a, b) = both(
+            true,
+            || self.blocks_after_graph(&mut forward.blocks, true),
+            || self.blocks_after_graph(&mut reverse.blocks, true),
+        );
+        a.and(b)
+    }
+
+    /// `fx` and `fy` are local features of the width block 0 reads.
+    fn check_features(&self, fx: ArrayView2<'_, T>, fy: ArrayView2<'_, T>) -> Result<()> {
         let width = self.config.block_width(0);
         for (what, f) in [("fx", fx.view()), ("fy", fy.view())] {
             if f.ncols() != width {
@@ -249,56 +301,41 @@ impl<T: Element> Rgm<T> {
                 .into());
             }
         }
-        cache.from_features = true;
-        self.forward_blocks(
-            BlocksInput::Features(fx.view(), fy.view()),
-            &mut cache.blocks,
-        )
+        Ok(())
     }
 
-    /// The reverse pass (Y, X) of the pass (X, Y) held in `forward`, into `reverse`: the C̃
-    /// (M, N) that [`Rgm::forward_from_features`]`(fy, fx)` gives, bit for bit, with block 0's
-    /// edges and graph convolutions (its transformer, the widest layers) taken from `forward`
-    /// instead of recomputed ([`Block::forward_swapped`] says why that is exact). No backward
-    /// follows such a pass.
-    pub fn forward_reverse(&self, forward: &RgmCache<T>, reverse: &mut RgmCache<T>) -> Result<()> {
-        let Some(first) = forward.blocks.first() else {
-            return Err(NetworkError::NoForwardPass);
-        };
-        reverse.from_features = true;
-        self.forward_blocks(BlocksInput::Swapped(first), &mut reverse.blocks)
-    }
-
-    /// The L blocks on `input`, into `blocks` (rebuilt when N or M change).
-    fn forward_blocks(
-        &self,
-        input: BlocksInput<'_, T>,
-        blocks: &mut Vec<BlockCache<T>>,
-    ) -> Result<()> {
-        let _precision = precision::enter(self.precision);
-        let (n, m) = match &input {
-            BlocksInput::Features(fx, fy) => (fx.nrows(), fy.nrows()),
-            BlocksInput::Swapped(first) => (first.dims().1, first.dims().0),
-        };
-        if blocks.len() != self.blocks.len() || blocks.first().map(|b| b.dims()) != Some((n, m)) {
+    /// `blocks` sized for the L blocks on (N, M) = `dims` (rebuilt when N or M change).
+    fn size_blocks(&self, blocks: &mut Vec<BlockCache<T>>, dims: (usize, usize)) {
+        if blocks.len() != self.blocks.len() || blocks.first().map(|b| b.dims()) != Some(dims) {
             *blocks = (0..self.blocks.len())
-                .map(|b| BlockCache::new(&self.config, b, n, m))
+                .map(|_| BlockCache::new(&self.config, dims.0, dims.1))
                 .collect();
         }
-        for (b, block) in self.blocks.iter().enumerate() {
+    }
+
+    /// The L blocks on `fx` (N, C), `fy` (M, C), into `blocks`; at `test_time` no backward
+    /// follows ([`Block::forward`]).
+    fn forward_blocks(
+        &self,
+        fx: ArrayView2<'_, T>,
+        fy: ArrayView2<'_, T>,
+        blocks: &mut Vec<BlockCache<T>>,
+        test_time: bool,
+    ) -> Result<()> {
+        let _precision = precision::enter(self.precision);
+        self.size_blocks(blocks, (fx.nrows(), fy.nrows()));
+        self.blocks[0].graph_forward(fx, fy, &mut blocks[0], test_time)?;
+        self.blocks_after_graph(blocks, test_time)
+    }
+
+    /// The rest of the L blocks once block 0's graph features are in `blocks[0]`: its
+    /// scoring, Sinkhorn and cross convolution, then blocks 1 to L − 1.
+    fn blocks_after_graph(&self, blocks: &mut [BlockCache<T>], test_time: bool) -> Result<()> {
+        self.blocks[0].match_forward(&mut blocks[0])?;
+        for b in 1..self.blocks.len() {
             let (done, rest) = blocks.split_at_mut(b);
-            match (done.last(), &input) {
-                (Some(prev), _) => {
-                    let (fx, fy) = prev.outputs(self.blocks[b - 1].cross.is_some());
-                    block.forward(fx, fy, &mut rest[0])?;
-                }
-                (None, BlocksInput::Features(fx, fy)) => {
-                    block.forward(fx.view(), fy.view(), &mut rest[0])?
-                }
-                (None, BlocksInput::Swapped(first)) => {
-                    block.forward_swapped(first, &mut rest[0])?
-                }
-            }
+            let (fx, fy) = done[b - 1].outputs(self.blocks[b - 1].cross.is_some());
+            self.blocks[b].forward(fx, fy, &mut rest[0], test_time)?;
         }
         Ok(())
     }

@@ -2,7 +2,7 @@
 //! (the annotated transformer's, one layer each, no dropout), run in both directions with the
 //! same weights: T_X = decoder(X, encoder(Y)), T_Y = decoder(Y, encoder(X)).
 
-use super::{shaped, zeroed, Element, Result};
+use super::{both, shaped, zeroed, Element, Result};
 use ndarray::{Array2, ArrayView2, ArrayViewMut2};
 use rand::Rng;
 use rgm_nn::param::{join_name, ParamView, ParamViewMut};
@@ -72,12 +72,14 @@ impl<T: Element> Stack<T> {
     }
 
     /// `x` (R, C) through the stack into `cache.out`; `memory` (R_m, C) is the encoder output
-    /// a decoder attends to (ignored by an encoder).
+    /// a decoder attends to (ignored by an encoder). At `test_time` no backward follows, and
+    /// the attention weights are not kept.
     pub fn forward(
         &self,
         x: ArrayView2<'_, T>,
         memory: ArrayView2<'_, T>,
         cache: &mut StackCache<T>,
+        test_time: bool,
     ) -> Result<()> {
         let subs = self.sublayer_norms.len();
         let shape = x.dim();
@@ -97,15 +99,19 @@ impl<T: Element> Stack<T> {
             )?;
             let (normed, out) = (cache.normed[i].view(), cache.dx.view_mut());
             match self.op(i) {
-                Op::SelfAttention => {
-                    self.self_attn
-                        .forward(out, normed, normed, &mut cache.attn[0])?
-                }
-                Op::CrossAttention => self.src_attn.as_ref().expect("decoder").forward(
+                Op::SelfAttention => self.self_attn.forward_keeping(
+                    out,
+                    normed,
+                    normed,
+                    &mut cache.attn[0],
+                    !test_time,
+                )?,
+                Op::CrossAttention => self.src_attn.as_ref().expect("decoder").forward_keeping(
                     out,
                     normed,
                     memory,
                     &mut cache.attn[1],
+                    !test_time,
                 )?,
                 Op::FeedForward => self.feed_forward.forward(out, normed, &mut cache.ff)?,
             }
@@ -260,20 +266,30 @@ impl<T: Element> EdgeTransformer<T> {
     }
 
     /// T_X = decoder(F_X, encoder(F_Y)), T_Y = decoder(F_Y, encoder(F_X)).
-    /// `fx`: (N, C), `fy`: (M, C).
+    /// `fx`: (N, C), `fy`: (M, C). At `test_time` (no backward follows) the two encoders run
+    /// side by side on rayon's pool, then the two decoders.
     pub fn forward(
         &self,
         fx: ArrayView2<'_, T>,
         fy: ArrayView2<'_, T>,
         cache: &mut EdgeTransformerCache<T>,
+        test_time: bool,
     ) -> Result<()> {
-        self.encoder.forward(fx, fx, &mut cache.enc_x)?;
-        self.encoder.forward(fy, fy, &mut cache.enc_y)?;
-        self.decoder
-            .forward(fx, cache.enc_y.out.view(), &mut cache.dec_x)?;
-        self.decoder
-            .forward(fy, cache.enc_x.out.view(), &mut cache.dec_y)?;
-        Ok(())
+        let (enc_x, enc_y) = (&mut cache.enc_x, &mut cache.enc_y);
+        let (a, b) = both(
+            test_time,
+            || self.encoder.forward(fx, fx, enc_x, test_time),
+            || self.encoder.forward(fy, fy, enc_y, test_time),
+        );
+        a.and(b)?;
+        let (mem_x, mem_y) = (cache.enc_y.out.view(), cache.enc_x.out.view());
+        let (dec_x, dec_y) = (&mut cache.dec_x, &mut cache.dec_y);
+        let (a, b) = both(
+            test_time,
+            || self.decoder.forward(fx, mem_x, dec_x, test_time),
+            || self.decoder.forward(fy, mem_y, dec_y, test_time),
+        );
+        a.and(b)
     }
 
     /// Adds into `dfx` (N, C), `dfy` (M, C) the gradients given `dtx` (N, C), `dty` (M, C):

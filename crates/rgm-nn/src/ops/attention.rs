@@ -32,24 +32,38 @@ const ROW_BLOCK: usize = 128;
 
 /// The attention's independent pieces of work, as a parallel iterator: for each head and each
 /// block of [`ROW_BLOCK`] query rows, `(head, first row, the block's rows of per_head[head]
-/// (rows, Nk), the block's rows of head's columns of per_row (rows, dk))`.
+/// (rows, Nk) when there is per_head, the block's rows of head's columns of per_row (rows, dk))`.
 fn head_row_blocks<'a, T: Scalar>(
-    per_head: &'a mut Array3<T>,
+    per_head: Option<&'a mut Array3<T>>,
     per_row: &'a mut Array2<T>,
     dk: usize,
-) -> impl ParallelIterator<Item = (usize, usize, ArrayViewMut2<'a, T>, ArrayViewMut2<'a, T>)> {
+) -> impl ParallelIterator<
+    Item = (
+        usize,
+        usize,
+        Option<ArrayViewMut2<'a, T>>,
+        ArrayViewMut2<'a, T>,
+    ),
+> {
     let mut blocks = Vec::new();
-    for (head, (scores, columns)) in per_head
-        .outer_iter_mut()
-        .zip(per_row.axis_chunks_iter_mut(Axis(1), dk))
-        .enumerate()
-    {
-        let (mut scores, mut columns, mut r0) = (scores, columns, 0);
-        while scores.nrows() > ROW_BLOCK {
-            let (s, rest_s) = scores.split_at(Axis(0), ROW_BLOCK);
+    let mut per_head = per_head.map(|p| p.outer_iter_mut());
+    for (head, columns) in per_row.axis_chunks_iter_mut(Axis(1), dk).enumerate() {
+        let mut scores = per_head
+            .as_mut()
+            .map(|p| p.next().expect("one score matrix a head"));
+        let (mut columns, mut r0) = (columns, 0);
+        while columns.nrows() > ROW_BLOCK {
             let (c, rest_c) = columns.split_at(Axis(0), ROW_BLOCK);
+            let s = match scores {
+                Some(all) => {
+                    let (s, rest_s) = all.split_at(Axis(0), ROW_BLOCK);
+                    scores = Some(rest_s);
+                    Some(s)
+                }
+                None => None,
+            };
             blocks.push((head, r0, s, c));
-            (scores, columns, r0) = (rest_s, rest_c, r0 + ROW_BLOCK);
+            (columns, r0) = (rest_c, r0 + ROW_BLOCK);
         }
         blocks.push((head, r0, scores, columns));
     }
@@ -108,14 +122,31 @@ impl<T: Scalar> MultiHeadAttention<T> {
         kv_in: ArrayView2<'_, T>,
         cache: &mut AttentionCache<T>,
     ) -> Result<()> {
+        self.forward_keeping(out, q_in, kv_in, cache, true)
+    }
+
+    /// [`MultiHeadAttention::forward`], keeping the attention weights (H, Nq, Nk) for a
+    /// backward only when `keep`. Where no backward follows they are its largest buffer: each
+    /// block of query rows then has its own for the time it takes, so that a pass touches far
+    /// less fresh memory, and `cache.probs` is left empty (a backward is refused). The same
+    /// bits either way.
+    pub fn forward_keeping(
+        &self,
+        out: ArrayViewMut2<'_, T>,
+        q_in: ArrayView2<'_, T>,
+        kv_in: ArrayView2<'_, T>,
+        cache: &mut AttentionCache<T>,
+        keep: bool,
+    ) -> Result<()> {
         let (c, h) = (self.channels(), self.heads);
         let (nq, nk, dk) = (q_in.nrows(), kv_in.nrows(), c / h);
         ensure(&mut cache.q, (nq, c));
         ensure(&mut cache.k, (nk, c));
         ensure(&mut cache.v, (nk, c));
         ensure(&mut cache.heads, (nq, c));
-        if cache.probs.dim() != (h, nq, nk) {
-            cache.probs = Array3::zeros((h, nq, nk));
+        let probs_shape = if keep { (h, nq, nk) } else { (0, 0, 0) };
+        if cache.probs.dim() != probs_shape {
+            cache.probs = Array3::zeros(probs_shape);
         }
         self.query.forward(cache.q.view_mut(), q_in)?;
         self.key.forward(cache.k.view_mut(), kv_in)?;
@@ -126,23 +157,30 @@ impl<T: Scalar> MultiHeadAttention<T> {
         // over the cores (each entry is computed as by whole-matrix products, on any thread).
         let precision = precision::current();
         let (q, k, v) = (cache.q.view(), cache.k.view(), cache.v.view());
-        head_row_blocks(&mut cache.probs, &mut cache.heads, dk).for_each(
-            |(head, r0, mut p, mut heads)| {
-                let _precision = precision::enter(precision);
-                let (rows, cols) = (r0..r0 + p.nrows(), head * dk..(head + 1) * dk);
-                mat_mul(
-                    scale,
-                    &q.slice(s![rows, cols.clone()]),
-                    &k.slice(s![.., cols.clone()]).t(),
-                    T::zero(),
-                    &mut p,
-                );
-                for row in p.rows_mut() {
-                    softmax_slice(row.into_slice().expect("probs rows are contiguous"));
+        let probs = keep.then_some(&mut cache.probs);
+        head_row_blocks(probs, &mut cache.heads, dk).for_each(|(head, r0, mut kept, mut heads)| {
+            let _precision = precision::enter(precision);
+            let (rows, cols) = (r0..r0 + heads.nrows(), head * dk..(head + 1) * dk);
+            let mut own: Array2<T>; // (rows, Nk) when the weights are not kept
+            let mut p = match &mut kept {
+                Some(p) => p.view_mut(),
+                None => {
+                    own = Array2::zeros((heads.nrows(), nk));
+                    own.view_mut()
                 }
-                mat_mul(T::one(), &p, &v.slice(s![.., cols]), T::zero(), &mut heads);
-            },
-        );
+            };
+            mat_mul(
+                scale,
+                &q.slice(s![rows, cols.clone()]),
+                &k.slice(s![.., cols.clone()]).t(),
+                T::zero(),
+                &mut p,
+            );
+            for row in p.rows_mut() {
+                softmax_slice(row.into_slice().expect("probs rows are contiguous"));
+            }
+            mat_mul(T::one(), &p, &v.slice(s![.., cols]), T::zero(), &mut heads);
+        });
         self.output.forward(out, cache.heads.view())
     }
 
@@ -189,9 +227,10 @@ impl<T: Scalar> MultiHeadAttention<T> {
         let precision = precision::current();
         let (probs, d_o) = (cache.probs.view(), cache.dheads.view());
         let (k, v) = (cache.k.view(), cache.v.view());
-        head_row_blocks(&mut cache.dprobs, &mut cache.dq, dk).for_each(
-            |(head, r0, mut ds, mut dq)| {
+        head_row_blocks(Some(&mut cache.dprobs), &mut cache.dq, dk).for_each(
+            |(head, r0, ds, mut dq)| {
                 let _precision = precision::enter(precision);
+                let mut ds = ds.expect("the score gradients are given");
                 let (rows, cols) = (r0..r0 + ds.nrows(), head * dk..(head + 1) * dk);
                 mat_mul(
                     T::one(),

@@ -23,6 +23,7 @@ pub struct BatchNorm<T: Scalar> {
 #[derive(Clone, Debug, Default)]
 pub struct BatchNormCache<T> {
     pub mean: Array1<T>, // (C), batch mean (training) or running mean (evaluation)
+    pub var: Array1<T>,  // (C), the batch's biased variance (training only)
     pub rstd: Array1<T>, // (C), 1 / √(var + eps) of the same statistics
     pub training: bool,  // whether mean and rstd came from the batch
 }
@@ -50,9 +51,35 @@ impl<T: Scalar> BatchNorm<T> {
     /// `σ² R / (R − 1)`. Evaluation mode uses the running statistics. `out`, `inp`: (R, C).
     pub fn forward(
         &mut self,
-        mut out: ArrayViewMut2<'_, T>,
+        out: ArrayViewMut2<'_, T>,
         inp: ArrayView2<'_, T>,
         training: bool,
+        cache: &mut BatchNormCache<T>,
+    ) -> Result<()> {
+        self.normalise(out, inp, training, cache)?;
+        if training {
+            let rows = inp.nrows();
+            let unbias = T::from_f64(rows as f64) / T::from_f64((rows - 1) as f64);
+            let m = self.momentum;
+            Zip::from(&mut self.running_mean)
+                .and(&cache.mean)
+                .for_each(|r, &b| *r = (T::one() - m) * *r + m * b);
+            Zip::from(&mut self.running_var)
+                .and(&cache.var)
+                .for_each(|r, &v| *r = (T::one() - m) * *r + m * v * unbias);
+        }
+        Ok(())
+    }
+
+    /// [`BatchNorm::forward`] without the running statistics' update, through `&self`: with
+    /// the batch's statistics (`batch = true`, needs R ≥ 2) or the running ones. A network
+    /// that normalises each cloud by its own statistics at test time runs its clouds side by
+    /// side through this.
+    pub fn normalise(
+        &self,
+        mut out: ArrayViewMut2<'_, T>,
+        inp: ArrayView2<'_, T>,
+        batch: bool,
         cache: &mut BatchNormCache<T>,
     ) -> Result<()> {
         let (rows, c) = inp.dim();
@@ -65,10 +92,11 @@ impl<T: Scalar> BatchNorm<T> {
         check_shape("batch_norm forward", "out", out.shape(), &[rows, c])?;
         if cache.mean.len() != c {
             cache.mean = Array1::zeros(c);
+            cache.var = Array1::zeros(c);
             cache.rstd = Array1::zeros(c);
         }
-        cache.training = training;
-        if training {
+        cache.training = batch;
+        if batch {
             if rows < 2 {
                 return Err(NnError::InvalidArgument {
                     op: "batch_norm forward",
@@ -92,11 +120,7 @@ impl<T: Scalar> BatchNorm<T> {
                 mean.iter_mut().zip(row).for_each(|(m, &x)| *m += x);
             }
             mean.iter_mut().for_each(|s| *s /= rf);
-            // (C), holds the biased variance until the last line
-            let var = cache
-                .rstd
-                .as_slice_mut()
-                .expect("a new array is contiguous");
+            let var = cache.var.as_slice_mut().expect("a new array is contiguous");
             var.fill(T::zero());
             for row in x_rows() {
                 for ((v, &x), &m) in var.iter_mut().zip(row).zip(&*mean) {
@@ -104,15 +128,9 @@ impl<T: Scalar> BatchNorm<T> {
                 }
             }
             var.iter_mut().for_each(|s| *s /= rf);
-            let var = &mut cache.rstd;
-            let (m, unbias) = (self.momentum, rf / T::from_f64((rows - 1) as f64));
-            Zip::from(&mut self.running_mean)
-                .and(&cache.mean)
-                .for_each(|r, &b| *r = (T::one() - m) * *r + m * b);
-            Zip::from(&mut self.running_var)
-                .and(&*var)
-                .for_each(|r, &v| *r = (T::one() - m) * *r + m * v * unbias);
-            var.mapv_inplace(|v| T::one() / (v + self.eps).sqrt());
+            Zip::from(&mut cache.rstd)
+                .and(&cache.var)
+                .for_each(|r, &v| *r = T::one() / (v + self.eps).sqrt());
         } else {
             cache.mean.assign(&self.running_mean);
             Zip::from(&mut cache.rstd)
