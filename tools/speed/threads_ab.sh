@@ -1,16 +1,21 @@
 #!/usr/bin/env bash
 # rgm --threads 1 and 2 on one pair at a time: rgm register on every 10th partial test pair (10 pairs), --threads 1 and 2 alternated, 3 rounds.
 # Prints per thread count: the method's time_ms (from --json), the process's wall and CPU (user + sys) ms.
-# Run from the repository root; RGM=path picks the binary. On a loaded machine, `nice -n -10 bash tools/speed/threads_ab.sh`.
+# Run from the repository root; RGM=path picks the binary; PAIRS=DIR takes the pairs from a folder `rgm pairs`
+# wrote (its first 10), for a machine without the data. On a loaded machine, `nice -n -10 bash tools/speed/threads_ab.sh`.
 set -euo pipefail
 RGM=${RGM:-target/release/rgm}
 OUT=/tmp/threads-ab
 rm -rf $OUT; mkdir -p $OUT
-$RGM pairs --data ../shared/data/modelnet40_npy1024 --setting partial --every 10 --limit 10 --out $OUT/pairs > /dev/null
+if [ -n "${PAIRS:-}" ]; then
+  cp -r "$PAIRS" $OUT/pairs
+else
+  $RGM pairs --data ../shared/data/modelnet40_npy1024 --setting partial --every 10 --limit 10 --out $OUT/pairs > /dev/null
+fi
 python3 - "$RGM" "$OUT" <<'PY'
 import json, resource, subprocess, sys, time, statistics
 rgm, out = sys.argv[1], sys.argv[2]
-pairs = json.load(open(f"{out}/pairs/pairs.json"))["pairs"]
+pairs = json.load(open(f"{out}/pairs/pairs.json"))["pairs"][:10]
 rows = {1: [], 2: []}
 walls = {1: [], 2: []}
 cpus = {1: [], 2: []}
