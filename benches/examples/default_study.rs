@@ -4,8 +4,9 @@
 //! ```text
 //! cargo run --release -p rgm-benches --example default_study -- --data DIR \
 //!     [--setting partial] [--limit 300] [--stride 1] [--offset 0] [--split validation] \
-//!     [--frame native|centred] [--study choices|cascade|robustness] \
-//!     [--versions 'as they are,half size,twice the size,20000 points each']
+//!     [--frame native|centred] [--study choices|cascade|robustness|network] \
+//!     [--versions 'as they are,half size,twice the size,20000 points each'] \
+//!     [--variants '2/384/both,1/384/both,1/256/both,2/384/one'] [--json FILE]
 //! ```
 //!
 //! The pairs are `offset`, `offset + stride`, `offset + 2·stride`, … (at most `limit` of them).
@@ -24,6 +25,15 @@
 //! and at twice its size, and with each cloud made of 20,000 points (every point repeated, with
 //! N(0, 0.005²) noise), and prints each version's recall (transforms scaled back to the pair's
 //! size) and time.
+//!
+//! `--study network` runs `rgm register`'s default with each variant of its network stage on
+//! each pair, the variants one after the other on the same pair (so that a changing load
+//! weighs on all of them alike): `PASSES/MATCH_POINTS/CHAINS[/ACCEPT]`, CHAINS `both` (cycle
+//! consistency, the paper's) or `one` (the forward chain alone), ACCEPT the cascade's score
+//! threshold (the default's when left out). Printed per variant: recall, the share off by more
+//! than 45°, mean and median ms per pair, the pairs running the network, and the pairs whose
+//! outcome differs from the first variant's. `--json FILE` writes each pair's outcome and time
+//! per variant.
 //!
 //! For each pair: RGM (the built-in model, unrefined) and FGR give a start; each refinement
 //! variant refines both starts; each score picks a candidate per pair. Printed: one row per
@@ -188,6 +198,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let indices: Vec<usize> = (offset..shapes.len()).step_by(stride).take(limit).collect();
     if arg(&args, "--study").as_deref() == Some("cascade") {
         return cascade(&generator, &shapes, &indices, arg(&args, "--dump"));
+    }
+    if arg(&args, "--study").as_deref() == Some("network") {
+        let variants = arg(&args, "--variants")
+            .unwrap_or_else(|| "2/384/both,1/384/both,1/256/both,2/384/one".into());
+        return network(
+            &generator,
+            &shapes,
+            &indices,
+            &variants,
+            arg(&args, "--json"),
+        );
     }
     if arg(&args, "--study").as_deref() == Some("robustness") {
         let versions = arg(&args, "--versions")
@@ -539,6 +560,141 @@ fn robustness(
             ms / n as f64,
             candidates.join("; ")
         );
+    }
+    Ok(())
+}
+
+/// One variant of the cascade's network stage (`--study network`).
+struct Variant {
+    name: String,
+    method: rgm_model::Method,
+}
+
+impl Variant {
+    /// `PASSES/MATCH_POINTS/CHAINS[/ACCEPT]`.
+    fn parse(spec: &str) -> Result<Self, Box<dyn std::error::Error>> {
+        let fields: Vec<&str> = spec.split('/').collect();
+        let (passes, points, chains) = match fields[..] {
+            [p, m, c] | [p, m, c, _] => (p.parse::<usize>()?, m.parse::<usize>()?, c),
+            _ => {
+                return Err(
+                    format!("variant {spec:?}: expected PASSES/POINTS/CHAINS[/ACCEPT]").into(),
+                )
+            }
+        };
+        let accept = match fields.get(3) {
+            Some(a) => a.parse::<f64>()?,
+            None => rgm_geom::best_of::ACCEPT.score,
+        };
+        let mut rgm = rgm_model::weights::builtin_registrar()?;
+        rgm.config.passes = passes;
+        rgm.config.match_points = Some(points);
+        rgm.config.cycle_consistency = match chains {
+            "both" => true,
+            "one" => false,
+            _ => return Err(format!("variant {spec:?}: chains are both or one").into()),
+        };
+        let acceptance = rgm_geom::best_of::Acceptance {
+            score: accept,
+            ..rgm_geom::best_of::ACCEPT
+        };
+        Ok(Self {
+            name: spec.to_string(),
+            method: rgm_model::options::auto(rgm, Some(RefineConfig::default()), acceptance),
+        })
+    }
+}
+
+fn network(
+    generator: &PairGenerator,
+    shapes: &[&rgm_data::Shape],
+    indices: &[usize],
+    variants: &str,
+    json: Option<String>,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let mut variants: Vec<Variant> = variants
+        .split(',')
+        .map(Variant::parse)
+        .collect::<Result<_, _>>()?;
+    // [variant][pair]: outcome, ms, whether the network ran.
+    let mut results: Vec<Vec<(Outcome, f64, bool)>> = variants.iter().map(|_| Vec::new()).collect();
+    for (done, &i) in indices.iter().enumerate() {
+        let pair = generator.test_pair(shapes, i)?;
+        for (v, variant) in variants.iter_mut().enumerate() {
+            let clock = Instant::now();
+            let found = variant.method.register(&pair.source, &pair.target);
+            let ms = clock.elapsed().as_secs_f64() * 1e3;
+            let (t, network) = match &found {
+                Ok(r) => (
+                    r.result.t_target_source,
+                    r.candidates.iter().any(|c| c.method.starts_with("rgm")),
+                ),
+                Err(_) => (RigidTransform::identity(), false),
+            };
+            let o = outcome(&t, &pair.t_target_source, &pair.source, &pair.target);
+            results[v].push((o, ms, network));
+        }
+        if (done + 1) % 50 == 0 {
+            eprintln!("{} of {} pairs", done + 1, indices.len());
+        }
+    }
+    let n = indices.len() as f64;
+    println!("| variant (passes/points/chains[/accept]) | recall | > 45° | ms / pair (mean) | median | pairs running the network | outcomes changed |");
+    println!("|---|---:|---:|---:|---:|---:|---:|");
+    for (variant, rows) in variants.iter().zip(&results) {
+        let outcomes: Vec<Outcome> = rows
+            .iter()
+            .map(|(o, _, _)| Outcome {
+                recall: o.recall,
+                mie_r: o.mie_r,
+            })
+            .collect();
+        let (recall, wild, _) = summary(&outcomes);
+        let mut ms: Vec<f64> = rows.iter().map(|r| r.1).collect();
+        let mean = ms.iter().sum::<f64>() / n;
+        ms.sort_by(f64::total_cmp);
+        let network = rows.iter().filter(|r| r.2).count() as f64 / n;
+        let changed = rows
+            .iter()
+            .zip(&results[0])
+            .filter(|(a, b)| a.0.recall != b.0.recall || (a.0.mie_r > 45.0) != (b.0.mie_r > 45.0))
+            .count();
+        println!(
+            "| {} | {:.2} % | {:.2} % | {mean:.1} | {:.1} | {:.1} % | {changed} |",
+            variant.name,
+            100.0 * recall,
+            100.0 * wild,
+            ms[ms.len() / 2],
+            100.0 * network
+        );
+    }
+    if let Some(path) = json {
+        let pairs: Vec<String> = indices
+            .iter()
+            .enumerate()
+            .map(|(k, i)| {
+                let per: Vec<String> = results
+                    .iter()
+                    .map(|r| {
+                        let (o, ms, net) = &r[k];
+                        format!(
+                            "{{\"recall\":{},\"mie_r_deg\":{},\"ms\":{ms},\"network\":{net}}}",
+                            o.recall, o.mie_r
+                        )
+                    })
+                    .collect();
+                format!("{{\"index\":{i},\"variants\":[{}]}}", per.join(","))
+            })
+            .collect();
+        let names: Vec<String> = variants.iter().map(|v| format!("{:?}", v.name)).collect();
+        std::fs::write(
+            path,
+            format!(
+                "{{\"variants\":[{}],\"pairs\":[\n{}\n]}}\n",
+                names.join(","),
+                pairs.join(",\n")
+            ),
+        )?;
     }
     Ok(())
 }
