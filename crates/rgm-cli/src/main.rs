@@ -111,7 +111,8 @@ pub struct MethodArgs {
     /// the transform to the full clouds; 0 matches on every point. The network's memory grows
     /// with the square of N (about 0.7 GB at 1,024 points, 2.7 GB at 2,048 for the paper's
     /// sizes), and a request beyond the machine's free memory is refused [default: the
-    /// built-in model's training size, 384; 1,024 with --weights, the paper's training size].
+    /// built-in model's training size, 384, or 256 as the auto cascade's second stage; 1,024
+    /// with --weights, the paper's training size].
     #[arg(long, value_name = "N")]
     match_points: Option<usize>,
     /// RGM's passes of network → matching → Kabsch, each on the source moved by the passes

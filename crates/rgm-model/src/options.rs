@@ -16,7 +16,8 @@
 //! runs both methods in that frame, on two thinnings of a dense pair, as a cascade: FGR first,
 //! and the network only when FGR's result overlaps less than [`MethodOptions::accept`] or, short
 //! of a whole overlap, fits as well turned about one of the source's axes
-//! ([`rgm_geom::best_of::Acceptance`]).
+//! ([`rgm_geom::best_of::Acceptance`]); the network then runs one chain of passes, without the
+//! second chain of cycle consistency, since the overlap score judges its result.
 
 use std::path::PathBuf;
 use std::str::FromStr;
@@ -117,6 +118,14 @@ impl FromStr for MethodName {
 /// trains on 1,024-point clouds, and the network's memory grows with the square of the points.
 pub const WEIGHTS_MATCH_POINTS: usize = 1024;
 
+/// Points the built-in model matches per cloud as the cascade's second stage unless
+/// `match_points` says otherwise: fewer than its training size, since the network is most of the
+/// cascade's time on the pairs where it runs: on the 1,980 validation pairs, one chain on 256
+/// points cost 0.51× the time of two chains on 384 on those pairs, for 0.3 points of recall,
+/// the most points that leave the default's mean time under Open3D's
+/// (docs/training/default-study/cascade-network-stage.md).
+pub const CASCADE_MATCH_POINTS: usize = 256;
+
 /// A method and its options; `None` leaves an option at the method's own default.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MethodOptions {
@@ -131,7 +140,8 @@ pub struct MethodOptions {
     /// weights; the built-in model has its own).
     pub test_statistics: Option<TestStatistics>,
     /// RGM matches on at most this many random points of each cloud; 0: every point. When
-    /// `None`: the built-in model's training size, or [`WEIGHTS_MATCH_POINTS`] with `weights`.
+    /// `None`: the built-in model's training size ([`CASCADE_MATCH_POINTS`] in `auto`), or
+    /// [`WEIGHTS_MATCH_POINTS`] with `weights`.
     pub match_points: Option<usize>,
     /// RGM's passes (2 when `None`, as in the paper).
     pub passes: Option<usize>,
@@ -189,7 +199,7 @@ impl MethodOptions {
                     score: self.accept,
                     ..ACCEPT
                 };
-                auto(self.build_rgm()?, refine, accept)
+                auto(self.build_cascade_rgm()?, refine, accept)
             }
         })
     }
@@ -221,6 +231,18 @@ impl MethodOptions {
             ));
         }
         Ok(())
+    }
+
+    /// The network as the cascade's second stage: one chain (the cascade's overlap score
+    /// already judges the result, so cycle consistency between two chains is not needed) and,
+    /// for the built-in model with no `match_points`, [`CASCADE_MATCH_POINTS`] per cloud.
+    fn build_cascade_rgm(&self) -> Result<RgmRegistrar, MethodError> {
+        let mut registrar = self.build_rgm()?;
+        registrar.config.cycle_consistency = false;
+        if self.weights.is_none() && self.match_points.is_none() {
+            registrar.config.match_points = Some(CASCADE_MATCH_POINTS);
+        }
+        Ok(registrar)
     }
 
     /// The network with its weights and test-time settings.
@@ -300,6 +322,20 @@ mod tests {
         assert_eq!(
             registrar.network.featurer.test_statistics,
             builtin.network.featurer.test_statistics
+        );
+        // As the cascade's second stage: one chain on fewer points, unless the user says.
+        let cascade = options.build_cascade_rgm().unwrap().config;
+        assert!(builtin.config.cycle_consistency && !cascade.cycle_consistency);
+        assert_eq!(cascade.match_points, Some(CASCADE_MATCH_POINTS));
+        assert_ne!(builtin.config.match_points, Some(CASCADE_MATCH_POINTS));
+        assert_eq!(cascade.passes, builtin.config.passes);
+        let asked = MethodOptions {
+            match_points: Some(500),
+            ..MethodOptions::default()
+        };
+        assert_eq!(
+            asked.build_cascade_rgm().unwrap().config.match_points,
+            Some(500)
         );
     }
 
