@@ -119,10 +119,9 @@ impl FromStr for MethodName {
 pub const WEIGHTS_MATCH_POINTS: usize = 1024;
 
 /// Points the built-in model matches per cloud as the cascade's second stage unless
-/// `match_points` says otherwise: fewer than its training size, since the network is most of the
-/// cascade's time on the pairs where it runs: on the 1,980 validation pairs, one chain on 256
-/// points cost 0.51× the time of two chains on 384 on those pairs, for 0.3 points of recall,
-/// the most points that leave the default's mean time under Open3D's
+/// `match_points` says otherwise. Fewer than its training size, because the network is most of
+/// the cascade's time on the pairs where it runs; chosen on validation pairs as the most points
+/// that keep the default's mean time under Open3D's
 /// (docs/training/default-study/cascade-network-stage.md).
 pub const CASCADE_MATCH_POINTS: usize = 256;
 
