@@ -301,13 +301,18 @@ def test_ctrl_c_interrupts_register_many_and_the_registrar_goes_on(airplane):
     import os
     import signal
 
-    # Both candidates on every pair (accept=inf): the network keeps the pairs busy long enough.
-    registrar = rgm.Registrar(accept=float("inf"))
+    # Both candidates on every pair (accept=inf), the network on all 1,024 points: the pairs keep
+    # it busy. The list doubles until one call lasts long enough to interrupt on any machine.
+    registrar = rgm.Registrar(accept=float("inf"), match_points=1024)
     pairs = [(airplane, moved(airplane, pose((3 * k, -2 * k, k), (0.01 * k, 0, 0)))) for k in range(12)]
-    start = time.perf_counter()
-    expected = registrar.register_many(pairs)
-    whole = time.perf_counter() - start
-    assert whole > 1.0, f"12 pairs take {whole:.2f} s: too short to interrupt"
+    while True:
+        start = time.perf_counter()
+        expected = registrar.register_many(pairs)
+        whole = time.perf_counter() - start
+        if whole > 1.0 or len(pairs) >= 768:
+            break
+        pairs = pairs + pairs
+    assert whole > 1.0, f"{len(pairs)} pairs take {whole:.2f} s: too short to interrupt"
     timer = threading.Timer(0.2, os.kill, (os.getpid(), signal.SIGINT))
     start = time.perf_counter()
     timer.start()
