@@ -2,8 +2,8 @@
 
 use crate::error::{check_shape, MatchError, Result};
 use ndarray::{Array2, ArrayView2, ArrayViewMut2, Ix2};
-use rand::Rng;
 use rgm_nn::gemm::mat_mul;
+use rgm_nn::init::Init;
 use rgm_nn::param::{join_name, ParamView, ParamViewMut};
 use rgm_nn::{Param, Parameters, Scalar};
 
@@ -44,12 +44,14 @@ impl<T: Scalar> AffinityCache<T> {
 }
 
 impl<T: Scalar> Affinity<T> {
-    /// The reference initialisation: W = I + U(−1/√Q, 1/√Q), drawn in row-major order.
-    pub fn new(cfg: &AffinityConfig, rng: &mut impl Rng) -> Self {
+    /// The reference initialisation: W = I + U(−1/√Q, 1/√Q), drawn in row-major order (I for
+    /// [`rgm_nn::init::Unset`]).
+    pub fn new(cfg: &AffinityConfig, init: &mut impl Init) -> Self {
         let bound = 1.0 / (cfg.width as f64).sqrt();
-        let w = Array2::from_shape_fn((cfg.width, cfg.width), |(r, c)| {
+        let noise: Array2<f64> = init.uniform((cfg.width, cfg.width), bound); // (Q, Q)
+        let w = Array2::from_shape_fn(noise.dim(), |(r, c)| {
             let eye = if r == c { 1.0 } else { 0.0 };
-            T::from_f64(eye + rng.gen_range(-bound..bound))
+            T::from_f64(eye + noise[[r, c]])
         });
         Self { w: Param::new(w) }
     }

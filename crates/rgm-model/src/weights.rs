@@ -280,7 +280,7 @@ pub fn builtin_registrar() -> Result<RgmRegistrar, MethodError> {
     let origin = Path::new("builtin:").join(BUILTIN_FILE);
     let (tensors, _) = rgm_nn::io::read_tensors_from_bytes::<f32>(builtin_weights(), &origin)
         .map_err(crate::network::NetworkError::from)?;
-    let mut network = Rgm::new(entry.config()?, 0)?;
+    let mut network = Rgm::with_init(entry.config()?, &mut rgm_nn::init::Unset)?;
     network.load_tensors(&tensors)?;
     Ok(entry.registrar_of(network))
 }

@@ -1,4 +1,5 @@
-//! PyTorch's default initialisation, seeded by the caller's random generator.
+//! PyTorch's default initialisation, seeded by the caller's random generator, or no
+//! initialisation for a network whose weights are read next ([`Unset`]).
 //!
 //! `nn.Linear` and `nn.Conv{1,2}d` draw their weight with `kaiming_uniform_(a = √5)`: gain
 //! `√(2 / (1 + a²)) = √(1/3)`, bound `gain · √(3 / fan_in) = 1/√fan_in`; and their bias from
@@ -14,13 +15,41 @@ pub fn default_bound(fan_in: usize) -> f64 {
     1.0 / (fan_in.max(1) as f64).sqrt()
 }
 
-/// An array of `shape` with entries uniform in `[-bound, bound)`.
-pub fn uniform<T: Scalar, D: Dimension, S: ShapeBuilder<Dim = D>>(
-    shape: S,
-    bound: f64,
-    rng: &mut impl Rng,
-) -> Array<T, D> {
-    Array::from_shape_simple_fn(shape, || T::from_f64(rng.gen_range(-bound..bound)))
+/// Where a new layer's parameters come from. Layers take one of these instead of a random
+/// generator so that loading a model need not draw every parameter only to overwrite it (most
+/// of the time it took to load one).
+pub trait Init {
+    /// An array of `shape` with entries uniform in `[-bound, bound)` (zeros for [`Unset`]).
+    fn uniform<T: Scalar, D: Dimension, S: ShapeBuilder<Dim = D>>(
+        &mut self,
+        shape: S,
+        bound: f64,
+    ) -> Array<T, D>;
+}
+
+/// A random generator draws PyTorch's default initialisation, entry after entry in row order.
+impl<R: Rng + ?Sized> Init for R {
+    fn uniform<T: Scalar, D: Dimension, S: ShapeBuilder<Dim = D>>(
+        &mut self,
+        shape: S,
+        bound: f64,
+    ) -> Array<T, D> {
+        Array::from_shape_simple_fn(shape, || T::from_f64(self.gen_range(-bound..bound)))
+    }
+}
+
+/// Parameters left at zero, for a layer whose values are set next (read from a file).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Unset;
+
+impl Init for Unset {
+    fn uniform<T: Scalar, D: Dimension, S: ShapeBuilder<Dim = D>>(
+        &mut self,
+        shape: S,
+        _bound: f64,
+    ) -> Array<T, D> {
+        Array::zeros(shape)
+    }
 }
 
 #[cfg(test)]
@@ -33,7 +62,7 @@ mod tests {
     fn bound_is_one_over_sqrt_fan_in_and_draws_fill_it() {
         // kaiming_uniform(a=√5): √(2/6) · √(3/64) = √(1/64) = 0.125.
         assert_eq!(default_bound(64), 0.125);
-        let w: Array2<f64> = uniform((256, 64), 0.125, &mut StdRng::seed_from_u64(7));
+        let w: Array2<f64> = StdRng::seed_from_u64(7).uniform((256, 64), 0.125);
         let (lo, hi) = w
             .iter()
             .fold((1.0f64, -1.0f64), |(lo, hi), &v| (lo.min(v), hi.max(v)));
@@ -50,9 +79,15 @@ mod tests {
     }
 
     #[test]
+    fn unset_leaves_zeros_and_draws_nothing() {
+        let w: Array2<f32> = Unset.uniform((3, 4), 0.5);
+        assert_eq!(w, Array2::<f32>::zeros((3, 4)));
+    }
+
+    #[test]
     fn same_seed_same_values() {
-        let a: Array2<f32> = uniform((3, 4), 0.5, &mut StdRng::seed_from_u64(1));
-        let b: Array2<f32> = uniform((3, 4), 0.5, &mut StdRng::seed_from_u64(1));
+        let a: Array2<f32> = StdRng::seed_from_u64(1).uniform((3, 4), 0.5);
+        let b: Array2<f32> = StdRng::seed_from_u64(1).uniform((3, 4), 0.5);
         assert_eq!(a, b);
     }
 }

@@ -5,13 +5,13 @@ use super::config::{Config, Edges, Scoring};
 use super::transformer::{EdgeTransformer, EdgeTransformerCache};
 use super::{both, shaped, zeroed, Element, Result};
 use ndarray::{s, Array2, ArrayView2, ArrayViewMut2};
-use rand::Rng;
 use rgm_match::{
     sinkhorn_backward, sinkhorn_forward, var1_backward, var1_forward, Affinity, AffinityCache,
     AffinityConfig, InstNorm, InstNormCache, InstNormConfig, SinkhornCache, SinkhornConfig,
     Var1Config,
 };
 use rgm_nn::gemm::{mat_mul, mat_mul_then, Then};
+use rgm_nn::init::Init;
 use rgm_nn::param::{join_name, ParamView, ParamViewMut};
 use rgm_nn::{
     l1_normalize_columns_backward, l1_normalize_columns_forward, matmul_backward, matmul_forward,
@@ -187,24 +187,24 @@ fn edges_backward<T: Element>(side: &mut Side<T>, t: ArrayView2<'_, T>) -> Resul
 
 impl<T: Element> Block<T> {
     /// Block `b` of `config`, PyTorch-initialised from `rng`.
-    pub fn new(config: &Config, b: usize, rng: &mut impl Rng) -> Result<Self> {
+    pub fn new(config: &Config, b: usize, init: &mut impl Init) -> Result<Self> {
         let (c, q) = (config.block_width(b), config.q);
         let transformer = match config.edges {
-            Edges::Transformer => Some(EdgeTransformer::new(c, config.heads, config.ff, rng)?),
+            Edges::Transformer => Some(EdgeTransformer::new(c, config.heads, config.ff, init)?),
             Edges::Full => None,
         };
-        let a_fc = Linear::new(c, q, true, rng);
-        let u_fc = Linear::new(c, q, true, rng);
+        let a_fc = Linear::new(c, q, true, init);
+        let u_fc = Linear::new(c, q, true, init);
         let scorer = match config.scoring {
             Scoring::Ais => Scorer::Ais {
-                affinity: Affinity::new(&AffinityConfig { width: q }, rng),
+                affinity: Affinity::new(&AffinityConfig { width: q }, init),
                 inst_norm: InstNorm::new(&InstNormConfig::default()),
             },
             Scoring::Var1 => Scorer::Var1,
         };
         let cross = config
             .has_cross(b)
-            .then(|| Linear::new(2 * q, q, true, rng));
+            .then(|| Linear::new(2 * q, q, true, init));
         Ok(Self {
             index: b,
             transformer,
@@ -267,7 +267,7 @@ impl<T: Element> Block<T> {
         test_time: bool,
     ) -> Result<()> {
         self.graph_forward(fx, fy, cache, test_time)?;
-        self.match_forward(cache)
+        self.match_forward(cache, test_time)
     }
 
     /// Takes into `cache` (sized (M, N)) the graph features of the block's pass on (X, Y) in
@@ -331,8 +331,9 @@ impl<T: Element> Block<T> {
     }
 
     /// Scoring of F'_X, F'_Y (AIS or Var1), Sinkhorn → C̃, and the cross-graph convolution
-    /// when the block has one, all in `cache`.
-    pub fn match_forward(&self, cache: &mut BlockCache<T>) -> Result<()> {
+    /// when the block has one, all in `cache`; at `test_time` (no backward follows) the
+    /// convolution's two sides side by side on rayon's pool.
+    pub fn match_forward(&self, cache: &mut BlockCache<T>, test_time: bool) -> Result<()> {
         let (x, y) = (&mut cache.x, &mut cache.y);
         match &self.scorer {
             Scorer::Ais {
@@ -371,16 +372,24 @@ impl<T: Element> Block<T> {
                 shaped(&mut side.cat, (side.fp.nrows(), 2 * q));
                 shaped(&mut side.next, side.fp.dim());
             }
-            x.cat.slice_mut(s![.., ..q]).assign(&x.fp);
-            y.cat.slice_mut(s![.., ..q]).assign(&y.fp);
-            matmul_forward(
-                x.cat.slice_mut(s![.., q..]),
-                cache.c_soft.view(),
-                y.fp.view(),
-            )?;
-            matmul_forward(y.cat.slice_mut(s![.., q..]), cache.c_soft.t(), x.fp.view())?;
-            cross.forward(x.next.view_mut(), x.cat.view())?;
-            cross.forward(y.next.view_mut(), y.cat.view())?;
+            // One side: [own | C̃ (or C̃ᵀ) · other] (rows, 2Q) into `cat`, the layer into `next`.
+            let side = |cat: &mut Array2<T>,
+                        next: &mut Array2<T>,
+                        own: ArrayView2<'_, T>,
+                        c: ArrayView2<'_, T>,
+                        other: ArrayView2<'_, T>| {
+                cat.slice_mut(s![.., ..q]).assign(&own);
+                matmul_forward(cat.slice_mut(s![.., q..]), c, other)?;
+                cross.forward(next.view_mut(), cat.view())
+            };
+            let c_soft = cache.c_soft.view();
+            let (fpx, fpy) = (x.fp.view(), y.fp.view());
+            let (a, b) = both(
+                test_time,
+                || side(&mut x.cat, &mut x.next, fpx, c_soft, fpy),
+                || side(&mut y.cat, &mut y.next, fpy, c_soft.t(), fpx),
+            );
+            a.and(b)?;
         }
         Ok(())
     }

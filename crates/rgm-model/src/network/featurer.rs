@@ -5,8 +5,8 @@
 
 use super::{shaped, zeroed, Element, Mode, Result};
 use ndarray::{s, Array2, ArrayView2, ArrayViewMut2};
-use rand::Rng;
 use rgm_geom::{knn_graph, Point3};
+use rgm_nn::init::Init;
 use rgm_nn::param::{join_name, ParamView, ParamViewMut};
 use rgm_nn::{
     edge_features_forward, max_k_backward, max_k_forward, relu_backward, relu_forward, BatchNorm,
@@ -57,7 +57,7 @@ pub struct FeaturerCache<T> {
 
 impl<T: Element> PointFeaturer<T> {
     /// PyTorch-initialised convolutions and fresh batch norms.
-    pub fn new(k: usize, widths: [usize; 4], edge: usize, rng: &mut impl Rng) -> Self {
+    pub fn new(k: usize, widths: [usize; 4], edge: usize, init: &mut impl Init) -> Self {
         let ins = [6, widths[0], widths[1], widths[2], widths.iter().sum()];
         let outs = [widths[0], widths[1], widths[2], widths[3], edge];
         Self {
@@ -65,7 +65,7 @@ impl<T: Element> PointFeaturer<T> {
             convs: ins
                 .iter()
                 .zip(outs)
-                .map(|(&i, o)| Linear::new(i, o, false, rng))
+                .map(|(&i, o)| Linear::new(i, o, false, init))
                 .collect(),
             bns: outs.iter().map(|&o| BatchNorm::new(o)).collect(),
             test_statistics: TestStatistics::Running,

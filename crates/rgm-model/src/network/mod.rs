@@ -33,6 +33,7 @@ pub use transformer::{EdgeTransformer, EdgeTransformerCache, Stack, StackCache};
 use ndarray::{Array2, ArrayD, ArrayView2, ArrayViewD, ArrayViewMutD};
 use rand::{rngs::StdRng, SeedableRng};
 use rgm_match::{bce_backward, bce_forward, Correspondences};
+use rgm_nn::init::{Init, Unset};
 use rgm_nn::param::{join_name, try_visit_buffers, try_visit_params, ParamView, ParamViewMut};
 use rgm_nn::precision::{self, Precision};
 use rgm_nn::{Parameters, Scalar};
@@ -148,11 +149,16 @@ fn check_cloud<T: Element>(what: &'static str, p: ArrayView2<'_, T>) -> Result<(
 impl<T: Element> Rgm<T> {
     /// A network of `config`'s sizes with PyTorch's default initialisation drawn from `seed`.
     pub fn new(config: Config, seed: u64) -> Result<Self> {
+        Self::with_init(config, &mut StdRng::seed_from_u64(seed))
+    }
+
+    /// A network of `config`'s sizes whose parameters come from `init`: [`Unset`] for one
+    /// whose every parameter is set next ([`Rgm::load_tensors`]).
+    pub fn with_init(config: Config, init: &mut impl Init) -> Result<Self> {
         config.validate()?;
-        let mut rng = StdRng::seed_from_u64(seed);
-        let featurer = PointFeaturer::new(config.k, config.dgcnn, config.edge, &mut rng);
+        let featurer = PointFeaturer::new(config.k, config.dgcnn, config.edge, init);
         let blocks = (0..config.blocks)
-            .map(|b| Block::new(&config, b, &mut rng))
+            .map(|b| Block::new(&config, b, init))
             .collect::<Result<_>>()?;
         Ok(Self {
             config,
@@ -165,7 +171,7 @@ impl<T: Element> Rgm<T> {
     /// A network of `config`'s sizes with every parameter and batch-norm statistic read from
     /// the safetensors file at `path` (see [`Rgm::load_tensors`]).
     pub fn load(config: Config, path: &Path) -> Result<Self> {
-        let mut rgm = Self::new(config, 0)?;
+        let mut rgm = Self::with_init(config, &mut Unset)?;
         let (tensors, _) = rgm_nn::io::read_tensors::<T>(path)?;
         rgm.load_tensors(&tensors)?;
         Ok(rgm)
@@ -206,7 +212,11 @@ impl<T: Element> Rgm<T> {
                     got: t.shape().to_vec(),
                 });
             }
-            dst.iter_mut().zip(t.iter()).for_each(|(d, &v)| *d = v);
+            // Both in row order (a 1×1 convolution's trailing axes add none): one copy.
+            match (dst.as_slice_mut(), t.as_slice()) {
+                (Some(d), Some(v)) => d.copy_from_slice(v),
+                _ => dst.iter_mut().zip(t.iter()).for_each(|(d, &v)| *d = v),
+            }
             Ok(())
         };
         try_visit_params(self, "", |name, p| fill(name, p.value))?;
@@ -331,7 +341,7 @@ impl<T: Element> Rgm<T> {
     /// The rest of the L blocks once block 0's graph features are in `blocks[0]`: its
     /// scoring, Sinkhorn and cross convolution, then blocks 1 to L − 1.
     fn blocks_after_graph(&self, blocks: &mut [BlockCache<T>], test_time: bool) -> Result<()> {
-        self.blocks[0].match_forward(&mut blocks[0])?;
+        self.blocks[0].match_forward(&mut blocks[0], test_time)?;
         for b in 1..self.blocks.len() {
             let (done, rest) = blocks.split_at_mut(b);
             let (fx, fy) = done[b - 1].outputs(self.blocks[b - 1].cross.is_some());

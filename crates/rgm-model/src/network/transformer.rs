@@ -4,7 +4,7 @@
 
 use super::{both, shaped, zeroed, Element, Result};
 use ndarray::{Array2, ArrayView2, ArrayViewMut2};
-use rand::Rng;
+use rgm_nn::init::Init;
 use rgm_nn::param::{join_name, ParamView, ParamViewMut};
 use rgm_nn::{
     AttentionCache, FeedForward, FeedForwardCache, LayerNorm, LayerNormCache, MultiHeadAttention,
@@ -45,14 +45,14 @@ enum Op {
 }
 
 impl<T: Element> Stack<T> {
-    fn new(c: usize, heads: usize, ff: usize, decoder: bool, rng: &mut impl Rng) -> Result<Self> {
-        let self_attn = MultiHeadAttention::new(c, heads, rng)?;
+    fn new(c: usize, heads: usize, ff: usize, decoder: bool, init: &mut impl Init) -> Result<Self> {
+        let self_attn = MultiHeadAttention::new(c, heads, init)?;
         let src_attn = if decoder {
-            Some(MultiHeadAttention::new(c, heads, rng)?)
+            Some(MultiHeadAttention::new(c, heads, init)?)
         } else {
             None
         };
-        let feed_forward = FeedForward::new(c, ff, rng);
+        let feed_forward = FeedForward::new(c, ff, init);
         let subs = if decoder { 3 } else { 2 };
         Ok(Self {
             self_attn,
@@ -257,11 +257,11 @@ impl<T> EdgeTransformerCache<T> {
 
 impl<T: Element> EdgeTransformer<T> {
     /// Width C, H heads, feed-forward width `ff`; PyTorch initialisation.
-    pub fn new(c: usize, heads: usize, ff: usize, rng: &mut impl Rng) -> Result<Self> {
-        let encoder = Stack::new(c, heads, ff, false, rng)?;
+    pub fn new(c: usize, heads: usize, ff: usize, init: &mut impl Init) -> Result<Self> {
+        let encoder = Stack::new(c, heads, ff, false, init)?;
         Ok(Self {
             encoder,
-            decoder: Stack::new(c, heads, ff, true, rng)?,
+            decoder: Stack::new(c, heads, ff, true, init)?,
         })
     }
 

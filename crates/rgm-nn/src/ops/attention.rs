@@ -6,11 +6,11 @@ use super::linear::Linear;
 use super::softmax::{softmax_backward_in_place, softmax_slice};
 use crate::error::check_shape;
 use crate::gemm::mat_mul;
+use crate::init::Init;
 use crate::param::{join_name, ParamView, ParamViewMut};
 use crate::precision;
 use crate::{NnError, Parameters, Result, Scalar};
 use ndarray::{s, Array2, Array3, ArrayView2, ArrayViewMut2, Axis};
-use rand::Rng;
 use rayon::prelude::*;
 
 /// `out = concat_h(softmax_rows(Q_h K_hᵀ / √(C/H)) V_h) · Woᵀ + bo` with `Q = q_in Wqᵀ + bq`,
@@ -93,14 +93,14 @@ fn ensure<T: Scalar>(buf: &mut Array2<T>, shape: (usize, usize)) {
 
 impl<T: Scalar> MultiHeadAttention<T> {
     /// Four `C × C` linear maps with bias, PyTorch-initialised; `c` must divide into `heads`.
-    pub fn new(c: usize, heads: usize, rng: &mut impl Rng) -> Result<Self> {
+    pub fn new(c: usize, heads: usize, init: &mut impl Init) -> Result<Self> {
         if heads == 0 || !c.is_multiple_of(heads) {
             return Err(NnError::InvalidArgument {
                 op: "multi_head_attention",
                 why: format!("C = {c} is not divisible by H = {heads}"),
             });
         }
-        let mut lin = || Linear::new(c, c, true, rng);
+        let mut lin = || Linear::new(c, c, true, init);
         Ok(Self {
             heads,
             query: lin(),

@@ -1,10 +1,10 @@
 //! The transformer's position-wise feed-forward: `Linear(C, F) → ReLU → Linear(F, C)`.
 
 use super::linear::Linear;
+use crate::init::Init;
 use crate::param::{join_name, ParamView, ParamViewMut};
 use crate::{Parameters, Result, Scalar};
 use ndarray::{Array2, ArrayView2, ArrayViewMut2};
-use rand::Rng;
 
 /// `out = ReLU(inp W1ᵀ + b1) W2ᵀ + b2`; parameters named `w_1`, `w_2` as in the reference.
 #[derive(Clone, Debug)]
@@ -22,11 +22,11 @@ pub struct FeedForwardCache<T> {
 
 impl<T: Scalar> FeedForward<T> {
     /// PyTorch-initialised `C → F → C` with biases.
-    pub fn new(c: usize, f: usize, rng: &mut impl Rng) -> Self {
-        let w_1 = Linear::new(c, f, true, rng);
+    pub fn new(c: usize, f: usize, init: &mut impl Init) -> Self {
+        let w_1 = Linear::new(c, f, true, init);
         Self {
             w_1,
-            w_2: Linear::new(f, c, true, rng),
+            w_2: Linear::new(f, c, true, init),
         }
     }
 

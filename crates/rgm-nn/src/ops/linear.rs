@@ -2,11 +2,10 @@
 
 use crate::error::check_shape;
 use crate::gemm::{mat_mul, mat_mul_then, Then};
-use crate::init;
+use crate::init::{self, Init};
 use crate::param::{join_name, ParamView, ParamViewMut};
 use crate::{Param, Parameters, Result, Scalar};
 use ndarray::{Array1, Array2, ArrayView2, ArrayViewMut2, Ix1, Ix2};
-use rand::Rng;
 
 /// `out = inp · weightᵀ + bias`, PyTorch's `nn.Linear` (and `nn.Conv{1,2}d` with a 1×1 kernel,
 /// whose `(C_out, C_in, 1, 1)` weight is this `(C_out, C_in)` one).
@@ -18,10 +17,10 @@ pub struct Linear<T: Scalar> {
 
 impl<T: Scalar> Linear<T> {
     /// PyTorch's default initialisation: weight and bias uniform in `±1/√C_in`.
-    pub fn new(c_in: usize, c_out: usize, bias: bool, rng: &mut impl Rng) -> Self {
+    pub fn new(c_in: usize, c_out: usize, bias: bool, init: &mut impl Init) -> Self {
         let bound = init::default_bound(c_in);
-        let weight = Param::new(init::uniform((c_out, c_in), bound, rng));
-        let bias = bias.then(|| Param::new(init::uniform(c_out, bound, rng)));
+        let weight = Param::new(init.uniform((c_out, c_in), bound));
+        let bias = bias.then(|| Param::new(init.uniform(c_out, bound)));
         Self { weight, bias }
     }
 
