@@ -223,8 +223,10 @@ impl<E: From<GeomError> + ToString + Send> Registrar<E> for BestOf<E> {
         _: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
         let start = Instant::now();
-        let (source_index, target_index) =
-            (KnnIndex::new(&source.points), KnnIndex::new(&target.points));
+        let (source_index, target_index) = rayon::join(
+            || KnnIndex::new(&source.points),
+            || KnnIndex::new(&target.points),
+        );
         let dense = source.len().max(target.len()) > DENSITY_POINTS;
         let thinnings = if dense {
             &self.thinnings[..]

@@ -66,6 +66,28 @@ pub fn current() -> Precision {
     CURRENT.with(Cell::get)
 }
 
+/// `a` and `b` side by side on rayon's pool (`rayon::join`), each in the caller's precision:
+/// the pool's threads have their own.
+pub fn join<A, B, RA, RB>(a: A, b: B) -> (RA, RB)
+where
+    A: FnOnce() -> RA + Send,
+    B: FnOnce() -> RB + Send,
+    RA: Send,
+    RB: Send,
+{
+    let precision = current();
+    rayon::join(
+        || {
+            let _precision = enter(precision);
+            a()
+        },
+        || {
+            let _precision = enter(precision);
+            b()
+        },
+    )
+}
+
 /// Sets the calling thread's precision until the returned guard drops (scopes nest).
 #[must_use = "the precision reverts when the guard drops"]
 pub fn enter(precision: Precision) -> Scope {

@@ -3,14 +3,23 @@
 extern "C" {
     fn openblas_set_num_threads(num_threads: std::ffi::c_int);
     fn openblas_get_num_threads() -> std::ffi::c_int;
+    fn blas_thread_shutdown_() -> std::ffi::c_int;
 }
 
 /// Sets how many threads OpenBLAS uses for every later matrix product (process-wide). Set it to
 /// 1 before running independent work on several rayon threads, so the two pools do not nest.
+/// With 1, OpenBLAS's worker threads are also stopped: started when the library loads, they
+/// spin waiting for work for about a tenth of a second, taking a core from a short run such
+/// as one `rgm register` on a small machine. A later call with more starts them again.
 pub fn set_blas_threads(n: usize) {
     let n = n.clamp(1, std::ffi::c_int::MAX as usize) as std::ffi::c_int;
     // SAFETY: a plain setter of OpenBLAS's global thread count; any positive value is valid.
     unsafe { openblas_set_num_threads(n) }
+    if n == 1 {
+        // SAFETY: joins OpenBLAS's idle workers and marks its pool stopped; a product with
+        // more than one thread starts it again, and one thread needs no pool.
+        unsafe { blas_thread_shutdown_() };
+    }
 }
 
 /// The number of threads OpenBLAS currently uses.

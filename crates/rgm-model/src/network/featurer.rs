@@ -4,10 +4,11 @@
 //! batch norm and ReLU on them gives the edge features. Output: node ⊕ edge per point.
 
 use super::{shaped, zeroed, Element, Mode, Result};
-use ndarray::{s, Array2, ArrayView2, ArrayViewMut2};
+use ndarray::{s, Array2, ArrayView2, ArrayViewMut2, Axis};
 use rgm_geom::{knn_graph, Point3};
 use rgm_nn::init::Init;
 use rgm_nn::param::{join_name, ParamView, ParamViewMut};
+use rgm_nn::precision;
 use rgm_nn::{
     edge_features_forward, max_k_backward, max_k_forward, relu_backward, relu_forward, BatchNorm,
     BatchNormCache, Linear, MaxKCache, Parameters,
@@ -89,9 +90,14 @@ impl<T: Element> PointFeaturer<T> {
         match mode {
             Mode::Train => {
                 let bns = &mut self.bns;
-                Self::run(self.k, &self.convs, points, cache, |i, out, inp, bn| {
-                    bns[i].forward(out, inp, true, bn)
-                })
+                Self::run(
+                    self.k,
+                    &self.convs,
+                    points,
+                    cache,
+                    false,
+                    |i, out, inp, bn| bns[i].forward(out, inp, true, bn),
+                )
             }
             Mode::Eval => self.forward_eval(points, cache),
         }
@@ -106,18 +112,25 @@ impl<T: Element> PointFeaturer<T> {
         cache: &mut FeaturerCache<T>,
     ) -> Result<()> {
         let cloud_statistics = self.test_statistics == TestStatistics::Cloud;
-        Self::run(self.k, &self.convs, points, cache, |i, out, inp, bn| {
-            self.bns[i].normalise(out, inp, cloud_statistics, bn)
-        })
+        Self::run(
+            self.k,
+            &self.convs,
+            points,
+            cache,
+            true,
+            |i, out, inp, bn| self.bns[i].normalise(out, inp, cloud_statistics, bn),
+        )
     }
 
     /// The pass of [`PointFeaturer::forward`] with `normalise(i, out, inp, cache)` as batch
-    /// norm `i`.
+    /// norm `i`; with `side_by_side` (no backward follows) the convolutions and ReLUs on two
+    /// halves of the rows at once.
     fn run(
         k: usize,
         convs: &[Linear<T>],
         points: ArrayView2<'_, T>,
         cache: &mut FeaturerCache<T>,
+        side_by_side: bool,
         mut normalise: impl FnMut(
             usize,
             ArrayViewMut2<'_, T>,
@@ -154,7 +167,9 @@ impl<T: Element> PointFeaturer<T> {
             } else {
                 cache.features.slice(s![.., ..node])
             };
-            convs[i].forward(cache.pre[i].view_mut(), inp)?;
+            by_rows(side_by_side, cache.pre[i].view_mut(), inp, |out, inp| {
+                convs[i].forward(out, inp)
+            })?;
             normalise(
                 i,
                 cache.normed[i].view_mut(),
@@ -164,7 +179,12 @@ impl<T: Element> PointFeaturer<T> {
             if i < 4 {
                 let act = &mut rest[0];
                 shaped(act, (n * k, widths[i]));
-                relu_forward(act.view_mut(), cache.normed[i].view())?;
+                by_rows(
+                    side_by_side,
+                    act.view_mut(),
+                    cache.normed[i].view(),
+                    relu_forward,
+                )?;
                 let block = s![.., offset..offset + widths[i]];
                 max_k_forward(
                     cache.features.slice_mut(block),
@@ -174,9 +194,11 @@ impl<T: Element> PointFeaturer<T> {
                 )?;
                 offset += widths[i];
             } else {
-                relu_forward(
+                by_rows(
+                    side_by_side,
                     cache.features.slice_mut(s![.., node..]),
                     cache.normed[4].view(),
+                    relu_forward,
                 )?;
             }
         }
@@ -301,4 +323,22 @@ impl<T: Element> Parameters<T> for PointFeaturer<T> {
             bn.visit_buffers(&join_name(prefix, &format!("bn{}", i + 1)), f);
         }
     }
+}
+
+/// `f(out, inp)`, or with `side_by_side` `f` on the top and on the bottom half of both's rows
+/// side by side on rayon's pool: for a row-by-row `f` the same values.
+fn by_rows<T: Element>(
+    side_by_side: bool,
+    out: ArrayViewMut2<'_, T>,
+    inp: ArrayView2<'_, T>,
+    f: impl Fn(ArrayViewMut2<'_, T>, ArrayView2<'_, T>) -> rgm_nn::Result<()> + Sync,
+) -> rgm_nn::Result<()> {
+    let half = out.nrows() / 2;
+    if !side_by_side || half == 0 || inp.nrows() != out.nrows() {
+        return f(out, inp);
+    }
+    let (out_top, out_bottom) = out.split_at(Axis(0), half);
+    let (inp_top, inp_bottom) = inp.split_at(Axis(0), half);
+    let (top, bottom) = precision::join(|| f(out_top, inp_top), || f(out_bottom, inp_bottom));
+    top.and(bottom)
 }

@@ -87,17 +87,7 @@ where
     if !side_by_side {
         return (a(), b());
     }
-    let current = precision::current();
-    rayon::join(
-        || {
-            let _precision = precision::enter(current);
-            a()
-        },
-        || {
-            let _precision = precision::enter(current);
-            b()
-        },
-    )
+    precision::join(a, b)
 }
 
 /// The RGM network: `pointfeaturer`, then L [`Block`]s.

@@ -148,9 +148,19 @@ impl<T: Scalar> MultiHeadAttention<T> {
         if cache.probs.dim() != probs_shape {
             cache.probs = Array3::zeros(probs_shape);
         }
-        self.query.forward(cache.q.view_mut(), q_in)?;
-        self.key.forward(cache.k.view_mut(), kv_in)?;
-        self.value.forward(cache.v.view_mut(), kv_in)?;
+        // Without kept weights no backward follows: the three projections side by side.
+        let (q, k, v) = (cache.q.view_mut(), cache.k.view_mut(), cache.v.view_mut());
+        let (query, key, value) = (
+            || self.query.forward(q, q_in),
+            || self.key.forward(k, kv_in),
+            || self.value.forward(v, kv_in),
+        );
+        let (queried, (keyed, valued)) = if keep {
+            (query(), (key(), value()))
+        } else {
+            precision::join(query, || precision::join(key, value))
+        };
+        queried.and(keyed).and(valued)?;
         let scale = T::one() / T::from_f64(dk as f64).sqrt();
         // Head by head and block by block of query rows, so that a block's score rows are
         // still in cache for their softmax and their product with V; rayon spreads the blocks
