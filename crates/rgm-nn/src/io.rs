@@ -318,7 +318,10 @@ pub fn read_tensors_from_bytes<T: Scalar>(
     let tensors = parse(origin, buffer)?
         .tensors()
         .into_par_iter()
-        .map(|(name, view)| Ok((name.clone(), to_array(origin, &name, &view, &metadata)?)))
+        .map(|(name, view)| {
+            let array = to_array(origin, &name, &view, &metadata)?;
+            Ok((name, array))
+        })
         .collect::<Result<Tensors<T>>>()?;
     Ok((tensors, metadata))
 }
