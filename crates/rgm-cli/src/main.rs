@@ -3,6 +3,9 @@
 //! Layering rule: the command is a thin shell over rgm-model (methods, evaluation) and rgm-data
 //! (files, pairs); it owns argument parsing, progress and printing, and no algorithm.
 
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 mod commands;
 mod table;
 
