@@ -142,8 +142,8 @@ class Registrar:
         match_points: RGM and auto only: match on at most this many randomly drawn points of each cloud
             (a fixed seed, so a pair always gives the same result) and apply the transform to
             the full clouds; 0 matches on every point (memory grows with the square of the
-            points; a request beyond the machine's free memory raises). Default: the built-in
-            model's training size, 384 (256 as ``auto``'s second stage); 1,024 with ``weights``.
+            points; a request beyond the machine's free memory raises). Default: every point for
+            the built-in model (256 as ``auto``'s second stage); 1,024 with ``weights``.
         passes: RGM and auto only: passes of network, matching and Kabsch, each on the source moved by
             the passes before. Default: 2, as in the paper.
         accept: auto only: take FGR's result without running the network when its overlap
@@ -305,7 +305,7 @@ def register(
             ``"cloud"`` for weights from ``rgm train``, ``"running"`` (default) for the
             authors' weights.
         match_points: RGM and auto only: match on at most this many random points of each cloud
-            (fixed seed); 0: every point. Default: 384 for the built-in model (256 in
+            (fixed seed); 0: every point. Default: every point for the built-in model (256 in
             ``auto``), 1,024 with ``weights``.
         passes: RGM and auto only: passes of network, matching and Kabsch. Default: 2.
 

@@ -52,8 +52,8 @@ enum Command {
     /// unless already in the unit-sphere frame, both are centred and scaled by one factor into
     /// it, clouds denser than ModelNet40's 1,024 points are thinned to 1,024 (a second way,
     /// its candidates named …/cells, when no result of the first is taken and the candidates
-    /// disagree), RGM matches on 384 random points of each, and the transform is reported for
-    /// the clouds as given.
+    /// disagree), RGM matches on 256 random points of each (--method rgm: every point), and the
+    /// transform is reported for the clouds as given.
     /// The winner on a thinned pair is refined further on the clouds as given, point to plane
     /// at their own point spacing. Reads PLY (ascii or binary), OFF, XYZ/CSV text and .npy
     /// files, gzip-compressed ones too (`scan.ply.gz`).
@@ -114,8 +114,8 @@ pub struct MethodArgs {
     /// the transform to the full clouds; 0 matches on every point. The network's memory grows
     /// with the square of N (about 0.7 GB at 1,024 points, 2.7 GB at 2,048 for the paper's
     /// sizes), and a request beyond the machine's free memory is refused [default: the
-    /// built-in model's training size, 384, or 256 as the auto cascade's second stage; 1,024
-    /// with --weights, the paper's training size].
+    /// built-in model's every point, as the paper tests it (chosen on validation pairs), or 256
+    /// as the auto cascade's second stage; 1,024 with --weights, the paper's training size].
     #[arg(long, value_name = "N")]
     match_points: Option<usize>,
     /// RGM's passes of network → matching → Kabsch, each on the source moved by the passes
