@@ -473,7 +473,7 @@ fn a_memory_limit_is_respected_with_the_estimate() {
     assert_eq!(out.status.code(), Some(1));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        err.contains("rgm: matching 384 × 384 points would need about")
+        err.contains("rgm: matching 1024 × 1024 points would need about")
             && err.contains("this process may take (free memory, ulimit -v, cgroup limit)"),
         "{err}"
     );
