@@ -25,7 +25,7 @@ pub enum TestStatistics {
     Running,
     /// Each cloud's own statistics, as in training, leaving the running ones untouched. rgm
     /// trains one cloud per batch-norm batch, so a network trained that way sees at test time
-    /// exactly what it saw in training (measured in docs/training.md).
+    /// exactly what it saw in training (measured in docs/training/README.md).
     Cloud,
 }
 
