@@ -3,13 +3,6 @@
 //! Layering rule: the command is a thin shell over rgm-model (methods, evaluation) and rgm-data
 //! (files, pairs); it owns argument parsing, progress and printing, and no algorithm.
 
-/// mimalloc reuses freed buffers and backs them with huge pages: with glibc's allocator every
-/// large zeroed buffer of the network was a fresh mapping, and its page faults were a large
-/// share of a short `rgm` process (docs/speed.md). The library crates leave the choice to
-/// their users.
-#[global_allocator]
-static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
-
 mod commands;
 mod table;
 
