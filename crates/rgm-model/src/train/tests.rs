@@ -645,7 +645,9 @@ fn the_default_training_is_the_built_in_models_recipe() {
     assert_eq!(builtin.setting, default.setting);
     assert!(!builtin.unseen && !default.unseen);
     // Trained on the default's match points; the manifest's own are the test-time choice.
-    let points = default.match_points.expect("the default trains on a subset");
+    let points = default
+        .match_points
+        .expect("the default trains on a subset");
     assert!(
         builtin
             .trained_with
