@@ -278,10 +278,9 @@ pub fn builtin_registrar() -> Result<RgmRegistrar, MethodError> {
             why: "no model is marked builtin".to_string(),
         })?;
     let origin = Path::new("builtin:").join(BUILTIN_FILE);
-    let (tensors, _) = rgm_nn::io::read_tensors_from_bytes::<f32>(builtin_weights(), &origin)
-        .map_err(crate::network::NetworkError::from)?;
     let mut network = Rgm::with_init(entry.config()?, &mut rgm_nn::init::Unset)?;
-    network.load_tensors(&tensors)?;
+    rgm_nn::io::load_params_from_bytes(builtin_weights(), &origin, &mut network)
+        .map_err(crate::network::NetworkError::from)?;
     Ok(entry.registrar_of(network))
 }
 

@@ -264,29 +264,44 @@ fn to_array<T: Scalar>(
     view: &TensorView<'_>,
     metadata: &HashMap<String, String>,
 ) -> Result<ArrayD<T>> {
-    let values: Vec<T> = match view.dtype() {
+    let mut array = ArrayD::zeros(IxDyn(view.shape()));
+    let values = array.as_slice_mut().expect("a new array is contiguous");
+    decode_into(path, name, view, metadata, values)?;
+    Ok(array)
+}
+
+/// [`to_array`] into `dst`, which holds as many values as the tensor, in row order: a model's
+/// parameters are filled without a second copy of them.
+fn decode_into<T: Scalar>(
+    path: &Path,
+    name: &str,
+    view: &TensorView<'_>,
+    metadata: &HashMap<String, String>,
+    dst: &mut [T],
+) -> Result<()> {
+    let data = view.data();
+    match view.dtype() {
         Dtype::U8 if log8_range(metadata, name).is_some() => {
             let (lo, hi) = log8_range(metadata, name).expect("checked");
-            view.data()
-                .iter()
-                .map(|&c| T::from_f64(log8_decode(c, lo, hi)))
-                .collect()
+            for (d, &c) in dst.iter_mut().zip(data) {
+                *d = T::from_f64(log8_decode(c, lo, hi));
+            }
         }
-        Dtype::F32 => view
-            .data()
-            .chunks_exact(4)
-            .map(|b| T::from_f64(f32::from_le_bytes(b.try_into().unwrap()) as f64))
-            .collect(),
-        Dtype::F64 => view
-            .data()
-            .chunks_exact(8)
-            .map(|b| T::from_f64(f64::from_le_bytes(b.try_into().unwrap())))
-            .collect(),
-        Dtype::BF16 => view
-            .data()
-            .chunks_exact(2)
-            .map(|b| T::from_f64(bf16_to_f32(u16::from_le_bytes([b[0], b[1]])) as f64))
-            .collect(),
+        Dtype::F32 => {
+            for (d, b) in dst.iter_mut().zip(data.chunks_exact(4)) {
+                *d = T::from_f64(f32::from_le_bytes(b.try_into().unwrap()) as f64);
+            }
+        }
+        Dtype::F64 => {
+            for (d, b) in dst.iter_mut().zip(data.chunks_exact(8)) {
+                *d = T::from_f64(f64::from_le_bytes(b.try_into().unwrap()));
+            }
+        }
+        Dtype::BF16 => {
+            for (d, b) in dst.iter_mut().zip(data.chunks_exact(2)) {
+                *d = T::from_f64(bf16_to_f32(u16::from_le_bytes([b[0], b[1]])) as f64);
+            }
+        }
         other => {
             return Err(NnError::TensorDtype {
                 path: path.to_path_buf(),
@@ -294,9 +309,8 @@ fn to_array<T: Scalar>(
                 dtype: format!("{other:?}"),
             })
         }
-    };
-    Ok(ArrayD::from_shape_vec(IxDyn(view.shape()), values)
-        .expect("safetensors checked the byte length"))
+    }
+    Ok(())
 }
 
 /// Reads every tensor of a safetensors file (all must be F32, F64, BF16 or
@@ -341,32 +355,45 @@ pub fn save_params<T: Scalar>(path: &Path, model: &dyn Parameters<T>) -> Result<
 /// [`crate::Linear`]. Tensors the model does not use (e.g. batch norm's integer
 /// `num_batches_tracked`) are ignored.
 pub fn load_params<T: Scalar>(path: &Path, model: &mut dyn Parameters<T>) -> Result<()> {
-    let buffer = read_bytes(path)?;
-    let file = parse(path, &buffer)?;
+    load_params_from_bytes(&read_bytes(path)?, path, model)
+}
+
+/// [`load_params`] from the bytes of a safetensors file already in memory (weights embedded in
+/// a binary); `origin` names them in errors. Each tensor is decoded straight into its
+/// parameter.
+pub fn load_params_from_bytes<T: Scalar>(
+    buffer: &[u8],
+    origin: &Path,
+    model: &mut dyn Parameters<T>,
+) -> Result<()> {
+    let file = parse(origin, buffer)?;
     let (_, header) =
-        SafeTensors::read_metadata(&buffer).map_err(|source| not_safetensors(path, source))?;
+        SafeTensors::read_metadata(buffer).map_err(|source| not_safetensors(origin, source))?;
     let metadata = header.metadata().clone().unwrap_or_default();
     let fill = |name: &str, mut dst: ndarray::ArrayViewMutD<'_, T>| -> Result<()> {
         let view = file.tensor(name).map_err(|_| NnError::MissingTensor {
-            path: path.to_path_buf(),
+            path: origin.to_path_buf(),
             name: name.to_string(),
         })?;
         let (got, want) = (view.shape(), dst.shape());
         let trailing_ones = got.len() >= want.len() && got[want.len()..].iter().all(|&d| d == 1);
         if !trailing_ones || &got[..want.len()] != want {
             return Err(NnError::TensorShape {
-                path: path.to_path_buf(),
+                path: origin.to_path_buf(),
                 name: name.to_string(),
                 expected: want.to_vec(),
                 got: got.to_vec(),
             });
         }
-        let t = to_array::<T>(path, name, &view, &metadata)?;
-        dst.assign(
-            &t.into_shape_with_order(want.to_vec())
-                .expect("same number of values"),
-        );
-        Ok(())
+        // Both in row order (trailing size-1 axes add none).
+        match dst.as_slice_mut() {
+            Some(values) => decode_into(origin, name, &view, &metadata, values),
+            None => {
+                let t = to_array::<T>(origin, name, &view, &metadata)?;
+                dst.iter_mut().zip(t.iter()).for_each(|(d, &v)| *d = v);
+                Ok(())
+            }
+        }
     };
     try_visit_params(model, "", |name, p| fill(name, p.value))?;
     try_visit_buffers(model, "", fill)

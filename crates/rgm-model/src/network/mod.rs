@@ -162,8 +162,7 @@ impl<T: Element> Rgm<T> {
     /// the safetensors file at `path` (see [`Rgm::load_tensors`]).
     pub fn load(config: Config, path: &Path) -> Result<Self> {
         let mut rgm = Self::with_init(config, &mut Unset)?;
-        let (tensors, _) = rgm_nn::io::read_tensors::<T>(path)?;
-        rgm.load_tensors(&tensors)?;
+        rgm_nn::io::load_params(path, &mut rgm)?;
         Ok(rgm)
     }
 
