@@ -2,14 +2,15 @@
 //! cloud, and the wrappers here compose registrars without knowing what they wrap —
 //! [`Refined`] (ICP refinement of its transform), [`Normalised`] (the pair centred and scaled
 //! into the unit-sphere frame), [`AtResolution`] (a last refinement at a dense pair's own
-//! point spacing) and [`crate::best_of::BestOf`] (several methods, the best by a score that
-//! needs no ground truth).
+//! point spacing), [`crate::best_of::BestOf`] (several methods, the best by a score that
+//! needs no ground truth) and [`OnFirstUse`] (a method made only when a pair needs it).
 //!
 //! The trait is generic over its error so that methods above this crate (the RGM network)
 //! compose with the classical ones here: every registrar of this crate works with any error
 //! type that a [`GeomError`] converts into.
 
 use std::fmt;
+use std::sync::Arc;
 use std::time::Instant;
 
 use crate::fgr::{self, FgrConfig, Progress};
@@ -387,6 +388,71 @@ impl<E: From<GeomError>, R: Registrar<E>> Registrar<E> for AtResolution<R> {
     }
 }
 
+/// The method `make` returns, made when it first registers a pair: a composite that may never
+/// run it (the cascade's network, when it accepts FGR's result) does not pay for making it.
+/// A failure to make it is the registration's error, and the next registration tries again.
+/// Copies share `make` and each keep what they made.
+pub struct OnFirstUse<R, E> {
+    id: MethodId,
+    make: Arc<dyn Fn() -> Result<R, E> + Send + Sync>,
+    made: Option<R>,
+}
+
+impl<R, E> OnFirstUse<R, E> {
+    /// The method named `id` (which must be what the method `make` returns is named), not yet
+    /// made.
+    pub fn new(id: MethodId, make: impl Fn() -> Result<R, E> + Send + Sync + 'static) -> Self {
+        Self {
+            id,
+            make: Arc::new(make),
+            made: None,
+        }
+    }
+
+    /// The method, if a registration has made it.
+    pub fn made(&self) -> Option<&R> {
+        self.made.as_ref()
+    }
+}
+
+impl<R: Clone, E> Clone for OnFirstUse<R, E> {
+    fn clone(&self) -> Self {
+        Self {
+            id: self.id,
+            make: self.make.clone(),
+            made: self.made.clone(),
+        }
+    }
+}
+
+impl<R: fmt::Debug, E> fmt::Debug for OnFirstUse<R, E> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("OnFirstUse")
+            .field("id", &self.id)
+            .field("made", &self.made)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<E, R: Registrar<E>> Registrar<E> for OnFirstUse<R, E> {
+    fn id(&self) -> MethodId {
+        self.id
+    }
+
+    fn register_with_progress(
+        &mut self,
+        source: &PointCloud,
+        target: &PointCloud,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        let method = match &mut self.made {
+            Some(method) => method,
+            None => self.made.insert((self.make)()?),
+        };
+        method.register_with_progress(source, target, progress)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -409,6 +475,50 @@ mod tests {
         );
         let target = source.transformed(&pose);
         (source, target)
+    }
+
+    #[test]
+    fn on_first_use_makes_its_method_once_and_only_when_a_pair_needs_it() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let made = Arc::new(AtomicUsize::new(0));
+        let count = made.clone();
+        let fails = Arc::new(std::sync::atomic::AtomicBool::new(true));
+        let failing = fails.clone();
+        let mut lazy = OnFirstUse::new(
+            MethodId {
+                base: "fgr",
+                refined: false,
+            },
+            move || {
+                count.fetch_add(1, Ordering::SeqCst);
+                if failing.load(Ordering::SeqCst) {
+                    Err(GeomError::Degenerate {
+                        op: "make",
+                        why: "not yet".into(),
+                    })
+                } else {
+                    Ok(FgrConfig::default())
+                }
+            },
+        );
+        // Named and copied without being made.
+        assert_eq!(Registrar::<GeomError>::id(&lazy).to_string(), "fgr");
+        let _copy = lazy.clone();
+        assert_eq!(made.load(Ordering::SeqCst), 0);
+        let (source, target) = curve_pair();
+        // A failure to make it is the registration's error; the next one tries again.
+        let err = lazy.register(&source, &target).unwrap_err();
+        assert!(err.to_string().contains("not yet"), "{err}");
+        assert!(lazy.made().is_none());
+        fails.store(false, Ordering::SeqCst);
+        let first = lazy.register(&source, &target).unwrap();
+        let second = lazy.register(&source, &target).unwrap();
+        assert_eq!(made.load(Ordering::SeqCst), 2);
+        // The same result as the method made directly.
+        let direct =
+            Registrar::<GeomError>::register(&mut FgrConfig::default(), &source, &target).unwrap();
+        assert_eq!(first.result.t_target_source, direct.result.t_target_source);
+        assert_eq!(second.result.t_target_source, direct.result.t_target_source);
     }
 
     #[test]

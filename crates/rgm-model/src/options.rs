@@ -26,7 +26,7 @@ use rgm_geom::best_of::{Acceptance, BestOf, ACCEPT, SCORE_DISTANCE};
 use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::icp::{self, IcpConfig};
 use rgm_geom::refine::{RefineConfig, ResolutionConfig};
-use rgm_geom::registrar::{AtResolution, DynRegistrar, Normalised, Refined};
+use rgm_geom::registrar::{AtResolution, DynRegistrar, Normalised, OnFirstUse, Refined, Registrar};
 use rgm_geom::thinning::Thinning;
 
 use rgm_nn::Precision;
@@ -198,7 +198,19 @@ impl MethodOptions {
                     score: self.accept,
                     ..ACCEPT
                 };
-                auto(self.build_cascade_rgm()?, refine, accept)
+                match &self.weights {
+                    // Given weights are read now, so that a bad file is an error before any
+                    // pair; the built-in model cannot fail to load, and a pair whose FGR result
+                    // the cascade accepts never needs it.
+                    Some(_) => auto(self.build_cascade_rgm()?, refine, accept),
+                    None => {
+                        let options = self.clone();
+                        let rgm = OnFirstUse::new(RgmRegistrar::ID, move || {
+                            options.build_cascade_rgm()
+                        });
+                        auto(rgm, refine, accept)
+                    }
+                }
             }
         })
     }
@@ -272,7 +284,10 @@ impl MethodOptions {
 /// `accept` does not take FGR's (the network costs most of the time), each refined with `refine`;
 /// the better by the overlap score on two thinnings of a dense pair, and the winner refined at
 /// a dense pair's own resolution.
-pub fn auto(rgm: RgmRegistrar, refine: Option<RefineConfig>, accept: Acceptance) -> Method {
+pub fn auto<R>(rgm: R, refine: Option<RefineConfig>, accept: Acceptance) -> Method
+where
+    R: Registrar<MethodError> + Clone + Send + Sync + 'static,
+{
     let rgm = Normalised { inner: rgm };
     let fgr = FgrConfig::default();
     let best_of = |candidates: [Box<dyn DynRegistrar<MethodError>>; 2], scoring_distance| BestOf {

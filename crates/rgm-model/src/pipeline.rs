@@ -271,6 +271,12 @@ fn kabsch_of(
 }
 
 impl RgmRegistrar {
+    /// What every RGM registrar is called: the network alone, unrefined.
+    pub const ID: MethodId = MethodId {
+        base: NAME,
+        refined: false,
+    };
+
     /// A registrar around `network`.
     pub fn new(network: Rgm<f32>, config: PipelineConfig) -> Self {
         Self {
@@ -436,10 +442,7 @@ impl RgmRegistrar {
 /// The network alone, on clouds in its frame.
 impl Registrar<MethodError> for RgmRegistrar {
     fn id(&self) -> MethodId {
-        MethodId {
-            base: NAME,
-            refined: false,
-        }
+        Self::ID
     }
 
     fn register_with_progress(
