@@ -509,7 +509,7 @@ fn a_run_saved_in_the_old_layout_resumes_and_so_does_a_bf16_snapshot() {
     ] {
         fs::copy(committed.join(name), dir.join(name)).unwrap();
     }
-    let config: TrainConfig =
+    let mut config: TrainConfig =
         serde_json::from_str(&fs::read_to_string(dir.join("config.json")).unwrap()).unwrap();
     // The state as the old code wrote it, whatever the snapshot's age.
     let mut state: serde_json::Value =
@@ -518,6 +518,8 @@ fn a_run_saved_in_the_old_layout_resumes_and_so_does_a_bf16_snapshot() {
     fs::write(dir.join("state.json"), state.to_string()).unwrap();
     let saved: TrainState = serde_json::from_value(state).unwrap();
     assert_eq!(saved.log_bytes, None);
+    // A snapshot at the end of its schedule still has an epoch to go on with.
+    config.epochs = config.epochs.max(saved.epoch + 2);
     let log_before = fs::read(dir.join("log.jsonl")).unwrap();
     // The small dataset: the run goes on from its saved position and stops after a batch.
     let mut trainer = Trainer::open(config.clone(), &dir).unwrap();
