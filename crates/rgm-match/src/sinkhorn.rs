@@ -25,9 +25,10 @@
 
 use crate::error::{check_shape, MatchError, Result};
 use ndarray::linalg::{general_mat_mul, general_mat_vec_mul};
-use ndarray::{Array1, Array2, ArrayView1, ArrayView2, ArrayViewMut1, ArrayViewMut2, Axis, Zip};
+use ndarray::{s, Array1, Array2, ArrayView1, ArrayView2, ArrayViewMut1, ArrayViewMut2, Axis, Zip};
 use rgm_nn::exp::{exp_shifted_sum, sum};
 use rgm_nn::Scalar;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// Which computation [`sinkhorn_forward`] uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -170,66 +171,166 @@ pub fn sinkhorn_forward<T: Scalar>(
 }
 
 /// The log form's rounds: α into `cache.rows`, β into `cache.cols`.
+///
+/// Each round's row step and column step is cut in two halves (of the rows, of the columns),
+/// four half-steps per round. Workers claim half-steps in order from a shared counter and start
+/// one only when every half of the previous steps is done, so one worker alone runs them all in
+/// order, and two (when rayon's pool has more than one thread and S is large enough) run each
+/// step's halves side by side; every value is computed the same way either way. The workers stay
+/// in one parallel region for all rounds: handing each half-step to the pool anew costs as much
+/// as the half-step (docs/speed.md).
 fn log_forward<T: Scalar>(
     s: ArrayView2<'_, T>,
     cfg: &SinkhornConfig,
     cache: &mut SinkhornCache<T>,
 ) {
-    let m = s.ncols();
+    let (n, m) = s.dim();
     // The slack entry's log value 0 joins every LSE; without slack it is −∞ (absent).
     let slack_log = if cfg.slack {
         T::zero()
     } else {
         T::neg_infinity()
     };
-    let (alpha, beta) = (&mut cache.rows, &mut cache.cols);
-    let zeros = Array1::<T>::zeros(m); // (M) β before the first column step
-    let mut col_max = Array1::<T>::zeros(m); // (M)
-    let mut col_sum = Array1::<T>::zeros(m); // (M)
-    let mut terms = Array1::<T>::zeros(m); // (M) one row's exponents, then their exponentials
-    let terms = terms.as_slice_mut().expect("a new array is contiguous");
-    for t in 0..cfg.iterations {
-        // Row step: α_i = −LSE(S_ij + β_j over j, slack 0), with β = 0 before the first column step.
-        let beta_prev = if t == 0 {
-            zeros.view()
-        } else {
-            beta.row(t - 1)
-        };
-        for (i, row) in s.outer_iter().enumerate() {
-            Zip::from(&mut *terms)
-                .and(&row)
-                .and(&beta_prev)
-                .for_each(|x, &v, &b| *x = v + b);
-            let max = rgm_nn::exp::max(terms, slack_log);
-            let sum = (slack_log - max).exp() + exp_shifted_sum(terms, max);
-            alpha[[t, i]] = -(max + sum.ln());
+    let rounds = cfg.iterations;
+    let potentials = Potentials {
+        alpha: cache.rows.as_mut_ptr(),
+        beta: cache.cols.as_mut_ptr(),
+    };
+    let claimed = AtomicUsize::new(0);
+    let done = AtomicUsize::new(0);
+    let halves = 4 * rounds;
+    let worker = || {
+        let potentials = &potentials; // shared whole: its fields alone are not Sync
+        let mut terms = vec![T::zero(); m]; // (M) one row's terms
+        let mut col_max = vec![T::zero(); m]; // (M)
+        let mut col_sum = vec![T::zero(); m]; // (M)
+        loop {
+            let h = claimed.fetch_add(1, Ordering::Relaxed);
+            if h >= halves {
+                return;
+            }
+            let (step, part) = (h / 2, h % 2);
+            // Every half of the steps before this one is done (and its writes visible).
+            let mut spins = 0u32;
+            while done.load(Ordering::Acquire) < 2 * step {
+                spins += 1;
+                if spins % 1024 == 0 {
+                    std::thread::yield_now();
+                } else {
+                    std::hint::spin_loop();
+                }
+            }
+            let (t, column_step) = (step / 2, step % 2 == 1);
+            // SAFETY: the cache holds (I, N) α and (I, M) β in row order. This half writes only
+            // its half of round t's row of one of them, which no other half-step touches, and
+            // reads rows that every writer finished before `done` let it start.
+            unsafe {
+                if column_step {
+                    let (c0, c1) = if part == 0 { (0, m / 2) } else { (m / 2, m) };
+                    let alpha = std::slice::from_raw_parts(potentials.alpha.add(t * n), n);
+                    let beta =
+                        std::slice::from_raw_parts_mut(potentials.beta.add(t * m + c0), c1 - c0);
+                    log_column_step(
+                        s.slice(s![.., c0..c1]),
+                        alpha,
+                        slack_log,
+                        beta,
+                        [
+                            &mut col_max[c0..c1],
+                            &mut col_sum[c0..c1],
+                            &mut terms[c0..c1],
+                        ],
+                    );
+                } else {
+                    let (r0, r1) = if part == 0 { (0, n / 2) } else { (n / 2, n) };
+                    // β = 0 before the first column step.
+                    let beta = (t > 0)
+                        .then(|| std::slice::from_raw_parts(potentials.beta.add((t - 1) * m), m));
+                    let alpha =
+                        std::slice::from_raw_parts_mut(potentials.alpha.add(t * n + r0), r1 - r0);
+                    log_row_step(s.slice(s![r0..r1, ..]), beta, slack_log, alpha, &mut terms);
+                }
+            }
+            done.fetch_add(1, Ordering::Release);
         }
-        // Column step: β_j = −LSE(S_ij + α_i over i, slack 0), row by row for contiguous access.
-        let a = alpha.row(t);
-        col_max.fill(slack_log);
-        for (row, &a) in s.outer_iter().zip(a) {
-            Zip::from(&mut col_max)
-                .and(&row)
-                .for_each(|mx, &v| *mx = mx.max(v + a));
-        }
-        Zip::from(&mut col_sum)
-            .and(&col_max)
-            .for_each(|sum, &mx| *sum = (slack_log - mx).exp());
-        for (row, &a) in s.outer_iter().zip(a) {
-            Zip::from(&mut *terms)
-                .and(&col_max)
-                .and(&row)
-                .for_each(|x, &mx, &v| *x = v + a - mx);
-            T::exp_in_place(terms);
-            Zip::from(&mut col_sum)
-                .and(&*terms)
-                .for_each(|sum, &e| *sum += e);
-        }
-        Zip::from(beta.row_mut(t))
-            .and(&col_max)
-            .and(&col_sum)
-            .for_each(|b, &mx, &sum| *b = -(mx + sum.ln()));
+    };
+    if rayon::current_num_threads() > 1 && n * m >= PARALLEL_ENTRIES {
+        rayon::join(worker, worker);
+    } else {
+        worker();
     }
+}
+
+/// Entries of S from which the log form asks rayon's pool for a second worker.
+const PARALLEL_ENTRIES: usize = 128 * 128;
+
+/// The log form's potentials, shared by its workers ([`log_forward`] says who writes what).
+struct Potentials<T> {
+    alpha: *mut T, // (I, N)
+    beta: *mut T,  // (I, M)
+}
+
+// SAFETY: the workers of one `log_forward` write disjoint parts, ordered by its counters.
+unsafe impl<T: Send> Sync for Potentials<T> {}
+
+/// α_i = −LSE(S_ij + β_j over j, slack) for the rows of `s` (R, M) into `alpha` (R); no `beta`
+/// is β = 0. `terms` (M) is scratch.
+fn log_row_step<T: Scalar>(
+    s: ArrayView2<'_, T>,
+    beta: Option<&[T]>,
+    slack_log: T,
+    alpha: &mut [T],
+    terms: &mut [T],
+) {
+    for (row, a) in s.outer_iter().zip(alpha.iter_mut()) {
+        let row = row.as_slice().expect("S's rows are contiguous");
+        match beta {
+            Some(beta) => Zip::from(&mut *terms)
+                .and(row)
+                .and(beta)
+                .for_each(|x, &v, &b| *x = v + b),
+            None => terms.copy_from_slice(row),
+        }
+        let max = rgm_nn::exp::max(terms, slack_log);
+        let sum = (slack_log - max).exp() + exp_shifted_sum(terms, max);
+        *a = -(max + sum.ln());
+    }
+}
+
+/// β_j = −LSE(S_ij + α_i over i, slack) for the columns of `s` (N, J) into `beta` (J), row by
+/// row for contiguous access; `scratch` is three (J) buffers: the column maxima, sums and one
+/// row's terms.
+fn log_column_step<T: Scalar>(
+    s: ArrayView2<'_, T>,
+    alpha: &[T],
+    slack_log: T,
+    beta: &mut [T],
+    scratch: [&mut [T]; 3],
+) {
+    let [col_max, col_sum, terms] = scratch;
+    col_max.fill(slack_log);
+    for (row, &a) in s.outer_iter().zip(alpha) {
+        Zip::from(&mut *col_max)
+            .and(&row)
+            .for_each(|mx, &v| *mx = mx.max(v + a));
+    }
+    Zip::from(&mut *col_sum)
+        .and(&*col_max)
+        .for_each(|sum, &mx| *sum = (slack_log - mx).exp());
+    for (row, &a) in s.outer_iter().zip(alpha) {
+        Zip::from(&mut *terms)
+            .and(&*col_max)
+            .and(&row)
+            .for_each(|x, &mx, &v| *x = v + a - mx);
+        T::exp_in_place(terms);
+        Zip::from(&mut *col_sum)
+            .and(&*terms)
+            .for_each(|sum, &e| *sum += e);
+    }
+    Zip::from(beta)
+        .and(&*col_max)
+        .and(&*col_sum)
+        .for_each(|b, &mx, &sum| *b = -(mx + sum.ln()));
 }
 
 /// The scaling form's rounds: K into `cache.k`, u into `cache.rows`, v into `cache.cols`.
@@ -501,6 +602,31 @@ mod tests {
             "scaling f32 error {}",
             worst(&fast32)
         );
+    }
+
+    #[test]
+    fn log_form_gives_the_same_bits_on_one_worker_and_two() {
+        // Large enough for two workers, odd sizes so that the halves differ; S beyond the
+        // scaling form's range so that the log form runs.
+        let s = (ix2(&uniform(&[131, 157], 21)) * 40.0).mapv(|v| v as f32);
+        let cfg = SinkhornConfig::default();
+        let on = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| run(&s, &cfg))
+        };
+        let (one, cache) = on(1);
+        assert_eq!(cache.form(), SinkhornForm::Log);
+        for threads in [2, 3] {
+            let (c, other) = on(threads);
+            assert_eq!(c, one, "{threads} threads");
+            assert_eq!(other.rows, cache.rows);
+            assert_eq!(other.cols, cache.cols);
+        }
+        // And it is Sinkhorn: with the slack, every real row sums to at most 1.
+        assert!(one.rows().into_iter().all(|r| r.sum() <= 1.0 + 1e-5));
     }
 
     #[test]
