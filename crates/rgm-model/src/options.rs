@@ -205,9 +205,8 @@ impl MethodOptions {
                     Some(_) => auto(self.build_cascade_rgm()?, refine, accept),
                     None => {
                         let options = self.clone();
-                        let rgm = OnFirstUse::new(RgmRegistrar::ID, move || {
-                            options.build_cascade_rgm()
-                        });
+                        let rgm =
+                            OnFirstUse::new(RgmRegistrar::ID, move || options.build_cascade_rgm());
                         auto(rgm, refine, accept)
                     }
                 }

@@ -278,9 +278,7 @@ pub fn builtin_registrar() -> Result<RgmRegistrar, MethodError> {
             why: "no model is marked builtin".to_string(),
         })?;
     let origin = Path::new("builtin:").join(BUILTIN_FILE);
-    let mut network = Rgm::with_init(entry.config()?, &mut rgm_nn::init::Unset)?;
-    rgm_nn::io::load_params_from_bytes(builtin_weights(), &origin, &mut network)
-        .map_err(crate::network::NetworkError::from)?;
+    let network = Rgm::from_bytes(entry.config()?, builtin_weights(), &origin)?;
     Ok(entry.registrar_of(network))
 }
 

@@ -194,7 +194,7 @@ pub fn rewrite_with_bf16(from: &Path, to: &Path, bf16: &dyn Fn(&str) -> bool) ->
 
 /// The bytes of the regular file at `path`; folders, devices, FIFOs and sockets are refused
 /// before they are opened (`/dev/zero` would never end).
-fn read_bytes(path: &Path) -> Result<Vec<u8>> {
+pub fn read_bytes(path: &Path) -> Result<Vec<u8>> {
     let io_error = |source| NnError::Io {
         path: path.to_path_buf(),
         source,
@@ -355,15 +355,17 @@ pub fn save_params<T: Scalar>(path: &Path, model: &dyn Parameters<T>) -> Result<
 /// [`crate::Linear`]. Tensors the model does not use (e.g. batch norm's integer
 /// `num_batches_tracked`) are ignored.
 pub fn load_params<T: Scalar>(path: &Path, model: &mut dyn Parameters<T>) -> Result<()> {
-    load_params_from_bytes(&read_bytes(path)?, path, model)
+    load_params_from_bytes(&read_bytes(path)?, path, "", model)
 }
 
 /// [`load_params`] from the bytes of a safetensors file already in memory (weights embedded in
-/// a binary); `origin` names them in errors. Each tensor is decoded straight into its
-/// parameter.
+/// a binary, or a file read once for several parts of a model); `origin` names them in errors.
+/// `model` is the part whose names start with `prefix` ("" for a whole model). Each tensor is
+/// decoded straight into its parameter.
 pub fn load_params_from_bytes<T: Scalar>(
     buffer: &[u8],
     origin: &Path,
+    prefix: &str,
     model: &mut dyn Parameters<T>,
 ) -> Result<()> {
     let file = parse(origin, buffer)?;
@@ -395,8 +397,8 @@ pub fn load_params_from_bytes<T: Scalar>(
             }
         }
     };
-    try_visit_params(model, "", |name, p| fill(name, p.value))?;
-    try_visit_buffers(model, "", fill)
+    try_visit_params(model, prefix, |name, p| fill(name, p.value))?;
+    try_visit_buffers(model, prefix, fill)
 }
 #[cfg(test)]
 mod tests {

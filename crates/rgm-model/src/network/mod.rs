@@ -32,6 +32,7 @@ pub use transformer::{EdgeTransformer, EdgeTransformerCache, Stack, StackCache};
 
 use ndarray::{Array2, ArrayD, ArrayView2, ArrayViewD, ArrayViewMutD};
 use rand::{rngs::StdRng, SeedableRng};
+use rayon::prelude::*;
 use rgm_match::{bce_backward, bce_forward, Correspondences};
 use rgm_nn::init::{Init, Unset};
 use rgm_nn::param::{join_name, try_visit_buffers, try_visit_params, ParamView, ParamViewMut};
@@ -161,9 +162,41 @@ impl<T: Element> Rgm<T> {
     /// A network of `config`'s sizes with every parameter and batch-norm statistic read from
     /// the safetensors file at `path` (see [`Rgm::load_tensors`]).
     pub fn load(config: Config, path: &Path) -> Result<Self> {
-        let mut rgm = Self::with_init(config, &mut Unset)?;
-        rgm_nn::io::load_params(path, &mut rgm)?;
-        Ok(rgm)
+        Self::from_bytes(config, &rgm_nn::io::read_bytes(path)?, path)
+    }
+
+    /// [`Rgm::load`] from the bytes of a safetensors file in memory (`origin` names them in
+    /// errors). The feature extractor and each block are made and filled side by side on
+    /// rayon's pool: loading is most of what a one-pair process waits for besides the pair.
+    pub fn from_bytes(config: Config, bytes: &[u8], origin: &Path) -> Result<Self> {
+        config.validate()?;
+        let fill = |part: &mut dyn Parameters<T>, prefix: &str| {
+            rgm_nn::io::load_params_from_bytes(bytes, origin, prefix, part)
+        };
+        let (featurer, blocks) = rayon::join(
+            || -> Result<PointFeaturer<T>> {
+                let mut featurer =
+                    PointFeaturer::new(config.k, config.dgcnn, config.edge, &mut Unset);
+                fill(&mut featurer, "pointfeaturer")?;
+                Ok(featurer)
+            },
+            || {
+                (0..config.blocks)
+                    .into_par_iter()
+                    .map(|b| {
+                        let mut block = Block::new(&config, b, &mut Unset)?;
+                        fill(&mut block, "")?;
+                        Ok(block)
+                    })
+                    .collect::<Result<Vec<_>>>()
+            },
+        );
+        Ok(Self {
+            config,
+            featurer: featurer?,
+            blocks: blocks?,
+            precision: Precision::F32,
+        })
     }
 
     pub fn config(&self) -> &Config {
