@@ -26,25 +26,19 @@ int main(void) {
         z[i] = _mm512_set1_ps(i);
         y[i] = _mm256_set1_ps(i);
     }
-    double t0 = now();
-    for (long n = 0; n < STEPS; n++)
-#pragma GCC unroll 12
-        for (int i = 0; i < ACCUMULATORS; i++) z[i] = _mm512_fmadd_ps(z[i], zb, zc);
-    double t = now() - t0;
-    printf("f32 512-bit FMA: %.1f GFLOP/s\n", STEPS * ACCUMULATORS * 16.0 * 2 / t / 1e9);
-    t0 = now();
-    for (long n = 0; n < STEPS; n++)
-#pragma GCC unroll 12
-        for (int i = 0; i < ACCUMULATORS; i++) y[i] = _mm256_fmadd_ps(y[i], yb, yc);
-    t = now() - t0;
-    printf("f32 256-bit FMA: %.1f GFLOP/s\n", STEPS * ACCUMULATORS * 8.0 * 2 / t / 1e9);
+    /* STEPS rounds of `op` on every accumulator, each op `flops` floating-point operations. */
+#define TIME(label, flops, op)                                                        \
+    do {                                                                              \
+        double t0 = now();                                                            \
+        for (long n = 0; n < STEPS; n++) {                                            \
+            _Pragma("GCC unroll 12") for (int i = 0; i < ACCUMULATORS; i++) op;       \
+        }                                                                             \
+        printf("%s: %.1f GFLOP/s\n", label, STEPS * ACCUMULATORS * (flops) / (now() - t0) / 1e9); \
+    } while (0)
+    TIME("f32 512-bit FMA", 16.0 * 2, z[i] = _mm512_fmadd_ps(z[i], zb, zc));
+    TIME("f32 256-bit FMA", 8.0 * 2, y[i] = _mm256_fmadd_ps(y[i], yb, yc));
     __m512bh one = (__m512bh)_mm512_set1_epi16(0x3f80), tiny = (__m512bh)_mm512_set1_epi16(0x3380);
-    t0 = now();
-    for (long n = 0; n < STEPS; n++)
-#pragma GCC unroll 12
-        for (int i = 0; i < ACCUMULATORS; i++) z[i] = _mm512_dpbf16_ps(z[i], one, tiny);
-    t = now() - t0;
-    printf("bf16 512-bit dot products: %.1f GFLOP/s\n", STEPS * ACCUMULATORS * 32.0 * 2 / t / 1e9);
+    TIME("bf16 512-bit dot products", 32.0 * 2, z[i] = _mm512_dpbf16_ps(z[i], one, tiny));
     /* The accumulators are printed so that the loops are not optimised away. */
     float sum = 0, lanes[8];
     for (int i = 0; i < ACCUMULATORS; i++) {
