@@ -15,7 +15,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DATA="${RGM_DATA:-../shared/data/modelnet40_npy1024}"
-COMMON="--preset fast --match-points 384 --optimizer adam --lr 3e-4 --epochs 100 --milestones 60,80 --val-shapes 300 --checkpoint-every 50 --test-statistics cloud"
+COMMON="--preset fast --match-points 384 --optimizer adam --lr 3e-4 --val-shapes 300 --checkpoint-every 50 --test-statistics cloud"
+# Every run's learning-rate schedule: 100 epochs, ×0.2 at 60 and 80 (the spec's 200 epochs with
+# steps at 120 and 140, compressed to the compute at hand).
+S100="--epochs 100 --milestones 60,80"
 
 # name | target epoch | options besides $COMMON
 # noise and clean are fine-tuned from the partial model at the end of its epoch 25 (196,575
@@ -26,17 +29,21 @@ COMMON="--preset fast --match-points 384 --optimizer adam --lr 3e-4 --epochs 100
 # first validation on the new sample becomes the run's best).
 PARTIAL25=crates/rgm-model/weights/partial-fast.safetensors
 QUEUE=(
-  "partial-fast|25|--setting partial --val-sample first"
-  "noise-fast|1|--setting noise --init $PARTIAL25 --val-sample first"
-  "clean-fast|1|--setting clean --init $PARTIAL25 --val-sample first"
-  "var2-fast|7|--setting partial --variant var2 --val-sample first"
-  "unseen-fast|9|--setting partial --unseen --val-sample first"
-  "var1-fast|7|--setting partial --variant var1 --val-sample first"
-  "partial-fast|40|--setting partial --val-sample spread"
-  "unseen-fast|20|--setting partial --unseen --val-sample spread"
-  "partial-fast|100|--setting partial --val-sample spread"
-  "noise-fast|3|--setting noise --init $PARTIAL25 --val-sample spread"
-  "clean-fast|3|--setting clean --init $PARTIAL25 --val-sample spread"
+  "partial-fast|25|--setting partial --val-sample first $S100"
+  "noise-fast|1|--setting noise --init $PARTIAL25 --val-sample first $S100"
+  "clean-fast|1|--setting clean --init $PARTIAL25 --val-sample first $S100"
+  "var2-fast|7|--setting partial --variant var2 --val-sample first $S100"
+  "unseen-fast|9|--setting partial --unseen --val-sample first $S100"
+  "var1-fast|7|--setting partial --variant var1 --val-sample first $S100"
+  "partial-fast|40|--setting partial --val-sample spread $S100"
+  "unseen-fast|20|--setting partial --unseen --val-sample spread $S100"
+  "partial-fast|100|--setting partial --val-sample spread $S100"
+  "noise-fast|3|--setting noise --init $PARTIAL25 --val-sample spread $S100"
+  "clean-fast|3|--setting clean --init $PARTIAL25 --val-sample spread $S100"
+  # The spec's last 100 epochs for the partial model (3e-4 to its 120th, ×0.2 at 120 and 140),
+  # from the end of partial-fast's compressed schedule: its validation had flattened at
+  # 55–57 % alone from epoch 80 on, at the last learning rate (docs/training/README.md).
+  "partial-fast-200|100|--setting partial --init runs/partial-fast/last.safetensors --val-sample spread --epochs 100 --milestones 20,40"
 )
 
 status() {
