@@ -282,14 +282,16 @@ fn log_row_step<T: Scalar>(
     alpha: &mut [T],
     terms: &mut [T],
 ) {
+    // Nothing here may panic: the other worker would wait for this half-step for ever.
     for (row, a) in s.outer_iter().zip(alpha.iter_mut()) {
-        let row = row.as_slice().expect("S's rows are contiguous");
         match beta {
             Some(beta) => Zip::from(&mut *terms)
-                .and(row)
+                .and(&row)
                 .and(beta)
                 .for_each(|x, &v, &b| *x = v + b),
-            None => terms.copy_from_slice(row),
+            None => Zip::from(&mut *terms)
+                .and(&row)
+                .for_each(|x, &v| *x = v + T::zero()),
         }
         let max = rgm_nn::exp::max(terms, slack_log);
         let sum = (slack_log - max).exp() + exp_shifted_sum(terms, max);
@@ -627,6 +629,12 @@ mod tests {
         }
         // And it is Sinkhorn: with the slack, every real row sums to at most 1.
         assert!(one.rows().into_iter().all(|r| r.sum() <= 1.0 + 1e-5));
+        // S in any memory layout: a transposed view gives what its standard copy gives.
+        let st = s.t();
+        let mut c = Array2::zeros(st.dim());
+        let mut cache = SinkhornCache::new(st.nrows(), st.ncols(), &cfg);
+        sinkhorn_forward(c.view_mut(), st, &cfg, &mut cache).unwrap();
+        assert_eq!(c, run(&st.to_owned(), &cfg).0);
     }
 
     #[test]
