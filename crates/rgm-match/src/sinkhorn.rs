@@ -28,7 +28,7 @@ use ndarray::linalg::{general_mat_mul, general_mat_vec_mul};
 use ndarray::{s, Array1, Array2, ArrayView1, ArrayView2, ArrayViewMut1, ArrayViewMut2, Axis, Zip};
 use rgm_nn::exp::{exp_shifted_sum, sum};
 use rgm_nn::Scalar;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 /// Which computation [`sinkhorn_forward`] uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -199,7 +199,9 @@ fn log_forward<T: Scalar>(
     let claimed = AtomicUsize::new(0);
     let done = AtomicUsize::new(0);
     let halves = 4 * rounds;
+    let failed = AtomicBool::new(false);
     let worker = || {
+        let _flag = FlagOnPanic(&failed);
         let potentials = &potentials; // shared whole: its fields alone are not Sync
         let mut terms = vec![T::zero(); m]; // (M) one row's terms
         let mut col_max = vec![T::zero(); m]; // (M)
@@ -213,6 +215,9 @@ fn log_forward<T: Scalar>(
             // Every half of the steps before this one is done (and its writes visible).
             let mut spins = 0u32;
             while done.load(Ordering::Acquire) < 2 * step {
+                // The other worker's half-step panicked: end this one too, so that rayon's
+                // join hands the panic to the caller instead of waiting for ever.
+                assert!(!failed.load(Ordering::Relaxed), "a Sinkhorn worker failed");
                 spins += 1;
                 if spins % 1024 == 0 {
                     std::thread::yield_now();
@@ -264,6 +269,17 @@ fn log_forward<T: Scalar>(
 /// Entries of S from which the log form asks rayon's pool for a second worker.
 const PARALLEL_ENTRIES: usize = 128 * 128;
 
+/// Sets its flag when the thread unwinds through it (a panic).
+struct FlagOnPanic<'a>(&'a AtomicBool);
+
+impl Drop for FlagOnPanic<'_> {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            self.0.store(true, Ordering::Relaxed);
+        }
+    }
+}
+
 /// The log form's potentials, shared by its workers ([`log_forward`] says who writes what).
 struct Potentials<T> {
     alpha: *mut T, // (I, N)
@@ -282,7 +298,6 @@ fn log_row_step<T: Scalar>(
     alpha: &mut [T],
     terms: &mut [T],
 ) {
-    // Nothing here may panic: the other worker would wait for this half-step for ever.
     for (row, a) in s.outer_iter().zip(alpha.iter_mut()) {
         match beta {
             Some(beta) => Zip::from(&mut *terms)
