@@ -339,7 +339,10 @@ impl<T: Element> Rgm<T> {
     /// `blocks` sized for the L blocks on (N, M) = `dims` (rebuilt when N or M change).
     fn size_blocks(&self, blocks: &mut Vec<BlockCache<T>>, dims: (usize, usize)) {
         if blocks.len() != self.blocks.len() || blocks.first().map(|b| b.dims()) != Some(dims) {
+            // Side by side: a new cache is mostly fresh memory filled with zeros (page faults),
+            // and a one-pair process makes each once.
             *blocks = (0..self.blocks.len())
+                .into_par_iter()
                 .map(|_| BlockCache::new(&self.config, dims.0, dims.1))
                 .collect();
         }
