@@ -245,7 +245,8 @@ impl Neighbourhoods {
     /// [`KnnIndex::hybrid`] for each of `queries`: blocks of queries side by side, joined in
     /// order.
     pub fn hybrid(index: &KnnIndex, queries: &[Point3<f64>], radius: f64, max_nn: usize) -> Self {
-        const BLOCK: usize = 256;
+        // Small enough that a cloud of a few hundred points makes pieces for every thread.
+        const BLOCK: usize = 64;
         let k = max_nn.min(index.len());
         // Per block: where each query's neighbours end, and the neighbours.
         type Block = (Vec<usize>, Vec<(usize, f64)>);
