@@ -394,7 +394,9 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     set_up_compute_threads(cli.threads.map_or(0, usize::from));
     let outcome = match cli.command {
-        Command::Register(args) => commands::register::run(args),
+        // On one of rayon's workers: its parallel steps then run on this thread and the pool's
+        // others, instead of this thread handing each one over and sleeping until it ends.
+        Command::Register(args) => rayon::scope(|_| commands::register::run(args)),
         Command::Eval(args) => commands::eval::run(args),
         Command::Pairs(args) => commands::pairs::run(args),
         Command::Score(args) => commands::score::run(args),
