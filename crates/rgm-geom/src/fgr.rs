@@ -37,10 +37,12 @@
 use nalgebra::{Matrix3, Matrix6, Point3, Vector3, Vector6};
 use rand::{rngs::StdRng, Rng, SeedableRng};
 use rayon::prelude::*;
+use std::sync::{Mutex, OnceLock};
 
 use crate::euler::rotation_xyz_extrinsic;
 use crate::fpfh::{features, Fpfh, FpfhConfig, FPFH_LEN};
 use crate::icp::check_clouds;
+use crate::lockstep;
 use crate::normals::NormalsConfig;
 use crate::registration::{score, RegistrationResult};
 use crate::{GeomError, KnnIndex, PointCloud, Result, RigidTransform};
@@ -504,7 +506,7 @@ fn optimise(
     };
     // Open3D's normalisation also returns a `scale_start` (1, or the extent with absolute
     // scale) but passes `scale_global` to the optimisation as the first μ; followed here.
-    let mut mu = scale_global;
+    let mu = scale_global;
     if !(scale_global > 0.0) {
         // Both clouds are single points repeated: nothing to rotate.
         return (RigidTransform::identity(), 0, false);
@@ -514,61 +516,74 @@ fn optimise(
         .iter()
         .map(|&(i, _)| (source.points[i].coords - mean_s) / scale_global)
         .collect();
-    let mut q: Vec<Vector3<f64>> = matches
+    let q: Vec<Vector3<f64>> = matches
         .iter()
         .map(|&(_, j)| (target.points[j].coords - mean_t) / scale_global)
         .collect();
 
+    // Iteration i's μ, which depends on the settings alone.
+    let mus: Vec<f64> = (0..config.iteration_number)
+        .scan(mu, |mu, iteration| {
+            let this = *mu;
+            if config.decrease_mu
+                && iteration % 4 == 0
+                && *mu > config.maximum_correspondence_distance
+            {
+                *mu /= config.division_factor;
+            }
+            Some(this)
+        })
+        .collect();
+    // Gauss–Newton on Σ l·‖r‖², r = p − (q + ω × q + t) = (p − q) + [q]ₓ ω − t, so
+    // J = [[q]ₓ, −I] and the normal equations are weighted sums over the matches:
+    // JᵀJ = [[|q|² I − q qᵀ, [q]ₓ], [−[q]ₓ, I]], Jᵀr = [r × q, −r] — Open3D's three rank-one
+    // updates per match, summed in closed form.
+    //
+    // Step i of [`lockstep::two_halves`] makes iteration i's sums: one half those of Jᵀr and
+    // [q]ₓ, the other those of |q|² I − q qᵀ. Each worker keeps a copy of q of its own, moved by
+    // every step solved so far, so that no worker writes what the other reads (a write to lines
+    // the other core holds costs more than the step).
+    let iterations = config.iteration_number;
+    let sums = [(); 2].map(|_| Mutex::new((Sums::default(), Matrix3::zeros()))); // by parity of i
+    let steps: Vec<OnceLock<Option<RigidTransform>>> =
+        (0..iterations).map(|_| OnceLock::new()).collect();
+    let step_of = |i: usize| {
+        *steps[i].get_or_init(|| {
+            let (sum, sqq) = *sums[i % 2].lock().expect("no half panicked");
+            sum.step(&sqq)
+        })
+    };
+    lockstep::two_halves(
+        iterations,
+        p.len() >= SIDE_BY_SIDE_MATCHES,
+        || (q.clone(), 0), // (q moved by the first `moved` steps, moved)
+        |(q, moved), i, half| {
+            for done in *moved..i {
+                // A failed solve is a zero step, as Open3D's.
+                if let Some(delta) = step_of(done) {
+                    for qi in q.iter_mut() {
+                        *qi = delta.rotation * *qi + delta.translation;
+                    }
+                }
+            }
+            *moved = i;
+            let slot = &sums[i % 2];
+            if half == 0 {
+                let sum = Sums::of(&p, q, mus[i]);
+                slot.lock().expect("no half panicked").0 = sum;
+            } else {
+                let sqq = rotation_block(&p, q, mus[i]);
+                slot.lock().expect("no half panicked").1 = sqq;
+            }
+        },
+    );
     // `trans` maps normalised target points onto normalised source points.
     let mut trans = RigidTransform::identity();
     let mut solved = true;
-    let mut iterations = 0;
-    for iteration in 0..config.iteration_number {
-        // Gauss–Newton on Σ l·‖r‖², r = p − (q + ω × q + t) = (p − q) + [q]ₓ ω − t, so
-        // J = [[q]ₓ, −I] and the normal equations are weighted sums over the matches:
-        // JᵀJ = [[|q|² I − q qᵀ, [q]ₓ], [−[q]ₓ, I]], Jᵀr = [r × q, −r] — Open3D's three rank-one
-        // updates per match, summed in closed form.
-        let (mut sw, mut sq, mut sr, mut srq) =
-            (0.0, Vector3::zeros(), Vector3::zeros(), Vector3::zeros());
-        let mut sqq = Matrix3::<f64>::zeros(); // (3, 3) Σ l (|q|² I − q qᵀ)
-        for (pi, qi) in p.iter().zip(&q) {
-            let r = pi - qi;
-            let l = mu / (r.norm_squared() + mu);
-            let w = l * l;
-            sw += w;
-            sq += w * qi;
-            sr += w * r;
-            srq += w * r.cross(qi);
-            sqq += w * (Matrix3::from_diagonal_element(qi.norm_squared()) - qi * qi.transpose());
-        }
-        let sq_cross = sq.cross_matrix();
-        let mut jtj = Matrix6::<f64>::zeros(); // (6, 6)
-        jtj.fixed_view_mut::<3, 3>(0, 0).copy_from(&sqq);
-        jtj.fixed_view_mut::<3, 3>(0, 3).copy_from(&sq_cross);
-        jtj.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-sq_cross));
-        jtj.fixed_view_mut::<3, 3>(3, 3)
-            .copy_from(&Matrix3::from_diagonal_element(sw));
-        let jtr = Vector6::new(srq.x, srq.y, srq.z, -sr.x, -sr.y, -sr.z); // (6,)
-                                                                          // A failed solve is a zero step, as Open3D's.
-        let step = jtj
-            .cholesky()
-            .map(|c| -c.solve(&jtr))
-            .filter(|x| x.iter().all(|v| v.is_finite()));
-        if let Some(x) = step {
-            let delta = RigidTransform::new(
-                rotation_xyz_extrinsic(x[0], x[1], x[2]),
-                Vector3::new(x[3], x[4], x[5]),
-            );
-            trans = delta.compose(&trans);
-            for qi in q.iter_mut() {
-                *qi = delta.rotation * *qi + delta.translation;
-            }
-        } else {
-            solved = false;
-        }
-        iterations += 1;
-        if config.decrease_mu && iteration % 4 == 0 && mu > config.maximum_correspondence_distance {
-            mu /= config.division_factor;
+    for i in 0..iterations {
+        match step_of(i) {
+            Some(delta) => trans = delta.compose(&trans),
+            None => solved = false,
         }
     }
     // Back to the original scale: target → source is q ↦ R q − R μ_t + s t + μ_s; invert it.
@@ -576,6 +591,90 @@ fn optimise(
     let t_source_target =
         RigidTransform::new(r, -(r * mean_t) + trans.translation * scale_global + mean_s);
     (t_source_target.inverse(), iterations, solved)
+}
+
+/// Matches from which [`optimise`] asks for a second worker.
+const SIDE_BY_SIDE_MATCHES: usize = 512;
+
+/// The weight l² of a match in the Geman–McClure objective at scale μ, l = μ / (‖r‖² + μ).
+fn weight(r: &Vector3<f64>, mu: f64) -> f64 {
+    let l = mu / (r.norm_squared() + mu);
+    l * l
+}
+
+/// One Gauss–Newton iteration's weighted sums over the matches but the rotation block.
+#[derive(Clone, Copy, Default)]
+struct Sums {
+    sw: f64,           // Σ w
+    sq: Vector3<f64>,  // Σ w q
+    sr: Vector3<f64>,  // Σ w r
+    srq: Vector3<f64>, // Σ w r × q
+}
+
+impl Sums {
+    /// The sums over the matches `p` (source, fixed) and `q` (target, moved), in order.
+    fn of(p: &[Vector3<f64>], q: &[Vector3<f64>], mu: f64) -> Self {
+        let mut sums = Self::default();
+        for (pi, qi) in p.iter().zip(q) {
+            let r = pi - qi;
+            let w = weight(&r, mu);
+            sums.sw += w;
+            sums.sq += w * qi;
+            sums.sr += w * r;
+            sums.srq += w * r.cross(qi);
+        }
+        sums
+    }
+
+    /// The step that solves the normal equations with rotation block `sqq`; `None` when they
+    /// cannot be solved.
+    fn step(&self, sqq: &Matrix3<f64>) -> Option<RigidTransform> {
+        let sq_cross = self.sq.cross_matrix();
+        let mut jtj = Matrix6::<f64>::zeros(); // (6, 6)
+        jtj.fixed_view_mut::<3, 3>(0, 0).copy_from(sqq);
+        jtj.fixed_view_mut::<3, 3>(0, 3).copy_from(&sq_cross);
+        jtj.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-sq_cross));
+        jtj.fixed_view_mut::<3, 3>(3, 3)
+            .copy_from(&Matrix3::from_diagonal_element(self.sw));
+        let (srq, sr) = (self.srq, self.sr);
+        let jtr = Vector6::new(srq.x, srq.y, srq.z, -sr.x, -sr.y, -sr.z); // (6,)
+        let x = jtj
+            .cholesky()
+            .map(|c| -c.solve(&jtr))
+            .filter(|x| x.iter().all(|v| v.is_finite()))?;
+        Some(RigidTransform::new(
+            rotation_xyz_extrinsic(x[0], x[1], x[2]),
+            Vector3::new(x[3], x[4], x[5]),
+        ))
+    }
+}
+
+/// Σ w (|q|² I − q qᵀ), the rotation block of JᵀJ, over the matches `p`, `q` in order. The
+/// block is symmetric, its (a, b) and (b, a) terms the same numbers, so six sums make it.
+fn rotation_block(p: &[Vector3<f64>], q: &[Vector3<f64>], mu: f64) -> Matrix3<f64> {
+    let mut diagonal = [0.0; 3]; // Σ w (|q|² − q_a²)
+    let mut off = [0.0; 3]; // Σ w (0 − q_a q_b) for (a, b) = (0, 1), (0, 2), (1, 2)
+    for (pi, qi) in p.iter().zip(q) {
+        let w = weight(&(pi - qi), mu);
+        let n = qi.norm_squared();
+        for a in 0..3 {
+            diagonal[a] += w * (n - qi[a] * qi[a]);
+        }
+        for (k, (a, b)) in [(0, 1), (0, 2), (1, 2)].into_iter().enumerate() {
+            off[k] += w * (0.0 - qi[a] * qi[b]);
+        }
+    }
+    Matrix3::new(
+        diagonal[0],
+        off[0],
+        off[1], //
+        off[0],
+        diagonal[1],
+        off[2], //
+        off[1],
+        off[2],
+        diagonal[2],
+    )
 }
 
 #[cfg(test)]
@@ -692,6 +791,103 @@ mod tests {
     /// r = registration_fgr_based_on_correspondence(s, tt, corr, opt); T = r.transformation
     /// # rotation error (deg) of T vs R, |t_T − t|, r.fitness, r.inlier_rmse
     /// ```
+    /// The optimisation as one loop, one match at a time: what [`optimise`] computes on its
+    /// halves, to the bit.
+    fn optimise_in_one_loop(
+        p: &[Vector3<f64>],
+        q: &[Vector3<f64>],
+        mus: &[f64],
+    ) -> (RigidTransform, bool) {
+        let mut q = q.to_vec();
+        let (mut trans, mut solved) = (RigidTransform::identity(), true);
+        for &mu in mus {
+            let mut sum = Sums::default();
+            let mut sqq = Matrix3::<f64>::zeros();
+            for (pi, qi) in p.iter().zip(&q) {
+                let r = pi - qi;
+                let l = mu / (r.norm_squared() + mu);
+                let w = l * l;
+                sum.sw += w;
+                sum.sq += w * qi;
+                sum.sr += w * r;
+                sum.srq += w * r.cross(qi);
+                sqq +=
+                    w * (Matrix3::from_diagonal_element(qi.norm_squared()) - qi * qi.transpose());
+            }
+            match sum.step(&sqq) {
+                Some(delta) => {
+                    trans = delta.compose(&trans);
+                    for qi in q.iter_mut() {
+                        *qi = delta.rotation * *qi + delta.translation;
+                    }
+                }
+                None => solved = false,
+            }
+        }
+        (trans, solved)
+    }
+
+    #[test]
+    fn optimisation_gives_the_same_bits_as_one_loop_on_one_worker_and_two() {
+        // Enough matches for two workers, a fifth of them outliers.
+        let target = box_surface(1500, 21);
+        let pose = RigidTransform::random(&mut StdRng::seed_from_u64(5), 30.0, 0.3);
+        let source = target.transformed(&pose.inverse());
+        let matches: Vec<(usize, usize)> = (0..1500)
+            .map(|i| (i, if i % 5 == 0 { (i * 7 + 3) % 1500 } else { i }))
+            .collect();
+        assert!(matches.len() >= SIDE_BY_SIDE_MATCHES);
+        let config = FgrConfig::default();
+        let runs: Vec<(RigidTransform, usize, bool)> = [1, 2, 3]
+            .map(|threads| {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                pool.install(|| optimise(&source, &target, &matches, &config))
+            })
+            .to_vec();
+        // The same normalisation and μ schedule as `optimise`, then one loop.
+        let (mean_s, mean_t) = (source.centroid().coords, target.centroid().coords);
+        let extent = |c: &PointCloud, m: Vector3<f64>| {
+            c.points
+                .iter()
+                .map(|p| (p.coords - m).norm())
+                .fold(0.0, f64::max)
+        };
+        let scale = extent(&source, mean_s).max(extent(&target, mean_t));
+        let p: Vec<Vector3<f64>> = matches
+            .iter()
+            .map(|&(i, _)| (source.points[i].coords - mean_s) / scale)
+            .collect();
+        let q: Vec<Vector3<f64>> = matches
+            .iter()
+            .map(|&(_, j)| (target.points[j].coords - mean_t) / scale)
+            .collect();
+        let mut mus = vec![scale];
+        for iteration in 0..config.iteration_number - 1 {
+            let mu = *mus.last().unwrap();
+            let decrease = config.decrease_mu
+                && iteration % 4 == 0
+                && mu > config.maximum_correspondence_distance;
+            mus.push(if decrease {
+                mu / config.division_factor
+            } else {
+                mu
+            });
+        }
+        let (trans, solved) = optimise_in_one_loop(&p, &q, &mus);
+        let r = trans.rotation;
+        let expected =
+            RigidTransform::new(r, -(r * mean_t) + trans.translation * scale + mean_s).inverse();
+        for (t, iterations, run_solved) in runs {
+            assert_eq!(t.to_matrix4(), expected.to_matrix4());
+            assert_eq!((iterations, run_solved), (64, solved));
+        }
+        let err = (expected.to_matrix4() - pose.to_matrix4()).abs().max();
+        assert!(err < 1e-3, "error {err:.3e}");
+    }
+
     #[test]
     fn optimisation_steps_match_open3d() {
         let target = PointCloud::new(

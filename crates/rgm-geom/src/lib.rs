@@ -21,6 +21,7 @@ pub mod frame;
 pub mod icp;
 pub mod kabsch;
 pub mod knn;
+pub mod lockstep;
 pub mod metrics;
 pub mod normals;
 pub mod refine;

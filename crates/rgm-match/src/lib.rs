@@ -3,7 +3,8 @@
 //! # Layering and conventions
 //!
 //! Layering rule: rgm-match builds on rgm-nn (its `Scalar` element type, matrix products through
-//! ndarray) and knows nothing of networks' other layers, data sets or the pipeline above it.
+//! ndarray) and rgm-geom (the two-worker steps of [`rgm_geom::lockstep`] that the Sinkhorn runs
+//! on), and knows nothing of networks' other layers, data sets or the pipeline above it.
 //!
 //! Conventions: those of rgm-nn (see its crate doc) — generic over `T: Scalar` (f32 compute, f64
 //! gradient checks), outputs first then inputs, caller-owned caches holding exactly what the

@@ -28,7 +28,6 @@ use ndarray::linalg::{general_mat_mul, general_mat_vec_mul};
 use ndarray::{s, Array1, Array2, ArrayView1, ArrayView2, ArrayViewMut1, ArrayViewMut2, Axis, Zip};
 use rgm_nn::exp::{exp_shifted_sum, sum};
 use rgm_nn::Scalar;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 /// Which computation [`sinkhorn_forward`] uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -172,13 +171,9 @@ pub fn sinkhorn_forward<T: Scalar>(
 
 /// The log form's rounds: α into `cache.rows`, β into `cache.cols`.
 ///
-/// Each round's row step and column step is cut in two halves (of the rows, of the columns),
-/// four half-steps per round. Workers claim half-steps in order from a shared counter and start
-/// one only when every half of the previous steps is done, so one worker alone runs them all in
-/// order, and two (when rayon's pool has more than one thread and S is large enough) run each
-/// step's halves side by side; every value is computed the same way either way. The workers stay
-/// in one parallel region for all rounds: handing each half-step to the pool anew costs as much
-/// as the half-step (docs/speed.md).
+/// Each round's row step and column step is cut in two halves (of the rows, of the columns) that
+/// two workers run side by side when S is large enough ([`rgm_geom::lockstep`]); every value is
+/// computed the same way on one worker or two.
 fn log_forward<T: Scalar>(
     s: ArrayView2<'_, T>,
     cfg: &SinkhornConfig,
@@ -196,39 +191,18 @@ fn log_forward<T: Scalar>(
         alpha: cache.rows.as_mut_ptr(),
         beta: cache.cols.as_mut_ptr(),
     };
-    let claimed = AtomicUsize::new(0);
-    let done = AtomicUsize::new(0);
-    let halves = 4 * rounds;
-    let failed = AtomicBool::new(false);
-    let worker = || {
-        let _flag = FlagOnPanic(&failed);
-        let potentials = &potentials; // shared whole: its fields alone are not Sync
-        let mut terms = vec![T::zero(); m]; // (M) one row's terms
-        let mut col_max = vec![T::zero(); m]; // (M)
-        let mut col_sum = vec![T::zero(); m]; // (M)
-        loop {
-            let h = claimed.fetch_add(1, Ordering::Relaxed);
-            if h >= halves {
-                return;
-            }
-            let (step, part) = (h / 2, h % 2);
-            // Every half of the steps before this one is done (and its writes visible).
-            let mut spins = 0u32;
-            while done.load(Ordering::Acquire) < 2 * step {
-                // The other worker's half-step panicked: end this one too, so that rayon's
-                // join hands the panic to the caller instead of waiting for ever.
-                assert!(!failed.load(Ordering::Relaxed), "a Sinkhorn worker failed");
-                spins += 1;
-                if spins % 1024 == 0 {
-                    std::thread::yield_now();
-                } else {
-                    std::hint::spin_loop();
-                }
-            }
+    // Steps 2t and 2t + 1: round t's row step and column step, each cut in two halves.
+    rgm_geom::lockstep::two_halves(
+        2 * rounds,
+        n * m >= PARALLEL_ENTRIES,
+        // Per worker: one row's terms, the column maxima and the column sums, (M) each.
+        || [vec![T::zero(); m], vec![T::zero(); m], vec![T::zero(); m]],
+        |[terms, col_max, col_sum], step, part| {
+            let potentials = &potentials; // shared whole: its fields alone are not Sync
             let (t, column_step) = (step / 2, step % 2 == 1);
             // SAFETY: the cache holds (I, N) α and (I, M) β in row order. This half writes only
             // its half of round t's row of one of them, which no other half-step touches, and
-            // reads rows that every writer finished before `done` let it start.
+            // reads rows that every writer finished before `two_halves` let it start.
             unsafe {
                 if column_step {
                     let (c0, c1) = if part == 0 { (0, m / 2) } else { (m / 2, m) };
@@ -253,32 +227,15 @@ fn log_forward<T: Scalar>(
                         .then(|| std::slice::from_raw_parts(potentials.beta.add((t - 1) * m), m));
                     let alpha =
                         std::slice::from_raw_parts_mut(potentials.alpha.add(t * n + r0), r1 - r0);
-                    log_row_step(s.slice(s![r0..r1, ..]), beta, slack_log, alpha, &mut terms);
+                    log_row_step(s.slice(s![r0..r1, ..]), beta, slack_log, alpha, terms);
                 }
             }
-            done.fetch_add(1, Ordering::Release);
-        }
-    };
-    if rayon::current_num_threads() > 1 && n * m >= PARALLEL_ENTRIES {
-        rayon::join(worker, worker);
-    } else {
-        worker();
-    }
+        },
+    );
 }
 
 /// Entries of S from which the log form asks rayon's pool for a second worker.
 const PARALLEL_ENTRIES: usize = 128 * 128;
-
-/// Sets its flag when the thread unwinds through it (a panic).
-struct FlagOnPanic<'a>(&'a AtomicBool);
-
-impl Drop for FlagOnPanic<'_> {
-    fn drop(&mut self) {
-        if std::thread::panicking() {
-            self.0.store(true, Ordering::Relaxed);
-        }
-    }
-}
 
 /// The log form's potentials, shared by its workers ([`log_forward`] says who writes what).
 struct Potentials<T> {
@@ -286,7 +243,7 @@ struct Potentials<T> {
     beta: *mut T,  // (I, M)
 }
 
-// SAFETY: the workers of one `log_forward` write disjoint parts, ordered by its counters.
+// SAFETY: the halves of one `log_forward` write disjoint parts, ordered by `two_halves`.
 unsafe impl<T: Send> Sync for Potentials<T> {}
 
 /// α_i = −LSE(S_ij + β_j over j, slack) for the rows of `s` (R, M) into `alpha` (R); no `beta`
