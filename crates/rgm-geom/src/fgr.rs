@@ -37,6 +37,7 @@
 use nalgebra::{Matrix3, Matrix6, Point3, Vector3, Vector6};
 use rand::{rngs::StdRng, Rng, SeedableRng};
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Mutex, OnceLock};
 
 use crate::euler::rotation_xyz_extrinsic;
@@ -445,7 +446,11 @@ fn tile_squared_distances(a: &Fpfh, tile: &FeatureTile) -> [f64; TILE] {
     std::array::from_fn(|l| (acc[0][l] + acc[1][l]) + (acc[2][l] + acc[3][l]) + rest[l])
 }
 
-/// The tuple test of step 3 on `matches` (source index, target index).
+/// The tuple test of step 3 on `matches` (source index, target index): up to `100 · len`
+/// random triples drawn from one seeded stream, tested in the order drawn.
+///
+/// Step c of [`lockstep::two_halves`] draws chunk c of the triples (one half) beside the test of
+/// chunk c − 1 (the other), in two buffers by parity; what is kept is what one loop keeps.
 fn tuple_test(
     source: &[Point3<f64>],
     target: &[Point3<f64>],
@@ -453,35 +458,64 @@ fn tuple_test(
     config: &FgrConfig,
 ) -> Vec<(usize, usize)> {
     let n = matches.len();
-    let mut kept = Vec::with_capacity(3 * config.maximum_tuple_count.min(100 * n));
-    if n == 0 {
-        return kept;
-    }
-    let mut rng = StdRng::seed_from_u64(config.seed);
+    let trials = 100 * n;
+    let chunks = trials.div_ceil(TUPLE_CHUNK);
+    let rng = Mutex::new(StdRng::seed_from_u64(config.seed));
+    let drawn = [(); 2].map(|_| Mutex::new(Vec::<[usize; 3]>::new())); // (≤ TUPLE_CHUNK,) each
+    let kept = Mutex::new(Vec::with_capacity(
+        3 * config.maximum_tuple_count.min(trials),
+    ));
+    let full = AtomicBool::new(false);
     let scale = config.tuple_scale;
     let agrees = |ls: f64, lt: f64| ls * scale < lt && lt < ls / scale;
-    let mut tuples = 0;
-    for _ in 0..100 * n {
-        let picks = [
-            matches[rng.gen_range(0..n)],
-            matches[rng.gen_range(0..n)],
-            matches[rng.gen_range(0..n)],
-        ];
-        let side = |pts: &[Point3<f64>], a: usize, b: usize| (pts[a] - pts[b]).norm();
-        let [(s0, t0), (s1, t1), (s2, t2)] = picks;
-        if agrees(side(source, s0, s1), side(target, t0, t1))
-            && agrees(side(source, s1, s2), side(target, t1, t2))
-            && agrees(side(source, s2, s0), side(target, t2, t0))
-        {
-            kept.extend_from_slice(&picks);
-            tuples += 1;
-            if tuples >= config.maximum_tuple_count {
-                break;
+    let side = |pts: &[Point3<f64>], a: usize, b: usize| (pts[a] - pts[b]).norm();
+    lockstep::two_halves(
+        chunks + 1,
+        trials >= SIDE_BY_SIDE_TRIALS,
+        || (),
+        |_, c, half| {
+            if full.load(Ordering::Relaxed) {
+                return;
             }
-        }
-    }
-    kept
+            if half == 0 && c < chunks {
+                let mut rng = rng.lock().expect("no half panicked");
+                let mut picks = drawn[c % 2].lock().expect("no half panicked");
+                picks.clear();
+                let count = TUPLE_CHUNK.min(trials - c * TUPLE_CHUNK);
+                picks.extend((0..count).map(|_| {
+                    [
+                        rng.gen_range(0..n),
+                        rng.gen_range(0..n),
+                        rng.gen_range(0..n),
+                    ]
+                }));
+            } else if half == 1 && c > 0 {
+                let picks = drawn[(c - 1) % 2].lock().expect("no half panicked");
+                let mut kept = kept.lock().expect("no half panicked");
+                for &[i, j, k] in picks.iter() {
+                    let [(s0, t0), (s1, t1), (s2, t2)] = [matches[i], matches[j], matches[k]];
+                    if agrees(side(source, s0, s1), side(target, t0, t1))
+                        && agrees(side(source, s1, s2), side(target, t1, t2))
+                        && agrees(side(source, s2, s0), side(target, t2, t0))
+                    {
+                        kept.extend_from_slice(&[matches[i], matches[j], matches[k]]);
+                        if kept.len() >= 3 * config.maximum_tuple_count {
+                            full.store(true, Ordering::Relaxed);
+                            break;
+                        }
+                    }
+                }
+            }
+        },
+    );
+    kept.into_inner().expect("no half panicked")
 }
+
+/// Triples drawn, or tested, per step of [`tuple_test`].
+const TUPLE_CHUNK: usize = 512;
+
+/// Triples from which [`tuple_test`] asks for a second worker.
+const SIDE_BY_SIDE_TRIALS: usize = 4096;
 
 /// Steps 4–6: (t_target_source, iterations, every solve succeeded).
 fn optimise(
@@ -791,6 +825,68 @@ mod tests {
     /// r = registration_fgr_based_on_correspondence(s, tt, corr, opt); T = r.transformation
     /// # rotation error (deg) of T vs R, |t_T − t|, r.fitness, r.inlier_rmse
     /// ```
+    /// The tuple test as one loop, one triple at a time: what [`tuple_test`] keeps, in order.
+    fn tuple_test_in_one_loop(
+        source: &[Point3<f64>],
+        target: &[Point3<f64>],
+        matches: &[(usize, usize)],
+        config: &FgrConfig,
+    ) -> Vec<(usize, usize)> {
+        let n = matches.len();
+        let mut rng = StdRng::seed_from_u64(config.seed);
+        let agrees =
+            |ls: f64, lt: f64| ls * config.tuple_scale < lt && lt < ls / config.tuple_scale;
+        let side = |pts: &[Point3<f64>], a: usize, b: usize| (pts[a] - pts[b]).norm();
+        let mut kept = Vec::new();
+        for _ in 0..100 * n {
+            let picks = [0; 3].map(|_| matches[rng.gen_range(0..n)]);
+            let [(s0, t0), (s1, t1), (s2, t2)] = picks;
+            if agrees(side(source, s0, s1), side(target, t0, t1))
+                && agrees(side(source, s1, s2), side(target, t1, t2))
+                && agrees(side(source, s2, s0), side(target, t2, t0))
+            {
+                kept.extend_from_slice(&picks);
+                if kept.len() >= 3 * config.maximum_tuple_count {
+                    break;
+                }
+            }
+        }
+        kept
+    }
+
+    #[test]
+    fn tuple_test_keeps_what_one_loop_keeps_on_one_worker_and_two() {
+        // 300 matches, every third one wrong: 30,000 triples in 59 chunks.
+        let target = box_surface(300, 13);
+        let pose = RigidTransform::random(&mut StdRng::seed_from_u64(3), 45.0, 0.5);
+        let source = target.transformed(&pose.inverse());
+        let matches: Vec<(usize, usize)> = (0..300)
+            .map(|i| (i, if i % 3 == 0 { (i * 11 + 5) % 300 } else { i }))
+            .collect();
+        // Every triple tested; the count reached within a chunk; the count reached at once.
+        for maximum_tuple_count in [100_000, 1000, 0] {
+            let config = FgrConfig {
+                maximum_tuple_count,
+                ..FgrConfig::default()
+            };
+            let expected =
+                tuple_test_in_one_loop(&source.points, &target.points, &matches, &config);
+            assert!(expected.len() >= 3, "{} kept", expected.len());
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let kept =
+                    pool.install(|| tuple_test(&source.points, &target.points, &matches, &config));
+                assert_eq!(
+                    kept, expected,
+                    "{threads} threads, at most {maximum_tuple_count}"
+                );
+            }
+        }
+    }
+
     /// The optimisation as one loop, one match at a time: what [`optimise`] computes on its
     /// halves, to the bit.
     fn optimise_in_one_loop(
