@@ -354,9 +354,24 @@ impl DataArgs {
     }
 }
 
-/// The point cloud in `path`, the reading's warnings (stray PLY header lines) shown on stderr.
-pub fn read_cloud(path: &Path) -> anyhow::Result<rgm_geom::PointCloud> {
-    let (cloud, warnings) = rgm_data::read_point_cloud_warned(path)?;
+/// The point clouds of a pair, read side by side; the readings' warnings (stray PLY header
+/// lines) shown on stderr and a failure returned in the order source, target.
+pub fn read_pair(
+    source: &Path,
+    target: &Path,
+) -> anyhow::Result<(rgm_geom::PointCloud, rgm_geom::PointCloud)> {
+    let (source, target) = rayon::join(
+        || rgm_data::read_point_cloud_warned(source),
+        || rgm_data::read_point_cloud_warned(target),
+    );
+    Ok((warned(source)?, warned(target)?))
+}
+
+/// The cloud read, its warnings printed.
+fn warned(
+    read: rgm_data::Result<(rgm_geom::PointCloud, Vec<rgm_data::io::Warning>)>,
+) -> anyhow::Result<rgm_geom::PointCloud> {
+    let (cloud, warnings) = read?;
     for warning in warnings {
         eprintln!("rgm: {warning}");
     }

@@ -39,8 +39,7 @@ pub fn run(args: Args) -> Result<()> {
         rgm_data::io::Format::from_path(out)?;
         crate::check_writable(out)?;
     }
-    let source = crate::read_cloud(source_path)?;
-    let target = crate::read_cloud(target_path)?;
+    let (source, target) = crate::read_pair(source_path, target_path)?;
     let mut method = args.method.build(crate::Defaults::Register)?;
     let registration =
         crate::register_files(&mut method, (&source, &target), (source_path, target_path))?;

@@ -60,8 +60,7 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(matrix) = &args.matrix {
         check_png(matrix, "--matrix")?;
     }
-    let source = crate::read_cloud(&args.source)?;
-    let target = crate::read_cloud(&args.target)?;
+    let (source, target) = crate::read_pair(&args.source, &args.target)?;
     let given = args.transform.as_deref().map(read_transform).transpose()?;
     let found = match (&given, &args.matrix) {
         (Some(_), None) => None, // nothing to find
