@@ -28,6 +28,7 @@ use std::borrow::Cow;
 use std::cell::RefCell;
 
 use nalgebra::{Matrix6, Point3, Rotation3, Vector3, Vector6};
+use rayon::prelude::*;
 
 use crate::icp::{self, check_clouds, IcpConfig};
 use crate::normals::{estimate_normals, normal_at, NormalsConfig};
@@ -230,6 +231,26 @@ impl PlaneFit<'_> {
         }
     }
 
+    /// Computes side by side the lazy normals of the target points `js` that are not known
+    /// yet: the same values [`PlaneFit::normal`] would compute one by one.
+    fn compute_normals(&self, js: impl Iterator<Item = usize>) {
+        let TargetNormals::Lazy { config, cache } = &self.normals else {
+            return;
+        };
+        let mut cache = cache.borrow_mut();
+        let mut missing: Vec<usize> = js.filter(|&j| cache[j].is_none()).collect();
+        missing.sort_unstable();
+        missing.dedup();
+        let (points, index) = (&self.target.points, self.index);
+        let normals: Vec<Vector3<f64>> = missing
+            .par_iter()
+            .map(|&j| normal_at(points, index, j, config))
+            .collect();
+        for (j, normal) in missing.into_iter().zip(normals) {
+            cache[j] = Some(normal);
+        }
+    }
+
     /// Runs `stage` from `transform`, updating it; `scratch` holds its buffers.
     fn run(
         &self,
@@ -253,7 +274,9 @@ impl PlaneFit<'_> {
             let source = &self.source.points;
             nearest_each(source, self.index, transform, stage.max_distance, nearest);
             pairs.clear();
-            // The gate in order on this thread: lazy normals are computed on first use.
+            if stage.residual_gate.is_some() {
+                self.compute_normals(nearest.iter().filter_map(|&found| Some(found?.0)));
+            }
             pairs.extend(nearest.iter().enumerate().filter_map(|(i, &found)| {
                 let (j, d) = found?;
                 let within = stage.residual_gate.is_none_or(|gate| {
@@ -273,6 +296,7 @@ impl PlaneFit<'_> {
                 pairs.select_nth_unstable_by(keep - 1, |a, b| a.2.total_cmp(&b.2));
                 pairs.truncate(keep);
             }
+            self.compute_normals(pairs.iter().map(|&(_, j, _)| j));
             let step = point_to_plane_step(moved, self.target, |j| self.normal(j), pairs);
             *transform = step.compose(transform);
             outcome.iterations += 1;
@@ -296,6 +320,7 @@ impl PlaneFit<'_> {
             max_distance,
             &mut nearest,
         );
+        self.compute_normals(nearest.iter().filter_map(|&found| Some(found?.0)));
         let mut residuals: Vec<f64> = self
             .source
             .points
