@@ -55,7 +55,7 @@ impl KnnIndex {
             .collect();
         let mut nodes = Vec::with_capacity(2 * points.len() / LEAF_SIZE + 1);
         if !tree_points.is_empty() {
-            build(&mut nodes, &mut tree_points, 0);
+            build(&mut nodes, &mut tree_points, 0, SIDE_BY_SIDE_POINTS);
         }
         Self {
             nodes,
@@ -400,8 +400,14 @@ impl Found for Within<'_> {
 }
 
 /// Builds the subtree over `points` (which start at position `offset` of the whole array)
-/// and returns its node index.
-fn build(nodes: &mut Vec<Node>, points: &mut [([f64; 3], u32)], offset: usize) -> u32 {
+/// and returns its node index; the subtrees of a node over `side_by_side_from` points or more
+/// are built side by side.
+fn build(
+    nodes: &mut Vec<Node>,
+    points: &mut [([f64; 3], u32)],
+    offset: usize,
+    side_by_side_from: usize,
+) -> u32 {
     let id = nodes.len() as u32;
     if points.len() <= LEAF_SIZE {
         nodes.push(Node::Leaf {
@@ -426,9 +432,29 @@ fn build(nodes: &mut Vec<Node>, points: &mut [([f64; 3], u32)], offset: usize) -
     points.select_nth_unstable_by(mid, |a, b| a.0[axis].total_cmp(&b.0[axis]));
     let value = points[mid].0[axis];
     nodes.push(Node::Leaf { start: 0, end: 0 }); // placeholder, replaced below
+    let side_by_side = points.len() >= side_by_side_from;
     let (left_points, right_points) = points.split_at_mut(mid);
-    let left = build(nodes, left_points, offset);
-    let right = build(nodes, right_points, offset + mid);
+    let (left, right) = if side_by_side {
+        // The two subtrees side by side, each into a list of its own, then appended in the
+        // order the one-by-one build gives: the same tree, node for node.
+        let subtree = |points: &mut [([f64; 3], u32)], offset: usize| {
+            let mut nodes = Vec::with_capacity(2 * points.len() / LEAF_SIZE + 1);
+            build(&mut nodes, points, offset, side_by_side_from);
+            nodes
+        };
+        let (left_nodes, right_nodes) = rayon::join(
+            || subtree(left_points, offset),
+            || subtree(right_points, offset + mid),
+        );
+        let left = append_shifted(nodes, left_nodes);
+        (left, append_shifted(nodes, right_nodes))
+    } else {
+        let left = build(nodes, left_points, offset, side_by_side_from);
+        (
+            left,
+            build(nodes, right_points, offset + mid, side_by_side_from),
+        )
+    };
     nodes[id as usize] = Node::Split {
         axis: axis as u8,
         value,
@@ -436,6 +462,30 @@ fn build(nodes: &mut Vec<Node>, points: &mut [([f64; 3], u32)], offset: usize) -
         right,
     };
     id
+}
+
+/// Points from which [`KnnIndex::new`] builds a node's two subtrees side by side.
+const SIDE_BY_SIDE_POINTS: usize = 8192;
+
+/// Appends the subtree `subtree` (built into a list of its own, its root first) to `nodes` and
+/// returns its root's index there.
+fn append_shifted(nodes: &mut Vec<Node>, subtree: Vec<Node>) -> u32 {
+    let base = nodes.len() as u32;
+    nodes.extend(subtree.into_iter().map(|node| match node {
+        Node::Split {
+            axis,
+            value,
+            left,
+            right,
+        } => Node::Split {
+            axis,
+            value,
+            left: left + base,
+            right: right + base,
+        },
+        leaf => leaf,
+    }));
+    base
 }
 
 /// `|p − q|²`, summed x, y, z in that order (every query reports bit-identical distances).
@@ -502,6 +552,27 @@ mod tests {
 
     fn random_cloud(n: usize, seed: u64) -> Vec<Point3<f64>> {
         uniform_cube(n, &mut StdRng::seed_from_u64(seed))
+    }
+
+    #[test]
+    fn subtrees_built_side_by_side_make_the_same_tree() {
+        let cloud = random_cloud(5 * SIDE_BY_SIDE_POINTS, 41);
+        let one_by_one = || {
+            let mut points: Vec<([f64; 3], u32)> = cloud
+                .iter()
+                .enumerate()
+                .map(|(i, p)| ([p.x, p.y, p.z], i as u32))
+                .collect();
+            let mut nodes = Vec::new();
+            build(&mut nodes, &mut points, 0, usize::MAX);
+            (format!("{nodes:?}"), points)
+        };
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap();
+        let index = pool.install(|| KnnIndex::new(&cloud));
+        assert_eq!((format!("{:?}", index.nodes), index.points), one_by_one());
     }
 
     /// Every point with its distance to `q`, sorted by distance then index.
