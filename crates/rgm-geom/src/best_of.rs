@@ -245,7 +245,7 @@ impl<E: From<GeomError> + ToString + Send> Registrar<E> for BestOf<E> {
         let mut best: Option<Best> = None;
         let mut chosen = None;
         'thinnings: for &how in thinnings {
-            let (s, t) = (thinned(source, how), thinned(target, how));
+            let (s, t) = rayon::join(|| thinned(source, how), || thinned(target, how));
             // The thinned pair's trees, built once a dense pair's result is worth testing; a
             // pair that is not thinned has its own already.
             let thinned_trees = std::cell::OnceCell::new();

@@ -141,7 +141,8 @@ impl PointCloud {
     /// One point per occupied cube of side `voxel` (cubes aligned on the origin): the mean of
     /// the cube's points, as Open3D's `voxel_down_sample`; in the order the cubes are first met.
     pub fn voxel_downsampled(&self, voxel: f64) -> Self {
-        let mut index = std::collections::HashMap::new();
+        // Fx hashing: the voxels' order (of first points) does not depend on the hasher.
+        let mut index = rustc_hash::FxHashMap::default();
         let mut sums: Vec<(Vector3<f64>, usize)> = Vec::new(); // (V,) sum and count per voxel
         for p in &self.points {
             let key = p.coords.map(|v| (v / voxel).floor() as i64);
