@@ -67,13 +67,29 @@ impl Normalisation {
 
     /// The normalisation of the pair (`source`, `target`), as described on the type.
     pub fn of_pair(source: &PointCloud, target: &PointCloud) -> Self {
-        let (source, target) = (source.select(&near(source)), target.select(&near(target)));
-        let extent = radius(&source, &source.centroid()).max(radius(&target, &target.centroid()));
-        let reach = radius(&source, &Point3::origin()).max(radius(&target, &Point3::origin()));
+        let (source, target) = rayon::join(
+            || source.select(&near(source)),
+            || target.select(&near(target)),
+        );
+        Self::of_near_pair(&source, &target)
+    }
+
+    /// [`Normalisation::of_pair`] of clouds whose far outliers ([`near`]) are left out already.
+    pub(crate) fn of_near_pair(source: &PointCloud, target: &PointCloud) -> Self {
+        // (centroid, extent from it, reach from the origin) of one cloud; the two side by side.
+        let measure = |cloud: &PointCloud| {
+            let centre = cloud.centroid();
+            let extent = radius(cloud, &centre);
+            (centre, extent, radius(cloud, &Point3::origin()))
+        };
+        let ((cx, source_extent, source_reach), (cy, target_extent, target_reach)) =
+            rayon::join(|| measure(source), || measure(target));
+        let extent = source_extent.max(target_extent);
+        let reach = source_reach.max(target_reach);
         if reach <= Self::FRAME_RADIUS && Self::FRAME_EXTENT.contains(&extent) || extent == 0.0 {
             return Self::identity();
         }
-        Self::centred(&source, &target)
+        Self::centred_on(cx, cy, extent)
     }
 
     /// Each cloud centred on its centroid, both scaled by one factor so that the farthest point
@@ -81,6 +97,11 @@ impl Normalisation {
     pub fn centred(source: &PointCloud, target: &PointCloud) -> Self {
         let (cx, cy) = (source.centroid(), target.centroid());
         let extent = radius(source, &cx).max(radius(target, &cy));
+        Self::centred_on(cx, cy, extent)
+    }
+
+    /// Centred on `cx` and `cy`, scaled by `extent` (none when it is 0).
+    fn centred_on(cx: Point3<f64>, cy: Point3<f64>, extent: f64) -> Self {
         Self {
             source_centre: cx.coords,
             target_centre: cy.coords,

@@ -307,10 +307,19 @@ impl<E: From<GeomError>, R: Registrar<E>> Registrar<E> for Normalised<R> {
         progress: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
         let start = Instant::now();
-        let frame = Normalisation::of_pair(source, target);
-        let (source_near, target_near) = (near(source), near(target));
-        let fs = frame.source(&source.select(&source_near)); // (N', 3)
-        let ft = frame.target(&target.select(&target_near)); // (M', 3)
+        // Each cloud's own steps side by side: its far outliers left out, then moved.
+        let near_of = |cloud: &PointCloud| {
+            let kept = near(cloud);
+            let selected = cloud.select(&kept);
+            (kept, selected)
+        };
+        let ((source_near, source_kept), (target_near, target_kept)) =
+            rayon::join(|| near_of(source), || near_of(target));
+        let frame = Normalisation::of_near_pair(&source_kept, &target_kept);
+        let (fs, ft) = rayon::join(
+            || frame.source(&source_kept), // (N', 3)
+            || frame.target(&target_kept), // (M', 3)
+        );
         let mut found = self.inner.register_with_progress(&fs, &ft, progress)?;
         let result = &mut found.result;
         result.t_target_source = frame.undo(&result.t_target_source);
