@@ -174,11 +174,32 @@ fn mat_mul_f32_in(
         bf16_mat_mul(alpha, a, b, beta, c);
     } else if f32_avx512_available() {
         #[cfg(target_arch = "x86_64")]
-        f32_mat_mul(alpha, a, b, beta, c);
+        {
+            // A large product in two halves of its rows side by side when the pool has a
+            // second thread: each entry is computed as in one product (the kernel's order of
+            // additions does not depend on the rows), so the bits do not depend on the threads.
+            let m = a.nrows();
+            if m >= 2
+                && m * a.ncols() * b.ncols() >= SIDE_BY_SIDE_MULTIPLY_ADDS
+                && rayon::current_num_threads() > 1
+            {
+                let (a_top, a_bottom) = a.split_at(Axis(0), m / 2);
+                let (c_top, c_bottom) = c.split_at(Axis(0), m / 2);
+                rayon::join(
+                    || f32_mat_mul(alpha, a_top, b, beta, c_top),
+                    || f32_mat_mul(alpha, a_bottom, b, beta, c_bottom),
+                );
+            } else {
+                f32_mat_mul(alpha, a, b, beta, c);
+            }
+        }
     } else {
         general_mat_mul(alpha, &a, &b, beta, &mut c);
     }
 }
+
+/// Multiply-adds from which an f32 product on AVX-512 is split by rows ([`mat_mul_f32`]).
+const SIDE_BY_SIDE_MULTIPLY_ADDS: usize = 1 << 22;
 
 /// Whether [`bf16_mat_mul`] can run here: an x86-64 processor with AMX-BF16 under Linux that
 /// granted the tile registers to this process (asked once, on the first call), or one with
@@ -539,6 +560,28 @@ mod tests {
             mul(-0.5, a.view(), b.view(), 1.0, ct.view_mut().reversed_axes());
             check(ct.t(), (-0.5, a.view(), b.view()), (1.0, c0.view()));
         }
+    }
+
+    #[test]
+    fn a_large_product_gives_the_same_bits_on_one_thread_and_two() {
+        // Large enough to be split by rows where the AVX-512 kernel runs it.
+        let a = Array2::from_shape_fn((301, 128), |(i, j)| {
+            ((i * 7 + j * 13) % 23) as f32 * 0.37 - 4.1
+        });
+        let b = Array2::from_shape_fn((128, 257), |(i, j)| {
+            ((i * 5 + j * 11) % 19) as f32 * 0.29 - 2.3
+        });
+        assert!(301 * 128 * 257 >= SIDE_BY_SIDE_MULTIPLY_ADDS);
+        let product = |threads: usize| {
+            let mut c = Array2::from_elem((301, 257), 0.5f32);
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| mat_mul(1.0, &a, &b, 2.0, &mut c));
+            c
+        };
+        assert_eq!(product(1), product(2));
     }
 
     #[test]
