@@ -38,7 +38,7 @@ pub fn two_halves<S>(
                 // hands the panic to the caller instead of waiting for ever.
                 assert!(!failed.load(Ordering::Relaxed), "a lockstep worker failed");
                 spins += 1;
-                if spins % 1024 == 0 {
+                if spins.is_multiple_of(1024) {
                     std::thread::yield_now();
                 } else {
                     std::hint::spin_loop();

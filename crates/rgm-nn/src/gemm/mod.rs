@@ -571,7 +571,7 @@ mod tests {
         let b = Array2::from_shape_fn((128, 257), |(i, j)| {
             ((i * 5 + j * 11) % 19) as f32 * 0.29 - 2.3
         });
-        assert!(301 * 128 * 257 >= SIDE_BY_SIDE_MULTIPLY_ADDS);
+        const { assert!(301 * 128 * 257 >= SIDE_BY_SIDE_MULTIPLY_ADDS) };
         let product = |threads: usize| {
             let mut c = Array2::from_elem((301, 257), 0.5f32);
             let pool = rayon::ThreadPoolBuilder::new()
