@@ -466,9 +466,6 @@ fn tuple_test(
         3 * config.maximum_tuple_count.min(trials),
     ));
     let full = AtomicBool::new(false);
-    let scale = config.tuple_scale;
-    let agrees = |ls: f64, lt: f64| ls * scale < lt && lt < ls / scale;
-    let side = |pts: &[Point3<f64>], a: usize, b: usize| (pts[a] - pts[b]).norm();
     lockstep::two_halves(
         chunks + 1,
         trials >= SIDE_BY_SIDE_TRIALS,
@@ -493,12 +490,9 @@ fn tuple_test(
                 let picks = drawn[(c - 1) % 2].lock().expect("no half panicked");
                 let mut kept = kept.lock().expect("no half panicked");
                 for &[i, j, k] in picks.iter() {
-                    let [(s0, t0), (s1, t1), (s2, t2)] = [matches[i], matches[j], matches[k]];
-                    if agrees(side(source, s0, s1), side(target, t0, t1))
-                        && agrees(side(source, s1, s2), side(target, t1, t2))
-                        && agrees(side(source, s2, s0), side(target, t2, t0))
-                    {
-                        kept.extend_from_slice(&[matches[i], matches[j], matches[k]]);
+                    let triple = [matches[i], matches[j], matches[k]];
+                    if consistent(source, target, triple, config.tuple_scale) {
+                        kept.extend_from_slice(&triple);
                         if kept.len() >= 3 * config.maximum_tuple_count {
                             full.store(true, Ordering::Relaxed);
                             break;
@@ -509,6 +503,22 @@ fn tuple_test(
         },
     );
     kept.into_inner().expect("no half panicked")
+}
+
+/// Whether the three matches (source index, target index) of `triple` span triangles whose
+/// sides agree between the clouds within the factor `scale` (`scale·l_s < l_t < l_s/scale`).
+fn consistent(
+    source: &[Point3<f64>],
+    target: &[Point3<f64>],
+    triple: [(usize, usize); 3],
+    scale: f64,
+) -> bool {
+    let agrees = |ls: f64, lt: f64| ls * scale < lt && lt < ls / scale;
+    let side = |pts: &[Point3<f64>], a: usize, b: usize| (pts[a] - pts[b]).norm();
+    let [(s0, t0), (s1, t1), (s2, t2)] = triple;
+    agrees(side(source, s0, s1), side(target, t0, t1))
+        && agrees(side(source, s1, s2), side(target, t1, t2))
+        && agrees(side(source, s2, s0), side(target, t2, t0))
 }
 
 /// Triples drawn, or tested, per step of [`tuple_test`].
@@ -568,6 +578,19 @@ fn optimise(
             Some(this)
         })
         .collect();
+    let (trans, solved) = gauss_newton(&p, &q, &mus);
+    let iterations = mus.len();
+    // Back to the original scale: target → source is q ↦ R q − R μ_t + s t + μ_s; invert it.
+    let r: Matrix3<f64> = trans.rotation;
+    let t_source_target =
+        RigidTransform::new(r, -(r * mean_t) + trans.translation * scale_global + mean_s);
+    (t_source_target.inverse(), iterations, solved)
+}
+
+/// Steps 5–6 in Open3D's normalised frame: one Gauss–Newton step per entry of `mus` (its μ) on
+/// the matches `p` (source, fixed) and `q` (target, moved), (P,) each; (the transform moving
+/// the normalised target onto the normalised source, every solve succeeded).
+fn gauss_newton(p: &[Vector3<f64>], q: &[Vector3<f64>], mus: &[f64]) -> (RigidTransform, bool) {
     // Gauss–Newton on Σ l·‖r‖², r = p − (q + ω × q + t) = (p − q) + [q]ₓ ω − t, so
     // J = [[q]ₓ, −I] and the normal equations are weighted sums over the matches:
     // JᵀJ = [[|q|² I − q qᵀ, [q]ₓ], [−[q]ₓ, I]], Jᵀr = [r × q, −r] — Open3D's three rank-one
@@ -577,7 +600,7 @@ fn optimise(
     // [q]ₓ, the other those of |q|² I − q qᵀ. Each worker keeps a copy of q of its own, moved by
     // every step solved so far, so that no worker writes what the other reads (a write to lines
     // the other core holds costs more than the step).
-    let iterations = config.iteration_number;
+    let iterations = mus.len();
     let sums = [(); 2].map(|_| Mutex::new((Sums::default(), Matrix3::zeros()))); // by parity of i
     let steps: Vec<OnceLock<Option<RigidTransform>>> =
         (0..iterations).map(|_| OnceLock::new()).collect();
@@ -590,7 +613,7 @@ fn optimise(
     lockstep::two_halves(
         iterations,
         p.len() >= SIDE_BY_SIDE_MATCHES,
-        || (q.clone(), 0), // (q moved by the first `moved` steps, moved)
+        || (q.to_vec(), 0), // (q moved by the first `moved` steps, moved)
         |(q, moved), i, half| {
             for done in *moved..i {
                 // A failed solve is a zero step, as Open3D's.
@@ -603,10 +626,10 @@ fn optimise(
             *moved = i;
             let slot = &sums[i % 2];
             if half == 0 {
-                let sum = Sums::of(&p, q, mus[i]);
+                let sum = Sums::of(p, q, mus[i]);
                 slot.lock().expect("no half panicked").0 = sum;
             } else {
-                let sqq = rotation_block(&p, q, mus[i]);
+                let sqq = rotation_block(p, q, mus[i]);
                 slot.lock().expect("no half panicked").1 = sqq;
             }
         },
@@ -620,14 +643,10 @@ fn optimise(
             None => solved = false,
         }
     }
-    // Back to the original scale: target → source is q ↦ R q − R μ_t + s t + μ_s; invert it.
-    let r: Matrix3<f64> = trans.rotation;
-    let t_source_target =
-        RigidTransform::new(r, -(r * mean_t) + trans.translation * scale_global + mean_s);
-    (t_source_target.inverse(), iterations, solved)
+    (trans, solved)
 }
 
-/// Matches from which [`optimise`] asks for a second worker.
+/// Matches from which [`gauss_newton`] asks for a second worker.
 const SIDE_BY_SIDE_MATCHES: usize = 512;
 
 /// The weight l² of a match in the Geman–McClure objective at scale μ, l = μ / (‖r‖² + μ).
@@ -813,18 +832,6 @@ mod tests {
         assert!(err < 1e-9, "error {err:.3e}");
     }
 
-    /// Pinned from Open3D 0.20 (`open3d-cpu`), exact correspondences, no tuple test, on the
-    /// airplane scaled by 0.5 (so that the normalising scale, 0.5, differs from 1):
-    ///
-    /// ```python
-    /// pts = 0.5 * np.load('.../airplane/test/airplane_0627.npy').astype(np.float64)
-    /// R = Rotation.from_euler('xyz', [30, 20, 10], degrees=True).as_matrix(); t = np.array([0.3, -0.2, 0.1])
-    /// src, tgt = (pts - t) @ R, pts  # as PointClouds s, tt
-    /// corr = o3d.utility.Vector2iVector(np.stack([np.arange(1024)] * 2, 1).astype(np.int32))
-    /// opt = FastGlobalRegistrationOption(tuple_test=False, iteration_number=k, decrease_mu=dm)
-    /// r = registration_fgr_based_on_correspondence(s, tt, corr, opt); T = r.transformation
-    /// # rotation error (deg) of T vs R, |t_T − t|, r.fitness, r.inlier_rmse
-    /// ```
     /// The tuple test as one loop, one triple at a time: what [`tuple_test`] keeps, in order.
     fn tuple_test_in_one_loop(
         source: &[Point3<f64>],
@@ -834,18 +841,11 @@ mod tests {
     ) -> Vec<(usize, usize)> {
         let n = matches.len();
         let mut rng = StdRng::seed_from_u64(config.seed);
-        let agrees =
-            |ls: f64, lt: f64| ls * config.tuple_scale < lt && lt < ls / config.tuple_scale;
-        let side = |pts: &[Point3<f64>], a: usize, b: usize| (pts[a] - pts[b]).norm();
         let mut kept = Vec::new();
         for _ in 0..100 * n {
-            let picks = [0; 3].map(|_| matches[rng.gen_range(0..n)]);
-            let [(s0, t0), (s1, t1), (s2, t2)] = picks;
-            if agrees(side(source, s0, s1), side(target, t0, t1))
-                && agrees(side(source, s1, s2), side(target, t1, t2))
-                && agrees(side(source, s2, s0), side(target, t2, t0))
-            {
-                kept.extend_from_slice(&picks);
+            let triple = [0; 3].map(|_| matches[rng.gen_range(0..n)]);
+            if consistent(source, target, triple, config.tuple_scale) {
+                kept.extend_from_slice(&triple);
                 if kept.len() >= 3 * config.maximum_tuple_count {
                     break;
                 }
@@ -854,15 +854,35 @@ mod tests {
         kept
     }
 
+    /// A box surface of `n` points (the target), the source it is moved from by a random pose,
+    /// that pose, and the matches i → i with every `wrong`-th one sent elsewhere.
+    fn pair_with_wrong_matches(
+        n: usize,
+        seed: u64,
+        wrong: usize,
+    ) -> (PointCloud, PointCloud, RigidTransform, Vec<(usize, usize)>) {
+        let target = box_surface(n, seed);
+        let pose = RigidTransform::random(&mut StdRng::seed_from_u64(seed), 30.0, 0.3);
+        let source = target.transformed(&pose.inverse());
+        let matches = (0..n)
+            .map(|i| (i, if i % wrong == 0 { (i * 7 + 3) % n } else { i }))
+            .collect();
+        (source, target, pose, matches)
+    }
+
+    /// `f` on a rayon pool of `threads` threads.
+    fn on_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> R {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(f)
+    }
+
     #[test]
     fn tuple_test_keeps_what_one_loop_keeps_on_one_worker_and_two() {
         // 300 matches, every third one wrong: 30,000 triples in 59 chunks.
-        let target = box_surface(300, 13);
-        let pose = RigidTransform::random(&mut StdRng::seed_from_u64(3), 45.0, 0.5);
-        let source = target.transformed(&pose.inverse());
-        let matches: Vec<(usize, usize)> = (0..300)
-            .map(|i| (i, if i % 3 == 0 { (i * 11 + 5) % 300 } else { i }))
-            .collect();
+        let (source, target, _, matches) = pair_with_wrong_matches(300, 13, 3);
         // Every triple tested; the count reached within a chunk; the count reached at once.
         for maximum_tuple_count in [100_000, 1000, 0] {
             let config = FgrConfig {
@@ -873,12 +893,9 @@ mod tests {
                 tuple_test_in_one_loop(&source.points, &target.points, &matches, &config);
             assert!(expected.len() >= 3, "{} kept", expected.len());
             for threads in [1, 2, 3] {
-                let pool = rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads)
-                    .build()
-                    .unwrap();
-                let kept =
-                    pool.install(|| tuple_test(&source.points, &target.points, &matches, &config));
+                let kept = on_threads(threads, || {
+                    tuple_test(&source.points, &target.points, &matches, &config)
+                });
                 assert_eq!(
                     kept, expected,
                     "{threads} threads, at most {maximum_tuple_count}"
@@ -887,8 +904,8 @@ mod tests {
         }
     }
 
-    /// The optimisation as one loop, one match at a time: what [`optimise`] computes on its
-    /// halves, to the bit.
+    /// The Gauss–Newton steps as one loop, one match at a time: what [`gauss_newton`] computes
+    /// on its halves, to the bit.
     fn optimise_in_one_loop(
         p: &[Vector3<f64>],
         q: &[Vector3<f64>],
@@ -924,66 +941,48 @@ mod tests {
     }
 
     #[test]
-    fn optimisation_gives_the_same_bits_as_one_loop_on_one_worker_and_two() {
-        // Enough matches for two workers, a fifth of them outliers.
-        let target = box_surface(1500, 21);
-        let pose = RigidTransform::random(&mut StdRng::seed_from_u64(5), 30.0, 0.3);
-        let source = target.transformed(&pose.inverse());
-        let matches: Vec<(usize, usize)> = (0..1500)
-            .map(|i| (i, if i % 5 == 0 { (i * 7 + 3) % 1500 } else { i }))
-            .collect();
+    fn gauss_newton_gives_the_same_bits_as_one_loop_on_one_worker_and_two() {
+        // Enough matches for two workers, a fifth of them outliers, in a unit-sphere frame.
+        let (source, target, _, matches) = pair_with_wrong_matches(1500, 21, 5);
         assert!(matches.len() >= SIDE_BY_SIDE_MATCHES);
-        let config = FgrConfig::default();
-        let runs: Vec<(RigidTransform, usize, bool)> = [1, 2, 3]
-            .map(|threads| {
-                let pool = rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads)
-                    .build()
-                    .unwrap();
-                pool.install(|| optimise(&source, &target, &matches, &config))
-            })
-            .to_vec();
-        // The same normalisation and μ schedule as `optimise`, then one loop.
-        let (mean_s, mean_t) = (source.centroid().coords, target.centroid().coords);
-        let extent = |c: &PointCloud, m: Vector3<f64>| {
-            c.points
-                .iter()
-                .map(|p| (p.coords - m).norm())
-                .fold(0.0, f64::max)
-        };
-        let scale = extent(&source, mean_s).max(extent(&target, mean_t));
         let p: Vec<Vector3<f64>> = matches
             .iter()
-            .map(|&(i, _)| (source.points[i].coords - mean_s) / scale)
+            .map(|&(i, _)| source.points[i].coords)
             .collect();
         let q: Vec<Vector3<f64>> = matches
             .iter()
-            .map(|&(_, j)| (target.points[j].coords - mean_t) / scale)
+            .map(|&(_, j)| target.points[j].coords)
             .collect();
-        let mut mus = vec![scale];
-        for iteration in 0..config.iteration_number - 1 {
-            let mu = *mus.last().unwrap();
-            let decrease = config.decrease_mu
-                && iteration % 4 == 0
-                && mu > config.maximum_correspondence_distance;
-            mus.push(if decrease {
-                mu / config.division_factor
-            } else {
-                mu
-            });
+        let mus: Vec<f64> = (0..64).map(|i| 2.0 / 1.4f64.powi(i / 4)).collect();
+        let expected = optimise_in_one_loop(&p, &q, &mus);
+        for threads in [1, 2, 3] {
+            let (trans, solved) = on_threads(threads, || gauss_newton(&p, &q, &mus));
+            assert_eq!(
+                (trans.to_matrix4(), solved),
+                (expected.0.to_matrix4(), expected.1)
+            );
         }
-        let (trans, solved) = optimise_in_one_loop(&p, &q, &mus);
-        let r = trans.rotation;
-        let expected =
-            RigidTransform::new(r, -(r * mean_t) + trans.translation * scale + mean_s).inverse();
-        for (t, iterations, run_solved) in runs {
-            assert_eq!(t.to_matrix4(), expected.to_matrix4());
-            assert_eq!((iterations, run_solved), (64, solved));
-        }
-        let err = (expected.to_matrix4() - pose.to_matrix4()).abs().max();
-        assert!(err < 1e-3, "error {err:.3e}");
+        // The steps found the pose: p = R q + t for the true matches.
+        let moved = expected.0.apply(&Point3::from(q[1]));
+        assert!(
+            (moved.coords - p[1]).norm() < 1e-3,
+            "{moved} against {}",
+            p[1]
+        );
     }
 
+    /// Pinned from Open3D 0.20 (`open3d-cpu`), exact correspondences, no tuple test, on the
+    /// airplane scaled by 0.5 (so that the normalising scale, 0.5, differs from 1):
+    ///
+    /// ```python
+    /// pts = 0.5 * np.load('.../airplane/test/airplane_0627.npy').astype(np.float64)
+    /// R = Rotation.from_euler('xyz', [30, 20, 10], degrees=True).as_matrix(); t = np.array([0.3, -0.2, 0.1])
+    /// src, tgt = (pts - t) @ R, pts  # as PointClouds s, tt
+    /// corr = o3d.utility.Vector2iVector(np.stack([np.arange(1024)] * 2, 1).astype(np.int32))
+    /// opt = FastGlobalRegistrationOption(tuple_test=False, iteration_number=k, decrease_mu=dm)
+    /// r = registration_fgr_based_on_correspondence(s, tt, corr, opt); T = r.transformation
+    /// # rotation error (deg) of T vs R, |t_T − t|, r.fitness, r.inlier_rmse
+    /// ```
     #[test]
     fn optimisation_steps_match_open3d() {
         let target = PointCloud::new(
