@@ -48,11 +48,7 @@ pub struct KnnIndex {
 impl KnnIndex {
     /// An index over `points`; reported indices are positions in this slice.
     pub fn new(points: &[Point3<f64>]) -> Self {
-        let mut tree_points: Vec<([f64; 3], u32)> = points
-            .iter()
-            .enumerate()
-            .map(|(i, p)| ([p.x, p.y, p.z], i as u32))
-            .collect();
+        let mut tree_points = tree_points(points);
         let mut nodes = Vec::with_capacity(2 * points.len() / LEAF_SIZE + 1);
         if !tree_points.is_empty() {
             build(&mut nodes, &mut tree_points, 0, SIDE_BY_SIDE_POINTS);
@@ -399,6 +395,16 @@ impl Found for Within<'_> {
     }
 }
 
+/// `points` as the tree stores them, each with its index in the slice, before the build orders
+/// them. // (N,)
+fn tree_points(points: &[Point3<f64>]) -> Vec<([f64; 3], u32)> {
+    points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| ([p.x, p.y, p.z], i as u32))
+        .collect()
+}
+
 /// Builds the subtree over `points` (which start at position `offset` of the whole array)
 /// and returns its node index; the subtrees of a node over `side_by_side_from` points or more
 /// are built side by side.
@@ -558,11 +564,7 @@ mod tests {
     fn subtrees_built_side_by_side_make_the_same_tree() {
         let cloud = random_cloud(5 * SIDE_BY_SIDE_POINTS, 41);
         let one_by_one = || {
-            let mut points: Vec<([f64; 3], u32)> = cloud
-                .iter()
-                .enumerate()
-                .map(|(i, p)| ([p.x, p.y, p.z], i as u32))
-                .collect();
+            let mut points = tree_points(&cloud);
             let mut nodes = Vec::new();
             build(&mut nodes, &mut points, 0, usize::MAX);
             (format!("{nodes:?}"), points)
