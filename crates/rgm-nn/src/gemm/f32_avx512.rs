@@ -374,8 +374,9 @@ unsafe fn pack_b<'o>(b: ArrayView2<'_, f32>, out: &'o mut Vec<f32>) -> &'o [f32]
 ///
 /// # Safety
 /// The processor must have AVX-512 F.
+#[inline]
 #[target_feature(enable = "avx512f")]
-unsafe fn transpose_16x16(r: &mut [std::arch::x86_64::__m512; 16]) {
+pub(super) unsafe fn transpose_16x16(r: &mut [std::arch::x86_64::__m512; 16]) {
     use std::arch::x86_64::*;
     // 1. Interleave rows 2i and 2i + 1 by single values: t[2i] holds, per 128-bit lane,
     //    (r2i[0], r2i+1[0], r2i[1], r2i+1[1]), t[2i + 1] the lane's upper halves.

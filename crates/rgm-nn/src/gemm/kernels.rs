@@ -15,7 +15,7 @@
 //! 32 × 32 slice, tmm6/tmm7 the two 16-column halves of B's 32 × 32 slice; one step is 4
 //! `tdpbf16ps`, 32 × 32 × 32 multiply-adds.
 
-use ndarray::ArrayViewMut2;
+use ndarray::{ArrayView2, ArrayViewMut2};
 use std::marker::PhantomData;
 use std::sync::OnceLock;
 
@@ -305,89 +305,209 @@ fn has_avx512_bf16() -> bool {
     }
 }
 
-/// `dst[i] = bf16(src[i])`, 16 at a time with `vcvtneps2bf16` where the processor has it. That
-/// instruction flushes f32 denormals to zero, which the tile units do with bf16 denormals anyway:
-/// the products are the same as with [`super::bf16_bits`].
-pub(super) fn round_into(dst: &mut [u16], src: &[f32]) {
-    assert_eq!(dst.len(), src.len(), "round_into: lengths");
+/// Packs `a` (M, K) into `out` in A's layout (see [`super::pack_a`]) with `vcvtneps2bf16`, where
+/// the processor has AVX-512 BF16 and `a`'s rows or columns are contiguous; returns `false`,
+/// writing nothing, otherwise. `out` holds the padded (Mp, Kp) and is zero where no row of `a`
+/// lands (rows M..Mp); everything else is written. The conversion flushes f32 denormals to zero,
+/// which the kernels do with bf16 denormals anyway: the products are those of
+/// [`super::bf16_bits`]'s rounding.
+pub(super) fn pack_a(a: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) -> bool {
     #[cfg(target_arch = "x86_64")]
-    if has_avx512_bf16() {
-        // SAFETY: the processor has AVX-512F and AVX-512 BF16 (checked above).
-        unsafe { round_into_avx512(dst, src) };
-        return;
+    if has_avx512_bf16() && (a.strides()[1] == 1 || a.strides()[0] == 1) {
+        assert_eq!(out.len(), a.nrows().next_multiple_of(32) * kp, "pack_a: out");
+        // SAFETY: the processor has AVX-512 F and BF16 (checked above); `out` is A's padded size.
+        unsafe { pack_a_avx512(a, kp, out) };
+        return true;
     }
-    for (d, &x) in dst.iter_mut().zip(src) {
-        *d = super::bf16_bits(x);
+    let _ = (a, kp, out);
+    false
+}
+
+/// Packs `b` (K, N) into `out` in B's layout of VNNI pairs (see [`super::pack_b`]), every value
+/// of the padded (Kp, Np) written; as [`pack_a`] otherwise.
+pub(super) fn pack_b(b: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    if has_avx512_bf16() && (b.strides()[1] == 1 || b.strides()[0] == 1) {
+        assert_eq!(out.len(), b.ncols().next_multiple_of(32) * kp, "pack_b: out");
+        // SAFETY: as in `pack_a`.
+        unsafe { pack_b_avx512(b, kp, out) };
+        return true;
+    }
+    let _ = (b, kp, out);
+    false
+}
+
+/// The first `n` of 16 lanes (all for n ≥ 16, none for n = 0).
+#[inline]
+#[cfg(target_arch = "x86_64")]
+fn lanes(n: usize) -> u16 {
+    if n >= 16 {
+        !0
+    } else {
+        (1u16 << n) - 1
     }
 }
 
+/// 32 f32 from `p` (the first `n` of them, zeros after) rounded to bf16, in order.
+///
+/// # Safety
+/// AVX-512 F and BF16; `p` reaches `min(n, 32)` values.
+#[inline]
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512bf16")]
-unsafe fn round_into_avx512(dst: &mut [u16], src: &[f32]) {
+unsafe fn bf16_x32(p: *const f32, n: usize) -> std::arch::x86_64::__m512i {
     use std::arch::x86_64::*;
-    let (mut d, mut s) = (dst.chunks_exact_mut(16), src.chunks_exact(16));
-    for (d, s) in (&mut d).zip(&mut s) {
-        // SAFETY: `s` holds 16 f32 and `d` 16 u16 (32 bytes); unaligned load and store.
-        unsafe {
-            let bf = _mm512_cvtneps_pbh(_mm512_loadu_ps(s.as_ptr()));
-            _mm256_storeu_si256(
-                d.as_mut_ptr().cast(),
-                std::mem::transmute::<__m256bh, __m256i>(bf),
-            );
-        }
-    }
-    for (d, &x) in d.into_remainder().iter_mut().zip(s.remainder()) {
-        *d = super::bf16_bits(x);
+    // SAFETY: the masks keep both loads inside the n values (a masked-off lane never faults).
+    unsafe {
+        let lo = _mm512_maskz_loadu_ps(lanes(n), p);
+        let hi = _mm512_maskz_loadu_ps(lanes(n.saturating_sub(16)), p.wrapping_add(16));
+        std::mem::transmute::<__m512bh, __m512i>(_mm512_cvtne2ps_pbh(hi, lo))
     }
 }
 
-/// `dst[2j] = bf16(r0[j])`, `dst[2j + 1] = bf16(r1[j])`: two rows of B as VNNI pairs, 16 columns
-/// at a time where the processor has AVX-512 BF16 (denormals as in [`round_into`]).
-pub(super) fn pairs_into(dst: &mut [u16], r0: &[f32], r1: &[f32]) {
-    assert!(
-        dst.len() == 2 * r0.len() && r0.len() == r1.len(),
-        "pairs_into: lengths"
-    );
-    #[cfg(target_arch = "x86_64")]
-    if has_avx512_bf16() {
-        // SAFETY: the processor has AVX-512F and AVX-512 BF16 (checked above).
-        unsafe { pairs_into_avx512(dst, r0, r1) };
-        return;
-    }
-    for ((d, &x0), &x1) in dst.chunks_exact_mut(2).zip(r0).zip(r1) {
-        d[0] = super::bf16_bits(x0);
-        d[1] = super::bf16_bits(x1);
-    }
-}
-
+/// 16 lanes of 32 bits: lane j is bf16(r0[j]) below bf16(r1[j]) (a VNNI pair), from the first
+/// `n` values of each row (zeros after); a `None` row is zeros.
+///
+/// # Safety
+/// AVX-512 F and BF16; each row reaches `min(n, 16)` values.
+#[inline]
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512bf16")]
-unsafe fn pairs_into_avx512(dst: &mut [u16], r0: &[f32], r1: &[f32]) {
+unsafe fn bf16_pairs_x16(
+    r0: Option<*const f32>,
+    r1: Option<*const f32>,
+    n: usize,
+) -> std::arch::x86_64::__m512i {
     use std::arch::x86_64::*;
-    let mut d = dst.chunks_exact_mut(32);
-    let (mut s0, mut s1) = (r0.chunks_exact(16), r1.chunks_exact(16));
-    for ((d, s0), s1) in (&mut d).zip(&mut s0).zip(&mut s1) {
-        // SAFETY: `s0`, `s1` hold 16 f32 each and `d` 32 u16 (64 bytes); unaligned loads and
-        // store. Each 32-bit lane j gets bf16(s0[j]) in its low half and bf16(s1[j]) above.
-        unsafe {
-            let lo = _mm512_cvtneps_pbh(_mm512_loadu_ps(s0.as_ptr()));
-            let hi = _mm512_cvtneps_pbh(_mm512_loadu_ps(s1.as_ptr()));
-            let lo = _mm512_cvtepu16_epi32(std::mem::transmute::<__m256bh, __m256i>(lo));
-            let hi = _mm512_cvtepu16_epi32(std::mem::transmute::<__m256bh, __m256i>(hi));
-            _mm512_storeu_si512(
-                d.as_mut_ptr().cast(),
-                _mm512_or_si512(lo, _mm512_slli_epi32::<16>(hi)),
-            );
+    let mut half = [_mm512_setzero_si512(); 2];
+    for (h, r) in half.iter_mut().zip([r0, r1]) {
+        if let Some(p) = r {
+            // SAFETY: the mask keeps the load inside the row's n values.
+            unsafe {
+                let bf = _mm512_cvtneps_pbh(_mm512_maskz_loadu_ps(lanes(n), p));
+                *h = _mm512_cvtepu16_epi32(std::mem::transmute::<__m256bh, __m256i>(bf));
+            }
         }
     }
-    let tail = d.into_remainder();
-    for ((d, &x0), &x1) in tail
-        .chunks_exact_mut(2)
-        .zip(s0.remainder())
-        .zip(s1.remainder())
-    {
-        d[0] = super::bf16_bits(x0);
-        d[1] = super::bf16_bits(x1);
+    _mm512_or_si512(half[0], _mm512_slli_epi32::<16>(half[1]))
+}
+
+/// Transposes 16 × 16 lanes of 32 bits (bf16 pairs) in registers.
+///
+/// # Safety
+/// AVX-512 F.
+#[inline]
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn transpose_words(w: &mut [std::arch::x86_64::__m512i; 16]) {
+    use std::arch::x86_64::*;
+    // SAFETY: 16 vectors of 512 bits either way (a cast of bits, as `_mm512_castsi512_ps`).
+    let f = unsafe { &mut *(w as *mut [__m512i; 16]).cast::<[__m512; 16]>() };
+    // SAFETY: AVX-512 F (this function's contract).
+    unsafe { super::f32_avx512::transpose_16x16(f) };
+}
+
+/// See [`pack_a`].
+///
+/// # Safety
+/// AVX-512 F and BF16; a unit stride in `a`; `out` holds (Mp, Kp).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bf16")]
+unsafe fn pack_a_avx512(a: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) {
+    use std::arch::x86_64::*;
+    let ((m, k), [rs, cs]) = (a.dim(), [a.strides()[0], a.strides()[1]]);
+    let base = a.as_ptr();
+    let dst = out.as_mut_ptr();
+    if cs == 1 {
+        // Rows contiguous: each row's 32 values of a slice rounded into its slice row.
+        for i in 0..m {
+            let row = base.wrapping_offset(i as isize * rs);
+            let strip_row = (i / 32) * kp * 32 + (i % 32) * 32;
+            for s in 0..kp / 32 {
+                // SAFETY: row i holds k values; the store is one slice row of `out`.
+                unsafe {
+                    let v = bf16_x32(row.wrapping_add(32 * s), k.saturating_sub(32 * s));
+                    _mm512_storeu_si512(dst.add(strip_row + s * 1024).cast(), v);
+                }
+            }
+        }
+        return;
+    }
+    // Columns contiguous (a transposed view, as `doutᵀ · inp`): per 16 rows and slice, the 16
+    // pairs of columns (2p, 2p + 1) as VNNI pairs of the 16 rows, transposed into the rows'
+    // 16 pairs.
+    let column = |kk: usize| (kk < k).then(|| base.wrapping_offset(kk as isize * cs));
+    let mut w = [_mm512_setzero_si512(); 16];
+    for i0 in (0..m).step_by(16) {
+        let n = m - i0;
+        for s in 0..kp / 32 {
+            for (p, w) in w.iter_mut().enumerate() {
+                let (c0, c1) = (column(32 * s + 2 * p), column(32 * s + 2 * p + 1));
+                // SAFETY: each column holds m values, so n from row i0.
+                *w = unsafe { bf16_pairs_x16(c0.map(|c| c.add(i0)), c1.map(|c| c.add(i0)), n) };
+            }
+            // SAFETY: AVX-512 F.
+            unsafe { transpose_words(&mut w) };
+            let at = (i0 / 32) * kp * 32 + s * 1024 + (i0 % 32) * 32;
+            for (r, w) in w.iter().enumerate() {
+                // SAFETY: row i0 + r of the strip (< Mp), slice s: 32 u16.
+                unsafe { _mm512_storeu_si512(dst.add(at + r * 32).cast(), *w) };
+            }
+        }
+    }
+}
+
+/// See [`pack_b`].
+///
+/// # Safety
+/// AVX-512 F and BF16; a unit stride in `b`; `out` holds (Kp, Np).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bf16")]
+unsafe fn pack_b_avx512(b: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) {
+    use std::arch::x86_64::*;
+    let ((k, n), [rs, cs]) = (b.dim(), [b.strides()[0], b.strides()[1]]);
+    let base = b.as_ptr();
+    let dst = out.as_mut_ptr();
+    let np = n.next_multiple_of(32);
+    if cs == 1 {
+        // Rows contiguous: two rows at a time, 16 columns into each tile row.
+        let row = |kk: usize| (kk < k).then(|| base.wrapping_offset(kk as isize * rs));
+        for pair in 0..kp / 2 {
+            let (r0, r1) = (row(2 * pair), row(2 * pair + 1));
+            let pair_row = (pair / 16) * 1024 + (pair % 16) * 32;
+            for j in (0..np).step_by(16) {
+                // SAFETY: each row holds n values; the store is one tile row of `out`.
+                unsafe {
+                    let v = bf16_pairs_x16(r0.map(|r| r.add(j)), r1.map(|r| r.add(j)), n.saturating_sub(j));
+                    _mm512_storeu_si512(dst.add((j / 32) * kp * 32 + ((j % 32) / 16) * 512 + pair_row).cast(), v);
+                }
+            }
+        }
+        return;
+    }
+    // Columns contiguous (a transposed view, as `inp · weightᵀ`): per 16 columns and slice, each
+    // column's 32 values rounded (16 pairs), transposed into the tile's 16 pair rows.
+    let mut w = [_mm512_setzero_si512(); 16];
+    for j0 in (0..np).step_by(16) {
+        for s in 0..kp / 32 {
+            for (c, w) in w.iter_mut().enumerate() {
+                *w = match j0 + c < n {
+                    // SAFETY: column j0 + c holds k values.
+                    true => unsafe {
+                        let col = base.wrapping_offset((j0 + c) as isize * cs);
+                        bf16_x32(col.wrapping_add(32 * s), k.saturating_sub(32 * s))
+                    },
+                    false => _mm512_setzero_si512(),
+                };
+            }
+            // SAFETY: AVX-512 F.
+            unsafe { transpose_words(&mut w) };
+            let at = (j0 / 32) * kp * 32 + s * 1024 + ((j0 % 32) / 16) * 512;
+            for (r, w) in w.iter().enumerate() {
+                // SAFETY: tile row r of slice s of the strip: 32 u16.
+                unsafe { _mm512_storeu_si512(dst.add(at + r * 32).cast(), *w) };
+            }
+        }
     }
 }
 

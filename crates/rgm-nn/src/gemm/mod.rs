@@ -212,10 +212,8 @@ pub fn bf16_available() -> bool {
 /// stable shapes allocate nothing.
 #[derive(Default)]
 struct Scratch {
-    a: Vec<u16>,      // (M/32, K/32, 32, 32) padded
-    b: Vec<u16>,      // (N/32, K/32, 2, 16, 16, 2) padded
-    column: Vec<u16>, // (M) or (K): one column of a transposed operand, rounded
-    zeros: Vec<f32>,  // (N): the row after B's last when K is odd
+    a: Vec<u16>, // (M/32, K/32, 32, 32) padded
+    b: Vec<u16>, // (N/32, K/32, 2, 16, 16, 2) padded
 }
 
 thread_local! {
@@ -284,14 +282,8 @@ fn packed_mat_mul(
         alpha == 1.0 && (beta == 0.0 || beta == 1.0) && c.strides()[1] == 1 && c.strides()[0] >= 32;
     SCRATCH.with(|scratch| {
         let scratch = &mut *scratch.borrow_mut();
-        pack_a(a, kp, &mut scratch.a, &mut scratch.column);
-        pack_b(
-            b,
-            kp,
-            &mut scratch.b,
-            &mut scratch.column,
-            &mut scratch.zeros,
-        );
+        pack_a(a, kp, &mut scratch.a);
+        pack_b(b, kp, &mut scratch.b);
         let mut block = [0f32; 32 * 32]; // (32, 32) row-major
         let (m_strips, n_strips) = (m.div_ceil(32), n.div_ceil(32));
         for first in (0..n_strips).step_by(panel_strips) {
@@ -324,91 +316,36 @@ fn packed_mat_mul(
 }
 
 /// Packs `a` (M, K) as bf16 into `out`: 32-row strips, each Kp/32 slices of 32 × 32 (row-major),
-/// zero-padded to whole strips and to `kp` columns.
-fn pack_a(a: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>, column: &mut Vec<u16>) {
-    let mp = a.nrows().next_multiple_of(32);
+/// zero-padded to whole strips and to `kp` columns. Vectorised where the processor has AVX-512
+/// BF16 and a stride is 1 ([`kernels::pack_a`]), one value at a time otherwise.
+fn pack_a(a: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>) {
     out.clear();
-    out.resize(mp * kp, 0);
-    if a.strides()[1] == 1 {
-        // Rows contiguous: 32 elements at a time into their slice row.
-        for (i, row) in a.axis_iter(Axis(0)).enumerate() {
-            let row = row.to_slice().expect("unit column stride");
-            let strip_row = (i / 32) * kp * 32 + (i % 32) * 32;
-            for (s, chunk) in row.chunks(32).enumerate() {
-                kernels::round_into(&mut out[strip_row + s * 1024..][..chunk.len()], chunk);
-            }
-        }
-        return;
+    out.resize(a.nrows().next_multiple_of(32) * kp, 0);
+    if !kernels::pack_a(a, kp, out) {
+        pack_a_one_by_one(a, kp, out);
     }
-    if a.strides()[0] == 1 {
-        // Columns contiguous (a transposed view, as `doutᵀ · inp`): round a column at a time,
-        // then place its values 32 elements (one slice row) apart.
-        column.resize(a.nrows(), 0); // (M)
-        for (k, col) in a.axis_iter(Axis(1)).enumerate() {
-            kernels::round_into(column, col.to_slice().expect("unit row stride"));
-            let at_k = (k / 32) * 1024 + k % 32;
-            for (strip, rows) in column.chunks(32).enumerate() {
-                let start = strip * kp * 32 + at_k;
-                for (r, &x) in rows.iter().enumerate() {
-                    out[start + r * 32] = x;
-                }
-            }
-        }
-        return;
-    }
+}
+
+/// [`pack_a`] one value at a time, into a zeroed `out`.
+fn pack_a_one_by_one(a: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) {
     for_each_in_memory_order(a, |i, k, x| {
         out[(i / 32) * kp * 32 + (k / 32) * 1024 + (i % 32) * 32 + k % 32] = bf16_bits(x);
     });
 }
 
 /// Packs `b` (K, N) as bf16 into `out`: 32-column strips, each Kp/32 slices of two 16-column
-/// tiles in VNNI pairs (pair row r, column j: rows 2r and 2r + 1 side by side), zero-padded.
-fn pack_b(
-    b: ArrayView2<'_, f32>,
-    kp: usize,
-    out: &mut Vec<u16>,
-    column: &mut Vec<u16>,
-    zeros: &mut Vec<f32>,
-) {
-    let (k, n) = b.dim();
-    let np = n.next_multiple_of(32);
+/// tiles in VNNI pairs (pair row r, column j: rows 2r and 2r + 1 side by side), zero-padded;
+/// vectorised as in [`pack_a`].
+fn pack_b(b: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>) {
     out.clear();
-    out.resize(np * kp, 0);
-    if b.strides()[1] == 1 && n > 0 {
-        // Rows contiguous: two rows at a time, 16 columns into each tile row.
-        zeros.clear();
-        zeros.resize(n, 0.0);
-        for pair in 0..k.div_ceil(2) {
-            let r0 = b.row(2 * pair).to_slice().expect("unit column stride");
-            let r1 = match 2 * pair + 1 < k {
-                true => b.row(2 * pair + 1).to_slice().expect("unit column stride"),
-                false => &zeros[..],
-            };
-            let pair_row = (pair / 16) * 1024 + (pair % 16) * 32;
-            for j in (0..n).step_by(16) {
-                let len = (n - j).min(16);
-                let at = (j / 32) * kp * 32 + ((j % 32) / 16) * 512 + pair_row;
-                kernels::pairs_into(&mut out[at..][..2 * len], &r0[j..][..len], &r1[j..][..len]);
-            }
-        }
-        return;
+    out.resize(b.ncols().next_multiple_of(32) * kp, 0);
+    if !kernels::pack_b(b, kp, out) {
+        pack_b_one_by_one(b, kp, out);
     }
-    if b.strides()[0] == 1 {
-        // Columns contiguous (a transposed view, as `inp · weightᵀ`): round a column at a time,
-        // then place its pairs of rows one tile row (32 elements) apart.
-        column.resize(k, 0); // (K)
-        for (j, col) in b.axis_iter(Axis(1)).enumerate() {
-            kernels::round_into(column, col.to_slice().expect("unit row stride"));
-            let at_j = (j / 32) * kp * 32 + ((j % 32) / 16) * 512 + (j % 16) * 2;
-            for (slice, ks) in column.chunks(32).enumerate() {
-                let start = at_j + slice * 1024;
-                for (r, pair) in ks.chunks(2).enumerate() {
-                    out[start + r * 32..][..pair.len()].copy_from_slice(pair);
-                }
-            }
-        }
-        return;
-    }
+}
+
+/// [`pack_b`] one value at a time, into a zeroed `out`.
+fn pack_b_one_by_one(b: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) {
     for_each_in_memory_order(b, |k, j, x| {
         let strip = (j / 32) * kp * 32 + (k / 32) * 1024 + ((j % 32) / 16) * 512;
         out[strip + ((k % 32) / 2) * 32 + (j % 16) * 2 + k % 2] = bf16_bits(x);
@@ -585,18 +522,30 @@ mod tests {
     }
 
     #[test]
-    fn the_packing_conversions_round_like_bf16_bits() {
-        // 37 values: two full vectors of 16 and a tail (the vector path where the processor
-        // has AVX-512 BF16, the scalar one elsewhere).
-        let (x, y) = (uniform(1, 37, 9), uniform(1, 37, 10));
-        let (x, y) = (x.as_slice().unwrap(), y.as_slice().unwrap());
-        let mut rounded = [0u16; 37];
-        kernels::round_into(&mut rounded, x);
-        assert!(rounded.iter().zip(x).all(|(&r, &x)| r == bf16_bits(x)));
-        let mut pairs = [0u16; 74];
-        kernels::pairs_into(&mut pairs, x, y);
-        for (j, p) in pairs.chunks_exact(2).enumerate() {
-            assert_eq!(p, [bf16_bits(x[j]), bf16_bits(y[j])], "column {j}");
+    fn the_vector_packing_lays_out_what_the_one_by_one_packing_does() {
+        if !bf16_available() {
+            eprintln!("no AVX-512 BF16: the vector packing does not run here");
+            return;
+        }
+        // Shapes around the 16-lane vectors and the 32-wide slices, odd K included; each
+        // operand as rows-contiguous and as a transposed view.
+        for (r, c) in [(1, 1), (7, 5), (16, 32), (31, 33), (33, 47), (64, 17), (40, 96)] {
+            let x = uniform(r, c, (r * 100 + c) as u64);
+            let xt = x.t().to_owned();
+            for v in [x.view(), xt.t()] {
+                let kp = c.next_multiple_of(32); // as A (r, c)
+                let mut want = vec![0u16; r.next_multiple_of(32) * kp];
+                pack_a_one_by_one(v, kp, &mut want);
+                let mut got = Vec::new();
+                pack_a(v, kp, &mut got);
+                assert_eq!(got, want, "A {r} × {c}, strides {:?}", v.strides());
+                let kp = r.next_multiple_of(32); // as B (r, c)
+                let mut want = vec![0u16; c.next_multiple_of(32) * kp];
+                pack_b_one_by_one(v, kp, &mut want);
+                let mut got = vec![7u16; 3]; // stale contents must not survive
+                pack_b(v, kp, &mut got);
+                assert_eq!(got, want, "B {r} × {c}, strides {:?}", v.strides());
+            }
         }
     }
 
