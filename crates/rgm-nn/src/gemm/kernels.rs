@@ -307,14 +307,17 @@ fn has_avx512_bf16() -> bool {
 
 /// Packs `a` (M, K) into `out` in A's layout (see [`super::pack_a`]) with `vcvtneps2bf16`, where
 /// the processor has AVX-512 BF16 and `a`'s rows or columns are contiguous; returns `false`,
-/// writing nothing, otherwise. `out` holds the padded (Mp, Kp) and is zero where no row of `a`
-/// lands (rows M..Mp); everything else is written. The conversion flushes f32 denormals to zero,
+/// writing nothing, otherwise. `out` holds the padded (Mp, Kp), every value of it written. The conversion flushes f32 denormals to zero,
 /// which the kernels do with bf16 denormals anyway: the products are those of
 /// [`super::bf16_bits`]'s rounding.
 pub(super) fn pack_a(a: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) -> bool {
     #[cfg(target_arch = "x86_64")]
     if has_avx512_bf16() && (a.strides()[1] == 1 || a.strides()[0] == 1) {
-        assert_eq!(out.len(), a.nrows().next_multiple_of(32) * kp, "pack_a: out");
+        assert_eq!(
+            out.len(),
+            a.nrows().next_multiple_of(32) * kp,
+            "pack_a: out"
+        );
         // SAFETY: the processor has AVX-512 F and BF16 (checked above); `out` is A's padded size.
         unsafe { pack_a_avx512(a, kp, out) };
         return true;
@@ -328,7 +331,11 @@ pub(super) fn pack_a(a: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) -> bool
 pub(super) fn pack_b(b: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) -> bool {
     #[cfg(target_arch = "x86_64")]
     if has_avx512_bf16() && (b.strides()[1] == 1 || b.strides()[0] == 1) {
-        assert_eq!(out.len(), b.ncols().next_multiple_of(32) * kp, "pack_b: out");
+        assert_eq!(
+            out.len(),
+            b.ncols().next_multiple_of(32) * kp,
+            "pack_b: out"
+        );
         // SAFETY: as in `pack_a`.
         unsafe { pack_b_avx512(b, kp, out) };
         return true;
@@ -420,11 +427,16 @@ unsafe fn pack_a_avx512(a: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) {
     let dst = out.as_mut_ptr();
     if cs == 1 {
         // Rows contiguous: each row's 32 values of a slice rounded into its slice row.
-        for i in 0..m {
+        // Rows M..Mp are zeros.
+        for i in 0..m.next_multiple_of(32) {
             let row = base.wrapping_offset(i as isize * rs);
-            let strip_row = (i / 32) * kp * 32 + (i % 32) * 32;
+            let (k, strip_row) = (
+                if i < m { k } else { 0 },
+                (i / 32) * kp * 32 + (i % 32) * 32,
+            );
             for s in 0..kp / 32 {
-                // SAFETY: row i holds k values; the store is one slice row of `out`.
+                // SAFETY: row i < m holds k values (none are read past m); the store is one
+                // slice row of `out`.
                 unsafe {
                     let v = bf16_x32(row.wrapping_add(32 * s), k.saturating_sub(32 * s));
                     _mm512_storeu_si512(dst.add(strip_row + s * 1024).cast(), v);
@@ -438,8 +450,8 @@ unsafe fn pack_a_avx512(a: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) {
     // 16 pairs.
     let column = |kk: usize| (kk < k).then(|| base.wrapping_offset(kk as isize * cs));
     let mut w = [_mm512_setzero_si512(); 16];
-    for i0 in (0..m).step_by(16) {
-        let n = m - i0;
+    for i0 in (0..m.next_multiple_of(32)).step_by(16) {
+        let n = m.saturating_sub(i0); // rows M..Mp are zeros
         for s in 0..kp / 32 {
             for (p, w) in w.iter_mut().enumerate() {
                 let (c0, c1) = (column(32 * s + 2 * p), column(32 * s + 2 * p + 1));
@@ -478,8 +490,16 @@ unsafe fn pack_b_avx512(b: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) {
             for j in (0..np).step_by(16) {
                 // SAFETY: each row holds n values; the store is one tile row of `out`.
                 unsafe {
-                    let v = bf16_pairs_x16(r0.map(|r| r.add(j)), r1.map(|r| r.add(j)), n.saturating_sub(j));
-                    _mm512_storeu_si512(dst.add((j / 32) * kp * 32 + ((j % 32) / 16) * 512 + pair_row).cast(), v);
+                    let v = bf16_pairs_x16(
+                        r0.map(|r| r.add(j)),
+                        r1.map(|r| r.add(j)),
+                        n.saturating_sub(j),
+                    );
+                    _mm512_storeu_si512(
+                        dst.add((j / 32) * kp * 32 + ((j % 32) / 16) * 512 + pair_row)
+                            .cast(),
+                        v,
+                    );
                 }
             }
         }
@@ -538,75 +558,76 @@ impl Avx512Bf16 {
             b.len()
         );
         assert!(
-            out.dim() == (32, 32) && out.strides()[1] == 1,
+            out.dim() == (32, 32) && out.strides()[1] == 1 && out.strides()[0] >= 32,
             "a 32 × 32 block with unit column stride, got {:?} with strides {:?}",
             out.shape(),
             out.strides()
         );
         #[cfg(target_arch = "x86_64")]
-        for (group, rows) in out.axis_chunks_iter_mut(ndarray::Axis(0), 8).enumerate() {
-            // SAFETY: `self` exists only where the processor has AVX-512F and AVX-512 BF16.
-            unsafe { dp_rows_avx512(a, b, group * 8, rows, accumulate) };
+        {
+            let (c, row_stride) = (out.as_mut_ptr(), out.strides()[0] as usize);
+            // SAFETY: `self` exists only where the processor has AVX-512F and AVX-512 BF16;
+            // `a` and `b` hold whole slices alike, `c` 32 rows of 32 at `row_stride` (checked
+            // above).
+            unsafe { block_avx512(a, b, c, row_stride, accumulate) };
         }
         #[cfg(not(target_arch = "x86_64"))]
         unreachable!("Avx512Bf16 exists only on x86-64 ({accumulate})");
     }
 }
 
-/// Rows `row0..row0 + 8` of the block into `out` (8, 32): see [`Avx512Bf16::block`].
+/// See [`Avx512Bf16::block`].
+///
+/// # Safety
+/// AVX-512 F and BF16; `a` and `b` the same whole number of slices; `c` reaches 32 rows of 32
+/// f32, `row_stride` apart.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512bf16")]
-unsafe fn dp_rows_avx512(
-    a: &[u16],
-    b: &[u16],
-    row0: usize,
-    mut out: ArrayViewMut2<'_, f32>,
-    accumulate: bool,
-) {
+unsafe fn block_avx512(a: &[u16], b: &[u16], c: *mut f32, row_stride: usize, accumulate: bool) {
     use std::arch::x86_64::*;
-    let mut each_row = out.rows_mut().into_iter();
-    let mut rows: [&mut [f32]; 8] = std::array::from_fn(|_| {
-        let row = each_row.next().expect("8 rows");
-        row.into_slice().expect("unit column stride")
-    });
-    let mut acc = [[_mm512_setzero_ps(); 2]; 8]; // (8 rows, 2 × 16 columns)
-    if accumulate {
-        for (acc, row) in acc.iter_mut().zip(&rows) {
-            // SAFETY: each row holds 32 f32 (a block row); unaligned loads.
-            unsafe {
-                acc[0] = _mm512_loadu_ps(row.as_ptr());
-                acc[1] = _mm512_loadu_ps(row.as_ptr().add(16));
-            }
-        }
-    }
-    for (a, b) in a.chunks_exact(SLICE).zip(b.chunks_exact(SLICE)) {
-        for r in 0..16 {
-            let (b0, b1) = (&b[r * 32..][..32], &b[512 + r * 32..][..32]);
-            // SAFETY: `b0`, `b1` hold 32 u16 (64 bytes) each; unaligned loads.
-            let (b0, b1): (__m512bh, __m512bh) = unsafe {
-                (
-                    std::mem::transmute::<__m512i, __m512bh>(_mm512_loadu_si512(
-                        b0.as_ptr().cast(),
-                    )),
-                    std::mem::transmute::<__m512i, __m512bh>(_mm512_loadu_si512(
-                        b1.as_ptr().cast(),
-                    )),
-                )
-            };
+    let slices = a.len() / SLICE;
+    for row0 in (0..32).step_by(8) {
+        // SAFETY: rows row0..row0 + 8 of the block; each reaches 32 f32.
+        let row = |i: usize| unsafe { c.add((row0 + i) * row_stride) };
+        let mut acc = [[_mm512_setzero_ps(); 2]; 8]; // (8 rows, 2 × 16 columns)
+        if accumulate {
             for (i, acc) in acc.iter_mut().enumerate() {
-                let at = (row0 + i) * 32 + 2 * r; // row row0 + i, k pair r
-                let pair = u32::from(a[at]) | (u32::from(a[at + 1]) << 16);
-                let pair: __m512bh = std::mem::transmute(_mm512_set1_epi32(pair as i32));
-                acc[0] = _mm512_dpbf16_ps(acc[0], pair, b0);
-                acc[1] = _mm512_dpbf16_ps(acc[1], pair, b1);
+                // SAFETY: a block row of 32 f32; unaligned loads.
+                unsafe {
+                    acc[0] = _mm512_loadu_ps(row(i));
+                    acc[1] = _mm512_loadu_ps(row(i).add(16));
+                }
             }
         }
-    }
-    for (acc, row) in acc.iter().zip(&mut rows) {
-        // SAFETY: each row holds 32 f32; unaligned stores.
-        unsafe {
-            _mm512_storeu_ps(row.as_mut_ptr(), acc[0]);
-            _mm512_storeu_ps(row.as_mut_ptr().add(16), acc[1]);
+        for s in 0..slices {
+            // SAFETY: slice s of `a` and of `b` (SLICE u16 each).
+            let (a, b) = unsafe { (a.as_ptr().add(s * SLICE), b.as_ptr().add(s * SLICE)) };
+            for r in 0..16 {
+                // SAFETY: B's tile rows r of the two 16-column halves (64 bytes each) and A's
+                // pair r of rows row0..row0 + 8 (4 bytes each), all inside the slices.
+                unsafe {
+                    let b0: __m512bh =
+                        std::mem::transmute(_mm512_loadu_si512(b.add(r * 32).cast()));
+                    let b1: __m512bh =
+                        std::mem::transmute(_mm512_loadu_si512(b.add(512 + r * 32).cast()));
+                    for (i, acc) in acc.iter_mut().enumerate() {
+                        let pair = a
+                            .add((row0 + i) * 32 + 2 * r)
+                            .cast::<i32>()
+                            .read_unaligned();
+                        let pair: __m512bh = std::mem::transmute(_mm512_set1_epi32(pair));
+                        acc[0] = _mm512_dpbf16_ps(acc[0], pair, b0);
+                        acc[1] = _mm512_dpbf16_ps(acc[1], pair, b1);
+                    }
+                }
+            }
+        }
+        for (i, acc) in acc.iter().enumerate() {
+            // SAFETY: a block row of 32 f32; unaligned stores.
+            unsafe {
+                _mm512_storeu_ps(row(i), acc[0]);
+                _mm512_storeu_ps(row(i).add(16), acc[1]);
+            }
         }
     }
 }

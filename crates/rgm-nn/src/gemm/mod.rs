@@ -319,9 +319,10 @@ fn packed_mat_mul(
 /// zero-padded to whole strips and to `kp` columns. Vectorised where the processor has AVX-512
 /// BF16 and a stride is 1 ([`kernels::pack_a`]), one value at a time otherwise.
 fn pack_a(a: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>) {
-    out.clear();
+    // The vector packing writes every value; the one-by-one packing only the operand's.
     out.resize(a.nrows().next_multiple_of(32) * kp, 0);
     if !kernels::pack_a(a, kp, out) {
+        out.fill(0);
         pack_a_one_by_one(a, kp, out);
     }
 }
@@ -337,9 +338,10 @@ fn pack_a_one_by_one(a: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) {
 /// tiles in VNNI pairs (pair row r, column j: rows 2r and 2r + 1 side by side), zero-padded;
 /// vectorised as in [`pack_a`].
 fn pack_b(b: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>) {
-    out.clear();
+    // The vector packing writes every value; the one-by-one packing only the operand's.
     out.resize(b.ncols().next_multiple_of(32) * kp, 0);
     if !kernels::pack_b(b, kp, out) {
+        out.fill(0);
         pack_b_one_by_one(b, kp, out);
     }
 }
@@ -529,20 +531,28 @@ mod tests {
         }
         // Shapes around the 16-lane vectors and the 32-wide slices, odd K included; each
         // operand as rows-contiguous and as a transposed view.
-        for (r, c) in [(1, 1), (7, 5), (16, 32), (31, 33), (33, 47), (64, 17), (40, 96)] {
+        for (r, c) in [
+            (1, 1),
+            (7, 5),
+            (16, 32),
+            (31, 33),
+            (33, 47),
+            (64, 17),
+            (40, 96),
+        ] {
             let x = uniform(r, c, (r * 100 + c) as u64);
             let xt = x.t().to_owned();
             for v in [x.view(), xt.t()] {
                 let kp = c.next_multiple_of(32); // as A (r, c)
                 let mut want = vec![0u16; r.next_multiple_of(32) * kp];
                 pack_a_one_by_one(v, kp, &mut want);
-                let mut got = Vec::new();
+                let mut got = vec![7u16; 1 << 14]; // stale contents must not survive
                 pack_a(v, kp, &mut got);
                 assert_eq!(got, want, "A {r} × {c}, strides {:?}", v.strides());
                 let kp = r.next_multiple_of(32); // as B (r, c)
                 let mut want = vec![0u16; c.next_multiple_of(32) * kp];
                 pack_b_one_by_one(v, kp, &mut want);
-                let mut got = vec![7u16; 3]; // stale contents must not survive
+                let mut got = vec![7u16; 1 << 14];
                 pack_b(v, kp, &mut got);
                 assert_eq!(got, want, "B {r} × {c}, strides {:?}", v.strides());
             }
