@@ -282,16 +282,16 @@ fn packed_mat_mul(
         alpha == 1.0 && (beta == 0.0 || beta == 1.0) && c.strides()[1] == 1 && c.strides()[0] >= 32;
     SCRATCH.with(|scratch| {
         let scratch = &mut *scratch.borrow_mut();
-        pack_a(a, kp, &mut scratch.a);
-        pack_b(b, kp, &mut scratch.b);
+        let packed_a = pack_a(a, kp, &mut scratch.a);
+        let packed_b = pack_b(b, kp, &mut scratch.b);
         let mut block = [0f32; 32 * 32]; // (32, 32) row-major
         let (m_strips, n_strips) = (m.div_ceil(32), n.div_ceil(32));
         for first in (0..n_strips).step_by(panel_strips) {
             for mi in 0..m_strips {
-                let a_strip = &scratch.a[mi * strip..][..strip];
+                let a_strip = &packed_a[mi * strip..][..strip];
                 let rows = mi * 32..(mi * 32 + 32).min(m);
                 for ni in first..(first + panel_strips).min(n_strips) {
-                    let b_strip = &scratch.b[ni * strip..][..strip];
+                    let b_strip = &packed_b[ni * strip..][..strip];
                     let cols = ni * 32..(ni * 32 + 32).min(n);
                     if direct && rows.len() == 32 && cols.len() == 32 {
                         let dst = c.slice_mut(s![rows.clone(), cols]);
@@ -318,13 +318,14 @@ fn packed_mat_mul(
 /// Packs `a` (M, K) as bf16 into `out`: 32-row strips, each Kp/32 slices of 32 × 32 (row-major),
 /// zero-padded to whole strips and to `kp` columns. Vectorised where the processor has AVX-512
 /// BF16 and a stride is 1 ([`kernels::pack_a`]), one value at a time otherwise.
-fn pack_a(a: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>) {
+fn pack_a<'o>(a: ArrayView2<'_, f32>, kp: usize, out: &'o mut Vec<u16>) -> &'o [u16] {
+    let out = aligned(out, a.nrows().next_multiple_of(32) * kp);
     // The vector packing writes every value; the one-by-one packing only the operand's.
-    out.resize(a.nrows().next_multiple_of(32) * kp, 0);
     if !kernels::pack_a(a, kp, out) {
         out.fill(0);
         pack_a_one_by_one(a, kp, out);
     }
+    out
 }
 
 /// [`pack_a`] one value at a time, into a zeroed `out`.
@@ -337,13 +338,21 @@ fn pack_a_one_by_one(a: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) {
 /// Packs `b` (K, N) as bf16 into `out`: 32-column strips, each Kp/32 slices of two 16-column
 /// tiles in VNNI pairs (pair row r, column j: rows 2r and 2r + 1 side by side), zero-padded;
 /// vectorised as in [`pack_a`].
-fn pack_b(b: ArrayView2<'_, f32>, kp: usize, out: &mut Vec<u16>) {
-    // The vector packing writes every value; the one-by-one packing only the operand's.
-    out.resize(b.ncols().next_multiple_of(32) * kp, 0);
+fn pack_b<'o>(b: ArrayView2<'_, f32>, kp: usize, out: &'o mut Vec<u16>) -> &'o [u16] {
+    let out = aligned(out, b.ncols().next_multiple_of(32) * kp);
     if !kernels::pack_b(b, kp, out) {
         out.fill(0);
         pack_b_one_by_one(b, kp, out);
     }
+    out
+}
+
+/// `len` elements of `buf` that start on a 64-byte boundary: every 32-element row of a packed
+/// slice then fills one cache line, so its loads and stores never straddle two.
+fn aligned(buf: &mut Vec<u16>, len: usize) -> &mut [u16] {
+    buf.resize(len + 32, 0);
+    let skip = buf.as_ptr().align_offset(64);
+    &mut buf[skip..][..len]
 }
 
 /// [`pack_b`] one value at a time, into a zeroed `out`.
@@ -547,14 +556,12 @@ mod tests {
                 let mut want = vec![0u16; r.next_multiple_of(32) * kp];
                 pack_a_one_by_one(v, kp, &mut want);
                 let mut got = vec![7u16; 1 << 14]; // stale contents must not survive
-                pack_a(v, kp, &mut got);
-                assert_eq!(got, want, "A {r} × {c}, strides {:?}", v.strides());
+                assert_eq!(pack_a(v, kp, &mut got), want, "A {r} × {c}, strides {:?}", v.strides());
                 let kp = r.next_multiple_of(32); // as B (r, c)
                 let mut want = vec![0u16; c.next_multiple_of(32) * kp];
                 pack_b_one_by_one(v, kp, &mut want);
                 let mut got = vec![7u16; 1 << 14];
-                pack_b(v, kp, &mut got);
-                assert_eq!(got, want, "B {r} × {c}, strides {:?}", v.strides());
+                assert_eq!(pack_b(v, kp, &mut got), want, "B {r} × {c}, strides {:?}", v.strides());
             }
         }
     }
@@ -808,3 +815,4 @@ mod tests {
         assert_eq!(in_scope, plain);
     }
 }
+
