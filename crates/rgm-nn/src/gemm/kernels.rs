@@ -38,18 +38,25 @@ impl Kernel {
         Avx512Bf16::new().map(Self::Avx512Bf16)
     }
 
-    /// See [`Tiles::block`]; both kernels compute the same block (each step rounds to nearest
-    /// even and flushes bf16 denormals) up to the order of the f32 additions.
+    /// `out = alpha · (a · b) + beta · out` for one block (`beta = 0` ignores what `out` held),
+    /// `a`, `b` and `out` as in [`Tiles::block`]; both kernels compute the same block (each step
+    /// rounds to nearest even and flushes bf16 denormals) up to the order of the f32 additions.
     pub(super) fn block(
         &mut self,
         a: &[u16],
         b: &[u16],
         out: ArrayViewMut2<'_, f32>,
-        accumulate: bool,
+        alpha: f32,
+        beta: f32,
     ) {
         match self {
-            Self::Amx(tiles) => tiles.block(a, b, out, accumulate),
-            Self::Avx512Bf16(k) => k.block(a, b, out, accumulate),
+            Self::Amx(tiles) => super::scaled_block(
+                |out, accumulate| tiles.block(a, b, out, accumulate),
+                out,
+                alpha,
+                beta,
+            ),
+            Self::Avx512Bf16(k) => k.block(a, b, out, alpha, beta),
         }
     }
 }
@@ -542,14 +549,16 @@ impl Avx512Bf16 {
         has_avx512_bf16().then_some(Self { _private: () })
     }
 
-    /// One block as [`Tiles::block`] computes it, with `vdpbf16ps`: 8 rows at a time, 16
-    /// accumulators of 16 f32 (the block's 8 × 32), each pair row of B loaded once per 8 rows.
+    /// One block as [`Kernel::block`] computes it, with `vdpbf16ps`: 8 rows at a time, 16
+    /// accumulators of 16 f32 (the block's 8 × 32), each pair row of B loaded once per 8 rows;
+    /// alpha and beta applied as the rows are stored, as [`super::finish`] does.
     pub(super) fn block(
         &mut self,
         a: &[u16],
         b: &[u16],
         mut out: ArrayViewMut2<'_, f32>,
-        accumulate: bool,
+        alpha: f32,
+        beta: f32,
     ) {
         assert!(
             a.len().is_multiple_of(SLICE) && a.len() == b.len(),
@@ -569,10 +578,10 @@ impl Avx512Bf16 {
             // SAFETY: `self` exists only where the processor has AVX-512F and AVX-512 BF16;
             // `a` and `b` hold whole slices alike, `c` 32 rows of 32 at `row_stride` (checked
             // above).
-            unsafe { block_avx512(a, b, c, row_stride, accumulate) };
+            unsafe { block_avx512(a, b, c, row_stride, alpha, beta) };
         }
         #[cfg(not(target_arch = "x86_64"))]
-        unreachable!("Avx512Bf16 exists only on x86-64 ({accumulate})");
+        unreachable!("Avx512Bf16 exists only on x86-64 ({alpha}, {beta})");
     }
 }
 
@@ -583,9 +592,21 @@ impl Avx512Bf16 {
 /// f32, `row_stride` apart.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512bf16")]
-unsafe fn block_avx512(a: &[u16], b: &[u16], c: *mut f32, row_stride: usize, accumulate: bool) {
+unsafe fn block_avx512(
+    a: &[u16],
+    b: &[u16],
+    c: *mut f32,
+    row_stride: usize,
+    alpha: f32,
+    beta: f32,
+) {
     use std::arch::x86_64::*;
     let slices = a.len() / SLICE;
+    // C += a · b accumulates onto C's rows from the start; any other alpha or beta scales the
+    // finished product (and C) as the rows are stored.
+    let accumulate = alpha == 1.0 && beta == 1.0;
+    let scaled = !accumulate && !(alpha == 1.0 && beta == 0.0);
+    let (alphas, betas) = (_mm512_set1_ps(alpha), _mm512_set1_ps(beta));
     for row0 in (0..32).step_by(8) {
         // SAFETY: rows row0..row0 + 8 of the block; each reaches 32 f32.
         let row = |i: usize| unsafe { c.add((row0 + i) * row_stride) };
@@ -623,10 +644,20 @@ unsafe fn block_avx512(a: &[u16], b: &[u16], c: *mut f32, row_stride: usize, acc
             }
         }
         for (i, acc) in acc.iter().enumerate() {
-            // SAFETY: a block row of 32 f32; unaligned stores.
-            unsafe {
-                _mm512_storeu_ps(row(i), acc[0]);
-                _mm512_storeu_ps(row(i).add(16), acc[1]);
+            for (h, &acc) in acc.iter().enumerate() {
+                // SAFETY: half h of a block row of 32 f32; unaligned loads and stores.
+                unsafe {
+                    let at = row(i).add(16 * h);
+                    let v = match (scaled, beta == 0.0) {
+                        (false, _) => acc,
+                        (true, true) => _mm512_mul_ps(alphas, acc),
+                        (true, false) => _mm512_add_ps(
+                            _mm512_mul_ps(alphas, acc),
+                            _mm512_mul_ps(betas, _mm512_loadu_ps(at)),
+                        ),
+                    };
+                    _mm512_storeu_ps(at, v);
+                }
             }
         }
     }

@@ -256,30 +256,58 @@ pub fn bf16_mat_mul(
         return;
     }
     let mut kernel = kernels::Kernel::new().expect("bf16_mat_mul needs AMX or AVX-512 BF16");
-    packed_mat_mul(alpha, a, b, beta, c.view_mut(), |a, b, out, accumulate| {
-        kernel.block(a, b, out, accumulate)
+    packed_mat_mul(alpha, a, b, beta, c.view_mut(), |a, b, out, alpha, beta| {
+        kernel.block(a, b, out, alpha, beta)
     });
 }
 
-/// The bf16 product with `block_of(a_strip, b_strip, out, accumulate)` computing one 32 × 32
-/// block from packed strips into a (32, 32) view (a kernel, or the tests' reference):
-/// packing, blocking, edges and the write-back into C. Whole blocks of a C with unit column
-/// stride go straight into C when alpha = 1 and beta ∈ {0, 1} (the tiles load and store C
-/// themselves); the other blocks go through a scratch block.
+/// `out = alpha · block + beta · out` (`beta = 0` ignores what `out` held) from a block function
+/// that can only set or add (`plain(out, accumulate)`: the AMX tiles): straight into `out` when
+/// alpha = 1 and beta ∈ {0, 1}, through a scratch block and [`finish`] otherwise.
+fn scaled_block(
+    mut plain: impl FnMut(ArrayViewMut2<'_, f32>, bool),
+    out: ArrayViewMut2<'_, f32>,
+    alpha: f32,
+    beta: f32,
+) {
+    if alpha == 1.0 && (beta == 0.0 || beta == 1.0) {
+        return plain(out, beta == 1.0);
+    }
+    let mut block = [0f32; 32 * 32]; // (32, 32) row-major
+    let mut got = ArrayViewMut2::from_shape((32, 32), &mut block[..]).expect("32²");
+    plain(got.view_mut(), false);
+    finish(out, got.view(), alpha, beta);
+}
+
+/// `dst = alpha · got + beta · dst`, or `alpha · got` when `beta = 0` (whatever `dst` held).
+fn finish(dst: ArrayViewMut2<'_, f32>, got: ArrayView2<'_, f32>, alpha: f32, beta: f32) {
+    if beta == 0.0 {
+        Zip::from(dst).and(got).for_each(|c, &g| *c = alpha * g);
+    } else {
+        Zip::from(dst)
+            .and(got)
+            .for_each(|c, &g| *c = alpha * g + beta * *c);
+    }
+}
+
+/// The bf16 product with `block_of(a_strip, b_strip, out, alpha, beta)` computing one 32 × 32
+/// block `out = alpha · a · b + beta · out` from packed strips into a (32, 32) view (a kernel,
+/// or the tests' reference): packing, blocking, edges and the write-back into C. Whole blocks
+/// of a C with unit column stride go straight into C; the others (C's edges, a C with strided
+/// rows) go through a scratch block.
 fn packed_mat_mul(
     alpha: f32,
     a: ArrayView2<'_, f32>,
     b: ArrayView2<'_, f32>,
     beta: f32,
     mut c: ArrayViewMut2<'_, f32>,
-    mut block_of: impl FnMut(&[u16], &[u16], ArrayViewMut2<'_, f32>, bool),
+    mut block_of: impl FnMut(&[u16], &[u16], ArrayViewMut2<'_, f32>, f32, f32),
 ) {
     let ((m, k), n) = (a.dim(), b.ncols());
     let kp = k.next_multiple_of(32);
     let strip = kp * 32; // elements of one packed 32-row strip of A or 32-column strip of B
     let panel_strips = (B_PANEL_BYTES / (2 * strip).max(1)).max(1);
-    let direct =
-        alpha == 1.0 && (beta == 0.0 || beta == 1.0) && c.strides()[1] == 1 && c.strides()[0] >= 32;
+    let direct = c.strides()[1] == 1 && c.strides()[0] >= 32;
     SCRATCH.with(|scratch| {
         let scratch = &mut *scratch.borrow_mut();
         let packed_a = pack_a(a, kp, &mut scratch.a);
@@ -295,20 +323,13 @@ fn packed_mat_mul(
                     let cols = ni * 32..(ni * 32 + 32).min(n);
                     if direct && rows.len() == 32 && cols.len() == 32 {
                         let dst = c.slice_mut(s![rows.clone(), cols]);
-                        block_of(a_strip, b_strip, dst, beta == 1.0);
+                        block_of(a_strip, b_strip, dst, alpha, beta);
                         continue;
                     }
                     let mut got = ArrayViewMut2::from_shape((32, 32), &mut block[..]).expect("32²");
-                    block_of(a_strip, b_strip, got.view_mut(), false);
+                    block_of(a_strip, b_strip, got.view_mut(), 1.0, 0.0);
                     let got = got.slice(s![..rows.len(), ..cols.len()]);
-                    let dst = c.slice_mut(s![rows.clone(), cols]);
-                    if beta == 0.0 {
-                        Zip::from(dst).and(got).for_each(|c, &g| *c = alpha * g);
-                    } else {
-                        Zip::from(dst)
-                            .and(got)
-                            .for_each(|c, &g| *c = alpha * g + beta * *c);
-                    }
+                    finish(c.slice_mut(s![rows.clone(), cols]), got, alpha, beta);
                 }
             }
         }
@@ -393,17 +414,21 @@ mod tests {
 
     /// What `tdpbf16ps` computes on one block, read from the packed layout as the module doc
     /// describes it: A slices row-major, B slices as two 16-column tiles of VNNI pairs.
-    fn reference_block(a: &[u16], b: &[u16], mut out: ArrayViewMut2<f32>, accumulate: bool) {
+    /// With alpha and beta as the AMX tiles get them ([`scaled_block`]).
+    fn reference_block(a: &[u16], b: &[u16], out: ArrayViewMut2<f32>, alpha: f32, beta: f32) {
         let f = |bits: u16| f32::from_bits(u32::from(bits) << 16);
-        if !accumulate {
-            out.fill(0.0);
-        }
-        for (a, b) in a.chunks_exact(1024).zip(b.chunks_exact(1024)) {
-            for (i, j) in (0..32).flat_map(|i| (0..32).map(move |j| (i, j))) {
-                let b_at = |k: usize| b[(j / 16) * 512 + (k / 2) * 32 + (j % 16) * 2 + k % 2];
-                out[(i, j)] += (0..32).map(|k| f(a[i * 32 + k]) * f(b_at(k))).sum::<f32>();
+        let plain = |mut out: ArrayViewMut2<f32>, accumulate: bool| {
+            if !accumulate {
+                out.fill(0.0);
             }
-        }
+            for (a, b) in a.chunks_exact(1024).zip(b.chunks_exact(1024)) {
+                for (i, j) in (0..32).flat_map(|i| (0..32).map(move |j| (i, j))) {
+                    let b_at = |k: usize| b[(j / 16) * 512 + (k / 2) * 32 + (j % 16) * 2 + k % 2];
+                    out[(i, j)] += (0..32).map(|k| f(a[i * 32 + k]) * f(b_at(k))).sum::<f32>();
+                }
+            }
+        };
+        scaled_block(plain, out, alpha, beta);
     }
 
     /// Checks `got` = alpha · round(a) · round(b) + beta · c0 up to f32 accumulation: each entry
@@ -503,6 +528,13 @@ mod tests {
             let mut c = c0.clone();
             mul(1.0, a.view(), b.view(), 1.0, c.view_mut());
             check(c.view(), (1.0, a.view(), b.view()), (1.0, c0.view()));
+            // Scaled into C itself (as the attention's scores and their gradients):
+            // c = 0.75 · a · b, and c = 0.75 · a · b − 0.5 · c.
+            for beta in [0.0, -0.5] {
+                let mut c = c0.clone();
+                mul(0.75, a.view(), b.view(), beta, c.view_mut());
+                check(c.view(), (0.75, a.view(), b.view()), (beta, c0.view()));
+            }
             // Into a transposed destination, accumulating: c (N, M) stored, cᵀ += -0.5 · a · b.
             let mut ct = c0.t().to_owned();
             mul(-0.5, a.view(), b.view(), 1.0, ct.view_mut().reversed_axes());
@@ -556,12 +588,22 @@ mod tests {
                 let mut want = vec![0u16; r.next_multiple_of(32) * kp];
                 pack_a_one_by_one(v, kp, &mut want);
                 let mut got = vec![7u16; 1 << 14]; // stale contents must not survive
-                assert_eq!(pack_a(v, kp, &mut got), want, "A {r} × {c}, strides {:?}", v.strides());
+                assert_eq!(
+                    pack_a(v, kp, &mut got),
+                    want,
+                    "A {r} × {c}, strides {:?}",
+                    v.strides()
+                );
                 let kp = r.next_multiple_of(32); // as B (r, c)
                 let mut want = vec![0u16; c.next_multiple_of(32) * kp];
                 pack_b_one_by_one(v, kp, &mut want);
                 let mut got = vec![7u16; 1 << 14];
-                assert_eq!(pack_b(v, kp, &mut got), want, "B {r} × {c}, strides {:?}", v.strides());
+                assert_eq!(
+                    pack_b(v, kp, &mut got),
+                    want,
+                    "B {r} × {c}, strides {:?}",
+                    v.strides()
+                );
             }
         }
     }
@@ -622,8 +664,8 @@ mod tests {
         // The AVX-512 BF16 kernel also where AMX takes precedence.
         if let Some(mut kernel) = kernels::Avx512Bf16::new() {
             check_cases(&mut |alpha, a, b, beta, c| {
-                packed_mat_mul(alpha, a, b, beta, c, |a, b, out, acc| {
-                    kernel.block(a, b, out, acc)
+                packed_mat_mul(alpha, a, b, beta, c, |a, b, out, alpha, beta| {
+                    kernel.block(a, b, out, alpha, beta)
                 })
             });
         }
@@ -815,4 +857,3 @@ mod tests {
         assert_eq!(in_scope, plain);
     }
 }
-
