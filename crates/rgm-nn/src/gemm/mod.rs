@@ -47,7 +47,10 @@ use crate::bf16::bf16_bits;
 use crate::precision::{self, Precision};
 use crate::Scalar;
 use ndarray::linalg::general_mat_mul;
-use ndarray::{s, ArrayBase, ArrayView1, ArrayView2, ArrayViewMut2, Axis, Data, DataMut, Ix2, Zip};
+use ndarray::{
+    s, ArrayBase, ArrayView1, ArrayView2, ArrayViewMut2, Axis, Data, DataMut, Ix2, ShapeBuilder,
+    Zip,
+};
 use std::cell::RefCell;
 
 /// `c = alpha · a · b + beta · c`, `a`: (M, K), `b`: (K, N), `c`: (M, N), in the calling
@@ -307,7 +310,8 @@ fn packed_mat_mul(
     let kp = k.next_multiple_of(32);
     let strip = kp * 32; // elements of one packed 32-row strip of A or 32-column strip of B
     let panel_strips = (B_PANEL_BYTES / (2 * strip).max(1)).max(1);
-    let direct = c.strides()[1] == 1 && c.strides()[0] >= 32;
+    let row_stride = c.strides()[0];
+    let direct = c.strides()[1] == 1 && row_stride >= 32;
     SCRATCH.with(|scratch| {
         let scratch = &mut *scratch.borrow_mut();
         let packed_a = pack_a(a, kp, &mut scratch.a);
@@ -322,7 +326,19 @@ fn packed_mat_mul(
                     let b_strip = &packed_b[ni * strip..][..strip];
                     let cols = ni * 32..(ni * 32 + 32).min(n);
                     if direct && rows.len() == 32 && cols.len() == 32 {
-                        let dst = c.slice_mut(s![rows.clone(), cols]);
+                        // SAFETY: rows × cols is a 32 × 32 block inside C, which `c` borrows
+                        // mutably; C's rows are `row_stride` apart with unit column stride (a
+                        // view made here rather than by `slice_mut`, whose checks cost more
+                        // than the smallest blocks' products).
+                        let dst = unsafe {
+                            let at = c
+                                .as_mut_ptr()
+                                .offset(rows.start as isize * row_stride + cols.start as isize);
+                            ArrayViewMut2::from_shape_ptr(
+                                (32, 32).strides((row_stride as usize, 1)),
+                                at,
+                            )
+                        };
                         block_of(a_strip, b_strip, dst, alpha, beta);
                         continue;
                     }
