@@ -463,7 +463,13 @@ unsafe fn pack_a_avx512(a: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) {
             for (p, w) in w.iter_mut().enumerate() {
                 let (c0, c1) = (column(32 * s + 2 * p), column(32 * s + 2 * p + 1));
                 // SAFETY: each column holds m values, so n from row i0.
-                *w = unsafe { bf16_pairs_x16(c0.map(|c| c.add(i0)), c1.map(|c| c.add(i0)), n) };
+                *w = unsafe {
+                    bf16_pairs_x16(
+                        c0.map(|c| c.wrapping_add(i0)),
+                        c1.map(|c| c.wrapping_add(i0)),
+                        n,
+                    )
+                };
             }
             // SAFETY: AVX-512 F.
             unsafe { transpose_words(&mut w) };
@@ -498,8 +504,8 @@ unsafe fn pack_b_avx512(b: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) {
                 // SAFETY: each row holds n values; the store is one tile row of `out`.
                 unsafe {
                     let v = bf16_pairs_x16(
-                        r0.map(|r| r.add(j)),
-                        r1.map(|r| r.add(j)),
+                        r0.map(|r| r.wrapping_add(j)),
+                        r1.map(|r| r.wrapping_add(j)),
                         n.saturating_sub(j),
                     );
                     _mm512_storeu_si512(
