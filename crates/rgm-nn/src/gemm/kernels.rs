@@ -608,10 +608,11 @@ unsafe fn block_avx512(
 ) {
     use std::arch::x86_64::*;
     let slices = a.len() / SLICE;
-    // C += a · b accumulates onto C's rows from the start; any other alpha or beta scales the
-    // finished product (and C) as the rows are stored.
+    // With alpha = 1 the product is stored as it is (beta = 0) or summed onto C's rows, loaded
+    // first (beta = 1); any other alpha or beta scales the finished product (and C) as the rows
+    // are stored, as `finish` does.
     let accumulate = alpha == 1.0 && beta == 1.0;
-    let scaled = !accumulate && !(alpha == 1.0 && beta == 0.0);
+    let scaled = !(alpha == 1.0 && (beta == 0.0 || beta == 1.0));
     let (alphas, betas) = (_mm512_set1_ps(alpha), _mm512_set1_ps(beta));
     for row0 in (0..32).step_by(8) {
         // SAFETY: rows row0..row0 + 8 of the block; each reaches 32 f32.
