@@ -314,9 +314,9 @@ fn has_avx512_bf16() -> bool {
 
 /// Packs `a` (M, K) into `out` in A's layout (see [`super::pack_a`]) with `vcvtneps2bf16`, where
 /// the processor has AVX-512 BF16 and `a`'s rows or columns are contiguous; returns `false`,
-/// writing nothing, otherwise. `out` holds the padded (Mp, Kp), every value of it written. The conversion flushes f32 denormals to zero,
-/// which the kernels do with bf16 denormals anyway: the products are those of
-/// [`super::bf16_bits`]'s rounding.
+/// writing nothing, otherwise. `out` holds the padded (Mp, Kp), every value of it written. The
+/// conversion flushes f32 denormals to zero, which the kernels do with bf16 denormals anyway:
+/// the products are those of [`super::bf16_bits`]'s rounding.
 pub(super) fn pack_a(a: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) -> bool {
     #[cfg(target_arch = "x86_64")]
     if has_avx512_bf16() && (a.strides()[1] == 1 || a.strides()[0] == 1) {
