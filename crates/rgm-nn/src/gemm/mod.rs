@@ -10,15 +10,16 @@
 //! 1. pack A (M, K) into 32-row strips, each a run of 32 × 32 slices along K (2 KiB, two tiles);
 //! 2. pack B (K, N) into 32-column strips, each a run of 32 × 32 slices along K in the VNNI
 //!    pairs layout that `tdpbf16ps` and `vdpbf16ps` read (see [`kernels`]); M, N and K are
-//!    padded with zeros to
-//!    multiples of 32, so edges need no special kernel;
+//!    padded with zeros to multiples of 32, so edges need no special kernel;
 //! 3. for each column panel of B small enough to stay in L2 (≤ 256 KiB), for each A strip (at
 //!    most 32 KiB for K ≤ 512: it stays in L1 across the panel), multiply the strip by each B
 //!    strip of the panel into a 32 × 32 f32 block of C (whole blocks of a C with unit column
-//!    stride when alpha = 1 and beta ∈ {0, 1}), or into a scratch block whose
+//!    stride, the kernel applying alpha and beta), or into a scratch block whose
 //!    `alpha · block + beta · C` then goes into the matching (clipped) block of C.
 //!
-//! Packing reads A and B in the order they lie in memory, so transposed views cost the same.
+//! Packing is vectorised for operands with a unit stride either way (a transposed view goes
+//! through 16 × 16 register transposes) where the processor has AVX-512 BF16, and reads other
+//! views one value at a time in the order they lie in memory.
 //!
 //! The file is long because its unit tests sit beside the code they check (as everywhere in
 //! rgm); the code itself is one job, kept in one place.
