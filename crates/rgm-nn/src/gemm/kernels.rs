@@ -351,6 +351,25 @@ pub(super) fn pack_b(b: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) -> bool
     false
 }
 
+/// Fetches, for writing, the first `rows` rows (`row_stride` apart) of the 32 × 32 block of C
+/// at `c` that a kernel writes next: the stores of a C too large for the caches (the
+/// attention's kept scores) would otherwise each wait on memory. A prefetch never faults, so
+/// rows past C's end are harmless.
+pub(super) fn prefetch_block(c: *const f32, rows: usize, row_stride: isize) {
+    #[cfg(target_arch = "x86_64")]
+    for r in 0..rows.min(32) {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_ET0};
+        let row = c.wrapping_offset(r as isize * row_stride);
+        // SAFETY: a prefetch reads nothing the program sees and never faults.
+        unsafe {
+            _mm_prefetch::<_MM_HINT_ET0>(row.cast());
+            _mm_prefetch::<_MM_HINT_ET0>(row.wrapping_add(16).cast());
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (c, rows, row_stride);
+}
+
 /// The first `n` of 16 lanes (all for n ≥ 16, none for n = 0).
 #[inline]
 #[cfg(target_arch = "x86_64")]

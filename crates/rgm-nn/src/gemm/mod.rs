@@ -323,10 +323,21 @@ fn packed_mat_mul(
             for mi in 0..m_strips {
                 let a_strip = &packed_a[mi * strip..][..strip];
                 let rows = mi * 32..(mi * 32 + 32).min(m);
-                for ni in first..(first + panel_strips).min(n_strips) {
+                let panel_end = (first + panel_strips).min(n_strips);
+                for ni in first..panel_end {
                     let b_strip = &packed_b[ni * strip..][..strip];
                     let cols = ni * 32..(ni * 32 + 32).min(n);
                     if direct && rows.len() == 32 && cols.len() == 32 {
+                        // The next block's rows of C, fetched while this block is computed.
+                        let (next_mi, next_ni) = match ni + 1 < panel_end {
+                            true => (mi, ni + 1),
+                            false => (mi + 1, first),
+                        };
+                        if next_mi < m_strips {
+                            let at = (next_mi * 32) as isize * row_stride + (next_ni * 32) as isize;
+                            let next = c.as_ptr().wrapping_offset(at);
+                            kernels::prefetch_block(next, m - next_mi * 32, row_stride);
+                        }
                         // SAFETY: rows × cols is a 32 × 32 block inside C, which `c` borrows
                         // mutably; C's rows are `row_stride` apart with unit column stride (a
                         // view made here rather than by `slice_mut`, whose checks cost more
