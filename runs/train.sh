@@ -43,7 +43,10 @@ QUEUE=(
   # The spec's last 100 epochs for the partial model (3e-4 to its 120th, ×0.2 at 120 and 140),
   # from the end of partial-fast's compressed schedule: its validation had flattened at
   # 55–57 % alone from epoch 80 on, at the last learning rate (docs/training/README.md).
-  "partial-fast-200|100|--setting partial --init runs/partial-fast/last.safetensors --val-sample spread --epochs 100 --milestones 20,40"
+  # bf16 products from its 8th epoch: the same learning in a one-epoch A/B, 1.37× the pairs per
+  # second on AVX-512 BF16 (docs/training/README.md, session 24); f32 where the processor has
+  # neither AMX nor AVX-512 BF16.
+  "partial-fast-200|100|--setting partial --init runs/partial-fast/last.safetensors --val-sample spread --epochs 100 --milestones 20,40 --precision bf16"
 )
 
 status() {
