@@ -34,7 +34,7 @@ enum Layout {
 }
 
 /// (name, M, K, N, layout of A, layout of B).
-const SHAPES: [(&str, usize, usize, usize, Layout, Layout); 11] = {
+const SHAPES: [(&str, usize, usize, usize, Layout, Layout); 14] = {
     use Layout::{Plain as P, Transposed as T};
     [
         ("square_1024", 1024, 1024, 1024, P, P),
@@ -48,6 +48,10 @@ const SHAPES: [(&str, usize, usize, usize, Layout, Layout); 11] = {
         ("fast_linear_7680x32->32", 7680, 32, 32, P, T),
         ("fast_linear_384x256->256", 384, 256, 256, P, T),
         ("fast_attention_scores_384x64x384", 384, 64, 384, P, T),
+        // One block of 128 query rows (the training step's attention runs by such blocks).
+        ("fast_attention_scores_block_128x64x384", 128, 64, 384, P, T),
+        ("fast_attention_scores_block_128x32x384", 128, 32, 384, P, T),
+        ("fast_attention_dvalues_384x384x32", 384, 384, 32, T, P),
     ]
 };
 
