@@ -368,13 +368,12 @@ fn packed_mat_mul(
 /// zero-padded to whole strips and to `kp` columns. Vectorised where the processor has AVX-512
 /// BF16 and a stride is 1 ([`kernels::pack_a`]), one value at a time otherwise.
 fn pack_a<'o>(a: ArrayView2<'_, f32>, kp: usize, out: &'o mut Vec<u16>) -> &'o [u16] {
-    let out = aligned(out, a.nrows().next_multiple_of(32) * kp);
-    // The vector packing writes every value; the one-by-one packing only the operand's.
-    if !kernels::pack_a(a, kp, out) {
-        out.fill(0);
-        pack_a_one_by_one(a, kp, out);
-    }
-    out
+    packed(
+        out,
+        a.nrows().next_multiple_of(32) * kp,
+        |out| kernels::pack_a(a, kp, out),
+        |out| pack_a_one_by_one(a, kp, out),
+    )
 }
 
 /// [`pack_a`] one value at a time, into a zeroed `out`.
@@ -388,20 +387,32 @@ fn pack_a_one_by_one(a: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) {
 /// tiles in VNNI pairs (pair row r, column j: rows 2r and 2r + 1 side by side), zero-padded;
 /// vectorised as in [`pack_a`].
 fn pack_b<'o>(b: ArrayView2<'_, f32>, kp: usize, out: &'o mut Vec<u16>) -> &'o [u16] {
-    let out = aligned(out, b.ncols().next_multiple_of(32) * kp);
-    if !kernels::pack_b(b, kp, out) {
-        out.fill(0);
-        pack_b_one_by_one(b, kp, out);
-    }
-    out
+    packed(
+        out,
+        b.ncols().next_multiple_of(32) * kp,
+        |out| kernels::pack_b(b, kp, out),
+        |out| pack_b_one_by_one(b, kp, out),
+    )
 }
 
-/// `len` elements of `buf` that start on a 64-byte boundary: every 32-element row of a packed
-/// slice then fills one cache line, so its loads and stores never straddle two.
-fn aligned(buf: &mut Vec<u16>, len: usize) -> &mut [u16] {
+/// `len` packed values in `buf`, starting on a 64-byte boundary (every 32-element row of a
+/// packed slice then fills one cache line, so its loads and stores never straddle two): by
+/// `vector` where it runs (it writes every value), else zeroed and filled by `one_by_one` (which
+/// writes only the operand's values).
+fn packed(
+    buf: &mut Vec<u16>,
+    len: usize,
+    vector: impl FnOnce(&mut [u16]) -> bool,
+    one_by_one: impl FnOnce(&mut [u16]),
+) -> &[u16] {
     buf.resize(len + 32, 0);
     let skip = buf.as_ptr().align_offset(64);
-    &mut buf[skip..][..len]
+    let out = &mut buf[skip..][..len];
+    if !vector(out) {
+        out.fill(0);
+        one_by_one(out);
+    }
+    out
 }
 
 /// [`pack_b`] one value at a time, into a zeroed `out`.
