@@ -296,13 +296,15 @@ pub fn register_peak_loop(steps: u64) -> Option<u64> {
     Some(steps.max(1) * 4 * 16 * 16 * 32)
 }
 
-/// Whether the AVX-512 BF16 conversions are there (every AMX processor has them; checked anyway).
+/// Whether the AVX-512 BF16 conversions and BW's word permutations are there (every AMX
+/// processor has them; checked anyway).
 fn has_avx512_bf16() -> bool {
     static HAS: OnceLock<bool> = OnceLock::new();
     #[cfg(target_arch = "x86_64")]
     {
         *HAS.get_or_init(|| {
             std::arch::is_x86_feature_detected!("avx512f")
+                && std::arch::is_x86_feature_detected!("avx512bw")
                 && std::arch::is_x86_feature_detected!("avx512bf16")
         })
     }
@@ -325,7 +327,8 @@ pub(super) fn pack_a(a: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) -> bool
             a.nrows().next_multiple_of(32) * kp,
             "pack_a: out"
         );
-        // SAFETY: the processor has AVX-512 F and BF16 (checked above); `out` is A's padded size.
+        // SAFETY: the processor has AVX-512 F, BW and BF16 (checked above); `out` is A's padded
+        // size.
         unsafe { pack_a_avx512(a, kp, out) };
         return true;
     }
@@ -399,30 +402,41 @@ unsafe fn bf16_x32(p: *const f32, n: usize) -> std::arch::x86_64::__m512i {
 }
 
 /// 16 lanes of 32 bits: lane j is bf16(r0[j]) below bf16(r1[j]) (a VNNI pair), from the first
-/// `n` values of each row (zeros after); a `None` row is zeros.
+/// `n` values of each row (zeros after); a `None` row is zeros. One conversion of both rows
+/// (r0's 16 words below r1's) and one word permutation that interleaves them.
 ///
 /// # Safety
-/// AVX-512 F and BF16; each row reaches `min(n, 16)` values.
+/// AVX-512 F, BW and BF16; each row reaches `min(n, 16)` values.
 #[inline]
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bf16")]
+#[target_feature(enable = "avx512f,avx512bw,avx512bf16")]
 unsafe fn bf16_pairs_x16(
     r0: Option<*const f32>,
     r1: Option<*const f32>,
     n: usize,
 ) -> std::arch::x86_64::__m512i {
     use std::arch::x86_64::*;
-    let mut half = [_mm512_setzero_si512(); 2];
-    for (h, r) in half.iter_mut().zip([r0, r1]) {
-        if let Some(p) = r {
-            // SAFETY: the mask keeps the load inside the row's n values.
-            unsafe {
-                let bf = _mm512_cvtneps_pbh(_mm512_maskz_loadu_ps(lanes(n), p));
-                *h = _mm512_cvtepu16_epi32(std::mem::transmute::<__m256bh, __m256i>(bf));
-            }
+    /// Word 2j takes word j (r0's j-th), word 2j + 1 takes word 16 + j (r1's j-th).
+    const INTERLEAVE: [u16; 32] = {
+        let mut index = [0u16; 32];
+        let mut j = 0;
+        while j < 16 {
+            index[2 * j] = j as u16;
+            index[2 * j + 1] = 16 + j as u16;
+            j += 1;
         }
+        index
+    };
+    // SAFETY: the mask keeps the load inside the row's n values.
+    let row = |r: Option<*const f32>| match r {
+        Some(p) => unsafe { _mm512_maskz_loadu_ps(lanes(n), p) },
+        None => _mm512_setzero_ps(),
+    };
+    // SAFETY: AVX-512 F, BW and BF16 (this function's contract); the index is 64 bytes.
+    unsafe {
+        let both = std::mem::transmute::<__m512bh, __m512i>(_mm512_cvtne2ps_pbh(row(r1), row(r0)));
+        _mm512_permutexvar_epi16(_mm512_loadu_si512(INTERLEAVE.as_ptr().cast()), both)
     }
-    _mm512_or_si512(half[0], _mm512_slli_epi32::<16>(half[1]))
 }
 
 /// Transposes 16 × 16 lanes of 32 bits (bf16 pairs) in registers.
@@ -443,9 +457,9 @@ unsafe fn transpose_words(w: &mut [std::arch::x86_64::__m512i; 16]) {
 /// See [`pack_a`].
 ///
 /// # Safety
-/// AVX-512 F and BF16; a unit stride in `a`; `out` holds (Mp, Kp).
+/// AVX-512 F, BW and BF16; a unit stride in `a`; `out` holds (Mp, Kp).
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bf16")]
+#[target_feature(enable = "avx512f,avx512bw,avx512bf16")]
 unsafe fn pack_a_avx512(a: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) {
     use std::arch::x86_64::*;
     let ((m, k), [rs, cs]) = (a.dim(), [a.strides()[0], a.strides()[1]]);
@@ -504,9 +518,9 @@ unsafe fn pack_a_avx512(a: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) {
 /// See [`pack_b`].
 ///
 /// # Safety
-/// AVX-512 F and BF16; a unit stride in `b`; `out` holds (Kp, Np).
+/// AVX-512 F, BW and BF16; a unit stride in `b`; `out` holds (Kp, Np).
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bf16")]
+#[target_feature(enable = "avx512f,avx512bw,avx512bf16")]
 unsafe fn pack_b_avx512(b: ArrayView2<'_, f32>, kp: usize, out: &mut [u16]) {
     use std::arch::x86_64::*;
     let ((k, n), [rs, cs]) = (b.dim(), [b.strides()[0], b.strides()[1]]);

@@ -296,10 +296,45 @@ fn finish(dst: ArrayViewMut2<'_, f32>, got: ArrayView2<'_, f32>, alpha: f32, bet
 
 /// The bf16 product with `block_of(a_strip, b_strip, out, alpha, beta)` computing one 32 × 32
 /// block `out = alpha · a · b + beta · out` from packed strips into a (32, 32) view (a kernel,
-/// or the tests' reference): packing, blocking, edges and the write-back into C. Whole blocks
-/// of a C with unit column stride go straight into C; the others (C's edges, a C with strided
-/// rows) go through a scratch block.
+/// or the tests' reference): [`packed_mat_mul_as_given`], or the same for `cᵀ = bᵀ · aᵀ` where
+/// that does less [`layout_work`]. Kernels and reference add each entry's products in the same
+/// order whichever operand is A, so the bits are the same either way.
 fn packed_mat_mul(
+    alpha: f32,
+    a: ArrayView2<'_, f32>,
+    b: ArrayView2<'_, f32>,
+    beta: f32,
+    c: ArrayViewMut2<'_, f32>,
+    block_of: impl FnMut(&[u16], &[u16], ArrayViewMut2<'_, f32>, f32, f32),
+) {
+    if layout_work(b.t(), a.t(), c.t()) < layout_work(a, b, c.view()) {
+        packed_mat_mul_as_given(alpha, b.t(), a.t(), beta, c.reversed_axes(), block_of);
+    } else {
+        packed_mat_mul_as_given(alpha, a, b, beta, c, block_of);
+    }
+}
+
+/// Values of `c = a · b` that take the slow paths: those of an operand not stored row by row
+/// (packed through 16 × 16 register transposes, or one by one) and those of a C not stored row
+/// by row (written through a scratch block). The attention's `Pᵀ · dO` has a (384, 384)
+/// operand stored column by column, its transpose `dOᵀ · P` only a (32, 384) one and C.
+fn layout_work(a: ArrayView2<'_, f32>, b: ArrayView2<'_, f32>, c: ArrayView2<'_, f32>) -> usize {
+    [
+        (a.strides()[1], a.dim()),
+        (b.strides()[1], b.dim()),
+        (c.strides()[1], c.dim()),
+    ]
+    .iter()
+    .filter(|&&(column_stride, (_, cols))| column_stride != 1 && cols > 1)
+    .map(|(_, (rows, cols))| rows * cols)
+    .sum()
+}
+
+/// [`packed_mat_mul`] with the operands as given: packing, blocking, edges and the write-back
+/// into C. Whole blocks of a C with unit column stride go straight into C; the others (C's
+/// edges, a C with strided rows) go through a scratch block that holds C's block first, so
+/// that every entry is computed alike wherever it lies.
+fn packed_mat_mul_as_given(
     alpha: f32,
     a: ArrayView2<'_, f32>,
     b: ArrayView2<'_, f32>,
@@ -355,9 +390,13 @@ fn packed_mat_mul(
                         continue;
                     }
                     let mut got = ArrayViewMut2::from_shape((32, 32), &mut block[..]).expect("32²");
-                    block_of(a_strip, b_strip, got.view_mut(), 1.0, 0.0);
-                    let got = got.slice(s![..rows.len(), ..cols.len()]);
-                    finish(c.slice_mut(s![rows.clone(), cols]), got, alpha, beta);
+                    let inside = s![..rows.len(), ..cols.len()];
+                    let mut dst = c.slice_mut(s![rows.clone(), cols]);
+                    if beta != 0.0 {
+                        got.slice_mut(inside).assign(&dst);
+                    }
+                    block_of(a_strip, b_strip, got.view_mut(), alpha, beta);
+                    dst.assign(&got.slice(inside));
                 }
             }
         }
@@ -652,6 +691,53 @@ mod tests {
         check_cases(&mut |alpha, a, b, beta, c| {
             packed_mat_mul(alpha, a, b, beta, c, reference_block)
         });
+    }
+
+    /// A block function of [`packed_mat_mul`]: the reference or a kernel.
+    type BlockOf<'k> = Box<dyn FnMut(&[u16], &[u16], ArrayViewMut2<f32>, f32, f32) + 'k>;
+
+    #[test]
+    fn a_product_and_its_transposed_product_give_the_same_bits() {
+        let mut block_ofs: Vec<(&str, BlockOf)> = vec![("reference", Box::new(reference_block))];
+        if let Some(mut kernel) = kernels::Kernel::new() {
+            block_ofs.push((
+                "fastest kernel",
+                Box::new(move |a, b, out, al, be| kernel.block(a, b, out, al, be)),
+            ));
+        }
+        if let Some(mut kernel) = kernels::Avx512Bf16::new() {
+            block_ofs.push((
+                "AVX-512 BF16",
+                Box::new(move |a, b, out, al, be| kernel.block(a, b, out, al, be)),
+            ));
+        }
+        // The attention's Pᵀ · dO, and edges off 32: A stored column by column, so that
+        // `packed_mat_mul` computes cᵀ = bᵀ · aᵀ, whose C is strided (the scratch blocks).
+        for (seed, (m, k, n)) in [(0, (384, 384, 32)), (4, (45, 70, 20))] {
+            let (at, b) = (uniform(k, m, seed), uniform(k, n, seed + 1));
+            let c0 = uniform(m, n, seed + 2);
+            let a = at.t();
+            assert!(layout_work(b.t(), a.t(), c0.t()) < layout_work(a, b.view(), c0.view()));
+            for (name, block_of) in &mut block_ofs {
+                for (alpha, beta) in [(1.0, 0.0), (1.0, 1.0), (0.75, -0.5)] {
+                    let (mut swapped, mut given) = (c0.clone(), c0.clone());
+                    packed_mat_mul(alpha, a, b.view(), beta, swapped.view_mut(), &mut *block_of);
+                    packed_mat_mul_as_given(
+                        alpha,
+                        a,
+                        b.view(),
+                        beta,
+                        given.view_mut(),
+                        &mut *block_of,
+                    );
+                    assert_eq!(
+                        swapped.mapv(f32::to_bits),
+                        given.mapv(f32::to_bits),
+                        "{name}, ({m}, {k}, {n}), alpha {alpha}, beta {beta}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]
