@@ -8,7 +8,8 @@
 //! ```
 //!
 //! `--what`: `forward` (one evaluation-mode forward), `train` (forward in training mode, BCE
-//! loss and backward) or `procedure` (spec §4 with the paper's settings: 2 passes, cycle
+//! loss and backward; `gradient_fnv` hashes the bits of every parameter gradient after the
+//! runs, so that two builds that print the same hash compute the same step bit for bit) or `procedure` (spec §4 with the paper's settings: 2 passes, cycle
 //! consistency). The pair: `--points` points uniform in the unit ball, and the same points
 //! rotated by (20°, 10°, 30°), moved by (0.2, −0.1, 0.3), in reverse order. Random weights unless
 //! `--weights` (the cost does not depend on them, except through how many correspondences the
@@ -26,7 +27,7 @@ use rgm_match::Correspondences;
 use rgm_model::network::{Config, Mode, Rgm, RgmCache};
 use rgm_model::pipeline::StageTimes;
 use rgm_model::{PipelineConfig, Registrar, RgmRegistrar};
-use rgm_nn::Precision;
+use rgm_nn::{Parameters, Precision};
 
 /// `n` points uniform in the unit ball and their copy at a known pose in reverse order;
 /// source i is target n − 1 − i.
@@ -63,6 +64,17 @@ fn arg(args: &[String], name: &str) -> Option<String> {
         .and_then(|i| args.get(i + 1).cloned())
 }
 
+/// FNV-1a over the bits of every parameter gradient, in the parameters' visiting order.
+fn gradient_fnv(network: &Rgm<f32>) -> u64 {
+    let mut hash = 0xcbf2_9ce4_8422_2325u64;
+    network.visit_params_ref("", &mut |_, p| {
+        for x in p.grad.iter() {
+            hash = (hash ^ u64::from(x.to_bits())).wrapping_mul(0x0100_0000_01b3);
+        }
+    });
+    hash
+}
+
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
@@ -91,6 +103,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut seconds = Vec::with_capacity(reps);
     let mut stages = Vec::new();
     let mut correspondences = 0;
+    let mut gradients = "null".to_string();
     match what.as_str() {
         "forward" | "train" => {
             let (x, y) = (rows(&source), rows(&target));
@@ -104,6 +117,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     network.forward_backward(x.view(), y.view(), &gt, &mut cache)?;
                 }
                 seconds.push(start.elapsed().as_secs_f64());
+            }
+            if what == "train" {
+                gradients = format!("\"{:016x}\"", gradient_fnv(&network));
             }
         }
         "procedure" => {
@@ -141,7 +157,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let text = |v: Option<String>| v.map_or("null".to_string(), |v| format!("{v:?}"));
     let line = format!(
-        r#"{{"implementation": "rgm", "preset": {:?}, "what": {:?}, "points": {points}, "match_points": {}, "weights": {}, "reps": {reps}, "precision": "{precision}", "bf16_kernel": {:?}, "median_s": {:.4}, "seconds": {:?}, "vm_hwm_mib": {:.1}, "blas_threads": {}, "correspondences": {correspondences}, "stage_share": {stage_share}}}"#,
+        r#"{{"implementation": "rgm", "preset": {:?}, "what": {:?}, "points": {points}, "match_points": {}, "weights": {}, "reps": {reps}, "precision": "{precision}", "bf16_kernel": {:?}, "median_s": {:.4}, "seconds": {:?}, "vm_hwm_mib": {:.1}, "blas_threads": {}, "correspondences": {correspondences}, "gradient_fnv": {gradients}, "stage_share": {stage_share}}}"#,
         preset,
         what,
         text(match_points.map(|m| m.to_string())).replace('"', ""),

@@ -13,13 +13,16 @@
 //!    padded with zeros to multiples of 32, so edges need no special kernel;
 //! 3. for each column panel of B small enough to stay in L2 (≤ 256 KiB), for each A strip (at
 //!    most 32 KiB for K ≤ 512: it stays in L1 across the panel), multiply the strip by each B
-//!    strip of the panel into a 32 × 32 f32 block of C (whole blocks of a C with unit column
-//!    stride, the kernel applying alpha and beta), or into a scratch block whose
-//!    `alpha · block + beta · C` then goes into the matching (clipped) block of C.
+//!    strip of the panel into a 32 × 32 f32 block of C, the kernel applying alpha and beta:
+//!    whole blocks of a C with unit column stride in place, the others (C's edges, a C with
+//!    strided rows) in a scratch block that holds C's block first and goes back clipped. Every
+//!    entry is thus computed alike wherever it lies, and a product summed in parts along K (at
+//!    multiples of 32, alpha 1, beta 1) has the whole product's bits.
 //!
 //! Packing is vectorised for operands with a unit stride either way (a transposed view goes
 //! through 16 × 16 register transposes) where the processor has AVX-512 BF16, and reads other
-//! views one value at a time in the order they lie in memory.
+//! views one value at a time in the order they lie in memory. Where it transposes fewer values,
+//! the product is computed as `cᵀ = bᵀ · aᵀ`, with the same bits.
 //!
 //! The file is long because its unit tests sit beside the code they check (as everywhere in
 //! rgm); the code itself is one job, kept in one place.
@@ -696,8 +699,8 @@ mod tests {
     /// A block function of [`packed_mat_mul`]: the reference or a kernel.
     type BlockOf<'k> = Box<dyn FnMut(&[u16], &[u16], ArrayViewMut2<f32>, f32, f32) + 'k>;
 
-    #[test]
-    fn a_product_and_its_transposed_product_give_the_same_bits() {
+    /// The reference block and each kernel this processor runs, by name.
+    fn block_ofs() -> Vec<(&'static str, BlockOf<'static>)> {
         let mut block_ofs: Vec<(&str, BlockOf)> = vec![("reference", Box::new(reference_block))];
         if let Some(mut kernel) = kernels::Kernel::new() {
             block_ofs.push((
@@ -711,6 +714,12 @@ mod tests {
                 Box::new(move |a, b, out, al, be| kernel.block(a, b, out, al, be)),
             ));
         }
+        block_ofs
+    }
+
+    #[test]
+    fn a_product_and_its_transposed_product_give_the_same_bits() {
+        let mut block_ofs = block_ofs();
         // The attention's Pᵀ · dO, and edges off 32: A stored column by column, so that
         // `packed_mat_mul` computes cᵀ = bᵀ · aᵀ, whose C is strided (the scratch blocks).
         for (seed, (m, k, n)) in [(0, (384, 384, 32)), (4, (45, 70, 20))] {
@@ -736,6 +745,38 @@ mod tests {
                         "{name}, ({m}, {k}, {n}), alpha {alpha}, beta {beta}"
                     );
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn a_product_summed_in_parts_along_k_gives_the_whole_products_bits() {
+        // As the attention's backward sums dVᵀ and dKᵀ over blocks of 128 query rows: parts
+        // of K at multiples of 32, each accumulated onto C (alpha 1, beta 1); C's edges too.
+        for (name, block_of) in &mut block_ofs() {
+            for (seed, (m, k, n), parts) in [(8, (32, 384, 64), 128), (12, (45, 150, 20), 64)] {
+                let (a, b) = (uniform(m, k, seed), uniform(k, n, seed + 1));
+                let c0 = uniform(m, n, seed + 2);
+                let mut whole = c0.clone();
+                packed_mat_mul(
+                    1.0,
+                    a.view(),
+                    b.view(),
+                    1.0,
+                    whole.view_mut(),
+                    &mut *block_of,
+                );
+                let mut summed = c0.clone();
+                for k0 in (0..k).step_by(parts) {
+                    let part = k0..(k0 + parts).min(k);
+                    let (a, b) = (a.slice(s![.., part.clone()]), b.slice(s![part, ..]));
+                    packed_mat_mul(1.0, a, b, 1.0, summed.view_mut(), &mut *block_of);
+                }
+                assert_eq!(
+                    summed.mapv(f32::to_bits),
+                    whole.mapv(f32::to_bits),
+                    "{name}, ({m}, {k}, {n}) in parts of {parts}"
+                );
             }
         }
     }

@@ -10,7 +10,7 @@ use crate::init::Init;
 use crate::param::{join_name, ParamView, ParamViewMut};
 use crate::precision;
 use crate::{NnError, Parameters, Result, Scalar};
-use ndarray::{s, Array2, Array3, ArrayView2, ArrayViewMut2, Axis};
+use ndarray::{s, Array2, Array3, ArrayView2, ArrayViewMut2, Axis, Zip};
 use rayon::prelude::*;
 
 /// `out = concat_h(softmax_rows(Q_h K_hᵀ / √(C/H)) V_h) · Woᵀ + bo` with `Q = q_in Wqᵀ + bq`,
@@ -82,7 +82,7 @@ pub struct AttentionCache<T> {
     dq: Array2<T>,        // (Nq, C)
     dk: Array2<T>,        // (Nk, C)
     dv: Array2<T>,        // (Nk, C)
-    dprobs: Array3<T>,    // (H, Nq, Nk), then the score gradients in place
+    dscores: Array3<T>, // (H, min(Nq, ROW_BLOCK), Nk) each head's score gradients, a block of rows at a time
 }
 
 fn ensure<T: Scalar>(buf: &mut Array2<T>, shape: (usize, usize)) {
@@ -225,58 +225,58 @@ impl<T: Scalar> MultiHeadAttention<T> {
             ensure(buf, shape);
             buf.fill(T::zero());
         }
-        if cache.dprobs.dim() != (h, nq, nk) {
-            cache.dprobs = Array3::zeros((h, nq, nk));
+        let dscores_shape = (h, ROW_BLOCK.min(nq), nk);
+        if cache.dscores.dim() != dscores_shape {
+            cache.dscores = Array3::zeros(dscores_shape);
         }
         self.output
             .backward(cache.dheads.view_mut(), dout, cache.heads.view())?;
         let scale = T::one() / T::from_f64(dk as f64).sqrt();
-        // dP → dS → dQ block by block of query rows, each block's rows still in cache for the
-        // next step; then dV and dK head by head. Spread over the cores by rayon; each entry is
-        // computed as by whole-matrix products.
+        // Head by head (spread over the cores by rayon), block by block of query rows: the
+        // block's dP, dS and dQ, then its shares of dVᵀ += dOᵀ P and dKᵀ += Qᵀ dS while its
+        // weights and score gradients are still in cache, into (dk, Nk) sums whose rows the
+        // products write whole. Each share is added onto the sum of the blocks before (at
+        // multiples of 32 rows, alpha 1), which the bf16 products accumulate as one
+        // whole-matrix product would; dK is scaled once, at the end, as the whole product's
+        // write-back onto zeros does (`+ 0` turns a −0 into 0 as that does).
         let precision = precision::current();
         let (probs, d_o) = (cache.probs.view(), cache.dheads.view());
-        let (k, v) = (cache.k.view(), cache.v.view());
-        head_row_blocks(Some(&mut cache.dprobs), &mut cache.dq, dk).for_each(
-            |(head, r0, ds, mut dq)| {
-                let _precision = precision::enter(precision);
-                let mut ds = ds.expect("the score gradients are given");
-                let (rows, cols) = (r0..r0 + ds.nrows(), head * dk..(head + 1) * dk);
-                mat_mul(
-                    T::one(),
-                    &d_o.slice(s![rows.clone(), cols.clone()]),
-                    &v.slice(s![.., cols.clone()]).t(),
-                    T::zero(),
-                    &mut ds,
-                );
-                for (d, y) in ds
-                    .rows_mut()
-                    .into_iter()
-                    .zip(probs.slice(s![head, rows, ..]).rows())
-                {
-                    softmax_backward_in_place(d, y);
-                }
-                mat_mul(scale, &ds, &k.slice(s![.., cols]), T::one(), &mut dq);
-            },
-        );
-        let (dprobs, q) = (cache.dprobs.view(), cache.q.view());
-        let dv_dk: Vec<_> = cache
-            .dv
-            .axis_chunks_iter_mut(Axis(1), dk)
+        let (q, k, v) = (cache.q.view(), cache.k.view(), cache.v.view());
+        let heads: Vec<_> = cache
+            .dscores
+            .outer_iter_mut()
+            .zip(cache.dq.axis_chunks_iter_mut(Axis(1), dk))
             .zip(cache.dk.axis_chunks_iter_mut(Axis(1), dk))
+            .zip(cache.dv.axis_chunks_iter_mut(Axis(1), dk))
             .enumerate()
             .collect();
-        dv_dk
+        heads
             .into_par_iter()
-            .for_each(|(head, (mut dv, mut dk_h))| {
+            .for_each(|(head, (((mut ds_rows, mut dq), mut dk_h), mut dv))| {
                 let _precision = precision::enter(precision);
                 let cols = s![.., head * dk..(head + 1) * dk];
-                let (p, ds) = (
-                    probs.index_axis(Axis(0), head),
-                    dprobs.index_axis(Axis(0), head),
-                );
-                mat_mul(T::one(), &p.t(), &d_o.slice(cols), T::one(), &mut dv);
-                mat_mul(scale, &ds.t(), &q.slice(cols), T::one(), &mut dk_h);
+                let (q, k, v, d_o) = (q.slice(cols), k.slice(cols), v.slice(cols), d_o.slice(cols));
+                let (mut dv_t, mut dk_t) = (Array2::zeros((dk, nk)), Array2::zeros((dk, nk)));
+                for r0 in (0..nq).step_by(ROW_BLOCK) {
+                    let rows = r0..(r0 + ROW_BLOCK).min(nq);
+                    let p = probs.slice(s![head, rows.clone(), ..]); // (rows, Nk)
+                    let (q, d_o) = (
+                        q.slice(s![rows.clone(), ..]),
+                        d_o.slice(s![rows.clone(), ..]),
+                    );
+                    let mut ds = ds_rows.slice_mut(s![..p.nrows(), ..]); // (rows, Nk)
+                    mat_mul(T::one(), &d_o, &v.t(), T::zero(), &mut ds);
+                    for (d, y) in ds.rows_mut().into_iter().zip(p.rows()) {
+                        softmax_backward_in_place(d, y);
+                    }
+                    mat_mul(scale, &ds, &k, T::one(), &mut dq.slice_mut(s![rows, ..]));
+                    mat_mul(T::one(), &d_o.t(), &p, T::one(), &mut dv_t);
+                    mat_mul(T::one(), &q.t(), &ds, T::one(), &mut dk_t);
+                }
+                dv.assign(&dv_t.t());
+                Zip::from(&mut dk_h)
+                    .and(dk_t.t())
+                    .for_each(|d, &sum| *d = scale * sum + T::zero());
             });
         self.query
             .backward(dq_in.view_mut(), cache.dq.view(), q_in)?;
