@@ -27,7 +27,9 @@ pub struct MultiHeadAttention<T: Scalar> {
 }
 
 /// Query rows per block of the attention's three steps (scores, softmax, product with V; and
-/// in the backward dP, dS, dQ): 128 rows of up to 1,024 scores are 512 KiB, within L2.
+/// in the backward dP, dS, dQ and the block's shares of dV and dK): 128 rows of up to 1,024
+/// scores are 512 KiB, within L2. A multiple of 32, so that the backward's sums over blocks
+/// have the bf16 whole products' bits.
 const ROW_BLOCK: usize = 128;
 
 /// The attention's independent pieces of work, as a parallel iterator: for each head and each
