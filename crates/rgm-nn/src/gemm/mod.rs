@@ -699,6 +699,15 @@ mod tests {
     /// A block function of [`packed_mat_mul`]: the reference or a kernel.
     type BlockOf<'k> = Box<dyn FnMut(&[u16], &[u16], ArrayViewMut2<f32>, f32, f32) + 'k>;
 
+    /// Panics, naming `case`, unless `got` and `expected` hold the same bits.
+    fn assert_same_bits(got: &Array2<f32>, expected: &Array2<f32>, case: &str) {
+        assert_eq!(
+            got.mapv(f32::to_bits),
+            expected.mapv(f32::to_bits),
+            "{case}"
+        );
+    }
+
     /// The reference block and each kernel this processor runs, by name.
     fn block_ofs() -> Vec<(&'static str, BlockOf<'static>)> {
         let mut block_ofs: Vec<(&str, BlockOf)> = vec![("reference", Box::new(reference_block))];
@@ -739,11 +748,8 @@ mod tests {
                         given.view_mut(),
                         &mut *block_of,
                     );
-                    assert_eq!(
-                        swapped.mapv(f32::to_bits),
-                        given.mapv(f32::to_bits),
-                        "{name}, ({m}, {k}, {n}), alpha {alpha}, beta {beta}"
-                    );
+                    let case = format!("{name}, ({m}, {k}, {n}), alpha {alpha}, beta {beta}");
+                    assert_same_bits(&swapped, &given, &case);
                 }
             }
         }
@@ -772,11 +778,8 @@ mod tests {
                     let (a, b) = (a.slice(s![.., part.clone()]), b.slice(s![part, ..]));
                     packed_mat_mul(1.0, a, b, 1.0, summed.view_mut(), &mut *block_of);
                 }
-                assert_eq!(
-                    summed.mapv(f32::to_bits),
-                    whole.mapv(f32::to_bits),
-                    "{name}, ({m}, {k}, {n}) in parts of {parts}"
-                );
+                let case = format!("{name}, ({m}, {k}, {n}) in parts of {parts}");
+                assert_same_bits(&summed, &whole, &case);
             }
         }
     }
