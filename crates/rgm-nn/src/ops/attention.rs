@@ -84,7 +84,7 @@ pub struct AttentionCache<T> {
     dq: Array2<T>,        // (Nq, C)
     dk: Array2<T>,        // (Nk, C)
     dv: Array2<T>,        // (Nk, C)
-    dscores: Array3<T>, // (H, min(Nq, ROW_BLOCK), Nk) each head's score gradients, a block of rows at a time
+    dscores: Array3<T>,   // (H, min(Nq, ROW_BLOCK), Nk) a block of each head's score gradients
 }
 
 fn ensure<T: Scalar>(buf: &mut Array2<T>, shape: (usize, usize)) {
@@ -258,6 +258,7 @@ impl<T: Scalar> MultiHeadAttention<T> {
                 let _precision = precision::enter(precision);
                 let cols = s![.., head * dk..(head + 1) * dk];
                 let (q, k, v, d_o) = (q.slice(cols), k.slice(cols), v.slice(cols), d_o.slice(cols));
+                // (dk, Nk) each: dVᵀ and the unscaled dKᵀ, summed over the blocks of rows.
                 let (mut dv_t, mut dk_t) = (Array2::zeros((dk, nk)), Array2::zeros((dk, nk)));
                 for r0 in (0..nq).step_by(ROW_BLOCK) {
                     let rows = r0..(r0 + ROW_BLOCK).min(nq);
