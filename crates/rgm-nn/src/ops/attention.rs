@@ -85,6 +85,7 @@ pub struct AttentionCache<T> {
     dk: Array2<T>,        // (Nk, C)
     dv: Array2<T>,        // (Nk, C)
     dscores: Array3<T>,   // (H, min(Nq, ROW_BLOCK), Nk) a block of each head's score gradients
+    dsums: Array3<T>,     // (H, 2·dk, Nk) each head's dVᵀ over dKᵀ (unscaled), summed over blocks
 }
 
 fn ensure<T: Scalar>(buf: &mut Array2<T>, shape: (usize, usize)) {
@@ -218,19 +219,21 @@ impl<T: Scalar> MultiHeadAttention<T> {
             cache.probs.shape(),
             &[h, nq, nk],
         )?;
-        for (buf, shape) in [
-            (&mut cache.dheads, (nq, c)),
-            (&mut cache.dq, (nq, c)),
-            (&mut cache.dk, (nk, c)),
-            (&mut cache.dv, (nk, c)),
-        ] {
+        // dheads and dq are added into; dk and dv are written whole from the sums below.
+        for (buf, shape) in [(&mut cache.dheads, (nq, c)), (&mut cache.dq, (nq, c))] {
             ensure(buf, shape);
             buf.fill(T::zero());
         }
+        ensure(&mut cache.dk, (nk, c));
+        ensure(&mut cache.dv, (nk, c));
         let dscores_shape = (h, ROW_BLOCK.min(nq), nk);
         if cache.dscores.dim() != dscores_shape {
             cache.dscores = Array3::zeros(dscores_shape);
         }
+        if cache.dsums.dim() != (h, 2 * dk, nk) {
+            cache.dsums = Array3::zeros((h, 2 * dk, nk));
+        }
+        cache.dsums.fill(T::zero());
         self.output
             .backward(cache.dheads.view_mut(), dout, cache.heads.view())?;
         let scale = T::one() / T::from_f64(dk as f64).sqrt();
@@ -247,19 +250,18 @@ impl<T: Scalar> MultiHeadAttention<T> {
         let heads: Vec<_> = cache
             .dscores
             .outer_iter_mut()
+            .zip(cache.dsums.outer_iter_mut())
             .zip(cache.dq.axis_chunks_iter_mut(Axis(1), dk))
             .zip(cache.dk.axis_chunks_iter_mut(Axis(1), dk))
             .zip(cache.dv.axis_chunks_iter_mut(Axis(1), dk))
             .enumerate()
             .collect();
-        heads
-            .into_par_iter()
-            .for_each(|(head, (((mut ds_rows, mut dq), mut dk_h), mut dv))| {
+        heads.into_par_iter().for_each(
+            |(head, ((((mut ds_rows, sums), mut dq), mut dk_h), mut dv))| {
                 let _precision = precision::enter(precision);
                 let cols = s![.., head * dk..(head + 1) * dk];
                 let (q, k, v, d_o) = (q.slice(cols), k.slice(cols), v.slice(cols), d_o.slice(cols));
-                // (dk, Nk) each: dVᵀ and the unscaled dKᵀ, summed over the blocks of rows.
-                let (mut dv_t, mut dk_t) = (Array2::zeros((dk, nk)), Array2::zeros((dk, nk)));
+                let (mut dv_t, mut dk_t) = sums.split_at(Axis(0), dk); // (dk, Nk) each
                 for r0 in (0..nq).step_by(ROW_BLOCK) {
                     let rows = r0..(r0 + ROW_BLOCK).min(nq);
                     let p = probs.slice(s![head, rows.clone(), ..]); // (rows, Nk)
@@ -280,7 +282,8 @@ impl<T: Scalar> MultiHeadAttention<T> {
                 Zip::from(&mut dk_h)
                     .and(dk_t.t())
                     .for_each(|d, &sum| *d = scale * sum + T::zero());
-            });
+            },
+        );
         self.query
             .backward(dq_in.view_mut(), cache.dq.view(), q_in)?;
         match dkv_in {
