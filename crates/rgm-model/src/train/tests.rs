@@ -496,25 +496,27 @@ fn a_run_folder_is_held_by_one_trainer_at_a_time() {
 /// Adam moments stored as bf16 (snapshots kept small in git) load too.
 #[test]
 fn a_run_saved_in_the_old_layout_resumes_and_so_does_a_bf16_snapshot() {
-    let committed = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../runs/partial-fast");
+    // A finished run as a snapshot commits it: `config.json`, `state.json` and the end of
+    // `log.jsonl` of runs/partial-fast as last committed (1487761; the folder has left the
+    // tree, its files are in the history), bf16 weights and no Adam state (`cargo xtask
+    // snapshot-runs --finished`: it resumes with a fresh one, and writes its own below). The
+    // weights are made here (the run's own are 3 MB each): fresh ones of the run's sizes,
+    // rounded to bf16 as a snapshot rounds them.
+    let committed = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/finished-run");
     let dir = run_dir("legacy");
     fs::create_dir_all(&dir).unwrap();
-    for name in [
-        "config.json",
-        "state.json",
-        "last.safetensors",
-        "last.optim.safetensors",
-        "best.safetensors",
-        "log.jsonl",
-    ] {
-        let from = committed.join(name);
-        // A run at its last target is committed without its Adam state (`cargo xtask
-        // snapshot-runs --finished`): it resumes with a fresh one, and writes its own below.
-        if name == "last.optim.safetensors" && !from.exists() {
-            continue;
-        }
-        fs::copy(from, dir.join(name)).unwrap();
+    for name in ["config.json", "state.json", "log.jsonl"] {
+        fs::copy(committed.join(name), dir.join(name)).unwrap();
     }
+    let saved_config: TrainConfig =
+        serde_json::from_str(&fs::read_to_string(dir.join("config.json")).unwrap()).unwrap();
+    let f32_weights = dir.join("f32.safetensors");
+    let network = crate::network::Rgm::<f32>::new(saved_config.network.clone(), 7).unwrap();
+    rgm_nn::io::save_params(&f32_weights, &network).unwrap();
+    for name in ["last.safetensors", "best.safetensors"] {
+        rgm_nn::io::rewrite_with_bf16(&f32_weights, &dir.join(name), &|_| true).unwrap();
+    }
+    fs::remove_file(&f32_weights).unwrap();
     let mut config: TrainConfig =
         serde_json::from_str(&fs::read_to_string(dir.join("config.json")).unwrap()).unwrap();
     // The state as the old code wrote it, whatever the snapshot's age.
