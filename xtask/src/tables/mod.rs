@@ -5,8 +5,11 @@
 //!
 //! Resumable ([`rgm_model::evaluate::Resumable`]): every finished chunk of pairs is appended to
 //! its row's per-pair file at once, and a later run computes only the pairs that are missing
-//! there, or every pair of a row whose inputs ([`Candidate::inputs`]) changed. This file
-//! chooses the rows and writes the report.
+//! there, or every pair of a row whose inputs ([`Candidate::inputs`]) changed. The per-pair
+//! files are not kept in the working tree (`.gitignore`: the tree travels to other machines and
+//! must stay small); those committed earlier are in the history, and a row whose file is
+//! missing starts from the one the last commit that added or changed that path holds
+//! ([`restore_from_history`]). This file chooses the rows and writes the report.
 
 use std::collections::BTreeMap;
 use std::fs;
@@ -63,6 +66,10 @@ pub struct Args {
     /// by default `git rev-parse`, marked when the code has uncommitted changes.
     #[arg(long, value_name = "REV")]
     commit: Option<String>,
+    /// Compute a row whose per-pair file is missing from scratch, instead of starting from the
+    /// one the git history last committed at that path.
+    #[arg(long)]
+    no_history: bool,
 }
 
 /// One protocol of test pairs (spec §1): a setting on the whole test split or on the unseen
@@ -156,6 +163,8 @@ struct Run {
     out: PathBuf,
     limit: Option<usize>,
     evaluation: Resumable,
+    /// Whether a missing per-pair file is first read back from the history.
+    history: bool,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -183,6 +192,7 @@ pub fn run(args: Args) -> Result<()> {
     let run = Run {
         out,
         limit: args.limit,
+        history: !args.no_history,
         evaluation: Resumable {
             pool: rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
@@ -211,7 +221,7 @@ pub fn run(args: Args) -> Result<()> {
         let mut rows = Vec::new();
         for candidate in candidates(set, &manifest, &args.only)? {
             let records = run.evaluation.evaluate(
-                &run.records_path(set, &candidate.stem),
+                &run.records_file(set, &candidate.stem)?,
                 &candidate.inputs,
                 &candidate.method,
                 pairs,
@@ -225,7 +235,7 @@ pub fn run(args: Args) -> Result<()> {
                     let config = RefineConfig::default();
                     let (name, stem, inputs) = candidate.refined(&config);
                     let records = run.evaluation.refine(
-                        &run.records_path(set, &stem),
+                        &run.records_file(set, &stem)?,
                         &inputs,
                         &records,
                         &config,
@@ -452,9 +462,17 @@ fn models_for(manifest: &Manifest, set: TestSet) -> impl Iterator<Item = &ModelE
 }
 
 impl Run {
-    /// The per-pair file of one method on one test set.
-    fn records_path(&self, set: TestSet, stem: &str) -> PathBuf {
-        records_path(&self.out, set, stem)
+    /// The per-pair file of one method on one test set, to resume from: when it is missing,
+    /// the one the history last committed at its path is written there first (unless
+    /// `--no-history`).
+    fn records_file(&self, set: TestSet, stem: &str) -> Result<PathBuf> {
+        let path = records_path(&self.out, set, stem);
+        if self.history && !path.exists() {
+            if let Some(revision) = restore_from_history(&project_root(), &path)? {
+                println!("{}: read back from commit {revision}", path.display());
+            }
+        }
+        Ok(path)
     }
 
     /// For the first `count` pairs: the clouds before and after `candidate`'s transform
@@ -531,6 +549,59 @@ fn records_path(out: &Path, set: TestSet, stem: &str) -> PathBuf {
     out.join("results")
         .join(set.key())
         .join(format!("{stem}.jsonl.gz"))
+}
+
+/// Writes the file `path` of the repository at `root` as the last commit that added or changed
+/// it holds it (a per-pair file removed from the tree since), and returns that commit; `None`,
+/// writing nothing, when no commit holds the path, `path` is outside the repository, or git
+/// cannot tell (a copy of the tree without its history; a shallow clone that lacks the commit).
+fn restore_from_history(root: &Path, path: &Path) -> Result<Option<String>> {
+    let (Some(folder), Some(name)) = (path.parent(), path.file_name()) else {
+        return Ok(None);
+    };
+    // The folder the file goes to is made anyway (the evaluation writes there); canonical
+    // paths, so that a relative --out and the root compare.
+    fs::create_dir_all(folder).with_context(|| format!("creating {}", folder.display()))?;
+    let (Ok(root), Ok(folder)) = (fs::canonicalize(root), fs::canonicalize(folder)) else {
+        return Ok(None);
+    };
+    let Ok(relative) = folder.strip_prefix(&root) else {
+        return Ok(None);
+    };
+    let Some(relative) = relative.join(name).to_str().map(|p| p.replace('\\', "/")) else {
+        return Ok(None);
+    };
+    let git = |args: &[&str]| {
+        Command::new("git")
+            .args(args)
+            .current_dir(&root)
+            .output()
+            .ok()
+            .filter(|out| out.status.success())
+            .map(|out| out.stdout)
+    };
+    let last = [
+        "log",
+        "-1",
+        "--format=%h",
+        "--diff-filter=AMRC",
+        "--",
+        &relative,
+    ];
+    let Some(revision) = git(&last).map(|out| String::from_utf8_lossy(&out).trim().to_string())
+    else {
+        return Ok(None);
+    };
+    if revision.is_empty() {
+        return Ok(None);
+    }
+    let Some(bytes) = git(&["show", &format!("{revision}:{relative}")]) else {
+        return Ok(None);
+    };
+    let partial = path.with_extension("gz.tmp");
+    fs::write(&partial, bytes).with_context(|| format!("writing {}", partial.display()))?;
+    fs::rename(&partial, path).with_context(|| format!("writing {}", path.display()))?;
+    Ok(Some(revision))
 }
 
 /// The 1-minute load average from /proc/loadavg (how busy the machine was).
@@ -683,6 +754,47 @@ mod tests {
                 default.stem
             );
         }
+    }
+
+    #[test]
+    fn a_missing_per_pair_file_is_read_back_from_the_last_commit_that_held_it() {
+        let root = std::env::temp_dir().join(format!("rgm-tables-history-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&root);
+        fs::create_dir_all(root.join("docs/results/clean")).unwrap();
+        let git = |args: &[&str]| {
+            let out = Command::new("git")
+                .args(["-c", "user.name=t", "-c", "user.email=t@t"])
+                .args(["-c", "commit.gpgsign=false"])
+                .args(args)
+                .current_dir(&root)
+                .output()
+                .unwrap();
+            assert!(out.status.success(), "git {args:?}: {out:?}");
+            String::from_utf8(out.stdout).unwrap().trim().to_string()
+        };
+        git(&["init", "-q"]);
+        let file = root.join("docs/results/clean/icp.jsonl.gz");
+        for content in ["first", "second"] {
+            fs::write(&file, content).unwrap();
+            git(&["add", "docs"]);
+            git(&["commit", "-q", "-m", content]);
+        }
+        let holder = git(&["rev-parse", "--short", "HEAD"]);
+        git(&["rm", "-q", "-r", "docs"]);
+        git(&["commit", "-q", "-m", "records out of the tree"]);
+        assert!(!root.join("docs").exists());
+        let restored = restore_from_history(&root, &file).unwrap();
+        assert_eq!(restored.as_deref(), Some(holder.as_str()));
+        assert_eq!(fs::read_to_string(&file).unwrap(), "second");
+        // A path no commit held, and one outside the repository: nothing is written.
+        let other = root.join("docs/results/clean/fgr.jsonl.gz");
+        assert_eq!(restore_from_history(&root, &other).unwrap(), None);
+        assert!(!other.exists());
+        let outside = root.with_extension("outside").join("icp.jsonl.gz");
+        assert_eq!(restore_from_history(&root, &outside).unwrap(), None);
+        assert!(!outside.exists());
+        fs::remove_dir_all(root.with_extension("outside")).unwrap();
+        fs::remove_dir_all(&root).unwrap();
     }
 
     #[test]

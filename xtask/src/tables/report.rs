@@ -106,7 +106,11 @@ impl Report {
                full precision), the time, the correspondences and any failure; the ground truth \
                and the metrics are computed again from the pair, which `rgm-data` regenerates \
                from its index. A later run computes only the pairs missing there, and every \
-               pair of a row whose inputs changed; delete a file to recompute it.\n\n";
+               pair of a row whose inputs changed. The files are not kept in the working tree \
+               (`.gitignore`); those committed earlier are in the history, and a run that \
+               misses one starts from the copy the last commit to add or change it holds \
+               (`git log -1 -- PATH`); delete a file and pass `--no-history` to recompute \
+               it.\n\n";
         md += &self.models_markdown();
         for table in &TABLES {
             md += &format!("## Table {}: {}\n\n", table.number, table.caption);
