@@ -1,9 +1,14 @@
 #!/usr/bin/env python3
 """Writes a training run's learning curve to docs/training/NAME/curve.svg and prints a Markdown
 summary of the run folder's record (config.json, state.json, log.jsonl; the run folder is
-committed under runs/ and is the one copy of those files).
+committed under runs/ while it trains and is the one copy of those files; a finished run's
+folder leaves the working tree and stays in the history, from where it is written out first).
 
-    python3 tools/training_report.py runs/partial-fast partial-fast > docs/training/partial-fast/README.md
+    python3 tools/training_report.py runs/partial-fast-200 partial-fast-200 > docs/training/partial-fast-200/README.md
+    # a finished run, written out of the history into a scratch folder, named as it was:
+    git archive a6842d0 runs/partial-fast | tar -x -C /tmp/scratch
+    (cd /tmp/scratch && python3 "$OLDPWD/tools/training_report.py" runs/partial-fast partial-fast) \
+        > docs/training/partial-fast/README.md
 
 Standard library only. The numbers are the run's own log lines, unchanged.
 """
