@@ -242,8 +242,9 @@ def _assign_from(partner, size):
     return inv[:, :size]
 
 
-def make_batch(shapes, setting, match_points, gen):
-    """Source (B, N, 3), target (B, M, 3) and ground truth (B, N, M) of `shapes` (B, P, 3)."""
+def make_batch(shapes, setting, match_points, gen, info=None):
+    """Source (B, N, 3), target (B, M, 3) and ground truth (B, N, M) of `shapes` (B, P, 3).
+    With a dict `info`, also the statistics `pair-stats` compares with rgm-data's."""
     b = shapes.shape[0]
     dev = shapes.device
     dt = shapes.dtype
@@ -263,12 +264,32 @@ def make_batch(shapes, setting, match_points, gen):
         source = torch.gather(source, 1, ps[..., None].expand(-1, -1, 3))
         target = torch.gather(target, 1, pt[..., None].expand(-1, -1, 3))
         gt = (ps[:, :, None] == pt[:, None, :]).to(shapes.dtype)
+        if info is not None:
+            trace = rot.diagonal(dim1=1, dim2=2).sum(-1)
+            info.update(source_points=torch.full((b,), float(source.shape[1])),
+                        target_points=torch.full((b,), float(target.shape[1])),
+                        rotation_deg=torch.rad2deg(((trace - 1) / 2).clamp(-1, 1).acos()),
+                        translation=trans.norm(dim=-1), matched=gt.sum((1, 2)), matched_cut=gt.sum((1, 2)))
         return source, target, gt
+    if info is not None:
+        trace = rot.diagonal(dim1=1, dim2=2).sum(-1)
+        info.update(source_points=torch.full((b,), float(source.shape[1])),
+                    target_points=torch.full((b,), float(target.shape[1])),
+                    rotation_deg=torch.rad2deg(((trace - 1) / 2).clamp(-1, 1).acos()),
+                    translation=trans.norm(dim=-1))
+        if exact:
+            info["matched"] = info["matched_cut"] = torch.full((b,), float(source.shape[1]))
+        else:
+            moved_all = (source - trans[:, None, :]) @ rot
+            info["matched"] = rebuild_correspondence(moved_all, target).sum((1, 2))
     count = match_points or max(source.shape[1], target.shape[1])
     source, target = random_subset(source, count, gen), random_subset(target, count, gen)
     # X' = G⁻¹ X: the source moved back onto the target.
     moved = (source - trans[:, None, :]) @ rot
-    return source, target, rebuild_correspondence(moved, target)
+    gt = rebuild_correspondence(moved, target)
+    if info is not None:
+        info["matched_cut"] = gt.sum((1, 2))
+    return source, target, gt
 
 
 # ---------------------------------------------------------------------------------------------
@@ -388,7 +409,7 @@ def new_config(args):
                     "scoring": "Ais", "edges": "Transformer"},
         "match_points": args.match_points, "epochs": args.epochs, "batch": args.batch, "optimizer": "adam",
         "lr": args.lr, "momentum": 0.9, "weight_decay": args.weight_decay, "milestones": args.milestones,
-        "gamma": args.gamma, "train_shapes": None, "val_shapes": 300, "val_sample": "spread", "workers": 2,
+        "gamma": args.gamma, "train_shapes": args.train_shapes, "val_shapes": args.val_shapes, "val_sample": "spread", "workers": 2,
         "checkpoint_every": 50, "seed": args.seed, "test_statistics": "cloud", "precision": "f32",
         **({"init": args.init} if args.init else {}),
     }
@@ -471,6 +492,8 @@ def train(args):
     run = Run(args.run, args, device)
     cfg = run.config
     shapes, _ = load_pack(args.pack, device, cfg["unseen"])
+    if cfg.get("train_shapes"):
+        shapes = shapes[:cfg["train_shapes"]]
     n_shapes = shapes.shape[0]
     batch = cfg["batch"]
     batches = -(-n_shapes // batch)
@@ -619,6 +642,42 @@ def step_fixture(out, seed=3, pairs=4, points=40, match_points=24):
     print(f"wrote {out}: loss {loss.item():.12f}, {int(gt.sum())} correspondences in {pairs} pairs")
 
 
+STAT_NAMES = ["source_points", "target_points", "matched", "matched_cut", "rotation_deg", "translation"]
+
+
+def pair_stats(pack, setting, count, match_points, rust_json=None, seed=0):
+    """Mean and standard deviation of each statistic over `count` pairs of the first training
+    shapes; with `rust_json` (the output of rgm-data's `pair_stats` example on the same shapes),
+    each mean compared: they must agree within 4 standard errors of the difference."""
+    shapes, _ = load_pack(pack, "cpu", False)
+    shapes = shapes[:count].double()
+    gen = torch.Generator().manual_seed(seed)
+    parts = {}
+    for start in range(0, shapes.shape[0], 256):
+        info = {}
+        make_batch(shapes[start:start + 256], setting, match_points, gen, info)
+        for k, v in info.items():
+            parts.setdefault(k, []).append(v.double().cpu())
+    mine = {"pairs": shapes.shape[0]}
+    for k in STAT_NAMES:
+        v = torch.cat(parts[k])
+        mine[k] = [v.mean().item(), v.std().item() if v.numel() > 1 else 0.0]
+    print(json.dumps(mine))
+    if rust_json is None:
+        return True
+    theirs = json.load(open(rust_json))
+    ok = True
+    print(f"{'statistic':<15}{'GPU trainer':>22}{'rgm-data':>22}{'|diff| / se':>13}")
+    for k in STAT_NAMES:
+        (m1, s1), (m2, s2) = mine[k], theirs[k]
+        se = math.sqrt(s1 ** 2 / mine["pairs"] + s2 ** 2 / theirs["pairs"])
+        z = abs(m1 - m2) / se if se > 0 else (0.0 if m1 == m2 else math.inf)
+        ok &= z < 4
+        print(f"{k:<15}{m1:>14.4f} ± {s1:<6.3f}{m2:>14.4f} ± {s2:<6.3f}{z:>13.2f}")
+    print("pairs: same statistics" if ok else "pairs: DIFFERENT statistics")
+    return ok
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -646,6 +705,8 @@ def main():
     t.add_argument("--milestones", type=lambda s: [int(v) for v in s.split(",") if v], default=[])
     t.add_argument("--gamma", type=float, default=0.2)
     t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--train-shapes", type=int, help="only the first N training shapes (as rgm train's option)")
+    t.add_argument("--val-shapes", type=int, default=300, help="recorded for rgm train, which validates")
     t.add_argument("--init", help="weights a new run starts from")
     b = sub.add_parser("bundle", help="a run folder as STEM.tar + STEM.optim.safetensors")
     b.add_argument("folder")
@@ -655,6 +716,12 @@ def main():
     u.add_argument("folder")
     s = sub.add_parser("step-fixture", help="write the batched-step fixture rgm's test compares against")
     s.add_argument("--out", required=True)
+    st = sub.add_parser("pair-stats", help="statistics of training pairs, compared with rgm-data's (pair_stats example)")
+    st.add_argument("--pack", required=True)
+    st.add_argument("--setting", choices=["clean", "noise", "partial"], default="partial")
+    st.add_argument("--pairs", type=int, default=2000)
+    st.add_argument("--match-points", type=int)
+    st.add_argument("--compare", help="the JSON that `cargo run -p rgm-data --example pair_stats` printed")
     a = p.parse_args()
     if a.cmd == "train":
         train(a)
@@ -662,6 +729,8 @@ def main():
         bundle(a.folder, a.stem)
     elif a.cmd == "unbundle":
         unbundle(a.stem, a.folder)
+    elif a.cmd == "pair-stats":
+        sys.exit(0 if pair_stats(a.pack, a.setting, a.pairs, a.match_points, a.compare) else 1)
     else:
         step_fixture(a.out)
 
