@@ -13,8 +13,11 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 exec python3 - "$@" <<'EOF'
 import os
+import signal
 import subprocess
 import sys
+
+signal.signal(signal.SIGPIPE, signal.SIG_DFL)  # `| head` ends the listing quietly
 
 LIMIT = 24 * 1024 * 1024  # 25,165,824 bytes
 
