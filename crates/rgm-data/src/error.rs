@@ -75,6 +75,10 @@ pub enum DataError {
         index: usize,
         len: usize,
     },
+    /// Shapes that the training-data pack cannot hold, or a pack that does not decode to them
+    /// ([`crate::pack`]).
+    #[error("pack: {why}")]
+    Pack { why: String },
     /// A geometry operation failed.
     #[error(transparent)]
     Geom(#[from] rgm_geom::GeomError),
