@@ -5,6 +5,7 @@
 //! chooses what to run and writes the reports, and holds no algorithm of its own.
 
 mod bench;
+mod pack;
 mod snapshot;
 mod tables;
 
@@ -27,6 +28,9 @@ enum Command {
     Bench(bench::Args),
     /// Reproduce the paper's Tables 1–5 on ModelNet40: docs/results.md, per-pair JSON, figures.
     ReproduceTables(tables::Args),
+    /// Pack ModelNet40's training shapes into one safetensors file of at most 32 MiB for a GPU
+    /// machine (docs/training/gpu.md), or check a pack against the data (--check).
+    PackModelnet(pack::Args),
     /// Make the training runs under runs/ small enough to commit (Adam moments in bf16).
     SnapshotRuns(snapshot::Args),
 }
@@ -35,6 +39,7 @@ fn main() -> ExitCode {
     let outcome = match Cli::parse().command {
         Command::Bench(args) => bench::run(args),
         Command::ReproduceTables(args) => tables::run(args),
+        Command::PackModelnet(args) => pack::run(args),
         Command::SnapshotRuns(args) => snapshot::run(args),
     };
     match outcome {
