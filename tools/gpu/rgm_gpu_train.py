@@ -132,7 +132,8 @@ def load_pack(path, device, unseen):
     shift, coords = 0, []
     for axis, b in enumerate(bits):
         q = ((words >> shift) & ((1 << b) - 1)).to(torch.float32)  # (S, P)
-        step = extent[:, axis:axis + 1] / float((1 << b) - 1)  # (S, 1)
+        # extent × float32(1/(2^b − 1)), as the pack's `decode` says: the same bits on every device
+        step = extent[:, axis:axis + 1] * (1.0 / float((1 << b) - 1))  # (S, 1)
         coords.append(lo[:, axis:axis + 1] + q * step)
         shift += b
     points = torch.stack(coords, dim=-1)  # (S, P, 3)
@@ -407,7 +408,7 @@ def new_config(args):
         "setting": args.setting, "unseen": args.unseen,
         "network": {**{k: list(v) if isinstance(v, tuple) else v for k, v in PRESETS[args.preset].items()},
                     "scoring": "Ais", "edges": "Transformer"},
-        "match_points": args.match_points, "epochs": args.epochs, "batch": args.batch, "optimizer": "adam",
+        "match_points": args.match_points or None, "epochs": args.epochs, "batch": args.batch, "optimizer": "adam",
         "lr": args.lr, "momentum": 0.9, "weight_decay": args.weight_decay, "milestones": args.milestones,
         "gamma": args.gamma, "train_shapes": args.train_shapes, "val_shapes": args.val_shapes, "val_sample": "spread", "workers": 2,
         "checkpoint_every": 50, "seed": args.seed, "test_statistics": "cloud", "precision": "f32",
@@ -697,7 +698,7 @@ def main():
     t.add_argument("--setting", choices=["clean", "noise", "partial"], default="partial")
     t.add_argument("--unseen", action="store_true")
     t.add_argument("--preset", choices=sorted(PRESETS), default="fast")
-    t.add_argument("--match-points", type=int, default=384)
+    t.add_argument("--match-points", type=int, default=384, help="cut each cloud to N points (0: whole clouds)")
     t.add_argument("--batch", type=int, default=32)
     t.add_argument("--lr", type=float, default=3e-4)
     t.add_argument("--weight-decay", type=float, default=0.0)
