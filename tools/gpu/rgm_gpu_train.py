@@ -643,6 +643,57 @@ def step_fixture(out, seed=3, pairs=4, points=40, match_points=24):
     print(f"wrote {out}: loss {loss.item():.12f}, {int(gt.sum())} correspondences in {pairs} pairs")
 
 
+def rebuild_line_by_line(xm, y):
+    """`Correspondence::rebuild` as rgm-data writes it, one point at a time (one pair): what the
+    batched `rebuild_correspondence` is checked against."""
+    d = torch.cdist(xm.double(), y.double())
+    n, m = d.shape
+    sd, sj = d.min(1)
+    td, ti = d.min(0)
+    to, so = [None] * n, [None] * m
+    for i in range(n):
+        j = int(sj[i])
+        if int(ti[j]) == i and sd[i] < MATCH_RADIUS:
+            to[i], so[j] = j, i
+    for i in range(n):
+        j = int(sj[i])
+        if to[i] is None and so[j] is None and sd[i] < MATCH_RADIUS:
+            to[i], so[j] = j, i
+    for j in range(m):
+        i = int(ti[j])
+        if so[j] is None and to[i] is None and td[j] < MATCH_RADIUS:
+            to[i], so[j] = j, i
+    rest_s = [i for i in range(n) if to[i] is None]
+    rest_t = [j for j in range(m) if so[j] is None]
+    if rest_s and rest_t:
+        dd = d[rest_s][:, rest_t]
+        ad, ab = dd.min(1)
+        _, ba = dd.min(0)
+        for a in range(len(rest_s)):
+            b = int(ab[a])
+            if int(ba[b]) == a and ad[a] < RESCUE_RADIUS:
+                to[rest_s[a]] = rest_t[b]
+    gt = torch.zeros(n, m, dtype=torch.float64)
+    for i, j in enumerate(to):
+        if j is not None:
+            gt[i, j] = 1.0
+    return gt
+
+
+def check_rebuild(trials=30, seed=0):
+    """The batched rebuild against the line-by-line one on random clouds dense enough (60 and 50
+    points in a 0.4 cube) that every step matches some points."""
+    gen = torch.Generator().manual_seed(seed)
+    wrong = 0
+    for _ in range(trials):
+        x = torch.rand(3, 60, 3, generator=gen, dtype=torch.float64) * 0.4
+        y = torch.rand(3, 50, 3, generator=gen, dtype=torch.float64) * 0.4
+        gt = rebuild_correspondence(x, y)
+        wrong += sum(not torch.equal(gt[b], rebuild_line_by_line(x[b], y[b])) for b in range(3))
+    print(f"rebuild: {3 * trials - wrong} of {3 * trials} random pairs equal to the line-by-line rebuild")
+    return wrong == 0
+
+
 STAT_NAMES = ["source_points", "target_points", "matched", "matched_cut", "rotation_deg", "translation"]
 
 
@@ -717,6 +768,7 @@ def main():
     u.add_argument("folder")
     s = sub.add_parser("step-fixture", help="write the batched-step fixture rgm's test compares against")
     s.add_argument("--out", required=True)
+    sub.add_parser("check-rebuild", help="the batched ground-truth rebuild against a line-by-line port of rgm-data's")
     st = sub.add_parser("pair-stats", help="statistics of training pairs, compared with rgm-data's (pair_stats example)")
     st.add_argument("--pack", required=True)
     st.add_argument("--setting", choices=["clean", "noise", "partial"], default="partial")
@@ -730,6 +782,8 @@ def main():
         bundle(a.folder, a.stem)
     elif a.cmd == "unbundle":
         unbundle(a.stem, a.folder)
+    elif a.cmd == "check-rebuild":
+        sys.exit(0 if check_rebuild() else 1)
     elif a.cmd == "pair-stats":
         sys.exit(0 if pair_stats(a.pack, a.setting, a.pairs, a.match_points, a.compare) else 1)
     else:
