@@ -15,24 +15,22 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DATA="${RGM_DATA:-../shared/data/modelnet40_npy1024}"
-COMMON="--preset fast --match-points 384 --optimizer adam --lr 3e-4 --val-shapes 300 --checkpoint-every 50 --test-statistics cloud"
+COMMON="--preset fast --optimizer adam --lr 3e-4 --val-shapes 300 --checkpoint-every 50 --test-statistics cloud"
 # name | target epoch | options besides $COMMON
-# The runs this queue trained before are finished (partial-fast to epoch 100 on the schedule
-# --epochs 100 --milestones 60,80; noise-fast, clean-fast, var2-fast, unseen-fast, var1-fast):
-# their folders have left the working tree and are in the history. docs/training/README.md has
-# each run's page and the queue's order and targets; the weights the tables use are the
+# The runs this queue trained before are finished or retired (partial-fast to epoch 100 on the
+# schedule --epochs 100 --milestones 60,80; noise-fast, clean-fast, var2-fast, unseen-fast,
+# var1-fast; partial-fast-200, retired at epoch 23 once training on whole clouds won, session
+# 26): their folders have left the working tree and are in the history. docs/training/README.md
+# has each run's page and the queue's order and targets; the weights the tables use are the
 # manifest's git:REV:PATH files. Listed here again, a run whose folder is missing would start
 # from scratch.
 QUEUE=(
-  # The spec's last 100 epochs for the partial model (3e-4 to its 120th, ×0.2 at 120 and 140),
-  # from the end of partial-fast's compressed schedule: its validation had flattened at
-  # 55–57 % alone from epoch 80 on, at the last learning rate (docs/training/README.md).
-  # bf16 products from its 8th epoch: the same learning in a one-epoch A/B, 1.37× the pairs per
-  # second on AVX-512 BF16 (docs/training/README.md, session 24); f32 where the processor has
-  # neither AMX nor AVX-512 BF16. `--init` is read only when the run starts (a folder without
-  # state.json; `Trainer::open`) and must stay as the run's config.json spells it; the file is
-  # in the history: git show 1487761:runs/partial-fast/last.safetensors.
-  "partial-fast-200|100|--setting partial --init runs/partial-fast/last.safetensors --val-sample spread --epochs 100 --milestones 20,40 --precision bf16"
+  # The built-in model's run: trained on whole clouds (717 points; 384 lost an equal-time A/B by
+  # 7.5 points of validation recall) in two GPU windows (tools/gpu/window.sh, docs/training/gpu.md),
+  # carried on here between windows. bf16 products where the processor has AMX or AVX-512 BF16.
+  # `--init` is read only when a run starts (a folder without state.json; `Trainer::open`) and
+  # must stay as config.json spells it: window 1's last weights, which are not committed.
+  "partial-fast-717|200|--setting partial --match-points 0 --batch 32 --epochs 200 --milestones 5,7 --val-sample spread --init target/gpu-init/partial717-w1.safetensors --precision bf16"
 )
 
 status() {
