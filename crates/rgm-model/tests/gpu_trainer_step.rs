@@ -7,8 +7,10 @@
 //! crates/rgm-model/tests/fixtures/gpu_trainer_step.safetensors` (f64). No Python is needed
 //! here.
 
-use ndarray::{Array2, ArrayD, Ix2};
-use rgm_match::Correspondences;
+mod common;
+
+use common::{ground_truth, matrix, with_prefix};
+use ndarray::ArrayD;
 use rgm_model::network::{Config, Rgm, RgmCache};
 use rgm_nn::Parameters;
 use std::collections::HashMap;
@@ -25,27 +27,11 @@ fn fixture() -> (HashMap<String, ArrayD<f64>>, usize) {
     (tensors, metadata["pairs"].parse().unwrap())
 }
 
-fn matrix(t: &HashMap<String, ArrayD<f64>>, name: &str) -> Array2<f64> {
-    t[name].clone().into_dimensionality::<Ix2>().unwrap()
-}
-
-fn ground_truth(gt: &Array2<f64>) -> Correspondences {
-    let pairs = gt
-        .indexed_iter()
-        .filter(|(_, &v)| v == 1.0)
-        .map(|(ij, _)| ij)
-        .collect();
-    Correspondences::new(gt.nrows(), gt.ncols(), pairs).unwrap()
-}
-
 /// What `Trainer::step` does with a batch on one worker: zeroed gradients, each pair's forward
 /// and backward adding into them, then the mean.
 fn rgm_step(t: &HashMap<String, ArrayD<f64>>, pairs: usize) -> (Rgm<f64>, f64) {
     let mut rgm = Rgm::<f64>::new(Config::tiny(), 7).unwrap();
-    let mut tensors: HashMap<String, ArrayD<f64>> = t
-        .iter()
-        .filter_map(|(k, v)| k.strip_prefix("param.").map(|k| (k.to_string(), v.clone())))
-        .collect();
+    let mut tensors = with_prefix(t, "param.");
     rgm.visit_buffers("", &mut |name, b| {
         tensors.entry(name.to_string()).or_insert(b.to_owned());
     });

@@ -6,8 +6,10 @@
 //! every parameter gradient, the batch-norm running statistics after that step, and C̃ of an
 //! evaluation-mode forward with them. No Python is needed here.
 
-use ndarray::{Array2, ArrayD, Ix2};
-use rgm_match::Correspondences;
+mod common;
+
+use common::{ground_truth, matrix, with_prefix};
+use ndarray::{ArrayD, Ix2};
 use rgm_model::network::{Config, Element, Mode, Rgm, RgmCache};
 use rgm_nn::Parameters;
 use std::collections::HashMap;
@@ -25,20 +27,6 @@ fn fixture() -> HashMap<String, ArrayD<f64>> {
         r#"{"k": 4, "dgcnn": [4, 4, 8, 8], "edge": 24, "q": 16, "heads": 4, "ff": 32, "blocks": 2, "sinkhorn_iters": 20}"#
     );
     tensors
-}
-
-fn matrix(t: &HashMap<String, ArrayD<f64>>, name: &str) -> Array2<f64> {
-    t[name].clone().into_dimensionality::<Ix2>().unwrap()
-}
-
-/// Tensors under `prefix.` with the prefix stripped.
-fn with_prefix<T: Element>(
-    t: &HashMap<String, ArrayD<T>>,
-    prefix: &str,
-) -> HashMap<String, ArrayD<T>> {
-    t.iter()
-        .filter_map(|(k, v)| k.strip_prefix(prefix).map(|k| (k.to_string(), v.clone())))
-        .collect()
 }
 
 /// The tiny network with the reference's parameters and fresh batch-norm statistics (those the
@@ -64,15 +52,6 @@ fn reference_step(t: &HashMap<String, ArrayD<f64>>) -> (Rgm<f64>, RgmCache<f64>,
         .forward_backward(x.view(), y.view(), &gt, &mut cache)
         .unwrap();
     (rgm, cache, loss)
-}
-
-fn ground_truth(gt: &Array2<f64>) -> Correspondences {
-    let pairs = gt
-        .indexed_iter()
-        .filter(|(_, &v)| v == 1.0)
-        .map(|(ij, _)| ij)
-        .collect();
-    Correspondences::new(gt.nrows(), gt.ncols(), pairs).unwrap()
 }
 
 /// max |got − want| / max |want|, printed.
