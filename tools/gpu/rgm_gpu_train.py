@@ -27,7 +27,7 @@ It needs torch only (no safetensors or numpy package): the GPU machine has nothi
 docs/training/gpu.md says how a GPU window runs it.
 """
 import argparse
-import io
+import ctypes
 import json
 import math
 import os
@@ -98,7 +98,7 @@ def write_safetensors(path, tensors, metadata=None, dtype=torch.float32):
         t = tensors[name].detach().cpu().contiguous()
         if t.dtype.is_floating_point:
             t = t.to(dtype)
-        raw = t.view(torch.uint8).numpy().tobytes() if t.numel() else b""
+        raw = ctypes.string_at(t.data_ptr(), t.numel() * t.element_size())  # no numpy needed
         header[name] = {"dtype": _NAMES[t.dtype], "shape": list(t.shape), "data_offsets": [offset, offset + len(raw)]}
         chunks.append(raw)
         offset += len(raw)
@@ -158,8 +158,7 @@ def rotation_xyz(a, b, c):
 def crop_keep_count(n, keep_ratio=0.7):
     """Points `crop_indices` keeps of n distinct projections: those above the interpolated
     percentile at rank r = (1 − keep)(n − 1), i.e. n − ⌊r⌋ − 1 (717 of 1,024)."""
-    rank = (1.0 - keep_ratio) * (n - 1)
-    return n - int(math.floor(rank)) - 1 if rank != math.floor(rank) else n - int(rank) - 1
+    return n - int(math.floor((1.0 - keep_ratio) * (n - 1))) - 1
 
 
 def random_directions(b, gen, like):
@@ -259,6 +258,12 @@ def make_batch(shapes, setting, match_points, gen, info=None):
         source, target = crop(source, gen), crop(target, gen)
     if setting != "clean":
         source, target = jitter(source, gen), jitter(target, gen)
+    if info is not None:
+        trace = rot.diagonal(dim1=1, dim2=2).sum(-1)
+        info.update(source_points=torch.full((b,), float(source.shape[1])),
+                    target_points=torch.full((b,), float(target.shape[1])),
+                    rotation_deg=torch.rad2deg(((trace - 1) / 2).clamp(-1, 1).acos()),
+                    translation=trans.norm(dim=-1))
     if exact:  # an exact permutation: the ground truth of the origins
         ps = torch.rand(b, source.shape[1], generator=gen, device=dev).argsort(1)
         pt = torch.rand(b, target.shape[1], generator=gen, device=dev).argsort(1)
@@ -266,23 +271,11 @@ def make_batch(shapes, setting, match_points, gen, info=None):
         target = torch.gather(target, 1, pt[..., None].expand(-1, -1, 3))
         gt = (ps[:, :, None] == pt[:, None, :]).to(shapes.dtype)
         if info is not None:
-            trace = rot.diagonal(dim1=1, dim2=2).sum(-1)
-            info.update(source_points=torch.full((b,), float(source.shape[1])),
-                        target_points=torch.full((b,), float(target.shape[1])),
-                        rotation_deg=torch.rad2deg(((trace - 1) / 2).clamp(-1, 1).acos()),
-                        translation=trans.norm(dim=-1), matched=gt.sum((1, 2)), matched_cut=gt.sum((1, 2)))
+            info["matched"] = info["matched_cut"] = gt.sum((1, 2))
         return source, target, gt
     if info is not None:
-        trace = rot.diagonal(dim1=1, dim2=2).sum(-1)
-        info.update(source_points=torch.full((b,), float(source.shape[1])),
-                    target_points=torch.full((b,), float(target.shape[1])),
-                    rotation_deg=torch.rad2deg(((trace - 1) / 2).clamp(-1, 1).acos()),
-                    translation=trans.norm(dim=-1))
-        if exact:
-            info["matched"] = info["matched_cut"] = torch.full((b,), float(source.shape[1]))
-        else:
-            moved_all = (source - trans[:, None, :]) @ rot
-            info["matched"] = rebuild_correspondence(moved_all, target).sum((1, 2))
+        moved_all = (source - trans[:, None, :]) @ rot
+        info["matched"] = rebuild_correspondence(moved_all, target).sum((1, 2))
     count = match_points or max(source.shape[1], target.shape[1])
     source, target = random_subset(source, count, gen), random_subset(target, count, gen)
     # X' = G⁻¹ X: the source moved back onto the target.
@@ -350,13 +343,13 @@ def load_weights(model, path):
                 v.copy_(tensors[k].reshape(v.shape))
 
 
-def rgm_shaped(name, t):
+def rgm_shaped(t):
     """rgm's shape of a parameter: 1×1 convolution weights as matrices."""
     return t.reshape(t.shape[0], t.shape[1]) if t.dim() == 4 else t
 
 
 def save_weights(model, path):
-    tensors = {k: rgm_shaped(k, v) for k, v in model.state_dict().items() if v.dtype.is_floating_point}
+    tensors = {k: rgm_shaped(v) for k, v in model.state_dict().items() if v.dtype.is_floating_point}
     write_safetensors(path, tensors)
 
 
@@ -396,8 +389,8 @@ def save_optimizer(opt, model, path, lr, weight_decay, step):
     for name in order:
         st = opt.state.get(params[name])
         z = torch.zeros_like(params[name])
-        tensors[f"m.{name}"] = rgm_shaped(name, st["exp_avg"] if st else z)
-        tensors[f"v.{name}"] = rgm_shaped(name, st["exp_avg_sq"] if st else z)
+        tensors[f"m.{name}"] = rgm_shaped(st["exp_avg"] if st else z)
+        tensors[f"v.{name}"] = rgm_shaped(st["exp_avg_sq"] if st else z)
     meta = {"optimizer": "adam", "lr": repr(lr), "beta1": "0.9", "beta2": "0.999", "eps": "0.00000001",
             "weight_decay": repr(weight_decay), "step": str(step), "order": "\n".join(order)}
     write_safetensors(path, tensors, meta)
@@ -542,7 +535,6 @@ def train(args):
             run.state["steps"] += 1
             run.state["pairs_seen"] += idx.numel()
             since += loss.detach()
-            since_count = run.state["batch"] - logged_batch
             now = time.time()
             out_of_time = now - start >= args.minutes * 60
             if run.state["batch"] % 50 == 0 or run.state["batch"] == batches or out_of_time:
@@ -550,7 +542,7 @@ def train(args):
                 clock = now
                 run.append_log({"kind": "train", "epoch": epoch, "batch": run.state["batch"], "batches": batches,
                                 "pairs_seen": run.state["pairs_seen"], "lr": lr,
-                                "loss": since.item() / since_count, "seconds": run.state["seconds"]})
+                                "loss": since.item() / (run.state["batch"] - logged_batch), "seconds": run.state["seconds"]})
                 since.zero_()
                 logged_batch = run.state["batch"]
             if out_of_time:
@@ -634,9 +626,9 @@ def step_fixture(out, seed=3, pairs=4, points=40, match_points=24):
         tensors[f"input.gt.{i}"] = gt[i]
     for name, v in before.items():
         if v.dtype.is_floating_point:
-            tensors[f"param.{name}"] = rgm_shaped(name, v)
+            tensors[f"param.{name}"] = rgm_shaped(v)
     for name, g in grads.items():
-        tensors[f"grad.{name}"] = rgm_shaped(name, g)
+        tensors[f"grad.{name}"] = rgm_shaped(g)
     write_safetensors(out, tensors, {"format": "rgm-gpu-step", "pairs": str(pairs),
                                      "config": json.dumps(PRESETS["tiny"]), "torch": torch.__version__},
                       dtype=torch.float64)
