@@ -57,16 +57,14 @@ pub fn run(args: Args) -> Result<()> {
     }
 }
 
-/// The training shapes of `data`, in order.
-fn load(data: &Path) -> Result<(ModelNet40, Instant)> {
-    let start = Instant::now();
-    let dataset = ModelNet40::open(data)
-        .with_context(|| format!("loading ModelNet40 from {}", data.display()))?;
-    Ok((dataset, start))
+/// ModelNet40 from `data`.
+fn load(data: &Path) -> Result<ModelNet40> {
+    ModelNet40::open(data).with_context(|| format!("loading ModelNet40 from {}", data.display()))
 }
 
 fn write(data: &Path, out: &Path) -> Result<()> {
-    let (dataset, start) = load(data)?;
+    let start = Instant::now();
+    let dataset = load(data)?;
     let shapes = dataset.split(Split::Train, false);
     let packed = Pack::encode(&shapes, POINTS_PER_SHAPE)?;
     let max = packed.max_error(&shapes)?;
@@ -115,7 +113,7 @@ fn check(path: &Path, data: &Path) -> Result<()> {
     let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
     let (packed, metadata) =
         from_bytes(&bytes).with_context(|| format!("reading the pack {}", path.display()))?;
-    let (dataset, _) = load(data)?;
+    let dataset = load(data)?;
     let categories = metadata["categories"].split('\n').collect::<Vec<_>>();
     ensure!(
         categories == dataset.categories,

@@ -33,7 +33,7 @@ pub const BITS: [u32; 3] = [11, 11, 10];
 /// The metadata's `bits`: [`BITS`] as written in the file.
 pub const BITS_TEXT: &str = "11,11,10";
 /// First bit of x, y, z in a word.
-pub const SHIFTS: [u32; 3] = [0, 11, 22];
+pub const SHIFTS: [u32; 3] = [0, BITS[0], BITS[0] + BITS[1]];
 /// The decoding formula, as the metadata's `decode` states it ([`decode_point`] computes it).
 pub const DECODE: &str = "qx = w & 2047; qy = (w >> 11) & 2047; qz = (w >> 22) & 1023; \
     v = lo + float32(q) * (extent * R) with R = float32(1 / (2^b - 1)), the float32 nearest \
@@ -102,11 +102,13 @@ pub struct EncodedShape {
 impl EncodedShape {
     /// The points decoded. // (P, 3)
     pub fn decode(&self) -> Vec<[f32; 3]> {
-        self.words
-            .iter()
-            .map(|&w| decode_point(w, self.lo, self.extent))
-            .collect()
+        decode_words(&self.words, self.lo, self.extent)
     }
+}
+
+/// The points of one shape's `words`, decoded with its `lo` and `extent`. // (P, 3)
+fn decode_words(words: &[u32], lo: [f32; 3], extent: [f32; 3]) -> Vec<[f32; 3]> {
+    words.iter().map(|&w| decode_point(w, lo, extent)).collect()
 }
 
 fn pack_error(why: impl Into<String>) -> DataError {
@@ -217,10 +219,7 @@ impl Pack {
     /// The points of shape `s`, decoded. // (P, 3)
     pub fn decode_shape(&self, s: usize) -> Vec<[f32; 3]> {
         let p = self.points_per_shape;
-        self.words[s * p..(s + 1) * p]
-            .iter()
-            .map(|&w| decode_point(w, self.lo[s], self.extent[s]))
-            .collect()
+        decode_words(&self.words[s * p..(s + 1) * p], self.lo[s], self.extent[s])
     }
 
     /// The largest absolute error of each axis over every coordinate, the pack decoded against
