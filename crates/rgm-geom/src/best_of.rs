@@ -208,11 +208,13 @@ impl<E: 'static> Clone for BestOf<E> {
 type Best = (f64, RigidTransform, usize);
 
 impl<E: From<GeomError> + ToString + Send> Registrar<E> for BestOf<E> {
-    /// `base`, refined when every candidate is.
+    /// `base`, refined as every candidate is when they are all refined alike.
     fn id(&self) -> MethodId {
+        let mut refiners = self.candidates.iter().map(|c| c.id().refiner);
+        let first = refiners.next().flatten();
         MethodId {
             base: self.base,
-            refined: !self.candidates.is_empty() && self.candidates.iter().all(|c| c.id().refined),
+            refiner: first.filter(|_| refiners.all(|r| r == first)),
         }
     }
 
@@ -399,10 +401,7 @@ mod tests {
 
     impl Registrar<GeomError> for Fixed {
         fn id(&self) -> MethodId {
-            MethodId {
-                base: self.name,
-                refined: false,
-            }
+            MethodId::plain(self.name)
         }
 
         fn register_with_progress(

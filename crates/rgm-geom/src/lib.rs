@@ -25,6 +25,7 @@ pub mod lockstep;
 pub mod metrics;
 pub mod normals;
 pub mod refine;
+pub mod refiner;
 pub mod registrar;
 pub mod registration;
 pub mod thinning;

@@ -35,6 +35,10 @@ use crate::normals::{estimate_normals, normal_at, NormalsConfig};
 use crate::registration::{nearest_each, score, RegistrationResult};
 use crate::{GeomError, KnnIndex, PointCloud, Result, RigidTransform};
 
+/// What a method refined by [`refine`] is called after its `+` (`fgr+icp`): it is ICP, point to
+/// plane and then point to point.
+pub const NAME: &str = "icp";
+
 /// Settings of [`refine`]. Distances are in the clouds' units; the defaults suit shapes scaled
 /// into the unit sphere, like ModelNet40's.
 #[derive(Clone, Debug, PartialEq)]

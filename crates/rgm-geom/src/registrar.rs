@@ -1,8 +1,8 @@
 //! One shape for every registration method: a [`Registrar`] maps a source cloud onto a target
 //! cloud, and the wrappers here compose registrars without knowing what they wrap —
-//! [`Refined`] (ICP refinement of its transform), [`Normalised`] (the pair centred and scaled
-//! into the unit-sphere frame), [`AtResolution`] (a last refinement at a dense pair's own
-//! point spacing), [`crate::best_of::BestOf`] (several methods, the best by a score that
+//! [`Refined`] (its transform improved by a [`Refiner`]), [`Normalised`] (the pair centred and
+//! scaled into the unit-sphere frame, for a registrar or a refiner), [`AtResolution`] (a last
+//! refinement of a dense pair only, at its own point spacing), [`crate::best_of::BestOf`] (several methods, the best by a score that
 //! needs no ground truth) and [`OnFirstUse`] (a method made only when a pair needs it).
 //!
 //! The trait is generic over its error so that methods above this crate (the RGM network)
@@ -16,34 +16,39 @@ use std::time::Instant;
 use crate::fgr::{self, FgrConfig, Progress};
 use crate::frame::{near, Normalisation};
 use crate::icp::{self, IcpConfig};
-use crate::refine::{self, RefineConfig, ResolutionConfig};
-use crate::registration::{score, RegistrationResult, Score};
+use crate::refine::RefineConfig;
+use crate::refiner::{AtSpacing, Refiner};
+use crate::registration::{score, RegistrationResult};
 use crate::thinning::DENSITY_POINTS;
 use crate::{GeomError, KnnIndex, PointCloud, RigidTransform};
 
-/// What users call a method: its base name and whether its transform is refined, spelled
-/// `base` or `base+icp` in the command line, the tables, the Python package and JSON.
+/// What users call a method: its base name and the refiner its transform went through, spelled
+/// `base` or `base+refiner` (`fgr+icp`) in the command line, the tables, the Python package
+/// and JSON. The wrappers compose it: [`Refined`] names its refiner.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct MethodId {
     /// The method without refinement (`icp`, `fgr`, `rgm`, `auto`).
     pub base: &'static str,
-    /// Followed by [`crate::refine`].
-    pub refined: bool,
+    /// The [`Refiner::name`] of its refinement, if it is refined.
+    pub refiner: Option<&'static str>,
 }
 
 impl MethodId {
-    /// What a refined method's name ends with.
-    pub const REFINED_SUFFIX: &'static str = "+icp";
+    /// The method `base`, not refined.
+    pub const fn plain(base: &'static str) -> Self {
+        Self {
+            base,
+            refiner: None,
+        }
+    }
 }
 
 impl fmt::Display for MethodId {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let suffix = if self.refined {
-            Self::REFINED_SUFFIX
-        } else {
-            ""
-        };
-        write!(f, "{}{suffix}", self.base)
+        match self.refiner {
+            Some(refiner) => write!(f, "{}+{refiner}", self.base),
+            None => f.write_str(self.base),
+        }
     }
 }
 
@@ -192,10 +197,7 @@ impl<E> Registrar<E> for Box<dyn DynRegistrar<E>> {
 /// Point-to-point ICP ([`crate::icp`]) from its configured initial transform.
 impl<E: From<GeomError>> Registrar<E> for IcpConfig {
     fn id(&self) -> MethodId {
-        MethodId {
-            base: icp::NAME,
-            refined: false,
-        }
+        MethodId::plain(icp::NAME)
     }
 
     fn register_with_progress(
@@ -216,10 +218,7 @@ impl<E: From<GeomError>> Registrar<E> for IcpConfig {
 /// Fast Global Registration on FPFH features ([`crate::fgr`]).
 impl<E: From<GeomError>> Registrar<E> for FgrConfig {
     fn id(&self) -> MethodId {
-        MethodId {
-            base: fgr::NAME,
-            refined: false,
-        }
+        MethodId::plain(fgr::NAME)
     }
 
     fn register_with_progress(
@@ -237,26 +236,26 @@ impl<E: From<GeomError>> Registrar<E> for FgrConfig {
     }
 }
 
-/// `inner`, then [`refine::refine`] (trimmed point-to-plane ICP, coarse to fine) from its
-/// transform, on the clouds `inner` was given. The result is scored at the refinement's finest
-/// distance; the iterations add up.
+/// `inner`, then `refiner` from its transform, on the clouds `inner` was given: named
+/// `inner`'s name `+` the refiner's. The result is the refiner's (scored as it scores); the
+/// iterations add up; `inner`'s candidates and doubt are kept.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Refined<R> {
+pub struct Refined<R, F = RefineConfig> {
     pub inner: R,
-    pub config: RefineConfig,
+    pub refiner: F,
 }
 
-impl<R> Refined<R> {
-    /// `inner` refined with `config`.
-    pub fn new(inner: R, config: RefineConfig) -> Self {
-        Self { inner, config }
+impl<R, F> Refined<R, F> {
+    /// `inner` refined by `refiner`.
+    pub fn new(inner: R, refiner: F) -> Self {
+        Self { inner, refiner }
     }
 }
 
-impl<E: From<GeomError>, R: Registrar<E>> Registrar<E> for Refined<R> {
+impl<E: From<GeomError>, R: Registrar<E>, F: Refiner> Registrar<E> for Refined<R, F> {
     fn id(&self) -> MethodId {
         MethodId {
-            refined: true,
+            refiner: Some(self.refiner.name()),
             ..self.inner.id()
         }
     }
@@ -271,17 +270,19 @@ impl<E: From<GeomError>, R: Registrar<E>> Registrar<E> for Refined<R> {
         let coarse = self
             .inner
             .register_with_progress(source, target, progress)?;
-        let fine = refine::refine(source, target, &coarse.result.t_target_source, &self.config)?;
-        let result = RegistrationResult {
-            iterations: coarse.result.iterations + fine.iterations,
-            ..fine
-        };
-        let distance = self.config.finest_distance();
+        let fine = self
+            .refiner
+            .refine(source, target, &coarse.result.t_target_source)?;
         Ok(Registration {
+            result: RegistrationResult {
+                iterations: coarse.result.iterations + fine.result.iterations,
+                ..fine.result
+            },
+            correspondences: fine.correspondences,
+            time_ms: elapsed_ms(start),
             candidates: coarse.candidates,
             chosen: coarse.chosen,
             doubt: coarse.doubt,
-            ..Registration::scored_within(result, source, target, distance, start)
         })
     }
 }
@@ -289,22 +290,20 @@ impl<E: From<GeomError>, R: Registrar<E>> Registrar<E> for Refined<R> {
 /// `inner` on the pair in the unit-sphere frame ([`Normalisation::of_pair`]), far outliers
 /// ([`near`]) left out; the result is given back in the caller's frame: transforms undone,
 /// correspondences indexing the clouds as given, RMSE in the caller's units, fitness counting
-/// the far outliers as source points without a partner.
+/// the far outliers as source points without a partner. It wraps a [`Registrar`] or a
+/// [`Refiner`] (whose starting transform is taken into the frame first).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Normalised<R> {
     pub inner: R,
 }
 
-impl<E: From<GeomError>, R: Registrar<E>> Registrar<E> for Normalised<R> {
-    fn id(&self) -> MethodId {
-        self.inner.id()
-    }
-
-    fn register_with_progress(
-        &mut self,
+impl<R> Normalised<R> {
+    /// `run` on the pair in its unit-sphere frame, given the frame; its registration given back
+    /// in the caller's frame.
+    fn in_frame<E>(
         source: &PointCloud,
         target: &PointCloud,
-        progress: &mut dyn FnMut(Progress),
+        run: impl FnOnce(&PointCloud, &PointCloud, &Normalisation) -> Result<Registration, E>,
     ) -> Result<Registration, E> {
         let start = Instant::now();
         // Each cloud's own steps side by side: its far outliers left out, then moved.
@@ -320,7 +319,7 @@ impl<E: From<GeomError>, R: Registrar<E>> Registrar<E> for Normalised<R> {
             || frame.source(&source_kept), // (N', 3)
             || frame.target(&target_kept), // (M', 3)
         );
-        let mut found = self.inner.register_with_progress(&fs, &ft, progress)?;
+        let mut found = run(&fs, &ft, &frame)?;
         let result = &mut found.result;
         result.t_target_source = frame.undo(&result.t_target_source);
         result.inlier_rmse *= frame.scale;
@@ -338,20 +337,53 @@ impl<E: From<GeomError>, R: Registrar<E>> Registrar<E> for Normalised<R> {
     }
 }
 
-/// `inner`, then, on a pair denser than [`DENSITY_POINTS`], [`refine::refine_at_resolution`]
-/// from its transform: point-to-plane stages at the clouds' own point spacing, finer than
-/// `coarser_than` (the finest distance `inner` refined at). A pair as sparse as the training
-/// clouds is returned as `inner` found it: its noise may exceed its spacing, and stages finer
-/// than the coarse ones would fit the noise. Rescored at `scoring_distance`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct AtResolution<R> {
-    pub inner: R,
-    pub coarser_than: f64,
-    pub scoring_distance: f64,
-    pub config: ResolutionConfig,
+impl<E: From<GeomError>, R: Registrar<E>> Registrar<E> for Normalised<R> {
+    fn id(&self) -> MethodId {
+        self.inner.id()
+    }
+
+    fn register_with_progress(
+        &mut self,
+        source: &PointCloud,
+        target: &PointCloud,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        let inner = &mut self.inner;
+        Self::in_frame(source, target, |fs, ft, _| {
+            inner.register_with_progress(fs, ft, progress)
+        })
+    }
 }
 
-impl<E: From<GeomError>, R: Registrar<E>> Registrar<E> for AtResolution<R> {
+impl<F: Refiner> Refiner for Normalised<F> {
+    fn name(&self) -> &'static str {
+        self.inner.name()
+    }
+
+    fn refine(
+        &self,
+        source: &PointCloud,
+        target: &PointCloud,
+        initial: &RigidTransform,
+    ) -> crate::Result<Registration> {
+        Self::in_frame(source, target, |fs, ft, frame| {
+            self.inner.refine(fs, ft, &frame.redo(initial))
+        })
+    }
+}
+
+/// `inner`, then, on a pair denser than [`DENSITY_POINTS`], `refiner` from its transform
+/// (by default [`AtSpacing`]: point-to-plane stages at the clouds' own point spacing, finer than
+/// the coarse refinement `inner` ran); named as `inner`, whose last refinement this completes.
+/// A pair as sparse as the training clouds is returned as `inner` found it: its noise may exceed
+/// its spacing, and stages finer than the coarse ones would fit the noise.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AtResolution<R, F = AtSpacing> {
+    pub inner: R,
+    pub refiner: F,
+}
+
+impl<E: From<GeomError>, R: Registrar<E>, F: Refiner> Registrar<E> for AtResolution<R, F> {
     fn id(&self) -> MethodId {
         self.inner.id()
     }
@@ -363,37 +395,25 @@ impl<E: From<GeomError>, R: Registrar<E>> Registrar<E> for AtResolution<R> {
         progress: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
         let start = Instant::now();
-        let mut found = self
+        let found = self
             .inner
             .register_with_progress(source, target, progress)?;
         if source.len().max(target.len()) <= DENSITY_POINTS {
             return Ok(found);
         }
-        let index = KnnIndex::new(&target.points);
-        let (transform, more) = refine::refine_at_resolution(
-            source,
-            target,
-            &index,
-            &found.result.t_target_source,
-            self.coarser_than,
-            &self.config,
-        )?;
-        found.correspondences.clear();
-        let scored: Score = score(
-            &source.points,
-            &index,
-            &transform,
-            self.scoring_distance,
-            Some(&mut found.correspondences),
-        );
-        found.result = RegistrationResult::scored(
-            transform,
-            found.result.iterations + more,
-            found.result.converged,
-            scored,
-        );
-        found.time_ms = elapsed_ms(start);
-        Ok(found)
+        let fine = self
+            .refiner
+            .refine(source, target, &found.result.t_target_source)?;
+        Ok(Registration {
+            result: RegistrationResult {
+                iterations: found.result.iterations + fine.result.iterations,
+                converged: found.result.converged && fine.result.converged,
+                ..fine.result
+            },
+            correspondences: fine.correspondences,
+            time_ms: elapsed_ms(start),
+            ..found
+        })
     }
 }
 
@@ -493,23 +513,17 @@ mod tests {
         let count = made.clone();
         let fails = Arc::new(std::sync::atomic::AtomicBool::new(true));
         let failing = fails.clone();
-        let mut lazy = OnFirstUse::new(
-            MethodId {
-                base: "fgr",
-                refined: false,
-            },
-            move || {
-                count.fetch_add(1, Ordering::SeqCst);
-                if failing.load(Ordering::SeqCst) {
-                    Err(GeomError::Degenerate {
-                        op: "make",
-                        why: "not yet".into(),
-                    })
-                } else {
-                    Ok(FgrConfig::default())
-                }
-            },
-        );
+        let mut lazy = OnFirstUse::new(MethodId::plain("fgr"), move || {
+            count.fetch_add(1, Ordering::SeqCst);
+            if failing.load(Ordering::SeqCst) {
+                Err(GeomError::Degenerate {
+                    op: "make",
+                    why: "not yet".into(),
+                })
+            } else {
+                Ok(FgrConfig::default())
+            }
+        });
         // Named and copied without being made.
         assert_eq!(Registrar::<GeomError>::id(&lazy).to_string(), "fgr");
         let _copy = lazy.clone();
@@ -545,6 +559,56 @@ mod tests {
             Registrar::<GeomError>::id(&IcpConfig::default()).to_string(),
             "icp"
         );
+    }
+
+    /// A new refinement is one type and one line where methods are composed: named by the
+    /// composition, started from the inner method's transform, its result the registration's.
+    #[test]
+    fn a_new_refiner_is_one_type_and_one_line() {
+        /// Records the transform it starts from and hands back the identity.
+        #[derive(Default)]
+        struct Reset {
+            started_from: std::sync::Mutex<Option<RigidTransform>>,
+        }
+        impl Refiner for Reset {
+            fn name(&self) -> &'static str {
+                "reset"
+            }
+            fn refine(
+                &self,
+                _: &PointCloud,
+                _: &PointCloud,
+                initial: &RigidTransform,
+            ) -> crate::Result<Registration> {
+                *self.started_from.lock().unwrap() = Some(*initial);
+                let result = RegistrationResult {
+                    t_target_source: RigidTransform::identity(),
+                    iterations: 1,
+                    converged: true,
+                    inlier_count: 0,
+                    fitness: 0.0,
+                    inlier_rmse: 0.0,
+                };
+                Ok(Registration::single(result, Vec::new(), Instant::now()))
+            }
+        }
+        let (source, target) = curve_pair();
+        let mut method = Refined::new(FgrConfig::default(), Reset::default());
+        assert_eq!(Registrar::<GeomError>::id(&method).to_string(), "fgr+reset");
+        let found = Registrar::<GeomError>::register(&mut method, &source, &target).unwrap();
+        let fgr = Registrar::<GeomError>::register(&mut FgrConfig::default(), &source, &target)
+            .unwrap()
+            .result;
+        let started_from = method.refiner.started_from.lock().unwrap().unwrap();
+        assert_eq!(started_from, fgr.t_target_source);
+        assert_eq!(found.result.t_target_source, RigidTransform::identity());
+        assert_eq!(found.result.iterations, fgr.iterations + 1);
+        // Point-to-point ICP as a refiner: `fgr+p2p`, and it lands on the true pose.
+        let mut method = Refined::new(FgrConfig::default(), IcpConfig::default());
+        assert_eq!(Registrar::<GeomError>::id(&method).to_string(), "fgr+p2p");
+        let found = Registrar::<GeomError>::register(&mut method, &source, &target).unwrap();
+        let angle = found.result.t_target_source.rotation_angle_deg();
+        assert!((angle - 5.0).abs() < 0.01, "{angle}°");
     }
 
     #[test]

@@ -9,8 +9,8 @@ use rgm_geom::metrics::{MetricsSummary, PairMetrics};
 use rgm_geom::RigidTransform;
 use serde::Serialize;
 
-use rgm_geom::frame::Normalisation;
-use rgm_geom::refine::{self, RefineConfig};
+use rgm_geom::refiner::Refiner;
+use rgm_geom::registrar::Normalised;
 use rgm_geom::Registrar;
 
 use crate::Method;
@@ -65,26 +65,22 @@ impl PairRecord {
         })
     }
 
-    /// This record's transform refined as `rgm+icp` refines RGM's (in the network's frame, on
-    /// the full clouds of `pair`), scored: the record `rgm eval --refine` would give, without
-    /// running the network again (its correspondences the refinement's inliers). Its time adds
-    /// the refinement's to this record's. A failed record stays as it is; a failed refinement is
-    /// recorded as a failure (the identity), as the pipeline reports it.
-    pub fn refined(&self, pair: &Pair, config: &RefineConfig) -> rgm_geom::Result<Self> {
+    /// This record's transform refined by `refiner` as `rgm+icp` composes it
+    /// (`Normalised<Refined<RgmRegistrar>>`: in the network's frame), scored: the record
+    /// `rgm eval --refine` would give, without running the network again (its correspondences
+    /// the refinement's inliers). Its time adds the refinement's to this record's. A failed
+    /// record stays as it is; a failed refinement is recorded as a failure (the identity), as
+    /// the pipeline reports it.
+    pub fn refined(&self, pair: &Pair, refiner: &impl Refiner) -> rgm_geom::Result<Self> {
         if self.failure.is_some() {
             return Ok(self.clone());
         }
         let start = Instant::now();
-        let frame = Normalisation::of_pair(&pair.source, &pair.target);
-        let refined = refine::refine(
-            &frame.source(&pair.source),
-            &frame.target(&pair.target),
-            &frame.redo(&self.transform),
-            config,
-        );
+        let refined =
+            Normalised { inner: refiner }.refine(&pair.source, &pair.target, &self.transform);
         let time_ms = self.time_ms + start.elapsed().as_secs_f64() * 1e3;
         let (transform, correspondences, failure) = match refined {
-            Ok(r) => (frame.undo(&r.t_target_source), r.inlier_count, None),
+            Ok(r) => (r.result.t_target_source, r.result.inlier_count, None),
             Err(e) => (
                 RigidTransform::identity(),
                 self.correspondences,

@@ -32,9 +32,9 @@ impl Method {
         self.id().to_string()
     }
 
-    /// Whether the method's transform is refined by [`rgm_geom::refine`].
+    /// Whether the method's transform is refined ([`rgm_geom::refiner`]).
     pub fn is_refined(&self) -> bool {
-        self.id().refined
+        self.id().refiner.is_some()
     }
 }
 

@@ -10,7 +10,11 @@
 //! | `fgr`, `fgr+icp` | [`FgrConfig`], [`Refined`]`<FgrConfig>` |
 //! | `rgm`, `rgm+icp` | [`Normalised`]`<RgmRegistrar>`, `Normalised<Refined<RgmRegistrar>>` |
 //! | `auto` | `Normalised<BestOf[FgrConfig, Normalised<RgmRegistrar>]>` |
-//! | `auto+icp` | `Normalised<AtResolution<BestOf[Refined<FgrConfig>, Refined<Normalised<RgmRegistrar>>]>>` |
+//! | `auto+icp` | `Normalised<AtResolution<BestOf[Refined<FgrConfig>, Refined<Normalised<RgmRegistrar>>], AtSpacing>>` |
+//!
+//! `Refined<R>` refines with [`RefineConfig`] (`+icp`); any other [`rgm_geom::refiner::Refiner`]
+//! composes the same way (`Refined::new(FgrConfig::default(), IcpConfig::default())` is
+//! `fgr+p2p`).
 //!
 //! RGM refines in the network's frame (distances in unit-sphere units for any input); `auto`
 //! runs both methods in that frame, on two thinnings of a dense pair, as a cascade: FGR first,
@@ -26,6 +30,7 @@ use rgm_geom::best_of::{Acceptance, BestOf, ACCEPT, SCORE_DISTANCE};
 use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::icp::{self, IcpConfig};
 use rgm_geom::refine::{RefineConfig, ResolutionConfig};
+use rgm_geom::refiner::AtSpacing;
 use rgm_geom::registrar::{AtResolution, DynRegistrar, Normalised, OnFirstUse, Refined, Registrar};
 use rgm_geom::thinning::Thinning;
 
@@ -312,9 +317,11 @@ where
     Method::new(Normalised {
         inner: AtResolution {
             inner: candidates,
-            coarser_than: finest,
-            scoring_distance: finest,
-            config: ResolutionConfig::default(),
+            refiner: AtSpacing {
+                coarser_than: finest,
+                scoring_distance: finest,
+                config: ResolutionConfig::default(),
+            },
         },
     })
 }

@@ -272,10 +272,7 @@ fn kabsch_of(
 
 impl RgmRegistrar {
     /// What every RGM registrar is called: the network alone, unrefined.
-    pub const ID: MethodId = MethodId {
-        base: NAME,
-        refined: false,
-    };
+    pub const ID: MethodId = MethodId::plain(NAME);
 
     /// A registrar around `network`.
     pub fn new(network: Rgm<f32>, config: PipelineConfig) -> Self {

@@ -12,6 +12,7 @@
 //! ([`restore_from_history`]). This file chooses the rows and writes the report.
 
 use std::collections::BTreeMap;
+use std::fmt::Debug;
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -21,6 +22,7 @@ use anyhow::{Context, Result};
 use rgm_cli::EvaluationBar;
 use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
 use rgm_geom::refine::RefineConfig;
+use rgm_geom::refiner::Refiner;
 use rgm_geom::registrar::{MethodId, Normalised};
 use rgm_model::evaluate::{Resumable, TestPairs};
 use rgm_model::weights::{weights_dir, Manifest, ModelEntry, Variant, WeightsFile};
@@ -130,11 +132,12 @@ struct Candidate {
 
 impl Candidate {
     /// The name, stem and inputs of its refined row (`<name>+icp`).
-    fn refined(&self, config: &RefineConfig) -> (String, String, String) {
+    fn refined(&self, refiner: &(impl Refiner + Debug)) -> (String, String, String) {
+        let suffix = refiner.name();
         (
-            format!("{}+icp", self.name),
-            format!("{}-icp", self.stem),
-            format!("{}; refined with {config:?}", self.inputs),
+            format!("{}+{suffix}", self.name),
+            format!("{}-{suffix}", self.stem),
+            format!("{}; refined with {refiner:?}", self.inputs),
         )
     }
 }
@@ -333,7 +336,7 @@ fn model_inputs(entry: &ModelEntry) -> Result<String> {
 fn default_row() -> String {
     MethodId {
         base: rgm_model::options::AUTO,
-        refined: true,
+        refiner: Some(rgm_geom::refine::NAME),
     }
     .to_string()
 }
@@ -390,14 +393,14 @@ fn candidates(set: TestSet, manifest: &Manifest, only: &[String]) -> Result<Vec<
 /// An error naming the rows of `only` that no test set has.
 fn check_only(manifest: &Manifest, only: &[String]) -> Result<()> {
     let classical = [
-        (MethodName::Icp, false),
-        (MethodName::Fgr, false),
-        (MethodName::Fgr, true),
+        (MethodName::Icp, None),
+        (MethodName::Fgr, None),
+        (MethodName::Fgr, Some(rgm_geom::refine::NAME)),
     ]
-    .map(|(name, refined)| {
+    .map(|(name, refiner)| {
         MethodId {
             base: name.name(),
-            refined,
+            refiner,
         }
         .to_string()
     });

@@ -21,7 +21,7 @@ use flate2::write::GzEncoder;
 use flate2::Compression;
 use rayon::prelude::*;
 use rgm_data::{Pair, PairGenerator, Shape};
-use rgm_geom::refine::RefineConfig;
+use rgm_geom::refiner::Refiner;
 use rgm_geom::{Matrix4, RigidTransform};
 use serde::{Deserialize, Serialize};
 
@@ -138,7 +138,7 @@ impl Resumable {
         path: &Path,
         inputs: &str,
         plain: &[PairRecord],
-        config: &RefineConfig,
+        refiner: &impl Refiner,
         pairs: TestPairs,
         progress: &dyn Progress,
     ) -> Result<Vec<PairRecord>, EvaluateError> {
@@ -153,7 +153,7 @@ impl Resumable {
             || (),
             |(), i| {
                 let start = plain[indices.binary_search(&i).expect("an index of plain")];
-                Ok(start.refined(&pairs.pair(i)?, config)?)
+                Ok(start.refined(&pairs.pair(i)?, refiner)?)
             },
         )
     }
@@ -415,6 +415,7 @@ mod tests {
 
     use super::*;
     use crate::{MethodName, MethodOptions};
+    use rgm_geom::refine::RefineConfig;
 
     /// Counts what a [`Progress`] is told.
     #[derive(Default)]
