@@ -4,9 +4,13 @@
 //! Methods fail on different pairs (RGM's network is robust to partial overlap but reads
 //! rotationally symmetric shapes ambiguously; FGR's features pin those down on full clouds but
 //! fail wildly on many partial ones), so the better of two is right more often than either.
-//! The score and its distance were chosen on validation pairs (`docs/training/README.md`,
+//! The composites here run candidate methods and judge them so: [`BestOf`] side by side,
+//! [`Cascade`] the cheap one first and the rest only when its result is in doubt
+//! ([`Acceptance`]); [`crate::thinning::Thinned`] runs either on several thinnings of a dense
+//! pair. The score and its distance were chosen on validation pairs (`docs/training/README.md`,
 //! session 6: `cargo run --release -p rgm-benches --example default_study`).
 
+use std::sync::OnceLock;
 use std::time::Instant;
 
 use rayon::prelude::*;
@@ -14,7 +18,6 @@ use rayon::prelude::*;
 use crate::fgr::Progress;
 use crate::registrar::{elapsed_ms, Candidate, DynRegistrar, MethodId, Registrar, Registration};
 use crate::registration::{score, RegistrationResult};
-use crate::thinning::{thinned, Thinning, DENSITY_POINTS};
 use crate::{GeomError, KnnIndex, PointCloud, RigidTransform};
 
 /// Distance (unit-sphere units) within which a moved point counts as overlapping the other
@@ -27,7 +30,7 @@ pub const SCORE_DISTANCE: f64 = 0.02;
 pub const MIN_OVERLAP: f64 = 0.1;
 
 /// When `rgm register`'s default takes its cheap candidate (FGR) without running the network
-/// ([`BestOf::accept`]): the cheapest on validation pairs that kept the recall and the share off
+/// ([`Cascade::accept`]): the cheapest on validation pairs that kept the recall and the share off
 /// by more than 45° of running both within 0.1 points
 /// (`docs/training/default-study/cascade-1980-validation.md`).
 pub const ACCEPT: Acceptance = Acceptance {
@@ -46,7 +49,7 @@ pub const WHOLE_DISTANCE: f64 = 0.05;
 /// (`docs/training/default-study/cascade-whole-overlap.md`).
 pub const WHOLE_OVERLAP: f64 = 1.98;
 
-/// When a cascade's result is good enough to end it ([`BestOf::accept`]).
+/// When a cascade's result is good enough to end it ([`Cascade::accept`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Acceptance {
     /// The least [`overlap_score`] taken.
@@ -166,29 +169,283 @@ pub fn agree(a: &RigidTransform, b: &RigidTransform) -> bool {
         && (a.translation - b.translation).norm() < distance
 }
 
-/// Every candidate on the pair, the best by [`overlap_score`] returned (ties to the earlier
-/// candidate). A pair denser than [`DENSITY_POINTS`] can be thinned many ways, none of them the
-/// sampling the methods were tuned on: the candidates run on each of `thinnings` in turn, all
-/// scored alike on the clouds as given, until the candidates of one thinning agree ([`agree`]),
-/// which leaves nothing for the next to fix. A pair no denser runs once, as it is.
-///
-/// With an [`Acceptance`] of a finite score it is a cascade: the first candidate runs alone, and
-/// the others only when its result is not taken.
-///
-/// Lengths are in unit-sphere units: wrap it in [`crate::registrar::Normalised`] for pairs of
-/// any size. The result is scored at `scoring_distance`; its correspondences are the source
-/// points within that distance of the target.
+/// The pair a composite's candidates are judged on (the clouds as its caller gave them, with
+/// their trees) and the best result an earlier stage found there. The candidates may run on a
+/// thinned version of the pair ([`crate::thinning::Thinned`]); they are scored on this one.
+pub struct Judge<'a> {
+    pub source: (&'a PointCloud, &'a KnnIndex),
+    pub target: (&'a PointCloud, &'a KnnIndex),
+    /// The trees of the thinned clouds the candidates run on, built when an [`Acceptance`]
+    /// first needs them; `None` when they run on the judged clouds themselves.
+    thinned_trees: Option<OnceLock<(KnnIndex, KnnIndex)>>,
+    /// The best (score, transform) found before: a candidate wins only by beating it, and an
+    /// acceptance weighs it as a result of this stage.
+    pub before: Option<(f64, RigidTransform)>,
+}
+
+impl<'a> Judge<'a> {
+    /// A judge of candidates that run on the judged clouds, with nothing found before.
+    pub fn new(
+        source: (&'a PointCloud, &'a KnnIndex),
+        target: (&'a PointCloud, &'a KnnIndex),
+    ) -> Self {
+        Self {
+            source,
+            target,
+            thinned_trees: None,
+            before: None,
+        }
+    }
+
+    /// A judge of candidates that run on a thinned version of the judged clouds, after `before`.
+    pub fn of_thinned(
+        source: (&'a PointCloud, &'a KnnIndex),
+        target: (&'a PointCloud, &'a KnnIndex),
+        before: Option<(f64, RigidTransform)>,
+    ) -> Self {
+        Self {
+            thinned_trees: Some(OnceLock::new()),
+            before,
+            ..Self::new(source, target)
+        }
+    }
+
+    /// `transform`'s [`overlap_score`] on the judged pair.
+    pub fn score(&self, transform: &RigidTransform) -> f64 {
+        overlap_score(self.source, self.target, transform)
+    }
+
+    /// Whether `accept` takes the best of `tally` (or of what came before), its turned share
+    /// measured on the clouds the candidates ran on (`source`, `target`).
+    fn takes(
+        &self,
+        accept: &Acceptance,
+        tally: &Tally,
+        source: &PointCloud,
+        target: &PointCloud,
+    ) -> bool {
+        tally.best.as_ref().is_some_and(|best| {
+            best.score >= accept.score && {
+                let (si, ti) = match &self.thinned_trees {
+                    Some(trees) => {
+                        let (si, ti) = trees.get_or_init(|| {
+                            (KnnIndex::new(&source.points), KnnIndex::new(&target.points))
+                        });
+                        (si, ti)
+                    }
+                    None => (self.source.1, self.target.1),
+                };
+                accept.takes(best.score, (source, si), (target, ti), &best.transform)
+            }
+        })
+    }
+}
+
+/// What a composite's candidates found on one pair, judged by a [`Judge`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Outcome {
+    /// Every candidate that ran, in order, each with its score on the judged pair.
+    pub candidates: Vec<Candidate>,
+    /// The best candidate's index in `candidates` and its iterations, when one beat the
+    /// judge's `before` (ties go to the earlier).
+    pub best: Option<(usize, usize)>,
+    /// Whether an acceptance took the best result: nothing after it needs to run.
+    pub settled: bool,
+}
+
+/// A method made of candidate methods that runs them on the clouds it is given and judges their
+/// results with a [`Judge`], which may hold other clouds: the thinning around it
+/// ([`crate::thinning::Thinned`]) judges on the pair as given.
+pub trait Composite<E>: Registrar<E> {
+    /// The candidates run on `source` and `target`, judged by `judge`.
+    fn run_judged(&mut self, source: &PointCloud, target: &PointCloud, judge: &Judge) -> Outcome;
+
+    /// The distance at which the chosen result is scored and its correspondences found.
+    fn scoring_distance(&self) -> f64;
+}
+
+/// A result that wins: its score, transform, iterations, and its index among the candidates
+/// (`None` when it came before them).
+struct Winner {
+    score: f64,
+    transform: RigidTransform,
+    iterations: usize,
+    index: Option<usize>,
+}
+
+/// The candidates of one composite's run so far and the best result.
+struct Tally {
+    candidates: Vec<Candidate>,
+    best: Option<Winner>,
+}
+
+impl Tally {
+    fn new(judge: &Judge) -> Self {
+        Self {
+            candidates: Vec::new(),
+            best: judge.before.map(|(score, transform)| Winner {
+                score,
+                transform,
+                iterations: 0,
+                index: None,
+            }),
+        }
+    }
+
+    /// `wave` run side by side on `source` and `target`, each on a core of its own when there
+    /// are cores to spare, then scored in their order.
+    fn run<E: ToString + Send>(
+        &mut self,
+        wave: &mut [Box<dyn DynRegistrar<E>>],
+        source: &PointCloud,
+        target: &PointCloud,
+        judge: &Judge,
+    ) {
+        let outcomes: Vec<(Result<Registration, E>, f64)> = wave
+            .par_iter_mut()
+            .map(|candidate| {
+                let start = Instant::now();
+                let outcome = candidate.register(source, target);
+                (outcome, elapsed_ms(start))
+            })
+            .collect();
+        for (candidate, (outcome, time_ms)) in wave.iter().zip(outcomes) {
+            let method = candidate.id().to_string();
+            match outcome {
+                Ok(registration) => {
+                    let transform = registration.result.t_target_source;
+                    let score = judge.score(&transform);
+                    // Ties go to the earlier candidate.
+                    if self.best.as_ref().is_none_or(|b| score > b.score) {
+                        self.best = Some(Winner {
+                            score,
+                            transform,
+                            iterations: registration.result.iterations,
+                            index: Some(self.candidates.len()),
+                        });
+                    }
+                    self.candidates.push(Candidate {
+                        method,
+                        t_target_source: transform,
+                        score: Some(score),
+                        failure: None,
+                        time_ms,
+                    });
+                }
+                Err(err) => self.candidates.push(Candidate {
+                    method,
+                    t_target_source: RigidTransform::identity(),
+                    score: None,
+                    failure: Some(err.to_string()),
+                    time_ms,
+                }),
+            }
+        }
+    }
+
+    fn outcome(self, settled: bool) -> Outcome {
+        let best = self
+            .best
+            .and_then(|b| b.index.map(|index| (index, b.iterations)));
+        Outcome {
+            candidates: self.candidates,
+            best,
+            settled,
+        }
+    }
+}
+
+/// A composite's id: `base`, refined as every candidate is when they are all refined alike.
+fn composite_id<'c, E: 'c>(
+    base: &'static str,
+    candidates: impl IntoIterator<Item = &'c Box<dyn DynRegistrar<E>>>,
+) -> MethodId {
+    let mut refiners = candidates.into_iter().map(|c| c.id().refiner);
+    let first = refiners.next().flatten();
+    MethodId {
+        base,
+        refiner: first.filter(|_| refiners.all(|r| r == first)),
+    }
+}
+
+/// The registration of a composite's `outcome` on the judged pair: the best candidate (`best`:
+/// its index among `candidates`), scored at `scoring_distance` with its correspondences;
+/// doubted when it overlaps less than [`MIN_OVERLAP`]; an error when every candidate failed.
+pub fn conclude<E: From<GeomError>>(
+    judge: &Judge,
+    candidates: Vec<Candidate>,
+    best: Option<(usize, usize)>,
+    scoring_distance: f64,
+    start: Instant,
+) -> Result<Registration, E> {
+    let Some((chosen, iterations)) = best else {
+        let why: Vec<String> = candidates
+            .iter()
+            .map(|c| format!("{}: {}", c.method, c.failure.as_deref().unwrap_or("?")))
+            .collect();
+        return Err(GeomError::AllCandidatesFailed(why.join("; ")).into());
+    };
+    let winner = &candidates[chosen];
+    let (transform, value) = (winner.t_target_source, winner.score.unwrap_or(0.0));
+    let doubt = (value < MIN_OVERLAP).then(|| {
+        let method = &winner.method;
+        format!(
+            "the best candidate, {method}, overlaps too little (score {value:.3} < {MIN_OVERLAP}): \
+             the clouds may not overlap, or every method failed on them"
+        )
+    });
+    let mut correspondences = Vec::new();
+    let scored = score(
+        &judge.source.0.points,
+        judge.target.1,
+        &transform,
+        scoring_distance,
+        Some(&mut correspondences),
+    );
+    Ok(Registration {
+        result: RegistrationResult::scored(transform, iterations, true, scored),
+        correspondences,
+        time_ms: elapsed_ms(start),
+        candidates,
+        chosen: Some(chosen),
+        doubt,
+    })
+}
+
+/// `composite` on the pair as given, judged there.
+fn register_composite<E: From<GeomError>>(
+    composite: &mut impl Composite<E>,
+    source: &PointCloud,
+    target: &PointCloud,
+) -> Result<Registration, E> {
+    let start = Instant::now();
+    let (source_index, target_index) = rayon::join(
+        || KnnIndex::new(&source.points),
+        || KnnIndex::new(&target.points),
+    );
+    let judge = Judge::new((source, &source_index), (target, &target_index));
+    let outcome = composite.run_judged(source, target, &judge);
+    conclude(
+        &judge,
+        outcome.candidates,
+        outcome.best,
+        composite.scoring_distance(),
+        start,
+    )
+}
+
+/// Every candidate on the pair, side by side, the best by [`overlap_score`] returned (ties to
+/// the earlier candidate). Lengths are in unit-sphere units: wrap it in
+/// [`crate::registrar::Normalised`] for pairs of any size. The result is scored at
+/// `scoring_distance`; its correspondences are the source points within that distance of the
+/// target.
 #[derive(Debug)]
 pub struct BestOf<E> {
     /// The name of the composite (`auto`).
     pub base: &'static str,
-    /// In the order they run and win ties: the cheap one first in a cascade.
+    /// In the order they win ties.
     pub candidates: Vec<Box<dyn DynRegistrar<E>>>,
-    pub thinnings: Vec<Thinning>,
     pub scoring_distance: f64,
-    /// When a result is taken as it is, and nothing after it runs; [`Acceptance::NEVER`] runs
-    /// every candidate, side by side.
-    pub accept: Acceptance,
 }
 
 impl<E: 'static> Clone for BestOf<E> {
@@ -196,26 +453,27 @@ impl<E: 'static> Clone for BestOf<E> {
         Self {
             base: self.base,
             candidates: self.candidates.clone(),
-            thinnings: self.thinnings.clone(),
             scoring_distance: self.scoring_distance,
-            accept: self.accept,
         }
     }
 }
 
-/// A candidate's outcome in the caller's frame of [`BestOf::register`]: its score, transform
-/// and iterations.
-type Best = (f64, RigidTransform, usize);
+impl<E: From<GeomError> + ToString + Send> Composite<E> for BestOf<E> {
+    fn run_judged(&mut self, source: &PointCloud, target: &PointCloud, judge: &Judge) -> Outcome {
+        let mut tally = Tally::new(judge);
+        tally.run(&mut self.candidates, source, target, judge);
+        tally.outcome(false)
+    }
+
+    fn scoring_distance(&self) -> f64 {
+        self.scoring_distance
+    }
+}
 
 impl<E: From<GeomError> + ToString + Send> Registrar<E> for BestOf<E> {
     /// `base`, refined as every candidate is when they are all refined alike.
     fn id(&self) -> MethodId {
-        let mut refiners = self.candidates.iter().map(|c| c.id().refiner);
-        let first = refiners.next().flatten();
-        MethodId {
-            base: self.base,
-            refiner: first.filter(|_| refiners.all(|r| r == first)),
-        }
+        composite_id(self.base, &self.candidates)
     }
 
     fn register_with_progress(
@@ -224,139 +482,74 @@ impl<E: From<GeomError> + ToString + Send> Registrar<E> for BestOf<E> {
         target: &PointCloud,
         _: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
-        let start = Instant::now();
-        let (source_index, target_index) = rayon::join(
-            || KnnIndex::new(&source.points),
-            || KnnIndex::new(&target.points),
-        );
-        let dense = source.len().max(target.len()) > DENSITY_POINTS;
-        let thinnings = if dense {
-            &self.thinnings[..]
-        } else {
-            &self.thinnings[..1.min(self.thinnings.len())]
-        };
-        // The candidates that run together: all of them, or in a cascade the first alone and
-        // then the rest.
-        let n = self.candidates.len();
-        let split = if self.accept.score.is_finite() {
-            n.min(1)
-        } else {
-            n
-        };
-        let mut candidates = Vec::new();
-        let mut best: Option<Best> = None;
-        let mut chosen = None;
-        'thinnings: for &how in thinnings {
-            let (s, t) = rayon::join(|| thinned(source, how), || thinned(target, how));
-            // The thinned pair's trees, built once a dense pair's result is worth testing; a
-            // pair that is not thinned has its own already.
-            let thinned_trees = std::cell::OnceCell::new();
-            let mut found = Vec::with_capacity(n); // this thinning's transforms
-            for wave in [0..split, split..n] {
-                if wave.is_empty() {
-                    continue;
-                }
-                // The candidates of a wave are independent until scored: they run side by
-                // side, each on a core of its own when there are cores to spare, and are
-                // scored in their order.
-                let outcomes: Vec<(Result<Registration, E>, f64)> = self.candidates[wave.clone()]
-                    .par_iter_mut()
-                    .map(|candidate| {
-                        let start = Instant::now();
-                        let outcome = candidate.register(&s, &t);
-                        (outcome, elapsed_ms(start))
-                    })
-                    .collect();
-                for (candidate, (outcome, time_ms)) in self.candidates[wave].iter().zip(outcomes) {
-                    let method = format!("{}{}", candidate.id(), how.suffix());
-                    match outcome {
-                        Ok(registration) => {
-                            let transform = registration.result.t_target_source;
-                            found.push(transform);
-                            let value = overlap_score(
-                                (source, &source_index),
-                                (target, &target_index),
-                                &transform,
-                            );
-                            // Ties go to the earlier candidate, and the earlier thinning.
-                            if best.is_none_or(|(b, _, _)| value > b) {
-                                best = Some((value, transform, registration.result.iterations));
-                                chosen = Some(candidates.len());
-                            }
-                            candidates.push(Candidate {
-                                method,
-                                t_target_source: transform,
-                                score: Some(value),
-                                failure: None,
-                                time_ms,
-                            });
-                        }
-                        Err(err) => candidates.push(Candidate {
-                            method,
-                            t_target_source: RigidTransform::identity(),
-                            score: None,
-                            failure: Some(err.to_string()),
-                            time_ms,
-                        }),
-                    }
-                }
-                let taken = best.is_some_and(|(b, found, _)| {
-                    b >= self.accept.score && {
-                        let (si, ti) = if dense {
-                            let (si, ti) = thinned_trees.get_or_init(|| {
-                                (KnnIndex::new(&s.points), KnnIndex::new(&t.points))
-                            });
-                            (si, ti)
-                        } else {
-                            (&source_index, &target_index)
-                        };
-                        self.accept.takes(b, (&s, si), (&t, ti), &found)
-                    }
-                });
-                if taken {
-                    break 'thinnings;
-                }
-            }
-            if found.len() > 1 && found[1..].iter().all(|t| agree(&found[0], t)) {
-                break;
-            }
+        register_composite(self, source, target)
+    }
+}
+
+/// `first` alone, and `rest` (side by side) only when `accept` does not take the best result
+/// so far; the best of all that ran by [`overlap_score`] returned, as [`BestOf`] returns it.
+/// The cheap method goes first: the others cost their time only on the pairs it leaves in
+/// doubt.
+#[derive(Debug)]
+pub struct Cascade<E> {
+    /// The name of the composite (`auto`).
+    pub base: &'static str,
+    pub first: Box<dyn DynRegistrar<E>>,
+    pub rest: Vec<Box<dyn DynRegistrar<E>>>,
+    /// When a result is taken as it is, and nothing after it runs.
+    pub accept: Acceptance,
+    pub scoring_distance: f64,
+}
+
+impl<E: 'static> Clone for Cascade<E> {
+    fn clone(&self) -> Self {
+        Self {
+            base: self.base,
+            first: self.first.clone(),
+            rest: self.rest.clone(),
+            accept: self.accept,
+            scoring_distance: self.scoring_distance,
         }
-        let Some((value, transform, iterations)) = best else {
-            let why: Vec<String> = candidates
-                .iter()
-                .map(|c| format!("{}: {}", c.method, c.failure.as_deref().unwrap_or("?")))
-                .collect();
-            return Err(GeomError::AllCandidatesFailed(why.join("; ")).into());
-        };
-        let doubt = (value < MIN_OVERLAP).then(|| {
-            let method = &candidates[chosen.expect("a best candidate is chosen")].method;
-            format!(
-                "the best candidate, {method}, overlaps too little (score {value:.3} < {MIN_OVERLAP}): \
-                 the clouds may not overlap, or every method failed on them"
-            )
-        });
-        let mut correspondences = Vec::new();
-        let scored = score(
-            &source.points,
-            &target_index,
-            &transform,
-            self.scoring_distance,
-            Some(&mut correspondences),
-        );
-        Ok(Registration {
-            result: RegistrationResult::scored(transform, iterations, true, scored),
-            correspondences,
-            time_ms: elapsed_ms(start),
-            candidates,
-            chosen,
-            doubt,
-        })
+    }
+}
+
+impl<E: From<GeomError> + ToString + Send> Composite<E> for Cascade<E> {
+    fn run_judged(&mut self, source: &PointCloud, target: &PointCloud, judge: &Judge) -> Outcome {
+        let mut tally = Tally::new(judge);
+        tally.run(std::slice::from_mut(&mut self.first), source, target, judge);
+        let mut settled = judge.takes(&self.accept, &tally, source, target);
+        if !settled && !self.rest.is_empty() {
+            tally.run(&mut self.rest, source, target, judge);
+            settled = judge.takes(&self.accept, &tally, source, target);
+        }
+        tally.outcome(settled)
+    }
+
+    fn scoring_distance(&self) -> f64 {
+        self.scoring_distance
+    }
+}
+
+impl<E: From<GeomError> + ToString + Send> Registrar<E> for Cascade<E> {
+    /// `base`, refined as every stage is when they are all refined alike.
+    fn id(&self) -> MethodId {
+        composite_id(self.base, std::iter::once(&self.first).chain(&self.rest))
+    }
+
+    fn register_with_progress(
+        &mut self,
+        source: &PointCloud,
+        target: &PointCloud,
+        _: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        register_composite(self, source, target)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testing::Fixed;
     use crate::{Point3, Vector3};
 
     #[test]
@@ -374,53 +567,43 @@ mod tests {
         assert!(!agree(&a, &turn(10.0, 0.121)));
     }
 
-    /// A method that answers every pair with one transform, and counts its calls.
-    #[derive(Clone)]
-    struct Fixed {
-        name: &'static str,
-        transform: RigidTransform,
-        calls: std::sync::Arc<std::sync::atomic::AtomicUsize>,
-    }
-
-    impl Fixed {
-        fn new(name: &'static str, shift: f64) -> Self {
-            Self {
-                name,
-                transform: RigidTransform::new(
-                    crate::Matrix3::identity(),
-                    Vector3::new(shift, 0.0, 0.0),
-                ),
-                calls: Default::default(),
-            }
-        }
-
-        fn calls(&self) -> usize {
-            self.calls.load(std::sync::atomic::Ordering::SeqCst)
-        }
-    }
-
-    impl Registrar<GeomError> for Fixed {
-        fn id(&self) -> MethodId {
-            MethodId::plain(self.name)
-        }
-
-        fn register_with_progress(
-            &mut self,
-            _: &PointCloud,
-            _: &PointCloud,
-            _: &mut dyn FnMut(Progress),
-        ) -> Result<Registration, GeomError> {
-            self.calls.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
-            let result = RegistrationResult {
-                t_target_source: self.transform,
-                iterations: 0,
-                converged: true,
-                inlier_count: 0,
-                fitness: 0.0,
-                inlier_rmse: 0.0,
-            };
-            Ok(Registration::single(result, Vec::new(), Instant::now()))
-        }
+    #[test]
+    fn best_of_runs_every_candidate_and_the_best_wins() {
+        let line = PointCloud::new(
+            (0..10)
+                .map(|i| Point3::new(0.1 * i as f64, 0.0, 0.0))
+                .collect(),
+        );
+        let (wrong, right, also) = (
+            Fixed::new("wrong", 0.05),
+            Fixed::new("right", 0.0),
+            Fixed::new("also", 0.0),
+        );
+        let mut best_of = BestOf::<GeomError> {
+            base: "all",
+            candidates: vec![
+                Box::new(wrong.clone()),
+                Box::new(right.clone()),
+                Box::new(also.clone()),
+            ],
+            scoring_distance: SCORE_DISTANCE,
+        };
+        let found = best_of.register(&line, &line).unwrap();
+        let scores: Vec<Option<f64>> = found.candidates.iter().map(|c| c.score).collect();
+        assert_eq!(scores, [Some(0.0), Some(2.0), Some(2.0)]);
+        // The tie goes to the earlier of the two right ones.
+        assert_eq!(found.chosen, Some(1));
+        assert_eq!(found.result.inlier_count, 10);
+        assert_eq!((wrong.calls(), right.calls(), also.calls()), (1, 1, 1));
+        assert!(found.doubt.is_none());
+        // Only the wrong one: a result that overlaps nothing is doubted, not dropped.
+        best_of.candidates.truncate(1);
+        let found = best_of.register(&line, &line).unwrap();
+        assert_eq!(found.chosen, Some(0));
+        assert!(found
+            .doubt
+            .unwrap()
+            .starts_with("the best candidate, wrong, overlaps too little"));
     }
 
     #[test]
@@ -433,14 +616,14 @@ mod tests {
                 .collect(),
         );
         let run = |first: &Fixed, second: &Fixed, accept: Acceptance| {
-            let mut best_of = BestOf::<GeomError> {
+            let mut cascade = Cascade::<GeomError> {
                 base: "both",
-                candidates: vec![Box::new(first.clone()), Box::new(second.clone())],
-                thinnings: vec![Thinning::Voxels],
-                scoring_distance: SCORE_DISTANCE,
+                first: Box::new(first.clone()),
+                rest: vec![Box::new(second.clone())],
                 accept,
+                scoring_distance: SCORE_DISTANCE,
             };
-            best_of.register(&line, &line).unwrap()
+            cascade.register(&line, &line).unwrap()
         };
         let at = |score: f64| Acceptance {
             score,

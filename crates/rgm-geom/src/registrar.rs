@@ -2,8 +2,9 @@
 //! cloud, and the wrappers here compose registrars without knowing what they wrap —
 //! [`Refined`] (its transform improved by a [`Refiner`]), [`Normalised`] (the pair centred and
 //! scaled into the unit-sphere frame, for a registrar or a refiner), [`AtResolution`] (a last
-//! refinement of a dense pair only, at its own point spacing), [`crate::best_of::BestOf`] (several methods, the best by a score that
-//! needs no ground truth) and [`OnFirstUse`] (a method made only when a pair needs it).
+//! refinement of a dense pair only, at its own point spacing) and [`OnFirstUse`] (a method made
+//! only when a pair needs it). The composites of [`crate::best_of`] run several methods and
+//! keep the best by a score that needs no ground truth.
 //!
 //! The trait is generic over its error so that methods above this crate (the RGM network)
 //! compose with the classical ones here: every registrar of this crate works with any error

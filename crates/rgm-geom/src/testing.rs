@@ -1,9 +1,15 @@
 //! Shapes shared by the tests of several modules.
 
-use nalgebra::Point3;
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use nalgebra::{Matrix3, Point3, Vector3};
 use rand::{rngs::StdRng, Rng, SeedableRng};
 
-use crate::PointCloud;
+use crate::fgr::Progress;
+use crate::registrar::{MethodId, Registrar, Registration};
+use crate::registration::RegistrationResult;
+use crate::{GeomError, PointCloud, RigidTransform};
 
 /// `n` points uniform in the cube [−1, 1)³.
 pub fn uniform_cube(n: usize, rng: &mut StdRng) -> Vec<Point3<f64>> {
@@ -65,4 +71,57 @@ pub fn airplane() -> PointCloud {
         .collect();
     assert_eq!(rows.len(), 1024);
     PointCloud::from_f32_rows(&rows)
+}
+
+/// A method that answers every pair with one transform (a shift along x), and records the
+/// sizes of the pairs it was given.
+#[derive(Clone)]
+pub struct Fixed {
+    pub name: &'static str,
+    pub transform: RigidTransform,
+    seen: Arc<Mutex<Vec<(usize, usize)>>>,
+}
+
+impl Fixed {
+    pub fn new(name: &'static str, shift: f64) -> Self {
+        Self {
+            name,
+            transform: RigidTransform::new(Matrix3::identity(), Vector3::new(shift, 0.0, 0.0)),
+            seen: Default::default(),
+        }
+    }
+
+    /// How many pairs it registered.
+    pub fn calls(&self) -> usize {
+        self.seen.lock().unwrap().len()
+    }
+
+    /// The (source, target) sizes of the pairs it registered, in order.
+    pub fn seen(&self) -> Vec<(usize, usize)> {
+        self.seen.lock().unwrap().clone()
+    }
+}
+
+impl Registrar<GeomError> for Fixed {
+    fn id(&self) -> MethodId {
+        MethodId::plain(self.name)
+    }
+
+    fn register_with_progress(
+        &mut self,
+        source: &PointCloud,
+        target: &PointCloud,
+        _: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, GeomError> {
+        self.seen.lock().unwrap().push((source.len(), target.len()));
+        let result = RegistrationResult {
+            t_target_source: self.transform,
+            iterations: 0,
+            converged: true,
+            inlier_count: 0,
+            fitness: 0.0,
+            inlier_rmse: 0.0,
+        };
+        Ok(Registration::single(result, Vec::new(), Instant::now()))
+    }
 }

@@ -1,9 +1,14 @@
 //! Dense clouds thinned to the density of the training clouds (1,024-point ModelNet40 shapes
-//! in the unit sphere), for methods whose settings were chosen at that density.
+//! in the unit sphere), for methods whose settings were chosen at that density, and
+//! [`Thinned`], a composite run on several thinnings of a dense pair.
 
 use std::borrow::Cow;
+use std::time::Instant;
 
-use crate::PointCloud;
+use crate::best_of::{agree, conclude, Composite, Judge};
+use crate::fgr::Progress;
+use crate::registrar::{MethodId, Registrar, Registration};
+use crate::{GeomError, KnnIndex, PointCloud, RigidTransform};
 
 /// Points of a training cloud (1,024 per ModelNet40 shape; 717 after the partial crop): a cloud
 /// with more points is denser than the methods were tuned for.
@@ -53,4 +58,167 @@ pub fn thinned(cloud: &PointCloud, how: Thinning) -> Cow<'_, PointCloud> {
             cloud.cell_means(&seeds.points)
         }
     })
+}
+
+/// A composite on a dense pair thinned each of `thinnings` ways in turn, its candidates judged
+/// on the pair as given: a pair denser than [`DENSITY_POINTS`] can be thinned many ways, none of
+/// them the sampling the methods were tuned on. The next thinning runs unless the composite's
+/// acceptance took a result ([`crate::best_of::Outcome::settled`]) or the candidates of this one agree
+/// ([`agree`]), which leaves nothing for the next to fix. A pair no denser runs once, as it is.
+/// The best of every thinning wins (ties to the earlier); a candidate's name carries its
+/// thinning ([`Thinning::suffix`]).
+#[derive(Clone, Debug)]
+pub struct Thinned<C> {
+    pub inner: C,
+    pub thinnings: Vec<Thinning>,
+}
+
+impl<E, C> Registrar<E> for Thinned<C>
+where
+    E: From<GeomError>,
+    C: Composite<E>,
+{
+    fn id(&self) -> MethodId {
+        self.inner.id()
+    }
+
+    fn register_with_progress(
+        &mut self,
+        source: &PointCloud,
+        target: &PointCloud,
+        _: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        let start = Instant::now();
+        let (source_index, target_index) = rayon::join(
+            || KnnIndex::new(&source.points),
+            || KnnIndex::new(&target.points),
+        );
+        let dense = source.len().max(target.len()) > DENSITY_POINTS;
+        let thinnings = if dense {
+            &self.thinnings[..]
+        } else {
+            &self.thinnings[..1.min(self.thinnings.len())]
+        };
+        let judged = ((source, &source_index), (target, &target_index));
+        let mut candidates = Vec::new();
+        // (score, transform, iterations, index in `candidates`) of the best so far.
+        let mut best: Option<(f64, RigidTransform, usize, usize)> = None;
+        for &how in thinnings {
+            let (s, t) = rayon::join(|| thinned(source, how), || thinned(target, how));
+            let before = best.map(|(score, transform, ..)| (score, transform));
+            let judge = if dense {
+                Judge::of_thinned(judged.0, judged.1, before)
+            } else {
+                Judge::new(judged.0, judged.1)
+            };
+            let outcome = self.inner.run_judged(&s, &t, &judge);
+            if let Some((i, iterations)) = outcome.best {
+                let winner = &outcome.candidates[i];
+                let score = winner.score.expect("a winner is scored");
+                best = Some((
+                    score,
+                    winner.t_target_source,
+                    iterations,
+                    candidates.len() + i,
+                ));
+            }
+            let found: Vec<RigidTransform> = outcome
+                .candidates
+                .iter()
+                .filter(|c| c.score.is_some())
+                .map(|c| c.t_target_source)
+                .collect();
+            candidates.extend(outcome.candidates.into_iter().map(|mut c| {
+                c.method.push_str(how.suffix());
+                c
+            }));
+            if outcome.settled || found.len() > 1 && found[1..].iter().all(|t| agree(&found[0], t))
+            {
+                break;
+            }
+        }
+        let judge = Judge::new(judged.0, judged.1);
+        let chosen = best.map(|(_, _, iterations, index)| (index, iterations));
+        conclude(
+            &judge,
+            candidates,
+            chosen,
+            self.inner.scoring_distance(),
+            start,
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::best_of::{Acceptance, BestOf, Cascade, SCORE_DISTANCE};
+    use crate::testing::{box_surface, Fixed};
+
+    fn thinned_best_of(candidates: &[&Fixed]) -> Thinned<BestOf<GeomError>> {
+        Thinned {
+            inner: BestOf {
+                base: "both",
+                candidates: candidates
+                    .iter()
+                    .map(|&c| Box::new(c.clone()) as _)
+                    .collect(),
+                scoring_distance: SCORE_DISTANCE,
+            },
+            thinnings: vec![Thinning::Voxels, Thinning::Cells],
+        }
+    }
+
+    #[test]
+    fn a_dense_pair_runs_on_the_next_thinning_until_the_candidates_agree() {
+        let dense = box_surface(3000, 1);
+        let (right, wrong) = (Fixed::new("right", 0.0), Fixed::new("wrong", 0.3));
+        // They disagree: both thinnings run, each on thinned clouds, judged on the dense pair.
+        let found = thinned_best_of(&[&right, &wrong])
+            .register(&dense, &dense)
+            .unwrap();
+        let names: Vec<&str> = found.candidates.iter().map(|c| c.method.as_str()).collect();
+        assert_eq!(names, ["right", "wrong", "right/cells", "wrong/cells"]);
+        assert_eq!(found.candidates[0].score, Some(2.0));
+        assert_eq!(found.chosen, Some(0));
+        assert_eq!(found.result.inlier_count, 3000);
+        for (s, t) in right.seen() {
+            assert!(s <= DENSITY_POINTS && t <= DENSITY_POINTS, "{s} {t}");
+        }
+        // They agree: the first thinning is enough.
+        let (a, b) = (Fixed::new("a", 0.0), Fixed::new("b", 0.001));
+        let found = thinned_best_of(&[&a, &b]).register(&dense, &dense).unwrap();
+        assert_eq!(found.candidates.len(), 2);
+        // A pair no denser runs once, as it is.
+        let sparse = box_surface(500, 2);
+        let found = thinned_best_of(&[&right, &wrong])
+            .register(&sparse, &sparse)
+            .unwrap();
+        assert_eq!(found.candidates.len(), 2);
+        assert_eq!(right.seen().last(), Some(&(500, 500)));
+    }
+
+    #[test]
+    fn a_result_the_cascade_takes_ends_the_thinnings() {
+        let dense = box_surface(3000, 1);
+        let (right, never_run) = (Fixed::new("right", 0.0), Fixed::new("later", 0.3));
+        let mut thinned = Thinned {
+            inner: Cascade::<GeomError> {
+                base: "cascade",
+                first: Box::new(right.clone()),
+                rest: vec![Box::new(never_run.clone())],
+                accept: Acceptance {
+                    score: 1.9,
+                    turned_share: f64::INFINITY,
+                    whole: (SCORE_DISTANCE, f64::INFINITY),
+                },
+                scoring_distance: SCORE_DISTANCE,
+            },
+            thinnings: vec![Thinning::Voxels, Thinning::Cells],
+        };
+        let found = thinned.register(&dense, &dense).unwrap();
+        assert_eq!(found.candidates.len(), 1);
+        assert_eq!((right.calls(), never_run.calls()), (1, 0));
+        assert_eq!(Registrar::<GeomError>::id(&thinned).to_string(), "cascade");
+    }
 }

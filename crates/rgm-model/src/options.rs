@@ -9,8 +9,10 @@
 //! | `icp` | [`IcpConfig`] (its own refinement) |
 //! | `fgr`, `fgr+icp` | [`FgrConfig`], [`Refined`]`<FgrConfig>` |
 //! | `rgm`, `rgm+icp` | [`Normalised`]`<RgmRegistrar>`, `Normalised<Refined<RgmRegistrar>>` |
-//! | `auto` | `Normalised<BestOf[FgrConfig, Normalised<RgmRegistrar>]>` |
-//! | `auto+icp` | `Normalised<AtResolution<BestOf[Refined<FgrConfig>, Refined<Normalised<RgmRegistrar>>], AtSpacing>>` |
+//! | `auto` | `Normalised<Thinned<Cascade { first: FgrConfig, rest: [Normalised<RgmRegistrar>] }>>` |
+//! | `auto+icp` | `Normalised<AtResolution<Thinned<Cascade { first: Refined<FgrConfig>, rest: [Refined<Normalised<RgmRegistrar>>] }>, AtSpacing>>` |
+//!
+//! (`BestOf[first, rest]` in place of the `Cascade` when `accept` takes nothing.)
 //!
 //! `Refined<R>` refines with [`RefineConfig`] (`+icp`); any other [`rgm_geom::refiner::Refiner`]
 //! composes the same way (`Refined::new(FgrConfig::default(), IcpConfig::default())` is
@@ -26,13 +28,13 @@
 use std::path::PathBuf;
 use std::str::FromStr;
 
-use rgm_geom::best_of::{Acceptance, BestOf, ACCEPT, SCORE_DISTANCE};
+use rgm_geom::best_of::{Acceptance, BestOf, Cascade, ACCEPT, SCORE_DISTANCE};
 use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::icp::{self, IcpConfig};
 use rgm_geom::refine::{RefineConfig, ResolutionConfig};
 use rgm_geom::refiner::AtSpacing;
 use rgm_geom::registrar::{AtResolution, DynRegistrar, Normalised, OnFirstUse, Refined, Registrar};
-use rgm_geom::thinning::Thinning;
+use rgm_geom::thinning::{Thinned, Thinning};
 
 use rgm_nn::Precision;
 
@@ -285,45 +287,62 @@ impl MethodOptions {
 }
 
 /// `auto` (`auto+icp` with `refine`): FGR's candidate in the network's frame, and RGM's when
-/// `accept` does not take FGR's (the network costs most of the time), each refined with `refine`;
-/// the better by the overlap score on two thinnings of a dense pair, and the winner refined at
-/// a dense pair's own resolution.
+/// `accept` does not take FGR's (the network costs most of the time; both side by side when
+/// `accept` takes nothing), each refined with `refine`; the better by the overlap score on two
+/// thinnings of a dense pair, and the winner refined at a dense pair's own resolution.
 pub fn auto<R>(rgm: R, refine: Option<RefineConfig>, accept: Acceptance) -> Method
 where
     R: Registrar<MethodError> + Clone + Send + Sync + 'static,
 {
     let rgm = Normalised { inner: rgm };
     let fgr = FgrConfig::default();
-    let best_of = |candidates: [Box<dyn DynRegistrar<MethodError>>; 2], scoring_distance| BestOf {
-        base: AUTO,
-        candidates: candidates.into(),
-        thinnings: vec![Thinning::Voxels, Thinning::Cells],
-        scoring_distance,
-        accept,
-    };
-    let Some(refine) = refine else {
-        return Method::new(Normalised {
-            inner: best_of([Box::new(fgr), Box::new(rgm)], SCORE_DISTANCE),
-        });
-    };
-    let finest = refine.finest_distance();
-    let candidates = best_of(
-        [
-            Box::new(Refined::new(fgr, refine.clone())),
-            Box::new(Refined::new(rgm, refine)),
-        ],
-        finest,
-    );
-    Method::new(Normalised {
-        inner: AtResolution {
-            inner: candidates,
-            refiner: AtSpacing {
-                coarser_than: finest,
-                scoring_distance: finest,
-                config: ResolutionConfig::default(),
+    let (candidates, scoring_distance): ([Box<dyn DynRegistrar<MethodError>>; 2], f64) =
+        match &refine {
+            None => ([Box::new(fgr), Box::new(rgm)], SCORE_DISTANCE),
+            Some(refine) => (
+                [
+                    Box::new(Refined::new(fgr, refine.clone())),
+                    Box::new(Refined::new(rgm, refine.clone())),
+                ],
+                refine.finest_distance(),
+            ),
+        };
+    let thinnings = vec![Thinning::Voxels, Thinning::Cells];
+    let [first, second] = candidates;
+    let composite: Box<dyn DynRegistrar<MethodError>> = if accept.score.is_finite() {
+        Box::new(Thinned {
+            inner: Cascade {
+                base: AUTO,
+                first,
+                rest: vec![second],
+                accept,
+                scoring_distance,
             },
-        },
-    })
+            thinnings,
+        })
+    } else {
+        Box::new(Thinned {
+            inner: BestOf {
+                base: AUTO,
+                candidates: vec![first, second],
+                scoring_distance,
+            },
+            thinnings,
+        })
+    };
+    match refine {
+        None => Method::new(Normalised { inner: composite }),
+        Some(_) => Method::new(Normalised {
+            inner: AtResolution {
+                inner: composite,
+                refiner: AtSpacing {
+                    coarser_than: scoring_distance,
+                    scoring_distance,
+                    config: ResolutionConfig::default(),
+                },
+            },
+        }),
+    }
 }
 
 #[cfg(test)]
