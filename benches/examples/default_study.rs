@@ -584,7 +584,7 @@ impl Variant {
         };
         let accept = match fields.get(3) {
             Some(a) => a.parse::<f64>()?,
-            None => rgm_geom::best_of::ACCEPT.score,
+            None => rgm_model::options::ACCEPT.score,
         };
         let mut rgm = rgm_model::weights::builtin_registrar()?;
         rgm.config.passes = passes;
@@ -596,7 +596,7 @@ impl Variant {
         };
         let acceptance = rgm_geom::best_of::Acceptance {
             score: accept,
-            ..rgm_geom::best_of::ACCEPT
+            ..rgm_model::options::ACCEPT
         };
         Ok(Self {
             name: spec.to_string(),

@@ -29,26 +29,6 @@ pub const SCORE_DISTANCE: f64 = 0.02;
 /// registered ([`Registration::doubt`]) rather than with a transform nothing supports.
 pub const MIN_OVERLAP: f64 = 0.1;
 
-/// When `rgm register`'s default takes its cheap candidate (FGR) without running the network
-/// ([`Cascade::accept`]): the cheapest on validation pairs that kept the recall and the share off
-/// by more than 45° of running both within 0.1 points
-/// (`docs/training/default-study/cascade-1980-validation.md`).
-pub const ACCEPT: Acceptance = Acceptance {
-    score: 0.55,
-    turned_share: 0.3,
-    whole: (WHOLE_DISTANCE, WHOLE_OVERLAP),
-};
-
-/// The distance (unit-sphere units) of [`ACCEPT`]'s whole overlap: the bound of the benchmark's
-/// jitter (σ = 0.01 per coordinate, clipped at 0.05), within which a noisy cloud's points still
-/// lie on the other cloud.
-pub const WHOLE_DISTANCE: f64 = 0.05;
-
-/// The least overlap at [`WHOLE_DISTANCE`] (0 to 2) that [`ACCEPT`] takes as whole: the least
-/// that changes no partial validation pair's course, far above any wrong result's
-/// (`docs/training/default-study/cascade-whole-overlap.md`).
-pub const WHOLE_OVERLAP: f64 = 1.98;
-
 /// When a cascade's result is good enough to end it ([`Cascade::accept`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Acceptance {

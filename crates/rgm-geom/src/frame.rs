@@ -1,12 +1,13 @@
 //! The frame a registration runs in: the pair centred and scaled so that lengths set for
-//! unit-sphere shapes (the network's training clouds, the refinement's and FGR's defaults) fit
+//! unit-sphere shapes (the refinement's and FGR's defaults, and what a method above this crate
+//! was tuned on) fit
 //! inputs of any size, and far outliers left out.
 
 use nalgebra::{Point3, Vector3};
 
 use crate::{PointCloud, RigidTransform};
 
-/// How a pair is moved into the frame the network was trained in: `p' = (p − centre) / scale`,
+/// How a pair is moved into the unit-sphere frame: `p' = (p − centre) / scale`,
 /// each cloud about its own centre, both by one scale.
 ///
 /// The benchmark's pairs (unit-sphere shapes, one moved by at most 0.5 per axis, jitter ≤ 0.05:
@@ -16,12 +17,12 @@ use crate::{PointCloud, RigidTransform};
 /// [`Normalisation::FRAME_EXTENT`]. Any other pair is centred (each cloud on its centroid) and
 /// scaled by one common factor so that the farthest point of either cloud lies on the unit
 /// sphere ([`Normalisation::centred`]): the same pair at half or twice the size reaches the
-/// network as the same clouds, centred.
+/// methods as the same clouds, centred.
 ///
 /// All of it is measured on each cloud's [`near`] points: a far outlier (a stray return of a
 /// scanner) neither decides the frame nor shrinks the pair to a dot in it, and the methods
 /// leave it out. Lengths are taken at any scale ([`crate::length`]): a pair at 1e200 or
-/// 1e-200 reaches the network as it does at 1.
+/// 1e-200 reaches the methods as it does at 1.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Normalisation {
     pub source_centre: Vector3<f64>,
@@ -118,17 +119,17 @@ impl Normalisation {
         PointCloud::new(cloud.points.iter().map(|p| (p - centre) / scale).collect())
     }
 
-    /// The source in the network's frame.
+    /// The source in the unit-sphere frame.
     pub fn source(&self, cloud: &PointCloud) -> PointCloud {
         Self::apply(cloud, &self.source_centre, self.scale)
     }
 
-    /// The target in the network's frame.
+    /// The target in the unit-sphere frame.
     pub fn target(&self, cloud: &PointCloud) -> PointCloud {
         Self::apply(cloud, &self.target_centre, self.scale)
     }
 
-    /// The transform in the caller's frame of `t` (y' = R x' + t' in the network's frame):
+    /// The transform in the caller's frame of `t` (y' = R x' + t' in the unit-sphere frame):
     /// y = s y' + c_Y = R x + (s t' + c_Y − R c_X).
     pub fn undo(&self, t: &RigidTransform) -> RigidTransform {
         let translation =
@@ -136,7 +137,7 @@ impl Normalisation {
         RigidTransform::new(t.rotation, translation)
     }
 
-    /// The transform in the network's frame of `t` (in the caller's frame): the inverse of
+    /// The transform in the unit-sphere frame of `t` (in the caller's frame): the inverse of
     /// [`Normalisation::undo`], t' = (t − c_Y + R c_X) / s.
     pub fn redo(&self, t: &RigidTransform) -> RigidTransform {
         let translation =

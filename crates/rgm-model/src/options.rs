@@ -28,7 +28,7 @@
 use std::path::PathBuf;
 use std::str::FromStr;
 
-use rgm_geom::best_of::{Acceptance, BestOf, Cascade, ACCEPT, SCORE_DISTANCE};
+use rgm_geom::best_of::{Acceptance, BestOf, Cascade, SCORE_DISTANCE};
 use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::icp::{self, IcpConfig};
 use rgm_geom::refine::{RefineConfig, ResolutionConfig};
@@ -120,6 +120,26 @@ impl FromStr for MethodName {
             })
     }
 }
+
+/// When `rgm register`'s default takes its cheap candidate (FGR) without running the network
+/// ([`Cascade::accept`](rgm_geom::best_of::Cascade::accept)): the cheapest on validation pairs that kept the recall and the share off
+/// by more than 45° of running both within 0.1 points
+/// (`docs/training/default-study/cascade-1980-validation.md`).
+pub const ACCEPT: Acceptance = Acceptance {
+    score: 0.55,
+    turned_share: 0.3,
+    whole: (WHOLE_DISTANCE, WHOLE_OVERLAP),
+};
+
+/// The distance (unit-sphere units) of [`ACCEPT`]'s whole overlap: the bound of the benchmark's
+/// jitter (σ = 0.01 per coordinate, clipped at 0.05), within which a noisy cloud's points still
+/// lie on the other cloud.
+pub const WHOLE_DISTANCE: f64 = 0.05;
+
+/// The least overlap at [`WHOLE_DISTANCE`] (0 to 2) that [`ACCEPT`] takes as whole: the least
+/// that changes no partial validation pair's course, far above any wrong result's
+/// (`docs/training/default-study/cascade-whole-overlap.md`).
+pub const WHOLE_OVERLAP: f64 = 1.98;
 
 /// Points matched per cloud with given weights unless `match_points` says otherwise: the paper
 /// trains on 1,024-point clouds, and the network's memory grows with the square of the points.
