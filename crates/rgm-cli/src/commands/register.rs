@@ -36,7 +36,7 @@ pub fn run(args: Args) -> Result<()> {
     };
     args.batch.refuse_without_pairs()?;
     if let Some(out) = &args.out {
-        rgm_data::io::Format::from_path(out)?;
+        rgm_data::io::format_of(out)?;
         crate::check_writable(out)?;
     }
     let (source, target) = crate::read_pair(source_path, target_path)?;
