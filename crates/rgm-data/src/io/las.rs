@@ -19,8 +19,9 @@ use rgm_geom::{Point3, PointCloud};
 use super::{format_error, PointFormat, Warning};
 use crate::Result;
 
-/// Points read at a time: the crate's buffer is this many records.
-const BATCH: u64 = 4096;
+/// Bytes of records read at a time (the crate's buffer): a record of a forged length (up to
+/// 64 KiB) must not make the batch large.
+const BATCH_BYTES: u64 = 1 << 17;
 
 /// The most points a LAZ file may declare per byte it holds. LASzip's best ratios on real data
 /// are near 10:1 of a 20-byte record, a few bytes a point; 16 points a byte is beyond any real
@@ -63,7 +64,7 @@ impl PointFormat for Laz {
         &["laz"]
     }
     fn summary(&self) -> &'static str {
-        "LASzip-compressed LAS, read and written as LAS is"
+        "LASzip-compressed LAS, point formats 0 to 5 (not yet 6 to 10), read and written as LAS is"
     }
     fn magic(&self) -> Option<&'static [u8]> {
         Some(b"LASF")
@@ -92,7 +93,17 @@ fn check_sizes(bytes: &[u8]) -> std::result::Result<(), String> {
         *bytes.get(25).ok_or_else(short)?,
     );
     let offset_to_points = le::<4>(bytes, 96).ok_or_else(short)?;
-    let compressed = le::<1>(bytes, 104).ok_or_else(short)? & 0x80 != 0;
+    let format = le::<1>(bytes, 104).ok_or_else(short)?;
+    let compressed = format & 0x80 != 0;
+    if compressed && format & 0x3f >= 6 {
+        // laz 0.13 sizes its layer buffers from 32-bit lengths in each chunk, unchecked: a
+        // forged 600-byte file takes 2 GB. Refused until those lengths are checked.
+        return Err(format!(
+            "point format {} in LAZ (layered compression, formats 6 to 10) is not read yet; \
+             LAS of that format is, and LAZ of formats 0 to 5",
+            format & 0x3f
+        ));
+    }
     let record = le::<2>(bytes, 105).ok_or_else(short)?;
     let mut counts = vec![le::<4>(bytes, 107).ok_or_else(short)?];
     if version >= (1, 4) {
@@ -161,14 +172,31 @@ fn parse(bytes: &[u8], path: &Path, name: &'static str) -> Result<Vec<Point3<f64
     super::check_magic(&Las, bytes, path)
         .map_err(|_| fail("missing the magic string LASF".into()))?;
     check_sizes(bytes).map_err(fail)?;
+    // laz 0.13 panics on some corrupt data (a slice index past its end) instead of returning an
+    // error: the panic is taken for the file's error, so that a bad file cannot end rgm.
+    std::panic::catch_unwind(|| read_points(bytes, path, name)).unwrap_or_else(|panic| {
+        let why = panic
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| panic.downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        Err(fail(format!("corrupt data (the decoder failed: {why})")))
+    })
+}
+
+/// The points of a LAS or LAZ file that [`check_sizes`] passed.
+fn read_points(bytes: &[u8], path: &Path, name: &'static str) -> Result<Vec<Point3<f64>>> {
+    let fail = |why: String| format_error(path, name, why);
     // The crate's reader owns its source.
     let mut reader =
         las::Reader::new(Cursor::new(bytes.to_vec())).map_err(|e| fail(e.to_string()))?;
     let declared = reader.header().number_of_points();
+    let record = reader.header().point_format().len() as u64;
+    let batch = (BATCH_BYTES / record.max(1)).max(1);
     let mut points = Vec::new();
     loop {
         let batch = reader
-            .read_points(BATCH)
+            .read_points(batch)
             .map_err(|e| fail(format!("point {} of {declared}: {e}", points.len() + 1)))?;
         if batch.is_empty() {
             break;

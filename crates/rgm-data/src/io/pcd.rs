@@ -277,15 +277,6 @@ fn fields(
 pub fn parse(bytes: &[u8], path: &Path, warnings: &mut Vec<Warning>) -> Result<Vec<Point3<f64>>> {
     let header = parse_header(bytes, path, warnings)?;
     let fields = &header.fields;
-    // For each axis, the field's index and its first value's index among a point's values.
-    let mut axes = [(0usize, 0usize); 3];
-    for (axis, name) in axes.iter_mut().zip(["x", "y", "z"]) {
-        let index = fields.iter().position(|f| f.name == name).ok_or_else(|| {
-            let why = format!("the header declares no `{name}` field");
-            line_error(path, header.lines, &header.data_line, why)
-        })?;
-        *axis = (index, fields[..index].iter().map(|f| f.count).sum());
-    }
     let too_large = || {
         let why = "the FIELDS' SIZE × COUNT add up to more bytes than any file holds";
         line_error(path, header.lines, &header.data_line, why)
@@ -297,6 +288,15 @@ pub fn parse(bytes: &[u8], path: &Path, warnings: &mut Vec<Warning>) -> Result<V
             sum.checked_add(f.size.checked_mul(f.count)?)
         })
         .ok_or_else(too_large)?;
+    // For each axis, the field's index and its first value's index among a point's values.
+    let mut axes = [(0usize, 0usize); 3];
+    for (axis, name) in axes.iter_mut().zip(["x", "y", "z"]) {
+        let index = fields.iter().position(|f| f.name == name).ok_or_else(|| {
+            let why = format!("the header declares no `{name}` field");
+            line_error(path, header.lines, &header.data_line, why)
+        })?;
+        *axis = (index, fields[..index].iter().map(|f| f.count).sum());
+    }
     let body = &bytes[header.data_start..];
     let data_error = |why: String| format_error(path, FORMAT, why);
     let mut points = match header.data {
@@ -401,7 +401,7 @@ fn read_ascii(
     // At most the point's bytes (a value takes at least one).
     let values: usize = header.fields.iter().map(|f| f.count).sum();
     // A point takes at least two bytes a value ("0 ... 0\n"): the count is bounded before use.
-    let mut points = Vec::with_capacity(header.points.min(text.len() / (2 * values)));
+    let mut points = Vec::with_capacity(header.points.min(text.len() / values.saturating_mul(2)));
     let mut lines = text
         .lines()
         .enumerate()
