@@ -52,8 +52,8 @@ enum Command {
     /// disagree), RGM matches on 256 random points of each (--method rgm: every point), and the
     /// transform is reported for the clouds as given.
     /// The winner on a thinned pair is refined further on the clouds as given, point to plane
-    /// at their own point spacing. Reads PLY (ascii or binary), OFF, XYZ/CSV text and .npy
-    /// files, gzip-compressed ones too (`scan.ply.gz`).
+    /// at their own point spacing. Reads the formats SRC's help lists, gzip-compressed ones too
+    /// (`scan.ply.gz`).
     Register(commands::register::Args),
     /// Run a method over the ModelNet40 test pairs and print the paper's metrics, or over real
     /// scan pairs (--scans) and print successes, median errors and time.
@@ -378,6 +378,15 @@ fn warned(
     Ok(cloud)
 }
 
+/// The long help of a command's input cloud: `first`, then every format rgm reads, from the
+/// one list of them.
+fn source_help(first: &str) -> String {
+    format!(
+        "{first} The format by extension, gzip-compressed too (`scan.ply.gz`):\n{}",
+        rgm_data::io::formats_help()
+    )
+}
+
 /// Fails now, before the work, when `path` cannot be written (its folder is missing, it is a
 /// folder, permission is denied), so a long command does not lose its result at the end;
 /// nothing changes at `path` ([`rgm_data::io::output::check_writable`]).
@@ -452,4 +461,28 @@ fn error_message(err: &anyhow::Error) -> String {
         }
     }
     message
+}
+
+#[cfg(test)]
+mod help_tests {
+    use clap::CommandFactory;
+
+    /// `rgm register --help` and `rgm render --help` name every format and extension of the list.
+    #[test]
+    fn the_help_names_every_format() {
+        for command in ["register", "render"] {
+            let mut cli = super::Cli::command();
+            let help = cli
+                .find_subcommand_mut(command)
+                .unwrap()
+                .render_long_help()
+                .to_string();
+            for format in rgm_data::io::FORMATS {
+                assert!(help.contains(format.name()), "{command}: {help}");
+                for ext in format.extensions() {
+                    assert!(help.contains(&format!(".{ext}")), "{command} lacks .{ext}");
+                }
+            }
+        }
+    }
 }

@@ -54,7 +54,11 @@ pub enum DataError {
     #[error("{}: the file holds no point", path.display())]
     Empty { path: PathBuf },
     /// The file name does not say which format it is.
-    #[error("{}: unknown point-cloud extension (expected .ply, .off, .xyz, .txt, .pts, .csv or .npy)", path.display())]
+    #[error(
+        "{}: unknown point-cloud extension (expected {})",
+        path.display(),
+        crate::io::extension_list()
+    )]
     UnknownExtension { path: PathBuf },
     /// A dataset folder or file does not have the expected layout or contents.
     #[error("{}: {why}", path.display())]

@@ -12,8 +12,12 @@ use crate::MethodArgs;
 /// Options of `rgm register`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The cloud to move (PLY, OFF, XYZ/CSV or .npy).
-    #[arg(required_unless_present = "pairs", conflicts_with = "pairs")]
+    /// The cloud to move; the format by extension (the list: `rgm_data::io::FORMATS`).
+    #[arg(
+        required_unless_present = "pairs",
+        conflicts_with = "pairs",
+        long_help = crate::source_help("The cloud to move.")
+    )]
     source: Option<PathBuf>,
     /// The cloud to move it onto.
     #[arg(required_unless_present = "pairs", conflicts_with = "pairs")]
@@ -36,7 +40,7 @@ pub fn run(args: Args) -> Result<()> {
     };
     args.batch.refuse_without_pairs()?;
     if let Some(out) = &args.out {
-        rgm_data::io::Format::from_path(out)?;
+        rgm_data::io::format_of(out)?;
         crate::check_writable(out)?;
     }
     let (source, target) = crate::read_pair(source_path, target_path)?;

@@ -16,7 +16,8 @@ const MATRIX_BLOCKS: usize = 36;
 /// Options of `rgm render`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The cloud that moves (PLY, OFF, XYZ/CSV or .npy).
+    /// The cloud that moves; the format by extension (the list: `rgm_data::io::FORMATS`).
+    #[arg(long_help = crate::source_help("The cloud that moves."))]
     source: PathBuf,
     /// The cloud it moves onto.
     target: PathBuf,

@@ -1,5 +1,6 @@
-//! Point-cloud files: one module per format, one entry point for reading and one for writing,
-//! both choosing the format from the file extension.
+//! Point-cloud files: one module per format, each a [`PointFormat`], and one list of them,
+//! [`FORMATS`], that the reader, the writer, the error for an unknown extension, the command
+//! line's help and the fuzz tests all read. A new format is one module and one line in the list.
 //!
 //! Every reader parses bytes it is given (so the tests need no files) and hands its points to
 //! [`checked_cloud`], the one place that rejects empty clouds and non-finite coordinates.
@@ -8,9 +9,12 @@
 //! format its inner extension names: real scans are often shipped so. It is decompressed in
 //! memory and read as the plain file would be; written, it is compressed.
 
+pub mod las;
+pub mod lzf;
 pub mod npy;
 pub mod off;
 pub mod output;
+pub mod pcd;
 pub mod ply;
 pub mod xyz;
 
@@ -21,46 +25,96 @@ use rgm_geom::{Point3, PointCloud};
 
 use crate::{DataError, Result};
 
-/// The file formats rgm reads and writes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Format {
-    /// Stanford PLY: ASCII, binary little- or big-endian; written binary little-endian float
-    /// (double for clouds float cannot hold).
-    Ply,
-    /// OFF (Object File Format): vertices only, faces ignored.
-    Off,
-    /// Whitespace-separated text (`.xyz`, `.txt`, `.pts`), extra columns ignored.
-    Xyz,
-    /// Comma-separated text, optional header line, extra columns ignored.
-    Csv,
-    /// NumPy `.npy`: little-endian float32/float64, C order, shape (N, 3).
-    Npy,
+/// One file format: how its files are named, read and written.
+pub trait PointFormat: Sync {
+    /// The name errors and help give it (`PLY`).
+    fn name(&self) -> &'static str;
+    /// Its file extensions, lower case, without the dot.
+    fn extensions(&self) -> &'static [&'static str];
+    /// What is read and written, for `--help` (`ascii or binary; written binary float32`).
+    fn summary(&self) -> &'static str;
+    /// The bytes every file of the format starts with: checked before a file is read whole, so
+    /// that a large file of another kind is refused unread.
+    fn magic(&self) -> Option<&'static [u8]> {
+        None
+    }
+    /// The points in `bytes`, the content of the file `path`; what is odd but readable goes to
+    /// `warnings`.
+    fn parse(
+        &self,
+        bytes: &[u8],
+        path: &Path,
+        warnings: &mut Vec<Warning>,
+    ) -> Result<Vec<Point3<f64>>>;
+    /// Writes `cloud` in the format.
+    fn write(&self, out: &mut dyn Write, cloud: &PointCloud) -> std::io::Result<()>;
 }
 
-impl Format {
-    /// The format named by `path`'s extension (case-insensitive), the one before `.gz` for a
-    /// compressed file.
-    pub fn from_path(path: &Path) -> Result<Self> {
-        let inner = if is_gzip(path) {
-            Path::new(path.file_stem().unwrap_or_default())
-        } else {
-            path
-        };
-        let ext = inner
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase);
-        match ext.as_deref() {
-            Some("ply") => Ok(Self::Ply),
-            Some("off") => Ok(Self::Off),
-            Some("xyz" | "txt" | "pts") => Ok(Self::Xyz),
-            Some("csv") => Ok(Self::Csv),
-            Some("npy") => Ok(Self::Npy),
-            _ => Err(DataError::UnknownExtension {
-                path: path.to_path_buf(),
-            }),
-        }
+impl std::fmt::Debug for dyn PointFormat {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
     }
+}
+
+/// Every format rgm reads and writes.
+pub static FORMATS: &[&dyn PointFormat] = &[
+    &ply::Ply,
+    &off::Off,
+    &xyz::Xyz,
+    &xyz::Csv,
+    &npy::Npy,
+    &pcd::Pcd,
+    &las::Las,
+    &las::Laz,
+];
+
+/// The format named by `path`'s extension (case-insensitive), the one before `.gz` for a
+/// compressed file.
+pub fn format_of(path: &Path) -> Result<&'static dyn PointFormat> {
+    let inner = if is_gzip(path) {
+        Path::new(path.file_stem().unwrap_or_default())
+    } else {
+        path
+    };
+    let ext = inner
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .unwrap_or_default();
+    FORMATS
+        .iter()
+        .copied()
+        .find(|f| f.extensions().contains(&ext.as_str()))
+        .ok_or_else(|| DataError::UnknownExtension {
+            path: path.to_path_buf(),
+        })
+}
+
+/// Every extension of [`FORMATS`] as `.ply, .off, ... or .laz`.
+pub fn extension_list() -> String {
+    let all: Vec<String> = FORMATS
+        .iter()
+        .flat_map(|f| f.extensions())
+        .map(|e| format!(".{e}"))
+        .collect();
+    match all.split_last() {
+        Some((last, [])) => last.clone(),
+        Some((last, rest)) => format!("{} or {last}", rest.join(", ")),
+        None => String::new(),
+    }
+}
+
+/// The formats of [`FORMATS`] as the command line's help gives them: one per line,
+/// `PLY (.ply): ascii or binary; ...`.
+pub fn formats_help() -> String {
+    FORMATS
+        .iter()
+        .map(|f| {
+            let exts: Vec<String> = f.extensions().iter().map(|e| format!(".{e}")).collect();
+            format!("{} ({}): {}", f.name(), exts.join(", "), f.summary())
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
 }
 
 /// Whether `path` names a gzip-compressed file (its extension is `.gz`, in any case).
@@ -98,31 +152,39 @@ pub fn read_point_cloud(path: impl AsRef<Path>) -> Result<PointCloud> {
 /// with the warnings of the reading.
 pub fn read_point_cloud_warned(path: impl AsRef<Path>) -> Result<(PointCloud, Vec<Warning>)> {
     let path = path.as_ref();
-    let format = Format::from_path(path)?;
-    if format == Format::Npy && !is_gzip(path) && std::fs::metadata(path).is_ok_and(|m| m.is_file())
-    {
-        // The magic string first: a large file that is not `.npy` is refused unread.
-        let mut prefix = Vec::with_capacity(npy::MAGIC.len());
-        std::fs::File::open(path)
-            .and_then(|f| f.take(npy::MAGIC.len() as u64).read_to_end(&mut prefix))
-            .map_err(|source| DataError::Io {
-                path: path.to_path_buf(),
-                source,
-            })?;
-        npy::check_magic(&prefix, path)?;
+    let format = format_of(path)?;
+    if let Some(magic) = format.magic() {
+        if !is_gzip(path) && std::fs::metadata(path).is_ok_and(|m| m.is_file()) {
+            // The magic string first: a large file of another kind is refused unread.
+            let mut prefix = Vec::with_capacity(magic.len());
+            std::fs::File::open(path)
+                .and_then(|f| f.take(magic.len() as u64).read_to_end(&mut prefix))
+                .map_err(|source| DataError::Io {
+                    path: path.to_path_buf(),
+                    source,
+                })?;
+            check_magic(format, &prefix, path)?;
+        }
     }
     let mut bytes = read_regular_file(path)?;
     if is_gzip(path) {
         bytes = gunzip(&bytes, path)?;
     }
     let mut warnings = Vec::new();
-    let points = match format {
-        Format::Ply => ply::parse(&bytes, path, &mut warnings)?,
-        Format::Off => off::parse(&bytes, path)?,
-        Format::Xyz | Format::Csv => xyz::parse(&bytes, path)?,
-        Format::Npy => npy::parse(&bytes, path)?,
-    };
+    let points = format.parse(&bytes, path, &mut warnings)?;
     Ok((checked_cloud(points, path)?, warnings))
+}
+
+/// Refuses `start`, the first bytes of a file, unless they are `format`'s magic string.
+pub fn check_magic(format: &dyn PointFormat, start: &[u8], path: &Path) -> Result<()> {
+    match format.magic() {
+        Some(magic) if !start.starts_with(magic) => Err(DataError::Format {
+            path: path.to_path_buf(),
+            format: format.name(),
+            why: format!("missing the magic string {}", magic.escape_ascii()),
+        }),
+        _ => Ok(()),
+    }
 }
 
 /// The decompressed content of the gzip data `bytes` (every member of a multi-member file).
@@ -173,13 +235,12 @@ pub fn read_regular_file(path: &Path) -> Result<Vec<u8>> {
     Ok(bytes)
 }
 
-/// Writes a point cloud, choosing the format by extension: PLY binary little-endian float32
-/// (double when float32 would lose precision, [`ply::write`]), OFF and XYZ text, CSV with an
-/// `x,y,z` header, `.npy` float64 (lossless); as [`output::write_file`] writes (a failed write
-/// leaves the path as it was).
+/// Writes a point cloud, choosing the format by extension (each format's
+/// [`PointFormat::summary`] says how it writes); as [`output::write_file`] writes (a failed
+/// write leaves the path as it was).
 pub fn write_point_cloud(path: impl AsRef<Path>, cloud: &PointCloud) -> Result<()> {
     let path = path.as_ref();
-    let format = Format::from_path(path)?;
+    let format = format_of(path)?;
     let io_error = |source| DataError::Io {
         path: path.to_path_buf(),
         source,
@@ -187,27 +248,13 @@ pub fn write_point_cloud(path: impl AsRef<Path>, cloud: &PointCloud) -> Result<(
     output::write_file(path, |out| {
         if is_gzip(path) {
             let mut gz = flate2::write::GzEncoder::new(out, flate2::Compression::default());
-            write_format(&mut gz, format, cloud)?;
+            format.write(&mut gz, cloud)?;
             gz.finish().map(|_| ())
         } else {
-            write_format(out, format, cloud)
+            format.write(out, cloud)
         }
     })
     .map_err(io_error)
-}
-
-fn write_format(
-    mut out: &mut dyn Write,
-    format: Format,
-    cloud: &PointCloud,
-) -> std::io::Result<()> {
-    match format {
-        Format::Ply => ply::write(&mut out, cloud),
-        Format::Off => off::write(&mut out, cloud),
-        Format::Xyz => xyz::write(&mut out, cloud, xyz::Separator::Space),
-        Format::Csv => xyz::write(&mut out, cloud, xyz::Separator::Comma),
-        Format::Npy => npy::write(&mut out, cloud, npy::Dtype::F64),
-    }
 }
 
 /// The cloud of `points`, rejecting an empty one and any non-finite coordinate.

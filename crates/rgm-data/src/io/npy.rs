@@ -8,11 +8,35 @@ use std::path::Path;
 
 use rgm_geom::{Point3, PointCloud};
 
-use super::format_error;
+use super::{format_error, PointFormat, Warning};
 use crate::Result;
 
 const FORMAT: &str = "npy";
 pub(crate) const MAGIC: &[u8] = b"\x93NUMPY";
+
+/// NumPy `.npy`.
+pub struct Npy;
+
+impl PointFormat for Npy {
+    fn name(&self) -> &'static str {
+        FORMAT
+    }
+    fn extensions(&self) -> &'static [&'static str] {
+        &["npy"]
+    }
+    fn summary(&self) -> &'static str {
+        "NumPy (N, 3) float32 or float64; written float64"
+    }
+    fn magic(&self) -> Option<&'static [u8]> {
+        Some(MAGIC)
+    }
+    fn parse(&self, bytes: &[u8], path: &Path, _: &mut Vec<Warning>) -> Result<Vec<Point3<f64>>> {
+        parse(bytes, path)
+    }
+    fn write(&self, mut out: &mut dyn Write, cloud: &PointCloud) -> std::io::Result<()> {
+        write(&mut out, cloud, Dtype::F64)
+    }
+}
 
 /// The element type of an array.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -48,23 +72,10 @@ fn dict_value<'a>(header: &'a str, key: &str) -> Option<&'a str> {
     Some(rest.strip_prefix(':')?.trim_start())
 }
 
-/// Refuses `bytes` that do not start with the `.npy` magic string.
-pub(crate) fn check_magic(bytes: &[u8], path: &Path) -> Result<()> {
-    if bytes.starts_with(MAGIC) {
-        Ok(())
-    } else {
-        Err(format_error(
-            path,
-            FORMAT,
-            "missing the magic string \\x93NUMPY",
-        ))
-    }
-}
-
 /// The points of a `.npy` file.
 pub fn parse(bytes: &[u8], path: &Path) -> Result<Vec<Point3<f64>>> {
     let fail = |why: String| format_error(path, FORMAT, why);
-    check_magic(bytes, path)?;
+    super::check_magic(&Npy, bytes, path)?;
     // Magic (6), version (2), header length (2 bytes in version 1, 4 in versions 2 and 3).
     let (len_size, major) = match bytes.get(6) {
         Some(1) => (2, 1),

@@ -11,8 +11,29 @@ use std::path::Path;
 
 use rgm_geom::{Point3, PointCloud};
 
-use super::{line_error, parse_xyz, text};
+use super::{line_error, parse_xyz, text, PointFormat, Warning};
 use crate::{DataError, Result};
+
+/// OFF, vertices only.
+pub struct Off;
+
+impl PointFormat for Off {
+    fn name(&self) -> &'static str {
+        "OFF"
+    }
+    fn extensions(&self) -> &'static [&'static str] {
+        &["off"]
+    }
+    fn summary(&self) -> &'static str {
+        "vertices (faces ignored); written as text"
+    }
+    fn parse(&self, bytes: &[u8], path: &Path, _: &mut Vec<Warning>) -> Result<Vec<Point3<f64>>> {
+        parse(bytes, path)
+    }
+    fn write(&self, mut out: &mut dyn Write, cloud: &PointCloud) -> std::io::Result<()> {
+        write(&mut out, cloud)
+    }
+}
 
 /// The vertices of an OFF file.
 pub fn parse(bytes: &[u8], path: &Path) -> Result<Vec<Point3<f64>>> {

@@ -14,10 +14,36 @@ use std::path::Path;
 
 use rgm_geom::{Point3, PointCloud, Vector3};
 
-use super::{format_error, line_error, Warning};
+use super::{format_error, line_error, PointFormat, Warning};
 use crate::{DataError, Result};
 
 const FORMAT: &str = "PLY";
+
+/// Stanford PLY.
+pub struct Ply;
+
+impl PointFormat for Ply {
+    fn name(&self) -> &'static str {
+        FORMAT
+    }
+    fn extensions(&self) -> &'static [&'static str] {
+        &["ply"]
+    }
+    fn summary(&self) -> &'static str {
+        "ascii or binary; written binary float32 (float64 where float32 would lose precision)"
+    }
+    fn parse(
+        &self,
+        bytes: &[u8],
+        path: &Path,
+        warnings: &mut Vec<Warning>,
+    ) -> Result<Vec<Point3<f64>>> {
+        parse(bytes, path, warnings)
+    }
+    fn write(&self, mut out: &mut dyn Write, cloud: &PointCloud) -> std::io::Result<()> {
+        write(&mut out, cloud)
+    }
+}
 
 /// How the body is encoded.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -521,7 +547,7 @@ fn read_row(
 const FLOAT32_LOSS: f64 = 1e-6;
 
 /// Whether float32 holds `cloud` to within [`FLOAT32_LOSS`] of its bounding box's diagonal.
-fn float32_suffices(cloud: &PointCloud) -> bool {
+pub(crate) fn float32_suffices(cloud: &PointCloud) -> bool {
     let (mut low, mut high) = (
         Vector3::repeat(f64::INFINITY),
         Vector3::repeat(f64::NEG_INFINITY),

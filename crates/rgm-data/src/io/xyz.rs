@@ -11,7 +11,7 @@ use std::path::Path;
 
 use rgm_geom::{Point3, PointCloud};
 
-use super::{parse_xyz, text};
+use super::{parse_xyz, text, PointFormat, Warning};
 use crate::Result;
 
 /// The column separator a file is written with.
@@ -21,6 +21,48 @@ pub enum Separator {
     Space,
     /// `x,y,z`, with an `x,y,z` header line.
     Comma,
+}
+
+/// Whitespace-separated text, written `x y z`.
+pub struct Xyz;
+
+/// Comma-separated text, written with an `x,y,z` header.
+pub struct Csv;
+
+impl PointFormat for Xyz {
+    fn name(&self) -> &'static str {
+        "XYZ"
+    }
+    fn extensions(&self) -> &'static [&'static str] {
+        &["xyz", "txt", "pts"]
+    }
+    fn summary(&self) -> &'static str {
+        "text, x y z first on each line, extra columns ignored"
+    }
+    fn parse(&self, bytes: &[u8], path: &Path, _: &mut Vec<Warning>) -> Result<Vec<Point3<f64>>> {
+        parse(bytes, path)
+    }
+    fn write(&self, mut out: &mut dyn Write, cloud: &PointCloud) -> std::io::Result<()> {
+        write(&mut out, cloud, Separator::Space)
+    }
+}
+
+impl PointFormat for Csv {
+    fn name(&self) -> &'static str {
+        "CSV"
+    }
+    fn extensions(&self) -> &'static [&'static str] {
+        &["csv"]
+    }
+    fn summary(&self) -> &'static str {
+        "comma-separated text, optional header line; written with an x,y,z header"
+    }
+    fn parse(&self, bytes: &[u8], path: &Path, _: &mut Vec<Warning>) -> Result<Vec<Point3<f64>>> {
+        parse(bytes, path)
+    }
+    fn write(&self, mut out: &mut dyn Write, cloud: &PointCloud) -> std::io::Result<()> {
+        write(&mut out, cloud, Separator::Comma)
+    }
 }
 
 /// The points of an XYZ or CSV file.
