@@ -94,7 +94,8 @@ pub struct Registration {
 impl Registration {
     /// A single method's registration of `result` on `source` and `target`, its correspondences
     /// the source points that `result`'s transform brings within `max_distance` of `target`,
-    /// timed from `start`.
+    /// timed from `start`; doubted when fewer than 3 are (a result no overlap supports: ICP or
+    /// FGR that found nothing hands back the transform it started from).
     pub fn scored_within(
         result: RegistrationResult,
         source: &PointCloud,
@@ -110,7 +111,17 @@ impl Registration {
             max_distance,
             Some(&mut correspondences),
         );
-        Self::single(result, correspondences, start)
+        let doubt = (correspondences.len() < MIN_CORRESPONDENCES).then(|| {
+            format!(
+                "{} source points lie within {max_distance} of the target under the result \
+                 (fewer than {MIN_CORRESPONDENCES}): the method found no overlap",
+                correspondences.len()
+            )
+        });
+        Self {
+            doubt,
+            ..Self::single(result, correspondences, start)
+        }
     }
 
     /// A single method's registration, timed from `start`.
@@ -129,6 +140,10 @@ impl Registration {
         }
     }
 }
+
+/// The fewest correspondences of a credible single method's result: fewer do not pin down a
+/// rigid transform.
+pub const MIN_CORRESPONDENCES: usize = 3;
 
 /// Milliseconds since `start`.
 pub fn elapsed_ms(start: Instant) -> f64 {
@@ -283,7 +298,7 @@ impl<E: From<GeomError>, R: Registrar<E>, F: Refiner> Registrar<E> for Refined<R
             time_ms: elapsed_ms(start),
             candidates: coarse.candidates,
             chosen: coarse.chosen,
-            doubt: coarse.doubt,
+            doubt: coarse.doubt.or(fine.doubt),
         })
     }
 }
@@ -413,6 +428,7 @@ impl<E: From<GeomError>, R: Registrar<E>, F: Refiner> Registrar<E> for AtResolut
             },
             correspondences: fine.correspondences,
             time_ms: elapsed_ms(start),
+            doubt: found.doubt.or(fine.doubt),
             ..found
         })
     }
@@ -543,6 +559,32 @@ mod tests {
             Registrar::<GeomError>::register(&mut FgrConfig::default(), &source, &target).unwrap();
         assert_eq!(first.result.t_target_source, direct.result.t_target_source);
         assert_eq!(second.result.t_target_source, direct.result.t_target_source);
+    }
+
+    /// Issue 44, D2: ICP or FGR that find nothing hand back a transform no point supports; it
+    /// is doubted (not registered), refined or not.
+    #[test]
+    fn a_single_method_that_finds_no_overlap_is_doubted() {
+        let (source, target) = curve_pair();
+        let far = target.transformed(&RigidTransform::new(
+            crate::Matrix3::identity(),
+            Vector3::new(100.0, 0.0, 0.0),
+        ));
+        let found =
+            Registrar::<GeomError>::register(&mut IcpConfig::default(), &source, &far).unwrap();
+        assert_eq!(found.result.t_target_source, RigidTransform::identity());
+        assert!(found.correspondences.is_empty());
+        let doubt = found.doubt.expect("doubted");
+        assert!(
+            doubt.starts_with("0 source points lie within 0.1 of the target"),
+            "{doubt}"
+        );
+        let mut refined = Refined::new(IcpConfig::default(), RefineConfig::default());
+        let found = Registrar::<GeomError>::register(&mut refined, &source, &far).unwrap();
+        assert!(found.doubt.is_some());
+        // The same methods on the pair they register are not doubted.
+        let found = Registrar::<GeomError>::register(&mut refined, &source, &target).unwrap();
+        assert!(found.doubt.is_none(), "{:?}", found.doubt);
     }
 
     #[test]
