@@ -30,6 +30,7 @@ pub mod registrar;
 pub mod registration;
 pub mod thinning;
 pub mod transform;
+pub mod triplets;
 
 #[cfg(test)]
 mod testing;

@@ -434,6 +434,35 @@ impl<E: From<GeomError>, R: Registrar<E>, F: Refiner> Registrar<E> for AtResolut
     }
 }
 
+/// `small` on a pair of at most `points` points per cloud, `other` on any other pair: tiny
+/// clouds (a few markers) need a method of their own ([`crate::triplets`]), which cannot run on
+/// large ones. Named as `other`, the method a pair usually gets.
+#[derive(Clone, Debug, PartialEq)]
+pub struct UpTo<S, R> {
+    pub points: usize,
+    pub small: S,
+    pub other: R,
+}
+
+impl<E, S: Registrar<E>, R: Registrar<E>> Registrar<E> for UpTo<S, R> {
+    fn id(&self) -> MethodId {
+        self.other.id()
+    }
+
+    fn register_with_progress(
+        &mut self,
+        source: &PointCloud,
+        target: &PointCloud,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        if source.len().max(target.len()) <= self.points {
+            self.small.register_with_progress(source, target, progress)
+        } else {
+            self.other.register_with_progress(source, target, progress)
+        }
+    }
+}
+
 /// The method `make` returns, made when it first registers a pair: a composite that may never
 /// run it (the cascade's network, when it accepts FGR's result) does not pay for making it.
 /// A failure to make it is the registration's error, and the next registration tries again.

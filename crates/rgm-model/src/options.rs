@@ -12,7 +12,9 @@
 //! | `auto` | `Normalised<Thinned<Cascade { first: FgrConfig, rest: [Normalised<RgmRegistrar>] }>>` |
 //! | `auto+icp` | `Normalised<AtResolution<Thinned<Cascade { first: Refined<FgrConfig>, rest: [Refined<Normalised<RgmRegistrar>>] }>, AtSpacing>>` |
 //!
-//! (`BestOf[first, rest]` in place of the `Cascade` when `accept` takes nothing.)
+//! (`BestOf[first, rest]` in place of the `Cascade` when `accept` takes nothing; inside the
+//! `Normalised`, `UpTo { points: 32, small: TripletConfig, .. }` sends a pair of a few points to
+//! [`rgm_geom::triplets`].)
 //!
 //! `Refined<R>` refines with [`RefineConfig`] (`+icp`); any other [`rgm_geom::refiner::Refiner`]
 //! composes the same way (`Refined::new(FgrConfig::default(), IcpConfig::default())` is
@@ -33,8 +35,11 @@ use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::icp::{self, IcpConfig};
 use rgm_geom::refine::{RefineConfig, ResolutionConfig};
 use rgm_geom::refiner::AtSpacing;
-use rgm_geom::registrar::{AtResolution, DynRegistrar, Normalised, OnFirstUse, Refined, Registrar};
+use rgm_geom::registrar::{
+    AtResolution, DynRegistrar, Normalised, OnFirstUse, Refined, Registrar, UpTo,
+};
 use rgm_geom::thinning::{Thinned, Thinning};
+use rgm_geom::triplets::TripletConfig;
 
 use rgm_nn::Precision;
 
@@ -350,24 +355,57 @@ where
             thinnings,
         })
     };
-    match refine {
-        None => Method::new(Normalised { inner: composite }),
-        Some(_) => Method::new(Normalised {
-            inner: AtResolution {
-                inner: composite,
-                refiner: AtSpacing {
-                    coarser_than: scoring_distance,
-                    scoring_distance,
-                    config: ResolutionConfig::default(),
-                },
+    let composite: Box<dyn DynRegistrar<MethodError>> = match refine {
+        None => composite,
+        Some(_) => Box::new(AtResolution {
+            inner: composite,
+            refiner: AtSpacing {
+                coarser_than: scoring_distance,
+                scoring_distance,
+                config: ResolutionConfig::default(),
             },
         }),
-    }
+    };
+    // A few markers have no neighbourhoods for features or the network: searched whole.
+    let triplets = TripletConfig::default();
+    Method::new(Normalised {
+        inner: UpTo {
+            points: triplets.max_points,
+            small: triplets,
+            other: composite,
+        },
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 44, D12: the default registers a copy of a few markers at another pose (it
+    /// refused them as "may not overlap").
+    #[test]
+    fn the_default_registers_a_few_markers() {
+        use rgm_geom::{Point3, PointCloud, RigidTransform, Vector3};
+        let markers = PointCloud::new(vec![
+            Point3::new(0.0, 0.0, 0.0),
+            Point3::new(0.12, 0.0, 0.01),
+            Point3::new(0.0, 0.2, 0.0),
+            Point3::new(0.03, 0.05, 0.3),
+            Point3::new(0.1, 0.1, 0.1),
+            Point3::new(-0.07, 0.15, 0.02),
+        ]);
+        let pose = RigidTransform::new(
+            rgm_geom::euler::rotation_xyz_intrinsic(0.4, -1.1, 2.5),
+            Vector3::new(1.5, 0.2, -3.0),
+        );
+        let moved = markers.transformed(&pose);
+        let mut method = MethodOptions::default().build().unwrap();
+        let found = method.register(&markers, &moved).unwrap();
+        assert!(found.doubt.is_none(), "{:?}", found.doubt);
+        let t = found.result.t_target_source;
+        assert!(t.inverse().compose(&pose).rotation_angle_deg() < 1e-6);
+        assert!((t.translation - pose.translation).norm() < 1e-9);
+    }
 
     #[test]
     fn the_default_is_the_built_in_rgm_and_fgr_refined() {
