@@ -168,10 +168,15 @@ pub enum Defaults {
 }
 
 impl MethodArgs {
-    /// The method these options select, with its weights loaded; refined when --refine is
-    /// given, or by `defaults` unless --no-refine is (ICP is its own refinement).
-    /// `rgm_model::MethodOptions` builds it, as it does for the Python package.
+    /// The method these options select, with its weights loaded ([`Self::options`] built).
     fn build(&self, defaults: Defaults) -> anyhow::Result<Method> {
+        Ok(self.options(defaults)?.build()?)
+    }
+
+    /// The options of the method these select: refined when --refine is given, or by
+    /// `defaults` unless --no-refine is (ICP is its own refinement). `rgm_model::MethodOptions`
+    /// builds the method, as it does for the Python package.
+    fn options(&self, defaults: Defaults) -> anyhow::Result<MethodOptions> {
         let refine_by_default = defaults == Defaults::Register;
         let method = match self.method {
             Some(method) => method,
@@ -193,7 +198,7 @@ impl MethodArgs {
             refine,
             accept: self.accept,
         };
-        Ok(options.build()?)
+        Ok(options)
     }
 }
 
