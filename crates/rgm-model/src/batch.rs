@@ -786,4 +786,42 @@ mod tests {
         );
         assert_eq!(csv_fields(r#""a"b,c"#), Err("text after a quoted field"));
     }
+
+    #[test]
+    fn a_rewritten_output_stays_locked_and_keeps_its_finished_lines() {
+        let dir = std::env::temp_dir().join(format!("rgm-batch-lock-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("out.jsonl");
+        let settings = settings(
+            &MethodOptions::default(),
+            &MethodOptions::default().build().unwrap(),
+        )
+        .unwrap();
+        let header = json!({HEADER_KEY: FORMAT, "settings": settings}).to_string();
+        let done = r#"{"source":"a","target":"b","registered":true}"#;
+        let failed = r#"{"source":"c","target":"d","error":"no"}"#;
+        // A failed pair's line and a cut-off last line: the file is rewritten without them.
+        std::fs::write(&path, format!("{header}\n{done}\n{failed}\n{{\"sou")).unwrap();
+        let output = Output::open(&path, &settings, &()).unwrap();
+        assert_eq!(
+            std::fs::read_to_string(&path).unwrap(),
+            format!("{header}\n{done}\n")
+        );
+        let key = ("a".to_string(), "b".to_string());
+        assert_eq!(output.done().get(&key), Some(&Outcome::Registered));
+        assert_eq!(output.done().len(), 1);
+        // The file now at the path is the one this run holds.
+        let other = File::open(&path).unwrap();
+        assert!(matches!(
+            other.try_lock(),
+            Err(std::fs::TryLockError::WouldBlock)
+        ));
+        assert!(matches!(
+            Output::open(&path, &settings, &()),
+            Err(BatchError::Busy { .. })
+        ));
+        drop(output);
+        other.try_lock().unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
