@@ -184,6 +184,7 @@ class Registrar:
         ValueError: an unknown method, preset or test_statistics; an RGM option with another
             method; a weight file that cannot be read or does not fit the preset (the message
             names the file).
+        TypeError: ``refine`` that is not True or False (``"no"`` would mean yes).
     """
 
     def __init__(
@@ -374,6 +375,7 @@ def register(
         ValueError: a cloud that is not a float32/float64 (N, 3) array or holds NaN or
             infinity (the message names the argument, its shape and dtype); an option that
             does not fit the method, or weights that cannot be loaded.
+        TypeError: ``refine`` that is not True or False.
         RuntimeError: the method found no transform for this pair.
 
     Example::
