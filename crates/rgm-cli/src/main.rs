@@ -274,7 +274,10 @@ pub struct DataArgs {
     /// are the scans that overlap by ≥ 45 % (the share of each scan's points within 3 median
     /// point spacings of the other under the ground truth, the smaller of the two), the source
     /// turned by up to 45° about a random axis and shifted by up to half the object's radius
-    /// (seeded per pair); --setting, --unseen and --split do not apply.
+    /// (seeded per pair); --setting, --unseen and --split do not apply. A folder is named by
+    /// its own name (in tables, and as the subfolder of `rgm pairs`), so two folders of one name
+    /// are refused; a folder without such a pair is noted on stderr, and a run without any pair
+    /// fails.
     #[arg(long, value_name = "DIR", num_args = 1..)]
     scans: Vec<PathBuf>,
     /// The paper's test protocol to use.
