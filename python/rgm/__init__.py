@@ -31,6 +31,7 @@ import numpy as np
 from . import _rgm
 
 __all__ = [
+    "BatchError",
     "BenchmarkPair",
     "Candidate",
     "DEFAULT_METHOD",
@@ -61,7 +62,8 @@ def _points(name: str, value: object) -> np.ndarray:
             f"{name} must be a NumPy array of shape (N, 3) and dtype float32 or float64, "
             f"got {type(value).__name__}"
         )
-    if value.dtype not in (np.float32, np.float64) or value.ndim != 2 or value.shape[1] != 3:
+    # Either byte order: a big-endian array is converted below.
+    if value.dtype.kind != "f" or value.dtype.itemsize not in (4, 8) or value.ndim != 2 or value.shape[1] != 3:
         raise ValueError(
             f"{name} must have shape (N, 3) and dtype float32 or float64, "
             f"got shape {value.shape} and dtype {value.dtype}"
@@ -76,6 +78,14 @@ def _points(name: str, value: object) -> np.ndarray:
             f"coordinate in row {row}: {value[row].tolist()}"
         )
     return np.ascontiguousarray(value, dtype=np.float64)
+
+
+def _flag(name: str, value: object) -> bool:
+    """``value`` if it is a bool (NumPy's too), else a TypeError: a string such as ``"no"``
+    is true to ``bool``, and would silently mean yes."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
 
 
 def _matrix(name: str, value: object, shape: tuple) -> np.ndarray:
@@ -108,6 +118,26 @@ Candidate = _rgm.Candidate
 #: (``help(rgm.RegistrationResult)`` says what each holds). It pickles, so results travel back
 #: from process pools and Dask workers.
 RegistrationResult = _rgm.RegistrationResult
+
+
+class BatchError(RuntimeError):
+    """Some pairs of ``Registrar.register_many`` failed; the others' results are kept.
+
+    Attributes:
+        results: one entry per pair, in the order of the pairs: its RegistrationResult, or
+            ``None`` for a pair that failed.
+        errors: ``(index, message)`` of each failed pair, in order.
+    """
+
+    def __init__(self, results: list, errors: list) -> None:
+        index, message = errors[0]
+        super().__init__(
+            f"pair {index}: {message} ({len(errors)} of {len(results)} pairs failed; the "
+            "exception's .results holds every pair's result, None where it failed, and "
+            ".errors each failed pair's (index, message))"
+        )
+        self.results = results
+        self.errors = errors
 
 
 class Registrar:
@@ -154,6 +184,7 @@ class Registrar:
         ValueError: an unknown method, preset or test_statistics; an RGM option with another
             method; a weight file that cannot be read or does not fit the preset (the message
             names the file).
+        TypeError: ``refine`` that is not True or False (``"no"`` would mean yes).
     """
 
     def __init__(
@@ -169,7 +200,7 @@ class Registrar:
     ) -> None:
         self._settings = (
             str(method),
-            bool(refine),
+            _flag("refine", refine),
             None if weights is None else os.fspath(weights),
             preset,
             test_statistics,
@@ -214,39 +245,61 @@ class Registrar:
         return self._native.register(source, target)
 
     def register_many(
-        self, pairs: Iterable[Tuple[np.ndarray, np.ndarray]]
-    ) -> List[RegistrationResult]:
+        self,
+        pairs: Iterable[Tuple[np.ndarray, np.ndarray]],
+        output: Optional[PathLike] = None,
+    ) -> Union[List[RegistrationResult], dict]:
         """``register`` on each (source, target) of ``pairs``, on all cores at once.
 
         The pairs run in parallel on rgm's threads (one per core) with the GIL released; each
-        result is the one ``register`` gives for its pair alone. Ctrl-C interrupts at once.
+        result is the one ``register`` gives for its pair alone. ``pairs`` may be any
+        iterable, a generator too: pairs are taken from it as threads come free, so only the
+        pairs being registered are held at once. Ctrl-C interrupts at once.
 
         Args:
             pairs: (source, target) pairs of clouds, each as ``register`` takes them.
+            output: a JSON Lines file to write instead of returning results: one line per
+                pair, as ``rgm register --pairs --output`` writes them (after a header line
+                that records the settings), the pairs named ``pairs[I].source`` and
+                ``pairs[I].target`` by their index. Resumable: a later call with the same
+                file and settings skips the pairs with a line there (a failed pair's line
+                is done again). A file that is not rgm's, one of other settings, or one
+                another run is writing is refused (ValueError) and left as it is.
 
         Returns:
-            A list of RegistrationResult, in the order of ``pairs``.
+            A list of RegistrationResult, in the order of ``pairs``; with ``output``, the
+            tally ``{"registered": n, "not_registered": n, "failed": n, "skipped": n}``.
 
         Raises:
             ValueError: a pair that is not two clouds, or a cloud that ``register`` refuses
-                (the message names the pair's index: ``pairs[3] target ...``).
-            RuntimeError: the method found no transform for a pair (the first such pair's
-                error, naming its index: ``pair 3: rgm+icp failed: ...``).
-            MemoryError: as for ``register``.
+                (the message names the pair's index: ``pairs[3] target ...``); pairs before it
+                are registered (and written to ``output``).
+            BatchError: a RuntimeError, when the method found no transform for some pairs:
+                its message names the first (``pair 3: rgm+icp failed: ...``), its
+                ``results`` holds every pair's result (``None`` where it failed) and its
+                ``errors`` each failed pair's (index, message). With ``output``, failed pairs
+                are lines with their ``"error"`` instead.
+            OSError: ``output`` cannot be read or written.
         """
-        checked = []
-        for index, pair in enumerate(pairs):
-            try:
-                source, target = pair
-            except (TypeError, ValueError):
-                raise ValueError(
-                    f"pairs[{index}] must be a (source, target) pair of clouds, "
-                    f"got {type(pair).__name__}"
-                ) from None
-            checked.append(
-                (_points(f"pairs[{index}] source", source), _points(f"pairs[{index}] target", target))
-            )
-        return self._native.register_many(checked)
+
+        def checked():
+            for index, pair in enumerate(pairs):
+                try:
+                    source, target = pair
+                except (TypeError, ValueError):
+                    raise ValueError(
+                        f"pairs[{index}] must be a (source, target) pair of clouds, "
+                        f"got {type(pair).__name__}"
+                    ) from None
+                yield (_points(f"pairs[{index}] source", source), _points(f"pairs[{index}] target", target))
+
+        if output is not None:
+            counts = self._native.register_many_into(checked(), os.fspath(output))
+            return dict(zip(("registered", "not_registered", "failed", "skipped"), counts))
+        results, errors = self._native.register_many(checked())
+        if errors:
+            raise BatchError(results, errors)
+        return results
 
     def __reduce__(self):
         # Unpickled through the cache of rgm.register: a process pool's worker loads the
@@ -254,7 +307,7 @@ class Registrar:
         return (_registrar, self._settings)
 
     def __repr__(self) -> str:
-        names = ("method", "refine", "weights", "preset", "test_statistics", "match_points", "passes")
+        names = ("method", "refine", "weights", "preset", "test_statistics", "match_points", "passes", "accept")
         given = ", ".join(f"{n}={v!r}" for n, v in zip(names, self._settings) if v is not None)
         return f"rgm.Registrar({given})"
 
@@ -275,6 +328,7 @@ def register(
     test_statistics: Optional[str] = None,
     match_points: Optional[int] = None,
     passes: Optional[int] = None,
+    accept: Optional[float] = None,
 ) -> RegistrationResult:
     """The rigid transform that maps ``source`` onto ``target``, as ``rgm register`` finds it.
 
@@ -308,6 +362,9 @@ def register(
             (fixed seed); 0: every point. Default: every point for the built-in model (256 in
             ``auto``), 1,024 with ``weights``.
         passes: RGM and auto only: passes of network, matching and Kabsch. Default: 2.
+        accept: auto only: take FGR's result without running the network when its overlap
+            score (0 to 2) reaches this; ``float("inf")`` runs both on every pair. Default:
+            that of ``rgm register``.
 
     Returns:
         A RegistrationResult: ``transformation`` ((4, 4) float64, target ← source),
@@ -318,6 +375,7 @@ def register(
         ValueError: a cloud that is not a float32/float64 (N, 3) array or holds NaN or
             infinity (the message names the argument, its shape and dtype); an option that
             does not fit the method, or weights that cannot be loaded.
+        TypeError: ``refine`` that is not True or False.
         RuntimeError: the method found no transform for this pair.
 
     Example::
@@ -327,12 +385,13 @@ def register(
     """
     registrar = _registrar(
         method,
-        refine,
+        _flag("refine", refine),
         None if weights is None else os.fspath(weights),
         preset,
         test_statistics,
-        match_points,
-        passes,
+        None if match_points is None else int(match_points),
+        None if passes is None else int(passes),
+        None if accept is None else float(accept),
     )
     return registrar.register(source, target)
 

@@ -1,6 +1,6 @@
 """Type stubs of the compiled extension ``rgm._rgm`` (arrays arrive checked, as float64)."""
 
-from typing import Optional
+from typing import Iterator, Optional
 
 import numpy as np
 import numpy.typing as npt
@@ -27,8 +27,11 @@ class Registrar:
         self, source: npt.NDArray[np.float64], target: npt.NDArray[np.float64]
     ) -> RegistrationResult: ...
     def register_many(
-        self, pairs: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]]
-    ) -> list[RegistrationResult]: ...
+        self, pairs: Iterator[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]]
+    ) -> tuple[list[Optional[RegistrationResult]], list[tuple[int, str]]]: ...
+    def register_many_into(
+        self, pairs: Iterator[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]], output: str
+    ) -> tuple[int, int, int, int]: ...
 
 class Candidate:
     method: str

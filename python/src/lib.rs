@@ -10,6 +10,7 @@
 //! pool of this process ([`pool`]), so a process forked from one that registered (a process
 //! pool's workers under Linux's default start method) registers too.
 
+use std::collections::HashSet;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -18,10 +19,10 @@ use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
 use pyo3::exceptions::{PyMemoryError, PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
-use rayon::prelude::*;
+use pyo3::types::{PyDict, PyIterator};
 use rgm_data::{DataError, ModelNet40, PairGenerator, Setting, Shape, Split};
 use rgm_geom::{Matrix4, PairMetrics, Point3, PointCloud, RigidTransform};
+use rgm_model::batch;
 use rgm_model::network::TestStatistics;
 use rgm_model::Registrar as _;
 use rgm_model::{Method, MethodError, MethodName, MethodOptions, Registration};
@@ -126,6 +127,8 @@ fn transform(matrix: &PyReadonlyArray2<'_, f64>, name: &str) -> PyResult<RigidTr
 struct Registrar {
     /// Shared with the pool's work, which may outlive a call interrupted by Ctrl-C.
     copies: Arc<Copies>,
+    /// What the method was built from, recorded in a batch's output.
+    options: MethodOptions,
 }
 
 /// A method and the copies of it that threads register with.
@@ -278,6 +281,7 @@ impl Registrar {
                 prototype,
                 idle: Mutex::new(Vec::new()),
             }),
+            options,
         })
     }
 
@@ -308,43 +312,188 @@ impl Registrar {
         RegistrationResult::from_registration(py, name, &registration, &pairs)
     }
 
-    /// Registers each (source, target) of `pairs` on all of the pool's threads; the results
-    /// in the order of `pairs`, or the error of the first pair that failed, naming it.
+    /// Registers each (source, target) of the iterator `pairs` (float64 clouds) on all of the
+    /// pool's threads, taking pairs as threads come free; the results in the order of
+    /// `pairs` (`None` for a pair that failed) and each failed pair's (index, error).
     fn register_many(
         &self,
         py: Python<'_>,
-        pairs: Vec<(PyReadonlyArray2<'_, f64>, PyReadonlyArray2<'_, f64>)>,
-    ) -> PyResult<Vec<RegistrationResult>> {
-        let clouds = pairs
-            .iter()
-            .map(|(s, t)| Ok((cloud(s, "source")?, cloud(t, "target")?)))
-            .collect::<PyResult<Vec<_>>>()?;
+        pairs: Bound<'_, PyIterator>,
+    ) -> PyResult<(Vec<Option<RegistrationResult>>, Vec<PairError>)> {
+        let name = self.name();
+        let pulled = Pulled::new(pairs, None);
+        let failed = pulled.error.clone();
+        let kept: Arc<Mutex<Vec<Finished>>> = Arc::default();
+        let into = kept.clone();
         let copies = self.copies.clone();
-        let name = &self.name();
-        let outcomes = on_pool(py, name, move |stop| {
-            clouds
-                .par_iter()
-                .map_init(
-                    || copies.lease(),
-                    |lease, (source, target)| {
-                        let method = lease.method.as_mut().expect("leased");
-                        // After a Ctrl-C nobody waits for the rest.
-                        (!stop.load(Ordering::Relaxed))
-                            .then(|| register_pair(method, source, target))
-                    },
-                )
-                .collect::<Vec<_>>()
-        })?;
-        outcomes
-            .into_iter()
-            .enumerate()
-            .map(|(i, outcome)| {
-                let (registration, pairs) = outcome
-                    .ok_or_else(|| PyRuntimeError::new_err("rgm's work was cut short"))?
-                    .map_err(|e| method_error(&format!("pair {i}: {name}"), e))?;
-                RegistrationResult::from_registration(py, name, &registration, &pairs)
-            })
-            .collect()
+        on_pool(py, &name, move |stop| {
+            batch::register_all(
+                &copies.prototype,
+                pulled,
+                None,
+                &(),
+                stop,
+                |i, registered| lock(&into).push((i, registered)),
+            )
+        })?
+        .map_err(|e| PyOSError::new_err(e.to_string()))?;
+        if let Some(error) = lock(&failed).take() {
+            return Err(error);
+        }
+        let mut done = std::mem::take(&mut *lock(&kept));
+        done.sort_by_key(|(i, _)| *i);
+        let mut results = Vec::with_capacity(done.len());
+        let mut errors = Vec::new();
+        for (i, registered) in done {
+            match registered {
+                Ok(mut registration) => {
+                    let pairs = std::mem::take(&mut registration.correspondences);
+                    results.push(Some(RegistrationResult::from_registration(
+                        py,
+                        &name,
+                        &registration,
+                        &pairs,
+                    )?));
+                }
+                Err(why) => {
+                    results.push(None);
+                    errors.push((i, why));
+                }
+            }
+        }
+        Ok((results, errors))
+    }
+
+    /// Registers the pairs of `pairs` as `register_many` does, each pair's line into the
+    /// resumable JSON Lines file `output` (`rgm register --pairs --output`'s format, the pairs
+    /// named `pairs[I].source` and `pairs[I].target`); pairs with a line there already are
+    /// skipped. The tally (registered, not registered, failed, skipped).
+    fn register_many_into(
+        &self,
+        py: Python<'_>,
+        pairs: Bound<'_, PyIterator>,
+        output: PathBuf,
+    ) -> PyResult<(usize, usize, usize, usize)> {
+        let name = self.name();
+        let method = &self.copies.prototype;
+        let settings = batch::settings(&self.options, method).map_err(batch_error)?;
+        let output = Arc::new(batch::Output::open(&output, &settings, &()).map_err(batch_error)?);
+        let done: HashSet<batch::Key> = output.done().keys().cloned().collect();
+        let pulled = Pulled::new(pairs, Some(done));
+        let (failed, skipped) = (pulled.error.clone(), pulled.skipped.clone());
+        let copies = self.copies.clone();
+        let file = output.clone();
+        let tally = on_pool(py, &name, move |stop| {
+            batch::register_all(
+                &copies.prototype,
+                pulled,
+                Some(file.lines()),
+                &(),
+                stop,
+                |_, _| {},
+            )
+        })?
+        .map_err(batch_error)?;
+        if let Some(error) = lock(&failed).take() {
+            return Err(error);
+        }
+        let skipped = skipped.load(Ordering::Relaxed);
+        Ok((
+            tally.registered,
+            tally.not_registered,
+            tally.failed,
+            skipped,
+        ))
+    }
+}
+
+/// A failed pair of a batch: its index and why.
+type PairError = (usize, String);
+
+/// A pair of a batch as it finished: its index and its registration, or why it failed.
+type Finished = (usize, Result<Registration, String>);
+
+/// A batch's error: `OSError` for a file that could not be read or written, `ValueError` for
+/// an output that is not rgm's or of other settings, or is busy.
+fn batch_error(err: batch::BatchError) -> PyErr {
+    match err {
+        batch::BatchError::Io { .. } => PyOSError::new_err(err.to_string()),
+        other => value_error(other),
+    }
+}
+
+/// `mutex` locked, a panic while it was held ignored (the data stays valid).
+fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
+    mutex
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// The pairs of a Python iterator as batch jobs, pulled under the GIL by the thread that
+/// takes the next job; the first Python error (a pair that is not two clouds) ends the
+/// iteration and is kept for the caller. Pairs named in `skip` are passed over.
+struct Pulled {
+    pairs: Py<PyIterator>,
+    next: usize,
+    skip: Option<HashSet<batch::Key>>,
+    skipped: Arc<std::sync::atomic::AtomicUsize>,
+    error: Arc<Mutex<Option<PyErr>>>,
+}
+
+impl Pulled {
+    fn new(pairs: Bound<'_, PyIterator>, skip: Option<HashSet<batch::Key>>) -> Self {
+        Self {
+            pairs: pairs.unbind(),
+            next: 0,
+            skip,
+            skipped: Arc::default(),
+            error: Arc::default(),
+        }
+    }
+}
+
+impl Iterator for Pulled {
+    type Item = batch::Job;
+
+    fn next(&mut self) -> Option<batch::Job> {
+        Python::attach(|py| loop {
+            if lock(&self.error).is_some() {
+                return None;
+            }
+            let index = self.next;
+            let pair = match self.pairs.bind(py).clone().next()? {
+                Ok(pair) => pair,
+                Err(error) => {
+                    *lock(&self.error) = Some(error);
+                    return None;
+                }
+            };
+            self.next += 1;
+            let key = (
+                format!("pairs[{index}].source"),
+                format!("pairs[{index}].target"),
+            );
+            if self.skip.as_ref().is_some_and(|skip| skip.contains(&key)) {
+                self.skipped.fetch_add(1, Ordering::Relaxed);
+                continue;
+            }
+            let clouds = pair
+                .extract::<(PyReadonlyArray2<'_, f64>, PyReadonlyArray2<'_, f64>)>()
+                .and_then(|(s, t)| Ok((cloud(&s, "source")?, cloud(&t, "target")?)));
+            match clouds {
+                Ok((source, target)) => {
+                    return Some(batch::Job {
+                        index,
+                        key,
+                        clouds: batch::Clouds::Given { source, target },
+                    })
+                }
+                Err(error) => {
+                    *lock(&self.error) = Some(error);
+                    return None;
+                }
+            }
+        })
     }
 }
 

@@ -3,6 +3,7 @@
 import os
 import pathlib
 import shutil
+import signal
 
 import numpy as np
 import pytest
@@ -63,3 +64,12 @@ def rgm_command():
     if shutil.which("cargo") is None:
         pytest.skip("no rgm binary (set RGM_BIN) and no cargo to build one")
     return ["cargo", "run", "--quiet", "--manifest-path", str(REPO / "Cargo.toml"), "--bin", "rgm", "--"]
+
+
+@pytest.fixture
+def ctrl_c():
+    """Python's own Ctrl-C handler (KeyboardInterrupt) for the test: a shell starts a background
+    job with SIGINT ignored, and its children inherit that."""
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, before)

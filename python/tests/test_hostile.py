@@ -1,12 +1,14 @@
 """Issue 27's Python cases: a process pool forked after a registration, Ctrl-C during one, a far
 outlier, clouds without overlap, and the docs of the default."""
 
+import json
 import multiprocessing
 import os
 import pathlib
 import signal
 import threading
 import time
+import weakref
 
 import numpy as np
 import pytest
@@ -35,7 +37,7 @@ def test_a_fork_pool_after_a_registration_registers(airplane):
         np.testing.assert_array_equal(result.transformation, expected)
 
 
-def test_ctrl_c_interrupts_a_registration_at_once(airplane):
+def test_ctrl_c_interrupts_a_registration_at_once(airplane, ctrl_c):
     # Case 11: KeyboardInterrupt came only when the call ended (21.6 s later). A dense pair
     # (1,000 copies of each point, jittered) keeps the default method busy for seconds; Ctrl-C
     # 0.2 s into it ends the call long before the registration would have.
@@ -119,3 +121,85 @@ def test_a_far_outlier_in_a_real_scan_leaves_the_transform_right():
     assert result.registered, result.reason
     angle, shift = errors(result.transformation, truth)
     assert angle < 2.0 and shift < 0.002, (angle, shift)
+
+
+def test_register_many_keeps_the_results_of_the_pairs_that_did_not_fail(airplane):
+    # Issue 44, D8: one failing pair among many raised, and every result was lost.
+    registrar = rgm.Registrar(method="rgm", refine=False)
+    good = (airplane, moved(airplane, KNOWN))
+    with pytest.raises(rgm.BatchError) as raised:
+        registrar.register_many([good, (airplane[:5], airplane[:5]), good])
+    assert isinstance(raised.value, RuntimeError)
+    results, failed = raised.value.results, raised.value.errors
+    assert results[1] is None and [i for i, _ in failed] == [1]
+    assert "needs at least" in failed[0][1]
+    alone = registrar.register(*good).transformation
+    for result in (results[0], results[2]):
+        np.testing.assert_array_equal(result.transformation, alone)
+
+
+def test_register_many_takes_a_generator_pair_by_pair(airplane):
+    # D8: a generator was collected whole before the first pair ran (every cloud in memory at
+    # once). Each yielded cloud is counted while it lives.
+    alive = [0, 0]  # now, most at once
+
+    def gone():
+        alive[0] -= 1
+
+    def pairs(count):
+        for k in range(count):
+            source = moved(airplane, pose((k, 0, 0), (0, 0, 0)))
+            target = moved(airplane, KNOWN)
+            for cloud in (source, target):
+                alive[0] += 1
+                weakref.finalize(cloud, gone)
+            alive[1] = max(alive[1], alive[0])
+            yield source, target
+
+    results = rgm.Registrar(method="icp").register_many(pairs(40))
+    assert len(results) == 40
+    # The pair being handed over and the generator's own last pair, on any number of cores
+    # (all 80 clouds, collected whole).
+    assert alive[1] <= 4, alive
+
+
+def test_register_many_writes_and_resumes_rgm_s_json_lines(airplane, tmp_path):
+    # D8: register_many writes the resumable file of `rgm register --pairs --output`.
+    registrar = rgm.Registrar(method="icp")
+    pairs = [(airplane, moved(airplane, pose((5 * k, 0, 0), (0, 0, 0)))) for k in range(3)]
+    output = tmp_path / "out.jsonl"
+    assert registrar.register_many(pairs[:2], output=output) == {
+        "registered": 2, "not_registered": 0, "failed": 0, "skipped": 0}
+    assert registrar.register_many(iter(pairs), output=output) == {
+        "registered": 1, "not_registered": 0, "failed": 0, "skipped": 2}
+    header, *lines = [json.loads(line) for line in output.read_text().splitlines()]
+    assert header["rgm_batch"] == 1 and header["settings"]["method"] == "icp"
+    assert sorted(line["source"] for line in lines) == [f"pairs[{k}].source" for k in range(3)]
+    for line in lines:
+        k = int(line["source"][6])
+        expected = registrar.register(*pairs[k]).transformation
+        np.testing.assert_allclose(line["transform"], expected, atol=1e-12)
+    # Another method's file, and a file that is not rgm's, are refused and left as they are.
+    before = output.read_text()
+    with pytest.raises(ValueError, match="its results were made with method \"icp\""):
+        rgm.Registrar(method="fgr").register_many(pairs, output=output)
+    notes = tmp_path / "notes.txt"
+    notes.write_text("my notes")
+    with pytest.raises(ValueError, match="notes.txt:1: not an output of rgm's batches"):
+        registrar.register_many(pairs, output=notes)
+    assert (output.read_text(), notes.read_text()) == (before, "my notes")
+
+
+def test_options_are_what_they_say(airplane):
+    # Issue 44's Python minor cases: accept in the repr and in rgm.register, refine a bool only,
+    # big-endian float64 clouds taken as they are.
+    assert repr(rgm.Registrar(accept=0.5)) == "rgm.Registrar(method='auto', refine=True, accept=0.5)"
+    for call in (lambda: rgm.Registrar(refine="no"), lambda: rgm.register(airplane, airplane, refine="no")):
+        with pytest.raises(TypeError, match="refine must be True or False, got 'no'"):
+            call()
+    target = moved(airplane, KNOWN)
+    both = rgm.register(airplane, target, accept=float("inf"), match_points=64)
+    assert [c.score is not None for c in both.candidates] == [True, True]
+    native = rgm.register(airplane, target, method="icp")
+    swapped = rgm.register(airplane.astype(">f8"), target.astype(">f8"), method="icp")
+    np.testing.assert_array_equal(swapped.transformation, native.transformation)

@@ -258,7 +258,7 @@ def test_register_many_gives_the_one_by_one_results(data, registrar):
         registrar.register_many([(airplane, airplane), (airplane, np.zeros((30, 2)))])
     with pytest.raises(ValueError, match=r"^pairs\[0\] must be a \(source, target\) pair"):
         registrar.register_many([airplane])
-    with pytest.raises(RuntimeError, match=r"^pair 1: rgm\+icp failed: .*needs at least"):
+    with pytest.raises(rgm.BatchError, match=r"^pair 1: rgm\+icp failed: .*needs at least"):
         rgm.Registrar(method="rgm").register_many([(airplane, airplane), (airplane[:5], airplane[:5])])
 
 
@@ -297,7 +297,7 @@ def test_a_result_has_named_read_only_fields_a_repr_and_pickles(airplane, regist
     np.testing.assert_array_equal(made.translation, np.zeros(3))
 
 
-def test_ctrl_c_interrupts_register_many_and_the_registrar_goes_on(airplane):
+def test_ctrl_c_interrupts_register_many_and_the_registrar_goes_on(airplane, ctrl_c):
     import os
     import signal
 

@@ -19,14 +19,15 @@ pub fn progress(len: usize, what: &str) -> ProgressBar {
     bar
 }
 
-/// A resumable evaluation's progress ([`rgm_model::evaluate::Progress`]) as a [`progress`] bar
-/// labelled `what`, drawn only once pairs are computed (none when every pair is read back).
-pub struct EvaluationBar {
+/// The progress of a resumable evaluation or a batch ([`rgm_model::progress::Progress`]) as a
+/// [`progress`] bar labelled `what`, drawn only once pairs are computed (none when an
+/// evaluation reads every pair back); notes go to stderr, above the bar.
+pub struct TaskBar {
     what: String,
     bar: OnceLock<ProgressBar>,
 }
 
-impl EvaluationBar {
+impl TaskBar {
     pub fn new(what: impl Into<String>) -> Self {
         Self {
             what: what.into(),
@@ -35,7 +36,7 @@ impl EvaluationBar {
     }
 }
 
-impl rgm_model::evaluate::Progress for EvaluationBar {
+impl rgm_model::progress::Progress for TaskBar {
     fn start(&self, total: usize, done: usize) {
         let bar = self.bar.get_or_init(|| progress(total, &self.what));
         bar.set_position(done as u64);
@@ -54,6 +55,13 @@ impl rgm_model::evaluate::Progress for EvaluationBar {
             } else {
                 bar.abandon_with_message("stopped at the time limit");
             }
+        }
+    }
+
+    fn note(&self, message: &str) {
+        match self.bar.get() {
+            Some(bar) => bar.suspend(|| eprintln!("rgm: {message}")),
+            None => eprintln!("rgm: {message}"),
         }
     }
 }

@@ -29,8 +29,8 @@ struct Cli {
     /// Threads one command may use: `rgm register` runs the network's attention on them (and
     /// both candidates side by side with --accept inf), and `--workers` of `register --pairs`
     /// and `rgm eval` defaults to it
-    /// (`rgm train` has its own --workers) [default: one per core; the `RAYON_NUM_THREADS`
-    /// variable sets it too].
+    /// (`rgm train` has its own --workers); more than 4 per core are cut to 4 per core [default:
+    /// one per core; the `RAYON_NUM_THREADS` variable sets it too].
     #[arg(long, global = true, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
     threads: Option<u16>,
 }
@@ -168,10 +168,15 @@ pub enum Defaults {
 }
 
 impl MethodArgs {
-    /// The method these options select, with its weights loaded; refined when --refine is
-    /// given, or by `defaults` unless --no-refine is (ICP is its own refinement).
-    /// `rgm_model::MethodOptions` builds it, as it does for the Python package.
+    /// The method these options select, with its weights loaded ([`Self::options`] built).
     fn build(&self, defaults: Defaults) -> anyhow::Result<Method> {
+        Ok(self.options(defaults)?.build()?)
+    }
+
+    /// The options of the method these select: refined when --refine is given, or by
+    /// `defaults` unless --no-refine is (ICP is its own refinement). `rgm_model::MethodOptions`
+    /// builds the method, as it does for the Python package.
+    fn options(&self, defaults: Defaults) -> anyhow::Result<MethodOptions> {
         let refine_by_default = defaults == Defaults::Register;
         let method = match self.method {
             Some(method) => method,
@@ -193,7 +198,7 @@ impl MethodArgs {
             refine,
             accept: self.accept,
         };
-        Ok(options.build()?)
+        Ok(options)
     }
 }
 
@@ -237,8 +242,8 @@ pub fn method_failure(
 /// `--workers N`: how many pairs run at once.
 #[derive(clap::Args, Debug, Clone)]
 pub struct WorkerArgs {
-    /// Pairs registered at once, one per worker thread [default: --threads]. Times are each
-    /// method's own, per pair.
+    /// Pairs registered at once, one per worker thread, at most 4 per core [default:
+    /// --threads]. Times are each method's own, per pair.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
     workers: Option<u16>,
 }
@@ -249,7 +254,7 @@ impl WorkerArgs {
         Ok(rayon::ThreadPoolBuilder::new()
             .num_threads(
                 self.workers
-                    .map_or_else(rayon::current_num_threads, usize::from),
+                    .map_or_else(rayon::current_num_threads, |n| sane_threads(n, "--workers")),
             )
             .start_handler(|_| {
                 rgm_nn::threads::flush_denormals_to_zero();
@@ -269,7 +274,10 @@ pub struct DataArgs {
     /// are the scans that overlap by ≥ 45 % (the share of each scan's points within 3 median
     /// point spacings of the other under the ground truth, the smaller of the two), the source
     /// turned by up to 45° about a random axis and shifted by up to half the object's radius
-    /// (seeded per pair); --setting, --unseen and --split do not apply.
+    /// (seeded per pair); --setting, --unseen and --split do not apply. A folder is named by
+    /// its own name (in tables, and as the subfolder of `rgm pairs`), so two folders of one name
+    /// are refused; a folder without such a pair is noted on stderr, and a run without any pair
+    /// fails.
     #[arg(long, value_name = "DIR", num_args = 1..)]
     scans: Vec<PathBuf>,
     /// The paper's test protocol to use.
@@ -304,25 +312,53 @@ impl DataArgs {
     }
 
     /// The pairs of each --scans folder that `--every` and `--limit` select, with the folder's
-    /// name; the folders' reading warnings go to stderr.
+    /// name (its own, also for `.`); the folders' reading warnings go to stderr, and a folder
+    /// without a pair is noted there. An error when two folders have one name (their pairs
+    /// would be written over each other) or no folder has a pair.
     fn scan_pairs(&self) -> anyhow::Result<Vec<(String, Vec<ScanPair>)>> {
-        let mut folders = Vec::new();
+        let mut folders: Vec<(String, Vec<ScanPair>)> = Vec::new();
+        let mut named: std::collections::HashMap<String, &Path> = Default::default();
+        let config = ScanPairConfig::default();
         for dir in &self.scans {
+            let name = std::fs::canonicalize(dir)
+                .ok()
+                .and_then(|full| full.file_name().map(|n| n.to_string_lossy().into_owned()))
+                .with_context(|| format!("--scans {}: a folder with no name", dir.display()))?;
+            if let Some(other) = named.insert(name.clone(), dir) {
+                anyhow::bail!(
+                    "--scans {} and {} are both named {name}; their pairs and results would \
+                     take one name: give folders of different names (a link to one, renamed, \
+                     will do)",
+                    other.display(),
+                    dir.display()
+                );
+            }
             let folder = ScanFolder::open(dir)?;
             for warning in &folder.warnings {
                 eprintln!("rgm: {warning}");
             }
             let pairs: Vec<ScanPair> = folder
-                .pairs(&ScanPairConfig::default())
+                .pairs(&config)
                 .into_iter()
                 .step_by(self.every as usize)
                 .take(self.limit.map_or(usize::MAX, |n| n as usize))
                 .collect();
-            let name = dir.file_name().map_or_else(
-                || dir.display().to_string(),
-                |n| n.to_string_lossy().into_owned(),
-            );
+            if pairs.is_empty() {
+                eprintln!(
+                    "rgm: {}: no two of its {} scans overlap by {} % or more, so it has no \
+                     pair",
+                    dir.display(),
+                    folder.scans.len(),
+                    100.0 * config.min_overlap
+                );
+            }
             folders.push((name, pairs));
+        }
+        if folders.iter().all(|(_, pairs)| pairs.is_empty()) {
+            anyhow::bail!(
+                "no pair of scans: no two scans of a --scans folder overlap by {} % or more",
+                100.0 * config.min_overlap
+            );
         }
         Ok(folders)
     }
@@ -416,7 +452,7 @@ fn end_quietly_on_closed_pipes() {
 fn main() -> ExitCode {
     end_quietly_on_closed_pipes();
     let cli = Cli::parse();
-    set_up_compute_threads(cli.threads.map_or(0, usize::from));
+    set_up_compute_threads(cli.threads.map_or(0, |n| sane_threads(n, "--threads")));
     let outcome = match cli.command {
         // On one of rayon's workers: its parallel steps then run on this thread and the pool's
         // others, instead of this thread handing each one over and sleeping until it ends.
@@ -434,6 +470,24 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// Threads past this many per core only cost their start (each a stack) and their switching.
+const THREADS_PER_CORE: usize = 4;
+
+/// `asked` threads, or [`THREADS_PER_CORE`] per core when it asks for more (said on stderr):
+/// tens of thousands of threads take minutes to start.
+fn sane_threads(asked: u16, option: &str) -> usize {
+    let cores = std::thread::available_parallelism().map_or(1, usize::from);
+    let most = THREADS_PER_CORE * cores;
+    if usize::from(asked) <= most {
+        return asked.into();
+    }
+    eprintln!(
+        "rgm: {option} {asked} is more than {THREADS_PER_CORE} per core on this machine's \
+         {cores}; using {most}"
+    );
+    most
 }
 
 /// Denormals flushed to zero on every compute thread (the network's Sinkhorn underflows), and

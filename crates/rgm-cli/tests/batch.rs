@@ -1,6 +1,7 @@
 //! `rgm register --pairs LIST`: the lines of one-by-one `rgm register --json` calls, a failed
 //! pair as a line, errors in LIST naming the file, the line and the value, and a resumable
-//! `--output` that never holds a pair twice.
+//! `--output` that never holds a pair twice, is rgm's by its header, records the settings and
+//! is written by one run at a time.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -44,16 +45,15 @@ fn written_pairs(dir: &Path, count: usize) -> PathBuf {
     out.join("pairs.json")
 }
 
-/// The JSON lines of `file`, each checked to be one complete object.
+/// The JSON lines of `file` after its header, each checked to be one complete object.
 fn lines(file: &Path) -> Vec<serde_json::Value> {
     let text = std::fs::read_to_string(file).unwrap();
-    assert!(
-        text.is_empty() || text.ends_with('\n'),
-        "a cut-off line in {text}"
-    );
-    text.lines()
-        .map(|l| serde_json::from_str(l).expect("a JSON line"))
-        .collect()
+    assert!(text.ends_with('\n'), "a cut-off line in {text}");
+    let mut lines = text
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).expect("a JSON line"));
+    assert_eq!(lines.next().unwrap()["rgm_batch"], 1, "no header in {text}");
+    lines.collect()
 }
 
 /// `lines` by their pair, each pair once.
@@ -139,10 +139,11 @@ fn a_rerun_registers_only_the_pairs_without_a_line_and_never_writes_one_twice() 
     assert_eq!(whole.len(), 6);
     // Line 2 removed and the last line cut in the middle, as a killed run leaves it, and the
     // first line written twice.
-    let kept: Vec<&str> = text.lines().collect();
+    let (header, kept) = text.split_once('\n').unwrap();
+    let kept: Vec<&str> = kept.lines().collect();
     let cut = &kept[5][..kept[5].len() / 2];
     let damaged = format!(
-        "{}\n{}\n{}\n{}\n{}\n{cut}",
+        "{header}\n{}\n{}\n{}\n{}\n{}\n{cut}",
         kept[0], kept[2], kept[3], kept[0], kept[4]
     );
     std::fs::write(&output, damaged).unwrap();
@@ -201,8 +202,9 @@ fn a_killed_run_finishes_on_a_rerun_without_redoing_its_pairs() {
         .stderr(std::process::Stdio::null())
         .spawn()
         .unwrap();
-    // Killed once its first line is written (or left alone, should it finish first).
-    while std::fs::read_to_string(&output).map_or(0, |t| t.lines().count()) == 0 {
+    // Killed once its first line after the header is written (or left alone, should it
+    // finish first).
+    while std::fs::read_to_string(&output).map_or(0, |t| t.lines().count()) < 2 {
         if child.try_wait().unwrap().is_some() {
             break;
         }
@@ -213,6 +215,7 @@ fn a_killed_run_finishes_on_a_rerun_without_redoing_its_pairs() {
     let text = std::fs::read_to_string(&output).unwrap();
     let finished: Vec<serde_json::Value> = text
         .split_inclusive('\n')
+        .skip(1)
         .filter(|l| l.ends_with('\n'))
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
@@ -328,18 +331,15 @@ fn errors_in_the_list_name_the_file_the_line_and_the_value() {
         let said = stderr(&out);
         assert!(said.contains(says), "{name}: {said}");
     }
-    // An --output that is not ours, or of another method, is refused and left as it was.
+    // An --output that is not ours is refused and left as it was, one line or more, with a
+    // newline or without (the list itself, notes, a JSON config).
     let list = dir.join("header.csv");
     std::fs::write(&list, "source,target\na.ply,b.ply\n").unwrap();
-    for (text, says) in [
-        (
-            "not json\n",
-            "other.jsonl:1: not a line of `rgm register --pairs`",
-        ),
-        (
-            "{\"source\": \"a.ply\", \"target\": \"b.ply\", \"method\": \"fgr+icp\"}\n",
-            "other.jsonl:1: a result of method \"fgr+icp\", not of this run's icp",
-        ),
+    for text in [
+        "not json\n",
+        "some notes",
+        r#"{"source": "a.ply", "target": "b.ply", "method": "icp"}"#,
+        "{\"config\": 1}\n{\"source\": \"a.ply\", \"target\": \"b.ply\"}\n",
     ] {
         let output = dir.join("other.jsonl");
         std::fs::write(&output, text).unwrap();
@@ -353,9 +353,25 @@ fn errors_in_the_list_name_the_file_the_line_and_the_value() {
             output.to_str().unwrap(),
         ]);
         assert!(!out.status.success());
-        assert!(stderr(&out).contains(says), "{}", stderr(&out));
+        assert!(
+            stderr(&out).contains("other.jsonl:1: not an output of rgm's batches"),
+            "{}",
+            stderr(&out)
+        );
         assert_eq!(std::fs::read_to_string(&output).unwrap(), text);
     }
+    let out = rgm(&[
+        "register",
+        "--pairs",
+        list.to_str().unwrap(),
+        "--output",
+        list.to_str().unwrap(),
+    ]);
+    assert!(stderr(&out).contains("header.csv:1: not an output of rgm's batches"));
+    assert_eq!(
+        std::fs::read_to_string(&list).unwrap(),
+        "source,target\na.ply,b.ply\n"
+    );
     // One pair and a list are one or the other.
     let out = rgm(&[
         "register",
@@ -367,4 +383,115 @@ fn errors_in_the_list_name_the_file_the_line_and_the_value() {
     assert!(!out.status.success() && stderr(&out).contains("cannot be used with"));
     let out = rgm(&["register", "a.ply", "b.ply", "--workers", "2"]);
     assert!(!out.status.success() && stderr(&out).contains("--workers applies to --pairs"));
+}
+
+#[test]
+fn a_second_run_on_a_locked_output_is_refused_and_changes_nothing() {
+    let dir = scratch("locked");
+    let list = written_pairs(&dir, 2);
+    let output = dir.join("out.jsonl");
+    let args = [
+        "register",
+        "--pairs",
+        list.to_str().unwrap(),
+        "--method",
+        "icp",
+        "--output",
+        output.to_str().unwrap(),
+    ];
+    let first = rgm(&args);
+    assert!(first.status.success(), "{}", stderr(&first));
+    let before = std::fs::read_to_string(&output).unwrap();
+    // Another run holds the file: its lock, as a running `rgm register --pairs` holds it.
+    let holder = std::fs::File::open(&output).unwrap();
+    holder.lock().unwrap();
+    let second = rgm(&args);
+    assert!(!second.status.success());
+    assert!(
+        stderr(&second).contains("out.jsonl: another run is writing this file"),
+        "{}",
+        stderr(&second)
+    );
+    assert_eq!(std::fs::read_to_string(&output).unwrap(), before);
+    holder.unlock().unwrap();
+    let third = rgm(&args);
+    assert!(third.status.success(), "{}", stderr(&third));
+    assert!(
+        stderr(&third).contains("registering 0"),
+        "{}",
+        stderr(&third)
+    );
+}
+
+#[test]
+fn a_resume_with_other_settings_is_refused_naming_the_setting() {
+    let dir = scratch("settings");
+    let list = written_pairs(&dir, 1);
+    let output = dir.join("out.jsonl");
+    let weights = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../rgm-model/tests/fixtures/rgm_tiny_state_dict.safetensors");
+    let run = |more: &[&str]| {
+        let mut args = vec![
+            "register",
+            "--pairs",
+            list.to_str().unwrap(),
+            "--method",
+            "rgm",
+            "--no-refine",
+            "--output",
+            output.to_str().unwrap(),
+        ];
+        args.extend_from_slice(more);
+        rgm(&args)
+    };
+    let first = run(&["--match-points", "64", "--passes", "1"]);
+    assert!(first.status.success(), "{}", stderr(&first));
+    let header: serde_json::Value = serde_json::from_str(
+        std::fs::read_to_string(&output)
+            .unwrap()
+            .lines()
+            .next()
+            .unwrap(),
+    )
+    .unwrap();
+    assert_eq!(header["settings"]["method"], "rgm");
+    assert_eq!(header["settings"]["passes"], 1);
+    assert_eq!(header["settings"]["match_points"], 64);
+    assert!(
+        header["settings"]["weights"]
+            .as_str()
+            .unwrap()
+            .starts_with("built-in partial-fast, CRC-32 "),
+        "{header}"
+    );
+    let before = std::fs::read_to_string(&output).unwrap();
+    for (more, says) in [
+        (
+            vec!["--match-points", "64", "--passes", "2"],
+            "made with passes 1, this run asks for passes 2",
+        ),
+        (
+            vec!["--match-points", "128", "--passes", "1"],
+            "made with match_points 64, this run asks for match_points 128",
+        ),
+        (
+            vec![
+                "--match-points",
+                "64",
+                "--passes",
+                "1",
+                "--weights",
+                weights.to_str().unwrap(),
+                "--preset",
+                "tiny",
+            ],
+            "this run asks for preset \"tiny\"",
+        ),
+    ] {
+        let out = run(&more);
+        assert!(!out.status.success(), "{more:?}");
+        assert!(stderr(&out).contains(says), "{more:?}: {}", stderr(&out));
+        assert!(stderr(&out).contains("give another output file"));
+        assert_eq!(std::fs::read_to_string(&output).unwrap(), before);
+    }
 }

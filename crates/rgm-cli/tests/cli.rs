@@ -640,3 +640,108 @@ fn scan_pairs_are_written_scored_and_evaluated() {
     let cells: Vec<&str> = row.split('|').map(str::trim).collect();
     assert_eq!(&cells[2..4], ["cube", "3"], "{row}");
 }
+
+#[test]
+fn scan_folders_go_by_their_own_names_and_never_share_one() {
+    let dir = scratch("scan-names");
+    for site in ["site1", "site2"] {
+        let scans = dir.join(site).join("cube");
+        std::fs::create_dir_all(&scans).unwrap();
+        cube_scans(&scans);
+    }
+    // Issue 44, D7: both were written to OUT/cube, the second's pairs.json over the first's.
+    let out = dir.join("out");
+    let both = rgm(&[
+        "pairs",
+        "--scans",
+        dir.join("site1/cube").to_str().unwrap(),
+        dir.join("site2/cube").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!both.status.success());
+    let said = String::from_utf8_lossy(&both.stderr);
+    assert!(said.contains("site2/cube are both named cube"), "{said}");
+    assert!(!out.exists());
+    // D11: `.` was named `.`, written to ../out/. (an error, or OUT itself).
+    let here = Command::new(env!("CARGO_BIN_EXE_rgm"))
+        .args(["pairs", "--scans", ".", "--out", "../out"])
+        .current_dir(dir.join("site1/cube"))
+        .output()
+        .unwrap();
+    assert!(stdout(&here).contains("wrote 3 pairs"));
+    let manifest: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("site1/out/cube/pairs.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(manifest["scans"], "cube");
+}
+
+#[test]
+fn scans_without_an_overlapping_pair_say_so() {
+    // Issue 44, D14: `rgm eval --scans` printed an empty table and succeeded.
+    let dir = scratch("scan-apart");
+    let scans = dir.join("apart");
+    std::fs::create_dir_all(&scans).unwrap();
+    let grid = |x0: f64| {
+        rgm_geom::PointCloud::new(
+            (0..400)
+                .map(|i| {
+                    rgm_geom::Point3::new(x0 + (i % 20) as f64 * 0.05, (i / 20) as f64 * 0.05, 0.0)
+                })
+                .collect(),
+        )
+    };
+    write_point_cloud(scans.join("a.ply"), &grid(0.0)).unwrap();
+    write_point_cloud(scans.join("b.ply"), &grid(10.0)).unwrap();
+    std::fs::write(
+        scans.join("apart.conf"),
+        "bmesh a.ply 0 0 0 0 0 0 1\nbmesh b.ply 0 0 0 0 0 0 1\n",
+    )
+    .unwrap();
+    let (scans, out) = (scans.to_str().unwrap(), dir.join("out"));
+    for args in [
+        ["eval", "--scans", scans, "--method", "icp"],
+        ["pairs", "--scans", scans, "--out", out.to_str().unwrap()],
+    ] {
+        let out = rgm(&args);
+        let said = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && out.stdout.is_empty(),
+            "{args:?}: {said}"
+        );
+        assert!(
+            said.contains("no two of its 2 scans overlap by 45 % or more"),
+            "{said}"
+        );
+        assert!(said.contains("no pair of scans"), "{said}");
+    }
+}
+
+#[test]
+fn threads_past_four_per_core_are_cut_with_a_warning() {
+    // Issue 44, D10: --threads 65535 started 65,535 threads: no result in 150 s.
+    let dir = scratch("threads");
+    let (src, tgt) = known_pair(&dir);
+    let cores = std::thread::available_parallelism().unwrap().get();
+    let out = rgm(&[
+        "--threads",
+        "65535",
+        "register",
+        src.to_str().unwrap(),
+        tgt.to_str().unwrap(),
+        "--method",
+        "icp",
+        "--json",
+    ]);
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        said.contains(&format!(
+            "--threads 65535 is more than 4 per core on this machine's {cores}; using {}",
+            4 * cores
+        )),
+        "{said}"
+    );
+    let found: serde_json::Value = serde_json::from_str(&stdout(&out)).unwrap();
+    assert_eq!(found["method"], "icp");
+}

@@ -249,6 +249,16 @@ fn parse_conf(text: &str, conf: &Path) -> Result<Vec<(usize, (String, RigidTrans
                 .filter(|x| x.is_finite())
                 .ok_or_else(|| bad(format!("`{token}` is not a finite number")))?;
         }
+        // Its squared norm, which normalising divides by: past f64's range the quaternion
+        // would come out as zero, the identity rotation.
+        let squared: f64 = v[3..].iter().map(|q| q * q).sum();
+        if !squared.is_finite() {
+            return Err(bad(format!(
+                "the quaternion ({}, {}, {}, {}) is too large to normalise (its squared norm \
+                 overflows)",
+                numbers[3], numbers[4], numbers[5], numbers[6]
+            )));
+        }
         let rotation = quaternion_rotation(v[3], v[4], v[5], v[6]);
         if !rotation.iter().all(|x| x.is_finite()) {
             return Err(bad("the quaternion is zero".into()));
@@ -498,6 +508,16 @@ mod tests {
         assert!(
             err.ends_with("the quaternion is zero: `bmesh view1.ply 0 0 0 0 0 0 0`"),
             "{err}"
+        );
+        std::fs::write(&conf, "bmesh view1.ply 0 0 0 1e200 0 0 1e200\n").unwrap();
+        let err = ScanFolder::open(&dir).unwrap_err().to_string();
+        assert_eq!(
+            err,
+            format!(
+                "{}:1: the quaternion (1e200, 0, 0, 1e200) is too large to normalise (its \
+                 squared norm overflows): `bmesh view1.ply 0 0 0 1e200 0 0 1e200`",
+                conf.display()
+            )
         );
         std::fs::write(
             &conf,

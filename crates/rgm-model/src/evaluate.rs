@@ -17,7 +17,7 @@ use crate::Method;
 
 mod resumable;
 
-pub use resumable::{EvaluateError, Progress, Resumable, TestPairs};
+pub use resumable::{EvaluateError, Resumable, TestPairs};
 
 /// One test pair's outcome.
 #[derive(Clone, Debug)]

@@ -4,12 +4,14 @@
 //! (ICP, FGR, RGM, and `rgm register`'s default, FGR and RGM as a cascade) from the
 //! registrars and wrappers of rgm-geom and this crate, into one [`method::Method`];
 //! [`evaluate`] runs a method over the benchmark's test pairs and scores it, resumably for long
-//! runs (per-pair record files).
+//! runs (per-pair record files); [`batch`] registers lists of pairs into a resumable JSON Lines
+//! file, for the `rgm` command and the Python package alike.
 //!
 //! Layering rule: rgm-model builds on rgm-geom, rgm-nn, rgm-match and rgm-data, and nothing
 //! builds on it but the `rgm` command, xtask and the Python package (`python/`). It owns no
 //! geometry or tensor op of its own.
 
+pub mod batch;
 mod by_name;
 pub mod error;
 pub mod evaluate;
@@ -18,6 +20,7 @@ pub mod method;
 pub mod network;
 pub mod options;
 pub mod pipeline;
+pub mod progress;
 pub mod train;
 pub mod weights;
 

@@ -19,7 +19,7 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
-use rgm_cli::EvaluationBar;
+use rgm_cli::TaskBar;
 use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
 use rgm_geom::refine::RefineConfig;
 use rgm_geom::refiner::Refiner;
@@ -228,7 +228,7 @@ pub fn run(args: Args) -> Result<()> {
                 &candidate.inputs,
                 &candidate.method,
                 pairs,
-                &EvaluationBar::new(format!("{} {}", set.key(), candidate.name)),
+                &TaskBar::new(format!("{} {}", set.key(), candidate.name)),
             )?;
             let matched = run.draw(set, &candidate, &records, pairs, args.figures)?;
             // A trained model refined as `rgm eval --refine` refines it, from its own
@@ -243,7 +243,7 @@ pub fn run(args: Args) -> Result<()> {
                         &records,
                         &config,
                         pairs,
-                        &EvaluationBar::new(format!("{} {name}", set.key())),
+                        &TaskBar::new(format!("{} {name}", set.key())),
                     )?;
                     run.draw_clouds(set, &stem, &records, pairs, args.figures)?;
                     Some(Row {

@@ -1,11 +1,10 @@
 //! `rgm register SRC TGT`: the transform that maps SRC onto TGT; `--pairs LIST` runs many
-//! pairs ([`super::batch`]).
+//! pairs ([`super::batch`], which does not depend on this module).
 
 use std::path::PathBuf;
 
 use anyhow::Result;
 use rgm_data::write_point_cloud;
-use rgm_model::{Method, Registration};
 
 use crate::MethodArgs;
 
@@ -55,7 +54,8 @@ pub fn run(args: Args) -> Result<()> {
     }
     let rows = result.t_target_source.to_rows();
     if args.json {
-        let value = json(&method, &registration, (source.len(), target.len()));
+        let value =
+            rgm_model::batch::result_json(&method, &registration, (source.len(), target.len()));
         println!("{value}");
         return not_registered(doubt);
     }
@@ -102,51 +102,6 @@ pub fn run(args: Args) -> Result<()> {
         println!("# wrote the moved source to {}", out.display());
     }
     Ok(())
-}
-
-/// The object `rgm register --json` prints for `registration` by `method` of clouds of
-/// `points` (source, target) points; `--pairs` writes it per pair.
-pub fn json(
-    method: &Method,
-    registration: &Registration,
-    (source_points, target_points): (usize, usize),
-) -> serde_json::Value {
-    let result = &registration.result;
-    let candidates: Vec<serde_json::Value> = registration
-        .candidates
-        .iter()
-        .map(|c| {
-            serde_json::json!({
-                "method": c.method,
-                "score": c.score,
-                "transform": c.t_target_source.to_rows(),
-                "failure": c.failure,
-                "time_ms": c.time_ms,
-            })
-        })
-        .collect();
-    let chosen = registration
-        .chosen
-        .map(|k| registration.candidates[k].method.as_str());
-    serde_json::json!({
-        "method": method.name(),
-        "transform": result.t_target_source.to_rows(),
-        "time_ms": registration.time_ms,
-        "iterations": result.iterations,
-        "converged": result.converged,
-        // The pairs behind the fitness: RGM's last hard matches unrefined, the refinement's
-        // inliers refined.
-        "correspondences": result.inlier_count,
-        "refined": method.is_refined(),
-        "fitness": result.fitness,
-        "inlier_rmse": result.inlier_rmse,
-        "source_points": source_points,
-        "target_points": target_points,
-        "candidates": candidates,
-        "chosen": chosen,
-        "registered": registration.doubt.is_none(),
-        "reason": registration.doubt,
-    })
 }
 
 /// The error of a result that is not credible ([`rgm_model::Registration::doubt`]): the pair is

@@ -26,6 +26,7 @@ use rgm_geom::{Matrix4, RigidTransform};
 use serde::{Deserialize, Serialize};
 
 use super::{evaluate_pair, PairRecord};
+use crate::progress::Progress;
 use crate::Method;
 
 /// Why a resumable evaluation stopped. A method's failure on a pair is a record, not an error.
@@ -53,24 +54,6 @@ pub enum EvaluateError {
     /// A transform could not be scored.
     #[error(transparent)]
     Geom(#[from] rgm_geom::GeomError),
-}
-
-/// What a resumable evaluation reports while it computes (the commands show a progress bar).
-pub trait Progress: Sync {
-    /// Computing starts: `done` of the `total` pairs were read back from the file. Not called
-    /// when none is missing.
-    fn start(&self, total: usize, done: usize);
-    /// One more pair is finished (called from the workers).
-    fn advance(&self);
-    /// Computing ends; `complete` is false when the deadline came before the last pair.
-    fn finish(&self, complete: bool);
-}
-
-/// No report.
-impl Progress for () {
-    fn start(&self, _: usize, _: usize) {}
-    fn advance(&self) {}
-    fn finish(&self, _: bool) {}
 }
 
 /// The test pairs of one protocol: pair `i` is made from `shapes` by `generator`, seeded from

@@ -1,0 +1,827 @@
+//! Many pairs registered on parallel workers, one JSON line each, resumably: the runner behind
+//! `rgm register --pairs LIST` and Python's `Registrar.register_many`.
+//!
+//! The output file ([`Output`]) is rgm's only when its first line is rgm's header
+//! (`{"rgm_batch": 1, "settings": {…}}`), which records every setting that changes results
+//! ([`settings`]); any other file is never written to. While a run uses it, it holds an
+//! exclusive lock on it, so a second run on the same file is refused instead of mixing its
+//! lines in. A later run with the same settings keeps the lines of finished pairs and registers
+//! the other pairs; with other settings it is refused, naming the setting. Resuming drops a
+//! cut-off last line (a killed run), the lines of pairs that failed (they are tried again) and
+//! repeated pairs, by rewriting the file whole (temporary file and rename) before it appends,
+//! so the file never holds a pair twice. Lines are appended one `write` each, as pairs finish.
+
+use std::collections::{HashMap, HashSet};
+use std::fs::File;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Mutex;
+
+use rayon::prelude::*;
+use rgm_geom::registrar::Registrar as _;
+use rgm_geom::PointCloud;
+use serde_json::{json, Map, Value};
+
+use crate::progress::Progress;
+use crate::{Method, MethodName, MethodOptions, Registration};
+
+/// The version of the output's format, in its header.
+pub const FORMAT: u64 = 1;
+
+/// The header's key that marks a file as rgm's batch output.
+const HEADER_KEY: &str = "rgm_batch";
+
+/// Why a batch could not run. A pair that fails is a line, not an error.
+#[derive(Debug, thiserror::Error)]
+pub enum BatchError {
+    /// A file could not be read or written.
+    #[error("{action} {}: {error}", path.display())]
+    Io {
+        action: &'static str,
+        path: PathBuf,
+        error: std::io::Error,
+    },
+    /// The pair list is not one (the message names the file, the line and the value).
+    #[error("{0}")]
+    List(String),
+    /// The output file is not rgm's, or not of these settings (the message says which and
+    /// how to go on).
+    #[error("{0}")]
+    Output(String),
+    /// Another run holds the output file.
+    #[error(
+        "{}: another run is writing this file (it holds its lock); wait for it to end, or give \
+         another output file",
+        path.display()
+    )]
+    Busy { path: PathBuf },
+}
+
+impl BatchError {
+    fn io<'a>(action: &'static str, path: &'a Path) -> impl FnOnce(std::io::Error) -> Self + 'a {
+        move |error| Self::Io {
+            action,
+            path: path.to_path_buf(),
+            error,
+        }
+    }
+}
+
+/// What became of a pair.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Outcome {
+    Registered,
+    /// A result with a doubt ([`Registration::doubt`]), `"registered": false`.
+    NotRegistered,
+    Failed,
+}
+
+/// How many pairs came out each way.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Tally {
+    pub registered: usize,
+    pub not_registered: usize,
+    pub failed: usize,
+}
+
+impl Tally {
+    pub fn add(&mut self, outcome: Outcome) {
+        match outcome {
+            Outcome::Registered => self.registered += 1,
+            Outcome::NotRegistered => self.not_registered += 1,
+            Outcome::Failed => self.failed += 1,
+        }
+    }
+
+    pub fn total(&self) -> usize {
+        self.registered + self.not_registered + self.failed
+    }
+}
+
+impl std::ops::AddAssign for Tally {
+    fn add_assign(&mut self, other: Self) {
+        self.registered += other.registered;
+        self.not_registered += other.not_registered;
+        self.failed += other.failed;
+    }
+}
+
+/// A pair's name in the output: its source and target as the caller spells them.
+pub type Key = (String, String);
+
+/// One pair to register.
+pub struct Job {
+    /// Its place among the pairs given.
+    pub index: usize,
+    /// Its name in the output.
+    pub key: Key,
+    pub clouds: Clouds,
+}
+
+/// A pair's clouds: files read on the worker that registers them, or clouds in memory.
+pub enum Clouds {
+    Files {
+        source: PathBuf,
+        target: PathBuf,
+    },
+    Given {
+        source: PointCloud,
+        target: PointCloud,
+    },
+}
+
+/// One pair of a list file.
+#[derive(Debug)]
+pub struct Listed {
+    /// The files as the list spells them: the pair's name in the output.
+    pub key: Key,
+    /// The files, relative paths taken from the list's folder.
+    pub source_path: PathBuf,
+    pub target_path: PathBuf,
+}
+
+impl Listed {
+    /// The pair as the `index`th job.
+    pub fn job(&self, index: usize) -> Job {
+        Job {
+            index,
+            key: self.key.clone(),
+            clouds: Clouds::Files {
+                source: self.source_path.clone(),
+                target: self.target_path.clone(),
+            },
+        }
+    }
+}
+
+/// The object `rgm register --json` prints for `registration` by `method` of clouds of
+/// `points` (source, target); a batch writes it per pair, with the pair's names.
+pub fn result_json(
+    method: &Method,
+    registration: &Registration,
+    (source_points, target_points): (usize, usize),
+) -> Value {
+    let result = &registration.result;
+    let candidates: Vec<Value> = registration
+        .candidates
+        .iter()
+        .map(|c| {
+            json!({
+                "method": c.method,
+                "score": c.score,
+                "transform": c.t_target_source.to_rows(),
+                "failure": c.failure,
+                "time_ms": c.time_ms,
+            })
+        })
+        .collect();
+    let chosen = registration
+        .chosen
+        .map(|k| registration.candidates[k].method.as_str());
+    json!({
+        "method": method.name(),
+        "transform": result.t_target_source.to_rows(),
+        "time_ms": registration.time_ms,
+        "iterations": result.iterations,
+        "converged": result.converged,
+        // The pairs behind the fitness: RGM's last hard matches unrefined, the refinement's
+        // inliers refined.
+        "correspondences": result.inlier_count,
+        "refined": method.is_refined(),
+        "fitness": result.fitness,
+        "inlier_rmse": result.inlier_rmse,
+        "source_points": source_points,
+        "target_points": target_points,
+        "candidates": candidates,
+        "chosen": chosen,
+        "registered": registration.doubt.is_none(),
+        "reason": registration.doubt,
+    })
+}
+
+/// Every setting of `options` that changes results, as the output's header records them: the
+/// method's name (`method`, with `+icp` when refined), the weights' CRC-32 (the built-in
+/// model's name and CRC-32 for `rgm` and `auto` without weights) and each option as given
+/// (`null`: the method's default).
+pub fn settings(
+    options: &MethodOptions,
+    method: &Method,
+) -> Result<Map<String, Value>, BatchError> {
+    let network = matches!(options.method, MethodName::Rgm | MethodName::Auto);
+    let weights = match (&options.weights, network) {
+        (_, false) => Value::Null,
+        (Some(path), true) => {
+            let bytes = std::fs::read(path).map_err(BatchError::io("reading", path))?;
+            format!("CRC-32 {:08x}", crc32(&bytes)).into()
+        }
+        (None, true) => {
+            let manifest = crate::weights::Manifest::builtin();
+            let name = manifest.builtin_entry().map_or("?", |e| e.name.as_str());
+            format!(
+                "built-in {name}, CRC-32 {:08x}",
+                crc32(crate::weights::builtin_weights())
+            )
+            .into()
+        }
+    };
+    let value = json!({
+        "method": method.name(),
+        "weights": weights,
+        "preset": options.preset,
+        "test_statistics": options.test_statistics.map(|s| format!("{s:?}").to_lowercase()),
+        "match_points": options.match_points,
+        "passes": options.passes,
+        "accept": (options.method == MethodName::Auto).then(|| options.accept.to_string()),
+        "refine": options.refine,
+        "precision": options.precision.name(),
+    });
+    match value {
+        Value::Object(map) => Ok(map),
+        _ => unreachable!("a JSON object"),
+    }
+}
+
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut crc = flate2::Crc::new();
+    crc.update(bytes);
+    crc.sum()
+}
+
+/// A run's output file (JSON Lines), locked for the run, with what earlier runs finished.
+pub struct Output {
+    path: PathBuf,
+    /// Open for appending, locked until dropped.
+    file: Mutex<File>,
+    done: HashMap<Key, Outcome>,
+}
+
+impl Output {
+    /// Opens `path` for a run of `settings` (see the module's doc), rewriting it without the
+    /// lines to be done again; a file that is not rgm's, or of other settings, or that another
+    /// run holds, is an error and left as it is.
+    pub fn open(
+        path: &Path,
+        settings: &Map<String, Value>,
+        progress: &dyn Progress,
+    ) -> Result<Self, BatchError> {
+        let path = match std::fs::canonicalize(path) {
+            Ok(resolved) => resolved,
+            Err(_) => path.to_path_buf(),
+        };
+        if path.exists() && !path.is_file() {
+            return Err(BatchError::Output(format!(
+                "{}: not a regular file; the output is a file that later runs resume (leave it \
+                 out to write the lines to stdout)",
+                path.display()
+            )));
+        }
+        let file = lock(&path)?;
+        let text = std::fs::read_to_string(&path).map_err(BatchError::io("reading", &path))?;
+        let header = json!({HEADER_KEY: FORMAT, "settings": settings}).to_string() + "\n";
+        if text.is_empty() {
+            (&file)
+                .write_all(header.as_bytes())
+                .map_err(BatchError::io("writing", &path))?;
+            return Ok(Self {
+                path,
+                file: Mutex::new(file),
+                done: HashMap::new(),
+            });
+        }
+        let (first, rest) = text.split_at(text.find('\n').map_or(text.len(), |n| n + 1));
+        check_header(&path, first, settings)?;
+        let (done, kept, rewrite) = earlier_lines(&path, rest, progress)?;
+        let file = match rewrite {
+            true => replace(&path, &(header + &kept))?,
+            false => file,
+        };
+        Ok(Self {
+            path,
+            file: Mutex::new(file),
+            done,
+        })
+    }
+
+    /// The outcome of each pair an earlier run finished.
+    pub fn done(&self) -> &HashMap<Key, Outcome> {
+        &self.done
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Where [`register_all`] appends the lines.
+    pub fn lines(&self) -> (&Path, &Mutex<dyn Write + Send + '_>) {
+        (&self.path, &self.file)
+    }
+}
+
+/// `path` opened for appending, created when missing, and locked; an error when another run
+/// holds it. A lock taken on a file that was renamed away meanwhile (another run's rewrite) is
+/// let go and taken again on the file now at `path`.
+fn lock(path: &Path) -> Result<File, BatchError> {
+    loop {
+        let file = std::fs::OpenOptions::new()
+            .read(true)
+            .append(true)
+            .create(true)
+            .open(path)
+            .map_err(BatchError::io("opening", path))?;
+        match file.try_lock() {
+            Ok(()) => {}
+            Err(std::fs::TryLockError::WouldBlock) => {
+                return Err(BatchError::Busy {
+                    path: path.to_path_buf(),
+                })
+            }
+            Err(std::fs::TryLockError::Error(error)) => {
+                return Err(BatchError::Io {
+                    action: "locking",
+                    path: path.to_path_buf(),
+                    error,
+                })
+            }
+        }
+        if same_file(&file, path) {
+            return Ok(file);
+        }
+    }
+}
+
+#[cfg(unix)]
+fn same_file(file: &File, path: &Path) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    match (file.metadata(), std::fs::metadata(path)) {
+        (Ok(a), Ok(b)) => (a.dev(), a.ino()) == (b.dev(), b.ino()),
+        _ => false,
+    }
+}
+
+#[cfg(not(unix))]
+fn same_file(_: &File, _: &Path) -> bool {
+    true
+}
+
+/// `path` written anew with `text` through a temporary file beside it, locked before it is
+/// renamed over `path` (so the run keeps its lock); the file, open for appending.
+fn replace(path: &Path, text: &str) -> Result<File, BatchError> {
+    let mut name = path.file_name().unwrap_or_default().to_os_string();
+    name.push(format!(".{}.tmp", std::process::id()));
+    let temporary = path.with_file_name(name);
+    let written = (|| {
+        let mut file = std::fs::OpenOptions::new()
+            .read(true)
+            .append(true)
+            .create_new(true)
+            .open(&temporary)?;
+        file.try_lock().map_err(std::io::Error::other)?;
+        file.write_all(text.as_bytes())?;
+        file.sync_all()?;
+        std::fs::rename(&temporary, path)?;
+        Ok(file)
+    })();
+    written.map_err(|error| {
+        let _ = std::fs::remove_file(&temporary);
+        BatchError::Io {
+            action: "rewriting",
+            path: path.to_path_buf(),
+            error,
+        }
+    })
+}
+
+/// Refuses a file whose first line is not rgm's header, or one of other settings.
+fn check_header(path: &Path, first: &str, settings: &Map<String, Value>) -> Result<(), BatchError> {
+    let header: Option<Map<String, Value>> = serde_json::from_str(first).ok();
+    let Some(header) = header.filter(|h| h.get(HEADER_KEY).is_some()) else {
+        return Err(BatchError::Output(format!(
+            "{}:1: not an output of rgm's batches (its first line is not rgm's header \
+             {{\"{HEADER_KEY}\": …}}), so it is left as it is; give another output file (a file \
+             written by an rgm before the header existed is not resumed either): `{}`",
+            path.display(),
+            shortened(first.trim_end())
+        )));
+    };
+    if header[HEADER_KEY] != FORMAT {
+        return Err(BatchError::Output(format!(
+            "{}:1: batch output format {}, this rgm writes {FORMAT}; give another output file",
+            path.display(),
+            header[HEADER_KEY]
+        )));
+    }
+    let written = header.get("settings").and_then(Value::as_object);
+    let empty = Map::new();
+    let written = written.unwrap_or(&empty);
+    let mut names: Vec<&String> = settings.keys().chain(written.keys()).collect();
+    names.sort();
+    names.dedup();
+    for name in names {
+        let (was, now) = (
+            written.get(name).unwrap_or(&Value::Null),
+            settings.get(name).unwrap_or(&Value::Null),
+        );
+        if was != now {
+            return Err(BatchError::Output(format!(
+                "{}: its results were made with {name} {was}, this run asks for {name} {now} \
+                 (null: the method's default); the file is left as it is: resume with its \
+                 settings, or give another output file for these",
+                path.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The outcome of each pair an earlier run finished, from the lines after the header
+/// (`text`), the lines to keep, and whether the file must be rewritten without others: a
+/// cut-off last line, a failed pair's line, a repeated pair's. A line that is not one of ours
+/// is an error.
+fn earlier_lines(
+    path: &Path,
+    text: &str,
+    progress: &dyn Progress,
+) -> Result<(HashMap<Key, Outcome>, String, bool), BatchError> {
+    let mut done = HashMap::new();
+    let (complete, cut) = match text.rfind('\n') {
+        Some(end) => text.split_at(end + 1),
+        None => ("", text),
+    };
+    let mut rewrite = !cut.is_empty();
+    if rewrite {
+        progress.note(&format!(
+            "{}: the last line was cut off (a killed run?); its pair runs again",
+            path.display()
+        ));
+    }
+    let mut kept = String::with_capacity(complete.len());
+    for (i, line) in complete.lines().enumerate() {
+        let at = || format!("{}:{}", path.display(), i + 2);
+        if line.trim().is_empty() {
+            rewrite = true;
+            continue;
+        }
+        let value: Value = serde_json::from_str(line).map_err(|_| {
+            BatchError::Output(format!(
+                "{}: not a line of rgm's batches (give another output file): `{}`",
+                at(),
+                shortened(line)
+            ))
+        })?;
+        let (Some(source), Some(target)) = (value["source"].as_str(), value["target"].as_str())
+        else {
+            return Err(BatchError::Output(format!(
+                "{}: a line without \"source\" and \"target\" is not one of rgm's batches (give \
+                 another output file): `{}`",
+                at(),
+                shortened(line)
+            )));
+        };
+        let key = (source.to_string(), target.to_string());
+        if value.get("error").is_some() || done.contains_key(&key) {
+            rewrite = true;
+            continue;
+        }
+        let outcome = if value["registered"] == true {
+            Outcome::Registered
+        } else {
+            Outcome::NotRegistered
+        };
+        done.insert(key, outcome);
+        kept.push_str(line);
+        kept.push('\n');
+    }
+    Ok((done, kept, rewrite))
+}
+
+/// Registers each of `jobs` with a copy of `method` per worker of the current rayon pool,
+/// taking jobs as workers come free (an iterator is never collected). Each pair's line
+/// (its [`result_json`] with `"source"` and `"target"`, or `{"source", "target", "method",
+/// "error"}` when it failed) goes to `lines` as one `write`; `each` gets its registration or
+/// error. Stops taking jobs once `stop` is set. A failed write to `lines` stops the run.
+pub fn register_all<I, F>(
+    method: &Method,
+    jobs: I,
+    lines: Option<(&Path, &Mutex<dyn Write + Send + '_>)>,
+    progress: &dyn Progress,
+    stop: &AtomicBool,
+    each: F,
+) -> Result<Tally, BatchError>
+where
+    I: Iterator<Item = Job> + Send,
+    F: Fn(usize, Result<Registration, String>) + Sync,
+{
+    let tally = Mutex::new(Tally::default());
+    jobs.take_while(|_| !stop.load(Ordering::Relaxed))
+        .par_bridge()
+        .map_init(
+            || method.clone(),
+            |method, job| -> Result<(), BatchError> {
+                let (registered, points) = register_job(method, &job.clouds, progress);
+                let outcome = match &registered {
+                    Ok(r) if r.doubt.is_none() => Outcome::Registered,
+                    Ok(_) => Outcome::NotRegistered,
+                    Err(_) => Outcome::Failed,
+                };
+                if let Some((path, out)) = lines {
+                    let mut line = match &registered {
+                        Ok(registration) => result_json(method, registration, points),
+                        Err(why) => json!({"method": method.name(), "error": why}),
+                    };
+                    line["source"] = job.key.0.clone().into();
+                    line["target"] = job.key.1.clone().into();
+                    let mut out = out.lock().unwrap_or_else(|p| p.into_inner());
+                    out.write_all(format!("{line}\n").as_bytes())
+                        .and_then(|()| out.flush())
+                        .map_err(BatchError::io("writing", path))?;
+                }
+                tally.lock().unwrap_or_else(|p| p.into_inner()).add(outcome);
+                each(job.index, registered);
+                progress.advance();
+                Ok(())
+            },
+        )
+        .collect::<Result<(), BatchError>>()?;
+    Ok(tally.into_inner().unwrap_or_else(|p| p.into_inner()))
+}
+
+/// A job's registration (or why it failed) and its clouds' sizes.
+fn register_job(
+    method: &mut Method,
+    clouds: &Clouds,
+    progress: &dyn Progress,
+) -> (Result<Registration, String>, (usize, usize)) {
+    let read = |path: &Path| -> Result<PointCloud, String> {
+        let (cloud, warnings) =
+            rgm_data::read_point_cloud_warned(path).map_err(|e| e.to_string())?;
+        for warning in warnings {
+            progress.note(&warning.to_string());
+        }
+        Ok(cloud)
+    };
+    match clouds {
+        Clouds::Given { source, target } => {
+            let registered = method
+                .register(source, target)
+                .map_err(|e| format!("{} failed: {e}", method.name()));
+            (registered, (source.len(), target.len()))
+        }
+        Clouds::Files { source, target } => {
+            match read(source).and_then(|s| Ok((s, read(target)?))) {
+                Ok((s, t)) => {
+                    let registered = method.register(&s, &t).map_err(|e| {
+                        format!(
+                            "{} failed on {} → {}: {e}",
+                            method.name(),
+                            source.display(),
+                            target.display()
+                        )
+                    });
+                    (registered, (s.len(), t.len()))
+                }
+                Err(why) => (Err(why), (0, 0)),
+            }
+        }
+    }
+}
+
+/// The pairs of the list file `path`, CSV or JSON (by its first character), a repeated pair
+/// once (noted).
+pub fn read_list(path: &Path, progress: &dyn Progress) -> Result<Vec<Listed>, BatchError> {
+    let text = std::fs::read_to_string(path).map_err(BatchError::io("reading", path))?;
+    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
+    let folder = path.parent().unwrap_or(Path::new(""));
+    let named = if text.trim_start().starts_with(['[', '{']) {
+        json_list(path, text)?
+    } else {
+        csv_list(path, text)?
+    };
+    let mut first: HashMap<Key, String> = HashMap::new();
+    let mut pairs = Vec::with_capacity(named.len());
+    for (source, target, place) in named {
+        let key = (source, target);
+        if let Some(earlier) = first.get(&key) {
+            progress.note(&format!(
+                "{place} repeats the pair of {earlier} ({}, {}); it runs once",
+                key.0, key.1
+            ));
+            continue;
+        }
+        first.insert(key.clone(), place);
+        pairs.push(Listed {
+            source_path: folder.join(&key.0),
+            target_path: folder.join(&key.1),
+            key,
+        });
+    }
+    if pairs.is_empty() {
+        return Err(BatchError::List(format!(
+            "{}: no pair listed",
+            path.display()
+        )));
+    }
+    Ok(pairs)
+}
+
+/// The pairs of `listed` an earlier run has not finished (`done`), and the finished ones'
+/// tally.
+pub fn remaining<'a>(
+    listed: &'a [Listed],
+    done: &HashMap<Key, Outcome>,
+) -> (Vec<&'a Listed>, Tally) {
+    let listed_keys: HashSet<&Key> = listed.iter().map(|p| &p.key).collect();
+    let mut earlier = Tally::default();
+    for (key, &outcome) in done {
+        if listed_keys.contains(key) {
+            earlier.add(outcome);
+        }
+    }
+    let todo = listed
+        .iter()
+        .filter(|p| !done.contains_key(&p.key))
+        .collect();
+    (todo, earlier)
+}
+
+/// (source, target, place) of each row of a CSV list.
+fn csv_list(path: &Path, text: &str) -> Result<Vec<(String, String, String)>, BatchError> {
+    let mut rows = text
+        .lines()
+        .enumerate()
+        .map(|(i, line)| (i + 1, line))
+        .filter(|(_, line)| !line.trim().is_empty() && !line.trim_start().starts_with('#'));
+    let at = |n: usize| format!("{}:{n}", path.display());
+    let Some((n, header)) = rows.next() else {
+        return Err(BatchError::List(format!(
+            "{}: no header line `source,target`",
+            path.display()
+        )));
+    };
+    let names = csv_fields(header)
+        .map_err(|why| BatchError::List(format!("{}: {why}: `{header}`", at(n))))?;
+    let column = |name: &str| names.iter().position(|h| h.eq_ignore_ascii_case(name));
+    let (Some(s), Some(t)) = (column("source"), column("target")) else {
+        return Err(BatchError::List(format!(
+            "{}: the header must name the columns `source` and `target`: `{header}`",
+            at(n)
+        )));
+    };
+    let mut pairs = Vec::new();
+    for (n, line) in rows {
+        let fields = csv_fields(line)
+            .map_err(|why| BatchError::List(format!("{}: {why}: `{line}`", at(n))))?;
+        let get = |k: usize, name: &str| match fields.get(k) {
+            Some(f) if !f.is_empty() => Ok(f.clone()),
+            _ => Err(BatchError::List(format!(
+                "{}: no {name} file (column {}): `{line}`",
+                at(n),
+                k + 1
+            ))),
+        };
+        pairs.push((get(s, "source")?, get(t, "target")?, at(n)));
+    }
+    Ok(pairs)
+}
+
+/// The comma-separated fields of a CSV line, trimmed; a field in double quotes may hold commas,
+/// and `""` inside it is one quote.
+fn csv_fields(line: &str) -> Result<Vec<String>, &'static str> {
+    let mut fields = Vec::new();
+    let mut chars = line.chars().peekable();
+    loop {
+        while chars.peek().is_some_and(|c| c.is_whitespace()) {
+            chars.next();
+        }
+        let mut field = String::new();
+        if chars.peek() == Some(&'"') {
+            chars.next();
+            loop {
+                match chars.next() {
+                    Some('"') if chars.peek() == Some(&'"') => {
+                        chars.next();
+                        field.push('"');
+                    }
+                    Some('"') => break,
+                    Some(c) => field.push(c),
+                    None => return Err("a quoted field has no closing quote"),
+                }
+            }
+            while chars.peek().is_some_and(|c| c.is_whitespace()) {
+                chars.next();
+            }
+            if !matches!(chars.peek(), None | Some(',')) {
+                return Err("text after a quoted field");
+            }
+        } else {
+            while let Some(&c) = chars.peek() {
+                if c == ',' {
+                    break;
+                }
+                field.push(c);
+                chars.next();
+            }
+            field = field.trim_end().to_string();
+        }
+        fields.push(field);
+        if chars.next().is_none() {
+            return Ok(fields);
+        }
+    }
+}
+
+/// (source, target, place) of each entry of a JSON list.
+fn json_list(path: &Path, text: &str) -> Result<Vec<(String, String, String)>, BatchError> {
+    let value: Value = serde_json::from_str(text)
+        .map_err(|e| BatchError::List(format!("{}: not valid JSON: {e}", path.display())))?;
+    let entries = value
+        .as_array()
+        .or_else(|| value.get("pairs").and_then(Value::as_array))
+        .ok_or_else(|| {
+            BatchError::List(format!(
+                "{}: a JSON list of pairs is a list of {{\"source\": FILE, \"target\": FILE}}, \
+                 or an object whose \"pairs\" is one",
+                path.display()
+            ))
+        })?;
+    entries
+        .iter()
+        .enumerate()
+        .map(|(i, entry)| {
+            let place = format!("{} entry {}", path.display(), i + 1);
+            let get = |name: &str| match entry.get(name) {
+                Some(Value::String(file)) if !file.is_empty() => Ok(file.clone()),
+                _ => Err(BatchError::List(format!(
+                    "{place}: no \"{name}\" file name: `{}`",
+                    shortened(&entry.to_string())
+                ))),
+            };
+            Ok((get("source")?, get("target")?, place))
+        })
+        .collect()
+}
+
+/// `text` cut to its first 120 characters, for messages.
+fn shortened(text: &str) -> String {
+    match text.char_indices().nth(120) {
+        Some((end, _)) => format!("{}…", &text[..end]),
+        None => text.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn csv_fields_split_on_commas_outside_quotes() {
+        assert_eq!(csv_fields(" a.ply , b.ply").unwrap(), ["a.ply", "b.ply"]);
+        assert_eq!(
+            csv_fields(r#""x, y.ply", "say ""hi"".ply",,z"#).unwrap(),
+            ["x, y.ply", r#"say "hi".ply"#, "", "z"]
+        );
+        assert_eq!(
+            csv_fields(r#""open"#),
+            Err("a quoted field has no closing quote")
+        );
+        assert_eq!(csv_fields(r#""a"b,c"#), Err("text after a quoted field"));
+    }
+
+    #[test]
+    fn a_rewritten_output_stays_locked_and_keeps_its_finished_lines() {
+        let dir = std::env::temp_dir().join(format!("rgm-batch-lock-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("out.jsonl");
+        let settings = settings(
+            &MethodOptions::default(),
+            &MethodOptions::default().build().unwrap(),
+        )
+        .unwrap();
+        let header = json!({HEADER_KEY: FORMAT, "settings": settings}).to_string();
+        let done = r#"{"source":"a","target":"b","registered":true}"#;
+        let failed = r#"{"source":"c","target":"d","error":"no"}"#;
+        // A failed pair's line and a cut-off last line: the file is rewritten without them.
+        std::fs::write(&path, format!("{header}\n{done}\n{failed}\n{{\"sou")).unwrap();
+        let output = Output::open(&path, &settings, &()).unwrap();
+        assert_eq!(
+            std::fs::read_to_string(&path).unwrap(),
+            format!("{header}\n{done}\n")
+        );
+        let key = ("a".to_string(), "b".to_string());
+        assert_eq!(output.done().get(&key), Some(&Outcome::Registered));
+        assert_eq!(output.done().len(), 1);
+        // The file now at the path is the one this run holds.
+        let other = File::open(&path).unwrap();
+        assert!(matches!(
+            other.try_lock(),
+            Err(std::fs::TryLockError::WouldBlock)
+        ));
+        assert!(matches!(
+            Output::open(&path, &settings, &()),
+            Err(BatchError::Busy { .. })
+        ));
+        drop(output);
+        other.try_lock().unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
