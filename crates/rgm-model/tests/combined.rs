@@ -54,10 +54,10 @@ fn metrics_against_truth(found: &Registration, pair: &rgm_data::Pair) -> PairMet
     .unwrap()
 }
 
-/// `auto+icp` with the tiny network, both candidates on every pair.
-fn combined() -> Method {
+/// `auto+icp` with `rgm`, both candidates on every pair.
+fn combined(rgm: RgmRegistrar) -> Method {
     let never = rgm_geom::best_of::Acceptance::NEVER;
-    rgm_model::options::auto(tiny_rgm(), Some(RefineConfig::default()), never)
+    rgm_model::options::auto(rgm, Some(RefineConfig::default()), never)
 }
 
 /// `rgm register`'s default, but both candidates on every pair.
@@ -124,10 +124,13 @@ fn the_candidate_that_overlaps_better_wins() {
 
 #[test]
 fn a_failed_candidate_leaves_the_other_and_both_failing_names_both() {
-    // The tiny network needs K + 1 = 5 points: with 4 it refuses, and FGR's result stands.
+    // The tiny network needs K + 1 = 5 points: matching 4 it refuses, and FGR's result stands
+    // (on 40 points: a pair of at most 32 goes to the triplet search instead).
     let pair = clean_pair();
-    let few = |c: &PointCloud| PointCloud::new(c.points[..4].to_vec());
-    let mut method = combined();
+    let few = |c: &PointCloud| PointCloud::new(c.points[..40].to_vec());
+    let mut rgm = tiny_rgm();
+    rgm.config.match_points = Some(4);
+    let mut method = combined(rgm);
     let found = method
         .register(&few(&pair.source), &few(&pair.target))
         .unwrap();
@@ -142,9 +145,9 @@ fn a_failed_candidate_leaves_the_other_and_both_failing_names_both() {
         found.result.t_target_source,
         found.candidates[0].t_target_source
     );
-    // Empty clouds: neither can run.
+    // An empty target: neither can run, and both failures are named.
     let empty = PointCloud::default();
-    match method.register(&empty, &empty) {
+    match method.register(&few(&pair.source), &empty) {
         Err(MethodError::Geom(GeomError::AllCandidatesFailed(why))) => {
             assert!(
                 why.contains("fgr+icp: ") && why.contains("rgm+icp: "),
@@ -153,6 +156,9 @@ fn a_failed_candidate_leaves_the_other_and_both_failing_names_both() {
         }
         other => panic!("expected both to fail, got {other:?}"),
     }
+    // Two empty clouds (no more than the triplet search's 32 points): a clear error.
+    let err = method.register(&empty, &empty).unwrap_err().to_string();
+    assert!(err.contains("the source has 0 points"), "{err}");
 }
 
 #[test]
