@@ -168,7 +168,10 @@ pub fn read_point_cloud_warned(path: impl AsRef<Path>) -> Result<(PointCloud, Ve
     }
     let mut bytes = read_regular_file(path)?;
     if is_gzip(path) {
-        bytes = gunzip(&bytes, path)?;
+        // Half of what the process may take: the points read from the content cost about as
+        // much again.
+        let budget = crate::memory::available().map(|a| a / 2);
+        bytes = gunzip(&bytes, path, budget)?;
     }
     let mut warnings = Vec::new();
     let points = format.parse(&bytes, path, &mut warnings)?;
@@ -188,11 +191,22 @@ pub fn check_magic(format: &dyn PointFormat, start: &[u8], path: &Path) -> Resul
 }
 
 /// The decompressed content of the gzip data `bytes` (every member of a multi-member file).
-fn gunzip(bytes: &[u8], path: &Path) -> Result<Vec<u8>> {
+/// Inflated no further than `budget` bytes: a small file that inflates to gigabytes (a gzip
+/// bomb) is refused once its content passes the budget, not when memory runs out.
+fn gunzip(bytes: &[u8], path: &Path, budget: Option<u64>) -> Result<Vec<u8>> {
+    let limit = budget.unwrap_or(u64::MAX);
     let mut out = Vec::new();
     flate2::read::MultiGzDecoder::new(bytes)
+        .take(limit.saturating_add(1))
         .read_to_end(&mut out)
         .map_err(|e| format_error(path, "gzip", e.to_string()))?;
+    if out.len() as u64 > limit {
+        return Err(DataError::TooLarge {
+            path: path.to_path_buf(),
+            bytes: out.len() as u64,
+            available: budget,
+        });
+    }
     Ok(out)
 }
 
@@ -429,6 +443,38 @@ mod tests {
         );
         let err = read_point_cloud("cloud.gz").unwrap_err();
         assert!(matches!(err, DataError::UnknownExtension { .. }), "{err}");
+    }
+
+    /// Issue 44, D6: a gzip bomb (10 MB of zeros in a few kB) is refused once its content
+    /// passes the budget, naming the file; within the budget it inflates whole.
+    #[test]
+    fn a_gzip_bomb_is_refused_at_its_budget() {
+        let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::best());
+        gz.write_all(&vec![b'0'; 10_000_000]).unwrap();
+        let bomb = gz.finish().unwrap();
+        assert!(bomb.len() < 50_000, "{}", bomb.len());
+        let path = Path::new("bomb.xyz.gz");
+        let err = gunzip(&bomb, path, Some(1_000_000)).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                DataError::TooLarge {
+                    bytes: 1_000_001,
+                    available: Some(1_000_000),
+                    ..
+                }
+            ),
+            "{err:?}"
+        );
+        assert!(
+            err.to_string()
+                .starts_with("bomb.xyz.gz: 0.0 GB, more than"),
+            "{err}"
+        );
+        assert_eq!(
+            gunzip(&bomb, path, Some(10_000_000)).unwrap().len(),
+            10_000_000
+        );
     }
 
     #[test]
