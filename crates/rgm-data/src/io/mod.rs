@@ -294,13 +294,23 @@ pub fn checked_cloud(points: Vec<Point3<f64>>, path: &Path) -> Result<PointCloud
     Ok(PointCloud::new(points))
 }
 
-/// The error for line `line` (from 1) of a text file.
+/// The error for line `line` (from 1) of a text file; the line and the reason quoted in short
+/// ([`excerpt`]), so that the error for a 10 MB line of junk is one line of text.
 fn line_error(path: &Path, line: usize, text: &str, why: impl Into<String>) -> DataError {
     DataError::Line {
         path: path.to_path_buf(),
         line,
-        text: text.trim().to_string(),
-        why: why.into(),
+        text: excerpt(text, 80),
+        why: excerpt(&why.into(), 200),
+    }
+}
+
+/// `text` trimmed, cut after `max` characters with its length said when longer.
+fn excerpt(text: &str, max: usize) -> String {
+    let text = text.trim();
+    match text.char_indices().nth(max) {
+        None => text.to_string(),
+        Some((cut, _)) => format!("{}… ({} bytes)", &text[..cut], text.len()),
     }
 }
 
@@ -353,7 +363,7 @@ fn parse_xyz<'a>(
                 path,
                 line,
                 text,
-                format!("`{}` is not a number{hint}", token.trim()),
+                format!("`{}` is not a number{hint}", excerpt(token, 80)),
             )
         })?;
     }
@@ -443,6 +453,22 @@ mod tests {
         );
         let err = read_point_cloud("cloud.gz").unwrap_err();
         assert!(matches!(err, DataError::UnknownExtension { .. }), "{err}");
+    }
+
+    /// Issue 44, D9: a row of junk 1 MB long is quoted in short, in the line and in the reason.
+    #[test]
+    fn a_long_row_of_junk_is_quoted_in_short() {
+        let row = "x".repeat(1_000_000);
+        let bytes = format!("1 2 3\n{row}\n");
+        let err = xyz::Xyz
+            .parse(bytes.as_bytes(), Path::new("junk.xyz"), &mut Vec::new())
+            .unwrap_err()
+            .to_string();
+        assert!(err.len() < 400, "{} bytes", err.len());
+        assert!(err.starts_with("junk.xyz:2: `xxx"), "{}", &err[..100]);
+        assert_eq!(err.matches("… (1000000 bytes)").count(), 2, "{err}");
+        assert_eq!(excerpt("  é1234  ", 3), "é12… (6 bytes)");
+        assert_eq!(excerpt("short", 80), "short");
     }
 
     /// Issue 44, D6: a gzip bomb (10 MB of zeros in a few kB) is refused once its content
