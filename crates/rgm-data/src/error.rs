@@ -26,6 +26,20 @@ pub enum DataError {
         bytes: u64,
         available: Option<u64>,
     },
+    /// A text file whose points could take more memory than the process may allocate.
+    #[error(
+        "{}: {:.1} GB of text, whose points may take {:.1} GB, more than the {:.1} GB of memory this process may allocate",
+        path.display(),
+        *bytes as f64 / 1e9,
+        *needs as f64 / 1e9,
+        *available as f64 / 1e9
+    )]
+    TextTooLarge {
+        path: PathBuf,
+        bytes: u64,
+        needs: u64,
+        available: u64,
+    },
     /// A line of a text file (XYZ/CSV, OFF, ASCII PLY) could not be read.
     #[error("{}:{line}: {why}: `{text}`", path.display())]
     Line {

@@ -38,6 +38,11 @@ pub trait PointFormat: Sync {
     fn magic(&self) -> Option<&'static [u8]> {
         None
     }
+    /// Whether its files are text, one point a line: a point costs more memory (24 bytes) than
+    /// the shortest line holding it (`0 0 0`, 6 bytes), which [`check_text_cost`] counts.
+    fn is_text(&self) -> bool {
+        false
+    }
     /// The points in `bytes`, the content of the file `path`; what is odd but readable goes to
     /// `warnings`.
     fn parse(
@@ -166,6 +171,11 @@ pub fn read_point_cloud_warned(path: impl AsRef<Path>) -> Result<(PointCloud, Ve
             check_magic(format, &prefix, path)?;
         }
     }
+    if format.is_text() && !is_gzip(path) {
+        if let Ok(meta) = std::fs::metadata(path) {
+            check_text_cost(path, meta.len(), crate::memory::available())?;
+        }
+    }
     let mut bytes = read_regular_file(path)?;
     if is_gzip(path) {
         // Half of what the process may take: the points read from the content cost about as
@@ -176,6 +186,22 @@ pub fn read_point_cloud_warned(path: impl AsRef<Path>) -> Result<(PointCloud, Ve
     let mut warnings = Vec::new();
     let points = format.parse(&bytes, path, &mut warnings)?;
     Ok((checked_cloud(points, path)?, warnings))
+}
+
+/// Refuses a text file of `bytes` bytes whose text and points (24 bytes for each 6 bytes of
+/// text at most) could take more than `available`: a sparse or huge text file is refused from
+/// its size, before it is read.
+pub fn check_text_cost(path: &Path, bytes: u64, available: Option<u64>) -> Result<()> {
+    let needs = bytes.saturating_mul(5);
+    match available {
+        Some(available) if needs > available => Err(DataError::TextTooLarge {
+            path: path.to_path_buf(),
+            bytes,
+            needs,
+            available,
+        }),
+        _ => Ok(()),
+    }
 }
 
 /// Refuses `start`, the first bytes of a file, unless they are `format`'s magic string.
@@ -453,6 +479,23 @@ mod tests {
         );
         let err = read_point_cloud("cloud.gz").unwrap_err();
         assert!(matches!(err, DataError::UnknownExtension { .. }), "{err}");
+    }
+
+    /// Issue 44, D9: a text file is sized by what its points may cost (5 times its bytes), not
+    /// by its bytes alone.
+    #[test]
+    fn a_text_file_is_sized_by_its_points() {
+        let path = Path::new("big.xyz");
+        assert!(check_text_cost(path, 1_000_000_000, Some(5_000_000_000)).is_ok());
+        assert!(check_text_cost(path, 1_000_000_000, None).is_ok());
+        let err = check_text_cost(path, 2_000_000_000, Some(6_000_000_000)).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "big.xyz: 2.0 GB of text, whose points may take 10.0 GB, more than the 6.0 GB of \
+             memory this process may allocate"
+        );
+        assert!(FORMATS.iter().any(|f| f.is_text()));
+        assert!(!npy::Npy.is_text());
     }
 
     /// Issue 44, D9: a row of junk 1 MB long is quoted in short, in the line and in the reason.

@@ -24,6 +24,9 @@ impl PointFormat for Off {
     fn extensions(&self) -> &'static [&'static str] {
         &["off"]
     }
+    fn is_text(&self) -> bool {
+        true
+    }
     fn summary(&self) -> &'static str {
         "vertices (faces ignored); written as text"
     }

@@ -36,6 +36,9 @@ impl PointFormat for Xyz {
     fn extensions(&self) -> &'static [&'static str] {
         &["xyz", "txt", "pts"]
     }
+    fn is_text(&self) -> bool {
+        true
+    }
     fn summary(&self) -> &'static str {
         "text, x y z first on each line, extra columns ignored"
     }
@@ -53,6 +56,9 @@ impl PointFormat for Csv {
     }
     fn extensions(&self) -> &'static [&'static str] {
         &["csv"]
+    }
+    fn is_text(&self) -> bool {
+        true
     }
     fn summary(&self) -> &'static str {
         "comma-separated text, optional header line; written with an x,y,z header"
