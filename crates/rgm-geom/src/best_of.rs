@@ -149,6 +149,14 @@ pub fn agree(a: &RigidTransform, b: &RigidTransform) -> bool {
         && (a.translation - b.translation).norm() < distance
 }
 
+/// The k-d trees of `source` and `target`, built side by side.
+pub fn pair_trees(source: &PointCloud, target: &PointCloud) -> (KnnIndex, KnnIndex) {
+    rayon::join(
+        || KnnIndex::new(&source.points),
+        || KnnIndex::new(&target.points),
+    )
+}
+
 /// The pair a composite's candidates are judged on (the clouds as its caller gave them, with
 /// their trees) and the best result an earlier stage found there. The candidates may run on a
 /// thinned version of the pair ([`crate::thinning::Thinned`]); they are scored on this one.
@@ -208,9 +216,7 @@ impl<'a> Judge<'a> {
             best.score >= accept.score && {
                 let (si, ti) = match &self.thinned_trees {
                     Some(trees) => {
-                        let (si, ti) = trees.get_or_init(|| {
-                            (KnnIndex::new(&source.points), KnnIndex::new(&target.points))
-                        });
+                        let (si, ti) = trees.get_or_init(|| pair_trees(source, target));
                         (si, ti)
                     }
                     None => (self.source.1, self.target.1),
@@ -399,10 +405,7 @@ fn register_composite<E: From<GeomError>>(
     target: &PointCloud,
 ) -> Result<Registration, E> {
     let start = Instant::now();
-    let (source_index, target_index) = rayon::join(
-        || KnnIndex::new(&source.points),
-        || KnnIndex::new(&target.points),
-    );
+    let (source_index, target_index) = pair_trees(source, target);
     let judge = Judge::new((source, &source_index), (target, &target_index));
     let outcome = composite.run_judged(source, target, &judge);
     conclude(

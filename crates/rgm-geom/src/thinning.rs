@@ -5,10 +5,10 @@
 use std::borrow::Cow;
 use std::time::Instant;
 
-use crate::best_of::{agree, conclude, Composite, Judge};
+use crate::best_of::{agree, conclude, pair_trees, Composite, Judge};
 use crate::fgr::Progress;
 use crate::registrar::{MethodId, Registrar, Registration};
-use crate::{GeomError, KnnIndex, PointCloud, RigidTransform};
+use crate::{GeomError, PointCloud, RigidTransform};
 
 /// Points of a training cloud (1,024 per ModelNet40 shape; 717 after the partial crop): a cloud
 /// with more points is denser than the methods were tuned for.
@@ -89,10 +89,7 @@ where
         _: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
         let start = Instant::now();
-        let (source_index, target_index) = rayon::join(
-            || KnnIndex::new(&source.points),
-            || KnnIndex::new(&target.points),
-        );
+        let (source_index, target_index) = pair_trees(source, target);
         let dense = source.len().max(target.len()) > DENSITY_POINTS;
         let thinnings = if dense {
             &self.thinnings[..]

@@ -188,11 +188,15 @@ pub fn read_point_cloud_warned(path: impl AsRef<Path>) -> Result<(PointCloud, Ve
     Ok((checked_cloud(points, path)?, warnings))
 }
 
+/// Bytes of memory a byte of a text file may take to read: itself, and 24 bytes of point for
+/// each 6 bytes of the shortest line holding one (`0 0 0`).
+const TEXT_COST: u64 = 5;
+
 /// Refuses a text file of `bytes` bytes whose text and points (24 bytes for each 6 bytes of
 /// text at most) could take more than `available`: a sparse or huge text file is refused from
 /// its size, before it is read.
 pub fn check_text_cost(path: &Path, bytes: u64, available: Option<u64>) -> Result<()> {
-    let needs = bytes.saturating_mul(5);
+    let needs = bytes.saturating_mul(TEXT_COST);
     match available {
         Some(available) if needs > available => Err(DataError::TextTooLarge {
             path: path.to_path_buf(),
