@@ -13,6 +13,7 @@
 
 pub mod best_of;
 pub mod cloud;
+pub mod coincidence;
 pub mod error;
 pub mod euler;
 pub mod fgr;

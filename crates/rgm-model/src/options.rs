@@ -8,13 +8,16 @@
 //! |---|---|
 //! | `icp` | [`IcpConfig`] (its own refinement) |
 //! | `fgr`, `fgr+icp` | [`FgrConfig`], [`Refined`]`<FgrConfig>` |
-//! | `rgm`, `rgm+icp` | [`Normalised`]`<RgmRegistrar>`, `Normalised<Refined<RgmRegistrar>>` |
+//! | `rgm`, `rgm+icp` | [`Normalised`]`<RgmRegistrar>`, `Normalised<Checked<Refined<RgmRegistrar>, REFINED_CHECKS>>` |
 //! | `auto` | `Normalised<Thinned<Cascade { first: FgrConfig, rest: [Normalised<RgmRegistrar>] }>>` |
-//! | `auto+icp` | `Normalised<AtResolution<Thinned<Cascade { first: Refined<FgrConfig>, rest: [Refined<Normalised<RgmRegistrar>>] }>, AtSpacing>>` |
+//! | `auto+icp` | `Normalised<Checked<AtResolution<Thinned<Cascade { first: Refined<FgrConfig>, rest: [Refined<Normalised<RgmRegistrar>>] }>, AtSpacing>, REFINED_CHECKS>>` |
 //!
 //! (`BestOf[first, rest]` in place of the `Cascade` when `accept` takes nothing; inside the
 //! `Normalised`, `UpTo { points: 32, small: TripletConfig, .. }` sends a pair of a few points to
 //! [`rgm_geom::triplets`].)
+//!
+//! [`Checked`] doubts a refined result whose overlap is not one where the clouds coincide
+//! ([`REFINED_CHECKS`]); the unrefined methods, calibrated on no data, are not checked.
 //!
 //! `Refined<R>` refines with [`RefineConfig`] (`+icp`); any other [`rgm_geom::refiner::Refiner`]
 //! composes the same way (`Refined::new(FgrConfig::default(), IcpConfig::default())` is
@@ -31,6 +34,7 @@ use std::path::PathBuf;
 use std::str::FromStr;
 
 use rgm_geom::best_of::{Acceptance, BestOf, Cascade, SCORE_DISTANCE};
+use rgm_geom::coincidence::{Checked, Coincides, CoincidesAtSpacing};
 use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::icp::{self, IcpConfig};
 use rgm_geom::refine::{RefineConfig, ResolutionConfig};
@@ -146,6 +150,28 @@ pub const WHOLE_DISTANCE: f64 = 0.05;
 /// (`docs/training/default-study/cascade-whole-overlap.md`).
 pub const WHOLE_OVERLAP: f64 = 1.98;
 
+/// How a refined result of the default or of `rgm+icp` must coincide with the other cloud where
+/// it overlaps it, in the unit-sphere frame: the least that kept every right result of 198
+/// validation pairs registered and doubted all but a few wrong ones on pairs at 10 % overlap
+/// (`docs/confidence.md`).
+pub const COINCIDES: Coincides = Coincides {
+    near: 0.02,
+    far: 0.08,
+    least: 0.35,
+};
+
+/// The same on a dense pair, in point spacings: midway between the right results of the
+/// Stanford and redkitchen pairs and the wrong ones of part-of-the-whole crops, non-overlapping
+/// scans and slid rooms (`docs/confidence.md`).
+pub const COINCIDES_AT_SPACING: CoincidesAtSpacing = CoincidesAtSpacing(Coincides {
+    near: 1.5,
+    far: 16.0,
+    least: 0.5,
+});
+
+/// The checks of a refined result: [`COINCIDES`], then [`COINCIDES_AT_SPACING`].
+pub const REFINED_CHECKS: (Coincides, CoincidesAtSpacing) = (COINCIDES, COINCIDES_AT_SPACING);
+
 /// Points matched per cloud with given weights unless `match_points` says otherwise: the paper
 /// trains on 1,024-point clouds, and the network's memory grows with the square of the points.
 pub const WEIGHTS_MATCH_POINTS: usize = 1024;
@@ -223,7 +249,10 @@ impl MethodOptions {
                 inner: self.build_rgm()?,
             }),
             (MethodName::Rgm, Some(refine)) => Method::new(Normalised {
-                inner: Refined::new(self.build_rgm()?, refine),
+                inner: Checked {
+                    inner: Refined::new(self.build_rgm()?, refine),
+                    check: REFINED_CHECKS,
+                },
             }),
             (MethodName::Auto, refine) => {
                 let accept = Acceptance {
@@ -357,13 +386,16 @@ where
     };
     let composite: Box<dyn DynRegistrar<MethodError>> = match refine {
         None => composite,
-        Some(_) => Box::new(AtResolution {
-            inner: composite,
-            refiner: AtSpacing {
-                coarser_than: scoring_distance,
-                scoring_distance,
-                config: ResolutionConfig::default(),
+        Some(_) => Box::new(Checked {
+            inner: AtResolution {
+                inner: composite,
+                refiner: AtSpacing {
+                    coarser_than: scoring_distance,
+                    scoring_distance,
+                    config: ResolutionConfig::default(),
+                },
             },
+            check: REFINED_CHECKS,
         }),
     };
     // A few markers have no neighbourhoods for features or the network: searched whole.

@@ -1,0 +1,307 @@
+//! Whether a result's overlap is one where the clouds coincide, or one where they only lie near
+//! each other: a ground-truth-free check that a composite's overlap score cannot make.
+//!
+//! Under a right transform the overlapping parts of two clouds lie on one surface, so the points
+//! near the other cloud are nearly all very near it (within the noise or a point spacing). Under
+//! a wrong one that still overlaps — a part of a cloud placed on the wrong part of the whole,
+//! clouds that do not overlap at all pressed together, a room slid along its floor — the
+//! surfaces cross or graze, and the distances spread evenly up to the loose ones. [`Coincides`]
+//! measures that spread: of the points within `far` of the other cloud (both ways), the share
+//! within `near`; below `least`, the result is doubted ([`Registration::doubt`]). [`Checked`]
+//! puts a [`Check`] on any registrar. The tuned lengths and shares are configuration, set where
+//! methods are composed.
+
+use std::time::Instant;
+
+use crate::best_of::pair_trees;
+use crate::fgr::Progress;
+use crate::refine::median_spacing;
+use crate::registrar::{elapsed_ms, MethodId, Registrar, Registration};
+use crate::thinning::DENSITY_POINTS;
+use crate::{GeomError, KnnIndex, PointCloud, RigidTransform};
+
+/// At most this many points of each cloud are measured: the shares settle long before a dense
+/// scan's 300,000 points.
+const SAMPLE: usize = 4096;
+
+/// Points spread evenly over `points`: every one when there are at most [`SAMPLE`].
+fn sample(points: &[crate::Point3<f64>]) -> impl Iterator<Item = &crate::Point3<f64>> {
+    points.iter().step_by(points.len().div_ceil(SAMPLE).max(1))
+}
+
+/// Of the points of both clouds that `transform` brings within `far` of the other cloud, the
+/// share within `near` (0 when none is within `far`). Measured on at most [`SAMPLE`] points of
+/// each cloud, against the other whole.
+pub fn coincidence(
+    source: (&PointCloud, &KnnIndex),
+    target: (&PointCloud, &KnnIndex),
+    transform: &RigidTransform,
+    near: f64,
+    far: f64,
+) -> f64 {
+    let count = |points: &[crate::Point3<f64>], onto: &KnnIndex, moved: &RigidTransform| {
+        let (mut within_near, mut within_far) = (0usize, 0usize);
+        for p in sample(points) {
+            if let Some((_, d)) = onto.nearest_within(&moved.apply(p), far) {
+                within_far += 1;
+                within_near += usize::from(d < near);
+            }
+        }
+        (within_near, within_far)
+    };
+    let (there_near, there_far) = count(&source.0.points, target.1, transform);
+    let (back_near, back_far) = count(&target.0.points, source.1, &transform.inverse());
+    let far_total = there_far + back_far;
+    if far_total == 0 {
+        return 0.0;
+    }
+    (there_near + back_near) as f64 / far_total as f64
+}
+
+/// A ground-truth-free test of a registration, made after it.
+pub trait Check {
+    /// Why `found` (the registration of `source` onto `target`) is not to be trusted, if it is
+    /// not.
+    fn doubt(
+        &self,
+        source: (&PointCloud, &KnnIndex),
+        target: (&PointCloud, &KnnIndex),
+        found: &Registration,
+    ) -> Option<String>;
+}
+
+/// Both checks, the first's doubt first.
+impl<A: Check, B: Check> Check for (A, B) {
+    fn doubt(
+        &self,
+        source: (&PointCloud, &KnnIndex),
+        target: (&PointCloud, &KnnIndex),
+        found: &Registration,
+    ) -> Option<String> {
+        self.0
+            .doubt(source, target, found)
+            .or_else(|| self.1.doubt(source, target, found))
+    }
+}
+
+/// The clouds must coincide where they overlap: of the points within `far` of the other cloud,
+/// at least `least` within `near` ([`coincidence`]). Lengths in the clouds' units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Coincides {
+    pub near: f64,
+    pub far: f64,
+    pub least: f64,
+}
+
+impl Coincides {
+    /// Its doubt of `transform`, lengths scaled by `unit` and named `in_units`.
+    fn doubt_at(
+        &self,
+        source: (&PointCloud, &KnnIndex),
+        target: (&PointCloud, &KnnIndex),
+        transform: &RigidTransform,
+        unit: f64,
+        in_units: &str,
+    ) -> Option<String> {
+        let (near, far) = (self.near * unit, self.far * unit);
+        let share = coincidence(source, target, transform, near, far);
+        (share < self.least).then(|| {
+            format!(
+                "the clouds lie near each other but do not coincide: of the points within {} \
+                 {in_units} of the other cloud, {share:.2} lie within {} (less than {}); the fit \
+                 may be wrong (one cloud placed on the wrong part of the other, clouds that do \
+                 not overlap, or a slide)",
+                self.far, self.near, self.least
+            )
+        })
+    }
+}
+
+impl Check for Coincides {
+    fn doubt(
+        &self,
+        source: (&PointCloud, &KnnIndex),
+        target: (&PointCloud, &KnnIndex),
+        found: &Registration,
+    ) -> Option<String> {
+        self.doubt_at(source, target, &found.result.t_target_source, 1.0, "units")
+    }
+}
+
+/// [`Coincides`] with its lengths in point spacings (the larger of the two clouds' median
+/// nearest-neighbour distances), on pairs denser than [`DENSITY_POINTS`] only: a sparse pair's
+/// noise may exceed its spacing, and the spacing then says nothing of a fit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CoincidesAtSpacing(pub Coincides);
+
+/// Points whose nearest neighbour sets a cloud's spacing.
+const SPACING_SAMPLE: usize = 2000;
+
+impl Check for CoincidesAtSpacing {
+    fn doubt(
+        &self,
+        source: (&PointCloud, &KnnIndex),
+        target: (&PointCloud, &KnnIndex),
+        found: &Registration,
+    ) -> Option<String> {
+        if source.0.len().max(target.0.len()) <= DENSITY_POINTS {
+            return None;
+        }
+        let spacing = median_spacing(&source.0.points, source.1, SPACING_SAMPLE)
+            .max(median_spacing(&target.0.points, target.1, SPACING_SAMPLE));
+        self.0.doubt_at(
+            source,
+            target,
+            &found.result.t_target_source,
+            spacing,
+            "point spacings",
+        )
+    }
+}
+
+/// `inner`, its result doubted when `check` doubts it (a result `inner` doubts already keeps its
+/// own reason). Named as `inner`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Checked<R, C> {
+    pub inner: R,
+    pub check: C,
+}
+
+impl<E: From<GeomError>, R: Registrar<E>, C: Check> Registrar<E> for Checked<R, C> {
+    fn id(&self) -> MethodId {
+        self.inner.id()
+    }
+
+    fn register_with_progress(
+        &mut self,
+        source: &PointCloud,
+        target: &PointCloud,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        let start = Instant::now();
+        let mut found = self
+            .inner
+            .register_with_progress(source, target, progress)?;
+        if found.doubt.is_none() {
+            let (source_index, target_index) = pair_trees(source, target);
+            found.doubt =
+                self.check
+                    .doubt((source, &source_index), (target, &target_index), &found);
+        }
+        found.time_ms = elapsed_ms(start);
+        Ok(found)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::{airplane, Fixed};
+    use crate::{Matrix3, Point3, Vector3};
+
+    fn indexed(cloud: &PointCloud) -> (&PointCloud, KnnIndex) {
+        (cloud, KnnIndex::new(&cloud.points))
+    }
+
+    /// A cloud coincides with itself; shifted by a little less than `far` it lies near itself
+    /// everywhere and coincides nowhere.
+    #[test]
+    fn a_copy_coincides_and_a_shifted_copy_does_not() {
+        let shape = airplane();
+        let (s, si) = indexed(&shape);
+        let same = coincidence((s, &si), (s, &si), &RigidTransform::identity(), 0.02, 0.08);
+        assert_eq!(same, 1.0);
+        let shift = RigidTransform::new(crate::Matrix3::identity(), Vector3::new(0.05, 0.0, 0.0));
+        let shifted = coincidence((s, &si), (s, &si), &shift, 0.02, 0.08);
+        assert!(shifted < 0.3, "{shifted}");
+        let far = RigidTransform::new(crate::Matrix3::identity(), Vector3::new(5.0, 0.0, 0.0));
+        assert_eq!(coincidence((s, &si), (s, &si), &far, 0.02, 0.08), 0.0);
+    }
+
+    /// A dense plane grid, and the same grid slid by 3.3 spacings along itself and lifted by 3
+    /// spacings off it: the slid copy coincides (it lies on the same surface), the lifted one
+    /// does not, in spacings whatever the units.
+    #[test]
+    fn at_spacing_tells_a_lifted_surface_from_a_slid_one_at_any_scale() {
+        for unit in [1e-3, 1.0, 1e3] {
+            let points: Vec<_> = (0..60)
+                .flat_map(|i| (0..60).map(move |j| (i, j)))
+                .map(|(i, j)| crate::Point3::new(i as f64 * unit, j as f64 * unit, 0.0))
+                .collect();
+            let plane = PointCloud::new(points);
+            let (p, pi) = indexed(&plane);
+            let check = CoincidesAtSpacing(Coincides {
+                near: 1.5,
+                far: 16.0,
+                least: 0.5,
+            });
+            let found = |t: Vector3<f64>| {
+                let transform = RigidTransform::new(crate::Matrix3::identity(), t * unit);
+                let unscored = crate::registration::Score {
+                    inlier_count: 0,
+                    fitness: 0.0,
+                    inlier_rmse: 0.0,
+                };
+                let result = crate::RegistrationResult::scored(transform, 0, true, unscored);
+                Registration::single(result, Vec::new(), Instant::now())
+            };
+            let slid = found(Vector3::new(3.3, 0.0, 0.0));
+            assert_eq!(check.doubt((p, &pi), (p, &pi), &slid), None, "unit {unit}");
+            let lifted = found(Vector3::new(0.0, 0.0, 3.0));
+            assert!(
+                check.doubt((p, &pi), (p, &pi), &lifted).is_some(),
+                "unit {unit}"
+            );
+        }
+    }
+
+    /// Issue 44, D1: a part of a dense bumpy sheet, given back on its place, is not doubted;
+    /// turned a quarter and put on another part of the sheet, where it lies near the surface
+    /// everywhere, it is, as it is far off the sheet.
+    #[test]
+    fn a_part_put_on_the_wrong_part_of_the_whole_is_doubted() {
+        let sheet = PointCloud::new(
+            (0..120)
+                .flat_map(|i| (0..120).map(move |j| (i, j)))
+                .map(|(i, j)| {
+                    let (x, y) = (i as f64 / 60.0 - 1.0, j as f64 / 60.0 - 1.0);
+                    Point3::new(x, y, 0.1 * (3.0 * x).sin() * (2.0 * y).cos())
+                })
+                .collect(),
+        );
+        let centre = Point3::new(0.2, -0.1, 0.0);
+        let part: Vec<usize> = (0..sheet.len())
+            .filter(|&i| (sheet.points[i].xy() - centre.xy()).norm() < 0.45)
+            .collect();
+        let pose = RigidTransform::new(
+            crate::euler::rotation_xyz_intrinsic(0.3, -0.2, 0.5),
+            Vector3::new(0.4, 0.1, -0.2),
+        );
+        let source = sheet.select(&part).transformed(&pose); // (N', 3), a sixth of the sheet
+        let right = pose.inverse();
+        let quarter = RigidTransform::new(
+            nalgebra::Rotation3::from_axis_angle(&Vector3::z_axis(), std::f64::consts::FRAC_PI_2)
+                .into_inner(),
+            Vector3::new(-0.5, 0.3, 0.0),
+        );
+        let check = CoincidesAtSpacing(Coincides {
+            near: 1.5,
+            far: 16.0,
+            least: 0.5,
+        });
+        let checked = |transform: RigidTransform| {
+            let mut fixed = Fixed::new("fixed", 0.0);
+            fixed.transform = transform;
+            let mut method = Checked {
+                inner: fixed,
+                check,
+            };
+            method.register(&source, &sheet).unwrap().doubt
+        };
+        assert_eq!(checked(right), None);
+        let doubt = checked(quarter.compose(&right)).expect("a wrong place is doubted");
+        assert!(doubt.starts_with("the clouds lie near each other but do not coincide"));
+        let off = RigidTransform::new(Matrix3::identity(), Vector3::new(0.0, 0.0, 5.0));
+        assert!(checked(off.compose(&right)).is_some());
+    }
+}
