@@ -209,6 +209,7 @@ impl<T: Scalar> MultiHeadAttention<T> {
     /// `P ⊙ (dP − Σ dP ⊙ P)`), `dQ_h += dS_h K_h / √d`, `dK_h += dS_hᵀ Q_h / √d`, then the four
     /// linear backwards. `dkv_in = None` means keys and values came from `q_in` (self-attention):
     /// their gradient is added to `dq_in`. Inputs as given to forward.
+    #[allow(clippy::too_many_arguments)]
     pub fn backward(
         &mut self,
         mut dq_in: ArrayViewMut2<'_, T>,
