@@ -64,7 +64,10 @@ fn largest_difference(a: &[f32], b: &[f32]) -> f32 {
 #[test]
 fn f32_is_the_default_and_matches_pytorch() {
     assert_eq!(
-        Rgm::<f32>::new(Config::tiny(), 0).unwrap().compute().precision,
+        Rgm::<f32>::new(Config::tiny(), 0)
+            .unwrap()
+            .compute()
+            .precision,
         Precision::F32
     );
     let expected = tensor("output.c_soft_eval");
