@@ -100,6 +100,7 @@ impl<T: Scalar> Affinity<T> {
 
     /// Differentiates S = F_X · A · F_Yᵀ: with G = dS · F_Y, dF_X += G · A, dF_Y += dSᵀ · (F_X · A),
     /// and dA = F_Xᵀ · G, so dW += (dA + dAᵀ)/2.
+    #[allow(clippy::too_many_arguments)]
     pub fn backward(
         &mut self,
         mut dfx: ArrayViewMut2<'_, T>, // (N, Q)
