@@ -1,12 +1,12 @@
-//! The compute settings every op that runs a matrix product takes ([`Compute`]): today the
-//! precision of the f32 products, f32 (the default) or bf16 inputs with f32 accumulation on the
+//! The compute settings every op that runs a matrix product takes ([`Compute`]): the precision
+//! of the f32 products, f32 (the default) or bf16 inputs with f32 accumulation on the
 //! processor's AMX tile units or AVX-512 BF16 dot products ([`crate::gemm`]).
 //!
 //! The settings are a value passed down from the caller (the network holds its own) to the
 //! products that choose a kernel, not a per-thread state: work spread over rayon's pool
-//! computes as its caller asked without each worker setting it again, and a setting that is no
-//! thread's to hold (a device) has a place to go. Only the products read it: reductions
-//! (softmax, norms, sums) and f64 products are never affected.
+//! computes as its caller asked without each worker being told again, and a setting no thread
+//! can hold for the work (a device) has the same way down. Only the products read it:
+//! reductions (softmax, norms, sums) and f64 products are never affected.
 
 use std::fmt;
 use std::str::FromStr;
