@@ -18,7 +18,7 @@ use rand::{rngs::StdRng, Rng, SeedableRng};
 use rgm_nn::gemm::{
     bf16_available, f32_avx512_available, f32_mat_mul, mat_mul, register_peak_loop,
 };
-use rgm_nn::precision::{self, Precision};
+use rgm_nn::{Compute, Precision};
 
 /// A (rows, cols) f32 matrix uniform in [-1, 1), reproducible from `seed`.
 fn uniform(rows: usize, cols: usize, seed: u64) -> Array2<f32> {
@@ -83,9 +83,9 @@ fn gemm(c: &mut Criterion) {
         let mut out = Array2::<f32>::zeros((m, n)); // (M, N)
         group.throughput(Throughput::Elements(2 * (m * k * n) as u64));
         for &p in precisions {
-            let _scope = precision::enter(p);
+            let compute = Compute::with_precision(p);
             group.bench_function(BenchmarkId::new(p.name(), name), |bench| {
-                bench.iter(|| mat_mul(1.0, &view(&a, la), &view(&b, lb), 0.0, &mut out))
+                bench.iter(|| mat_mul(1.0, &view(&a, la), &view(&b, lb), 0.0, &mut out, compute))
             });
         }
         group.bench_function(BenchmarkId::new("blas", name), |bench| {

@@ -11,7 +11,7 @@ use rand::{rngs::StdRng, Rng, SeedableRng};
 use rgm_benches::SIZES;
 use rgm_nn::{
     edge_features_forward, gram_forward, l1_normalize_columns_forward, max_k_backward,
-    max_k_forward, softmax_rows_forward, AttentionCache, BatchNorm, BatchNormCache,
+    max_k_forward, softmax_rows_forward, AttentionCache, BatchNorm, BatchNormCache, Compute,
     L1NormalizeCache, LayerNorm, LayerNormCache, Linear, MaxKCache, MultiHeadAttention,
 };
 
@@ -60,13 +60,16 @@ fn linear(c: &mut Criterion) {
         let id = format!("{rows}x{c_in}->{c_out}");
         group.throughput(Throughput::Elements(flops));
         group.bench_function(BenchmarkId::new("forward", &id), |b| {
-            b.iter(|| lin.forward(out.view_mut(), inp.view()).unwrap())
+            b.iter(|| {
+                lin.forward(out.view_mut(), inp.view(), Compute::default())
+                    .unwrap()
+            })
         });
         group.throughput(Throughput::Elements(2 * flops));
         group.bench_function(BenchmarkId::new("backward", &id), |b| {
             b.iter(|| {
                 lin_b
-                    .backward(dinp.view_mut(), dout.view(), inp.view())
+                    .backward(dinp.view_mut(), dout.view(), inp.view(), Compute::default())
                     .unwrap()
             })
         });
@@ -93,13 +96,25 @@ fn attention(c: &mut Criterion) {
             group.throughput(Throughput::Elements(flops));
             group.bench_function(BenchmarkId::new("forward", &id), |b| {
                 b.iter(|| {
-                    mha.forward(out.view_mut(), x.view(), x.view(), &mut cache)
-                        .unwrap()
+                    mha.forward(
+                        out.view_mut(),
+                        x.view(),
+                        x.view(),
+                        &mut cache,
+                        Compute::default(),
+                    )
+                    .unwrap()
                 })
             });
             group.throughput(Throughput::Elements(2 * flops));
-            mha.forward(out.view_mut(), x.view(), x.view(), &mut cache)
-                .unwrap(); // fills the cache
+            mha.forward(
+                out.view_mut(),
+                x.view(),
+                x.view(),
+                &mut cache,
+                Compute::default(),
+            )
+            .unwrap(); // fills the cache
             group.bench_function(BenchmarkId::new("backward", &id), |b| {
                 b.iter(|| {
                     mha.backward(
@@ -109,6 +124,7 @@ fn attention(c: &mut Criterion) {
                         x.view(),
                         x.view(),
                         &mut cache,
+                        Compute::default(),
                     )
                     .unwrap()
                 })
@@ -224,7 +240,7 @@ fn adjacency(c: &mut Criterion) {
         let alpha = 1.0 / (ch as f32).sqrt();
         group.throughput(Throughput::Elements((2 * n * n * ch) as u64));
         group.bench_function(BenchmarkId::new("gram", n), |b| {
-            b.iter(|| gram_forward(scores.view_mut(), t.view(), alpha).unwrap())
+            b.iter(|| gram_forward(scores.view_mut(), t.view(), alpha, Compute::default()).unwrap())
         });
         group.throughput(Throughput::Elements((n * n) as u64));
         group.bench_function(BenchmarkId::new("softmax_rows", n), |b| {

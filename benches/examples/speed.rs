@@ -27,7 +27,7 @@ use rgm_match::Correspondences;
 use rgm_model::network::{Config, Mode, Rgm, RgmCache};
 use rgm_model::pipeline::StageTimes;
 use rgm_model::{PipelineConfig, Registrar, RgmRegistrar};
-use rgm_nn::{Parameters, Precision};
+use rgm_nn::{Compute, Parameters, Precision};
 
 /// `n` points uniform in the unit ball and their copy at a known pose in reverse order;
 /// source i is target n − 1 − i.
@@ -98,7 +98,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         None => Rgm::<f32>::new(config, 0)?,
         Some(file) => Rgm::load(config, file.as_ref())?,
     };
-    network.set_precision(precision);
+    network.set_compute(Compute::with_precision(precision));
     let (source, target, truth) = pair(points);
     let mut seconds = Vec::with_capacity(reps);
     let mut stages = Vec::new();

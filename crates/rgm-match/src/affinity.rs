@@ -5,7 +5,7 @@ use ndarray::{Array2, ArrayView2, ArrayViewMut2, Ix2};
 use rgm_nn::gemm::mat_mul;
 use rgm_nn::init::Init;
 use rgm_nn::param::{join_name, ParamView, ParamViewMut};
-use rgm_nn::{Param, Parameters, Scalar};
+use rgm_nn::{Compute, Param, Parameters, Scalar};
 
 /// Settings of the affinity layer.
 #[derive(Clone, Debug, PartialEq)]
@@ -81,6 +81,7 @@ impl<T: Scalar> Affinity<T> {
         fx: ArrayView2<'_, T>,       // (N, Q)
         fy: ArrayView2<'_, T>,       // (M, Q)
         cache: &mut AffinityCache<T>,
+        compute: Compute,
     ) -> Result<()> {
         const OP: &str = "affinity forward";
         let (n, m, q) = (fx.nrows(), fy.nrows(), self.width());
@@ -92,13 +93,14 @@ impl<T: Scalar> Affinity<T> {
         cache.a.assign(w);
         cache.a += &w.t();
         cache.a *= half;
-        mat_mul(T::one(), &fx, &cache.a, T::zero(), &mut cache.fx_a);
-        mat_mul(T::one(), &cache.fx_a, &fy.t(), T::zero(), &mut s);
+        mat_mul(T::one(), &fx, &cache.a, T::zero(), &mut cache.fx_a, compute);
+        mat_mul(T::one(), &cache.fx_a, &fy.t(), T::zero(), &mut s, compute);
         Ok(())
     }
 
     /// Differentiates S = F_X · A · F_Yᵀ: with G = dS · F_Y, dF_X += G · A, dF_Y += dSᵀ · (F_X · A),
     /// and dA = F_Xᵀ · G, so dW += (dA + dAᵀ)/2.
+    #[allow(clippy::too_many_arguments)]
     pub fn backward(
         &mut self,
         mut dfx: ArrayViewMut2<'_, T>, // (N, Q)
@@ -107,6 +109,7 @@ impl<T: Scalar> Affinity<T> {
         fx: ArrayView2<'_, T>,         // (N, Q)
         fy: ArrayView2<'_, T>,         // (M, Q)
         cache: &AffinityCache<T>,
+        compute: Compute,
     ) -> Result<()> {
         const OP: &str = "affinity backward";
         let (n, m, q) = (fx.nrows(), fy.nrows(), self.width());
@@ -117,16 +120,16 @@ impl<T: Scalar> Affinity<T> {
         check_shape(OP, "dfy", dfy.shape(), &[m, q])?;
         check_shape(OP, "cache", cache.fx_a.shape(), &[n, q])?;
         // S = (F_X · A) · F_Yᵀ  →  dF_Y += dSᵀ · (F_X · A)
-        mat_mul(T::one(), &ds.t(), &cache.fx_a, T::one(), &mut dfy);
+        mat_mul(T::one(), &ds.t(), &cache.fx_a, T::one(), &mut dfy, compute);
         // (Every product through `mat_mul`, the f32 one on AVX-512 where the processor has it.)
         let mut g = Array2::zeros((n, q)); // (N, Q) dS · F_Y
-        mat_mul(T::one(), &ds, &fy, T::zero(), &mut g);
+        mat_mul(T::one(), &ds, &fy, T::zero(), &mut g, compute);
         // S = F_X · (A · F_Yᵀ)  →  dF_X += (dS · F_Y) · A
-        mat_mul(T::one(), &g, &cache.a, T::one(), &mut dfx);
+        mat_mul(T::one(), &g, &cache.a, T::one(), &mut dfx, compute);
         // dA = F_Xᵀ · dS · F_Y, and A = (W + Wᵀ)/2  →  dW += (dA + dAᵀ)/2
         let half = T::from_f64(0.5);
         let mut da = Array2::zeros((q, q)); // (Q, Q)
-        mat_mul(T::one(), &fx.t(), &g, T::zero(), &mut da);
+        mat_mul(T::one(), &fx.t(), &g, T::zero(), &mut da, compute);
         self.w.grad.scaled_add(half, &da);
         self.w.grad.scaled_add(half, &da.t());
         Ok(())
@@ -164,6 +167,7 @@ mod tests {
             fx.view(),
             fy.view(),
             &mut AffinityCache::new(1, 2),
+            Compute::default(),
         )
         .unwrap();
         assert_eq!(s, array![[3.0, 3.0, 6.0]]);
@@ -187,6 +191,7 @@ mod tests {
                 ix2(&i[0]).view(),
                 ix2(&i[1]).view(),
                 &mut cache,
+                Compute::default(),
             )
             .unwrap();
             (aff, cache, s)
@@ -206,6 +211,7 @@ mod tests {
                     ix2(&i[0]).view(),
                     ix2(&i[1]).view(),
                     &cache,
+                    Compute::default(),
                 )
                 .unwrap();
                 vec![dfx.into_dyn(), dfy.into_dyn(), aff.w.grad.into_dyn()]
@@ -253,6 +259,7 @@ mod tests {
             Array2::zeros((2, 4)).view(),
             Array2::zeros((2, 3)).view(),
             &mut AffinityCache::new(2, 3),
+            Compute::default(),
         );
         assert!(
             matches!(err, Err(MatchError::Shape { what: "fx", .. })),

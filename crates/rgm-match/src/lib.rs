@@ -7,11 +7,12 @@
 //! on), and knows nothing of networks' other layers, data sets or the pipeline above it.
 //!
 //! Conventions: those of rgm-nn (see its crate doc) — generic over `T: Scalar` (f32 compute, f64
-//! gradient checks), outputs first then inputs, caller-owned caches holding exactly what the
-//! backward needs, backward passes that *add* into `d<name>` buffers and [`rgm_nn::Param`]
-//! gradients, layers with parameters as structs, parameterless ops as free functions. One call
-//! handles one pair (N source points, M target points, Q feature width); a batch is a loop whose
-//! parameter gradients accumulate.
+//! gradient checks), outputs first then inputs and the compute settings ([`rgm_nn::Compute`])
+//! last where an op runs rgm-nn's matrix products (the affinity), caller-owned caches holding
+//! exactly what the backward needs, backward passes that *add* into `d<name>` buffers and
+//! [`rgm_nn::Param`] gradients, layers with parameters as structs, parameterless ops as free
+//! functions. One call handles one pair (N source points, M target points, Q feature width); a
+//! batch is a loop whose parameter gradients accumulate.
 
 pub mod affinity;
 pub mod assign;

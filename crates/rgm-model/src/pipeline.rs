@@ -29,7 +29,7 @@ use rgm_geom::registrar::{MethodId, Registrar, Registration};
 use rgm_geom::thinning::DENSITY_POINTS;
 use rgm_geom::{Point3, PointCloud, RegistrationResult, RigidTransform};
 use rgm_match::{hard_match, Correspondences, MatchConfig};
-use rgm_nn::{Parameters, Precision};
+use rgm_nn::{Compute, Parameters, Precision};
 
 use crate::error::MethodError;
 use crate::network::{both, FeaturerCache, Rgm, RgmCache};
@@ -308,7 +308,8 @@ impl RgmRegistrar {
                 why: "passes must be at least 1".into(),
             });
         }
-        self.network.set_precision(self.config.precision);
+        self.network
+            .set_compute(Compute::with_precision(self.config.precision));
         let start = Instant::now();
         let source_idx = matched_indices(source, self.config.match_points, SOURCE_SEED);
         let target_idx = matched_indices(target, self.config.match_points, TARGET_SEED);

@@ -1,6 +1,6 @@
-//! `Rgm::set_precision`: f32 stays exact, bf16 runs the products on AMX or AVX-512 BF16 where the
-//! processor has either (and is f32, bit for bit, where it has not), on whatever thread runs the
-//! pass.
+//! `Rgm::set_compute` with each precision: f32 stays exact, bf16 runs the products on AMX or
+//! AVX-512 BF16 where the processor has either (and is f32, bit for bit, where it has not), on
+//! whatever thread runs the pass.
 //!
 //! The fixture is the PyTorch export of `tests/pipeline.rs` (tiny preset, a 48×48 pair, PyTorch's
 //! evaluation-mode C̃).
@@ -11,7 +11,7 @@ use ndarray::Array2;
 use rgm_match::Correspondences;
 use rgm_model::network::{Config, Mode, Rgm, RgmCache};
 use rgm_nn::gemm::bf16_available;
-use rgm_nn::{Parameters, Precision};
+use rgm_nn::{Compute, Parameters, Precision};
 
 fn fixture() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/rgm_tiny_state_dict.safetensors")
@@ -22,12 +22,12 @@ fn tensor(name: &str) -> Array2<f32> {
     tensors[name].clone().into_dimensionality().unwrap()
 }
 
-/// C̃ of the fixture pair in evaluation mode, computed on a thread of its own (which has never
-/// entered a precision scope: the network must enter its own).
+/// C̃ of the fixture pair in evaluation mode, computed on a thread of its own: the network's
+/// settings go with it, whichever thread runs the pass.
 fn c_soft(precision: Precision) -> Array2<f32> {
     std::thread::spawn(move || {
         let mut network = Rgm::<f32>::load(Config::tiny(), &fixture()).unwrap();
-        network.set_precision(precision);
+        network.set_compute(Compute::with_precision(precision));
         let (x, y) = (tensor("input.x"), tensor("input.y"));
         let mut cache = RgmCache::default();
         network
@@ -43,7 +43,7 @@ fn c_soft(precision: Precision) -> Array2<f32> {
 /// the first 24 points), concatenated.
 fn gradients(precision: Precision) -> Vec<f32> {
     let mut network = Rgm::<f32>::load(Config::tiny(), &fixture()).unwrap();
-    network.set_precision(precision);
+    network.set_compute(Compute::with_precision(precision));
     let (x, y) = (tensor("input.x"), tensor("input.y"));
     let gt = Correspondences::new(48, 48, (0..24).map(|i| (i, i)).collect()).unwrap();
     network
@@ -64,7 +64,10 @@ fn largest_difference(a: &[f32], b: &[f32]) -> f32 {
 #[test]
 fn f32_is_the_default_and_matches_pytorch() {
     assert_eq!(
-        Rgm::<f32>::new(Config::tiny(), 0).unwrap().precision(),
+        Rgm::<f32>::new(Config::tiny(), 0)
+            .unwrap()
+            .compute()
+            .precision,
         Precision::F32
     );
     let expected = tensor("output.c_soft_eval");

@@ -16,10 +16,12 @@
 //!   score matrix, L1 normalisation).
 //! - **Weights** keep PyTorch's layout: a linear / 1×1 convolution weight is `(C_out, C_in)` and
 //!   `out = inp · weightᵀ + bias`, so state dicts convert without transposes.
-//! - **Arguments**: ops take views, outputs first then inputs (llm.c order):
-//!   `forward(out, inp, .., cache)`, `backward(dinp, .., dout, inp, .., cache)`. The caller owns
-//!   every buffer (reused across steps: no allocation in the hot path once shapes are stable);
-//!   an op checks the shapes it is given and returns [`NnError::Shape`] on a mismatch.
+//! - **Arguments**: ops take views, outputs first then inputs (llm.c order), and an op that
+//!   runs a matrix product takes the compute settings ([`Compute`]) last:
+//!   `forward(out, inp, .., cache, compute)`, `backward(dinp, .., dout, inp, .., cache,
+//!   compute)`. The caller owns every buffer (reused across steps: no allocation in the hot
+//!   path once shapes are stable); an op checks the shapes it is given and returns
+//!   [`NnError::Shape`] on a mismatch.
 //! - **Gradients accumulate**: every backward *adds* into `dinp` and into the parameters' `grad`
 //!   buffers; the caller zeroes them once per step ([`Parameters::zero_grad`]). Gradient buffers
 //!   are named `d` + the name of the value (`dinp`, `dout`, `dweight`).
@@ -33,8 +35,8 @@
 //!   checks in [`gradcheck`]).
 //! - **Matrix products** all go through [`gemm::mat_mul`]: f32 on AVX-512 where the processor
 //!   has it ([`gemm::f32_mat_mul`]) and BLAS elsewhere, f64 on BLAS, or bf16 inputs with f32
-//!   accumulation on AMX tile units (or AVX-512 BF16) inside a
-//!   [`precision::enter`]`(Precision::Bf16)` scope (f32 where the processor has neither).
+//!   accumulation on AMX tile units (or AVX-512 BF16) when the [`Compute`] it is given says
+//!   [`Precision::Bf16`] (f32 where the processor has neither).
 //! - **Threads**: BLAS products use OpenBLAS's own threads, the AVX-512 and bf16 ones the
 //!   calling thread; the attention's row softmax (and its
 //!   backward) runs on rayon's pool between BLAS calls; everything else runs on the calling
@@ -49,6 +51,7 @@
 extern crate openblas_src;
 
 pub mod bf16;
+pub mod compute;
 pub mod error;
 pub mod exp;
 pub mod gemm;
@@ -58,12 +61,12 @@ pub mod io;
 pub mod ops;
 pub mod optim;
 pub mod param;
-pub mod precision;
 #[cfg(test)]
 mod pytorch_pinned;
 pub mod scalar;
 pub mod threads;
 
+pub use compute::{Compute, Precision};
 pub use error::{NnError, Result};
 pub use ops::attention::{AttentionCache, MultiHeadAttention};
 pub use ops::batchnorm::{BatchNorm, BatchNormCache};
@@ -82,5 +85,4 @@ pub use ops::relu::{relu_backward, relu_forward, relu_in_place};
 pub use ops::softmax::{softmax_rows_backward, softmax_rows_forward};
 pub use optim::Optimizer;
 pub use param::{Param, Parameters};
-pub use precision::Precision;
 pub use scalar::Scalar;

@@ -52,11 +52,17 @@ fn linear_matches_pytorch() {
     let mut lin = Linear::from_values(p2(4, 3, 2), Some(p1(4, 3))).unwrap();
     let x = p2(5, 3, 1);
     let mut out = Array2::zeros((5, 4));
-    lin.forward(out.view_mut(), x.view()).unwrap();
+    lin.forward(out.view_mut(), x.view(), Compute::default())
+        .unwrap();
     assert_close("linear out", &out, values::LINEAR_OUT);
     let mut dx = Array2::zeros((5, 3));
-    lin.backward(dx.view_mut(), r((5, 4)).view(), x.view())
-        .unwrap();
+    lin.backward(
+        dx.view_mut(),
+        r((5, 4)).view(),
+        x.view(),
+        Compute::default(),
+    )
+    .unwrap();
     assert_close("linear dx", &dx, values::LINEAR_DX);
     assert_close("linear dweight", &lin.weight.grad, values::LINEAR_DW);
     assert_close("linear dbias", &lin.bias.unwrap().grad, values::LINEAR_DB);
@@ -164,8 +170,14 @@ fn attention_matches_the_annotated_transformer() {
     };
     let (q, kv) = (p2(3, 4, 12), p2(5, 4, 13));
     let (mut out, mut cache) = (Array2::zeros((3, 4)), AttentionCache::default());
-    mha.forward(out.view_mut(), q.view(), kv.view(), &mut cache)
-        .unwrap();
+    mha.forward(
+        out.view_mut(),
+        q.view(),
+        kv.view(),
+        &mut cache,
+        Compute::default(),
+    )
+    .unwrap();
     assert_close("attention out", &out, values::MHA_OUT);
     let (mut dq, mut dkv) = (Array2::zeros((3, 4)), Array2::zeros((5, 4)));
     mha.backward(
@@ -175,6 +187,7 @@ fn attention_matches_the_annotated_transformer() {
         q.view(),
         kv.view(),
         &mut cache,
+        Compute::default(),
     )
     .unwrap();
     assert_close("attention dq", &dq, values::MHA_DQ);
@@ -266,10 +279,17 @@ fn feed_forward_matches_pytorch() {
         Array2::zeros((5, 4)),
         FeedForwardCache::default(),
     );
-    ff.forward(out.view_mut(), x.view(), &mut cache).unwrap();
-    assert_close("feed-forward out", &out, values::FF_OUT);
-    ff.backward(dx.view_mut(), r((5, 4)).view(), x.view(), &mut cache)
+    ff.forward(out.view_mut(), x.view(), &mut cache, Compute::default())
         .unwrap();
+    assert_close("feed-forward out", &out, values::FF_OUT);
+    ff.backward(
+        dx.view_mut(),
+        r((5, 4)).view(),
+        x.view(),
+        &mut cache,
+        Compute::default(),
+    )
+    .unwrap();
     assert_close("feed-forward dx", &dx, values::FF_DX);
     assert_close("feed-forward dw_1", &ff.w_1.weight.grad, values::FF_DW1);
     assert_close(
@@ -299,7 +319,7 @@ fn matmul_with_a_transposed_operand_matches_pytorch() {
         Array2::zeros((9, 4)),
         Array2::zeros((10, 4)),
     );
-    matmul_forward(out.view_mut(), a.view(), b.t()).unwrap();
+    matmul_forward(out.view_mut(), a.view(), b.t(), Compute::default()).unwrap();
     assert_close("matmul out", &out, values::MATMUL_OUT);
     matmul_backward(
         da.view_mut(),
@@ -307,6 +327,7 @@ fn matmul_with_a_transposed_operand_matches_pytorch() {
         r((9, 10)).view(),
         a.view(),
         b.t(),
+        Compute::default(),
     )
     .unwrap();
     assert_close("matmul da", &da, values::MATMUL_DA);

@@ -1,6 +1,7 @@
 //! The element types the ops run in: f32 for compute, f64 for the gradient checks.
 
 use crate::gemm::Then;
+use crate::Compute;
 use ndarray::linalg::general_mat_mul;
 use ndarray::{ArrayView2, ArrayViewMut2, LinalgScalar, ScalarOperand};
 use num_traits::{Float, NumAssign};
@@ -30,6 +31,7 @@ pub trait Scalar:
         b: ArrayView2<'_, Self>,
         beta: Self,
         c: ArrayViewMut2<'_, Self>,
+        compute: Compute,
     );
     /// `c = a · b` finished by `then` in this type's way: see [`crate::gemm::mat_mul_then`].
     fn mat_mul_then(
@@ -37,6 +39,7 @@ pub trait Scalar:
         b: ArrayView2<'_, Self>,
         then: Then<'_, Self>,
         c: ArrayViewMut2<'_, Self>,
+        compute: Compute,
     );
     /// Replaces every value by its exponential: libm's in f64, [`crate::exp`]'s vectorised
     /// polynomial (≤ 2 ulp) in f32.
@@ -50,23 +53,26 @@ impl Scalar for f32 {
     fn to_f64(self) -> f64 {
         self as f64
     }
-    /// BLAS, or bf16 on AMX in a [`crate::precision::Precision::Bf16`] scope.
+    /// AVX-512 or BLAS, or bf16 on AMX when `compute` asks for
+    /// [`crate::Precision::Bf16`].
     fn mat_mul(
         alpha: Self,
         a: ArrayView2<'_, Self>,
         b: ArrayView2<'_, Self>,
         beta: Self,
         c: ArrayViewMut2<'_, Self>,
+        compute: Compute,
     ) {
-        crate::gemm::mat_mul_f32(alpha, a, b, beta, c);
+        crate::gemm::mat_mul_f32(alpha, a, b, beta, c, compute);
     }
     fn mat_mul_then(
         a: ArrayView2<'_, Self>,
         b: ArrayView2<'_, Self>,
         then: Then<'_, Self>,
         c: ArrayViewMut2<'_, Self>,
+        compute: Compute,
     ) {
-        crate::gemm::mat_mul_then_f32(a, b, then, c);
+        crate::gemm::mat_mul_then_f32(a, b, then, c, compute);
     }
     fn exp_in_place(xs: &mut [Self]) {
         crate::exp::exp_f32_in_place(xs);
@@ -80,13 +86,14 @@ impl Scalar for f64 {
     fn to_f64(self) -> f64 {
         self
     }
-    /// Always BLAS: f64 runs the gradient checks, whatever the precision.
+    /// Always BLAS: f64 runs the gradient checks, whatever `compute` says.
     fn mat_mul(
         alpha: Self,
         a: ArrayView2<'_, Self>,
         b: ArrayView2<'_, Self>,
         beta: Self,
         mut c: ArrayViewMut2<'_, Self>,
+        _compute: Compute,
     ) {
         general_mat_mul(alpha, &a, &b, beta, &mut c);
     }
@@ -95,8 +102,9 @@ impl Scalar for f64 {
         b: ArrayView2<'_, Self>,
         then: Then<'_, Self>,
         c: ArrayViewMut2<'_, Self>,
+        compute: Compute,
     ) {
-        crate::gemm::then_by_passes(a, b, then, c);
+        crate::gemm::then_by_passes(a, b, then, c, compute);
     }
     fn exp_in_place(xs: &mut [Self]) {
         xs.iter_mut().for_each(|x| *x = x.exp());

@@ -41,7 +41,7 @@ impl Layer {
 
     fn forward(&mut self, inp: &Array2<f64>, mut node: ndarray::ArrayViewMut2<'_, f64>) {
         self.conv
-            .forward(self.pre_bn.view_mut(), inp.view())
+            .forward(self.pre_bn.view_mut(), inp.view(), Compute::default())
             .unwrap();
         self.bn
             .forward(
@@ -74,7 +74,7 @@ impl Layer {
             )
             .unwrap();
         self.conv
-            .backward(dinp, dpre_bn.view(), inp.view())
+            .backward(dinp, dpre_bn.view(), inp.view(), Compute::default())
             .unwrap();
     }
 }

@@ -54,7 +54,13 @@ fn forward(enc: &Encoder, x: &Array2<f64>, c: &mut Caches) -> Array2<f64> {
         .unwrap();
     let mut attn = zeros();
     enc.mha
-        .forward(attn.view_mut(), c.n1.view(), c.n1.view(), &mut c.mha)
+        .forward(
+            attn.view_mut(),
+            c.n1.view(),
+            c.n1.view(),
+            &mut c.mha,
+            Compute::default(),
+        )
         .unwrap();
     c.y = x + &attn;
     enc.ln2
@@ -62,7 +68,7 @@ fn forward(enc: &Encoder, x: &Array2<f64>, c: &mut Caches) -> Array2<f64> {
         .unwrap();
     let mut ff = zeros();
     enc.ff
-        .forward(ff.view_mut(), c.n2.view(), &mut c.ff)
+        .forward(ff.view_mut(), c.n2.view(), &mut c.ff, Compute::default())
         .unwrap();
     c.z = &c.y + &ff;
     let mut out = zeros();
@@ -97,7 +103,13 @@ fn pre_norm_encoder_layer_backward_matches_finite_differences() {
             let mut dy = dz.clone();
             let mut dn2 = zeros();
             enc.ff
-                .backward(dn2.view_mut(), dz.view(), c.n2.view(), &mut c.ff)
+                .backward(
+                    dn2.view_mut(),
+                    dz.view(),
+                    c.n2.view(),
+                    &mut c.ff,
+                    Compute::default(),
+                )
                 .unwrap();
             enc.ln2
                 .backward(dy.view_mut(), dn2.view(), c.y.view(), &c.ln2)
@@ -113,6 +125,7 @@ fn pre_norm_encoder_layer_backward_matches_finite_differences() {
                     c.n1.view(),
                     c.n1.view(),
                     &mut c.mha,
+                    Compute::default(),
                 )
                 .unwrap();
             enc.ln1

@@ -15,7 +15,7 @@ use rgm_nn::init::Init;
 use rgm_nn::param::{join_name, ParamView, ParamViewMut};
 use rgm_nn::{
     l1_normalize_columns_backward, l1_normalize_columns_forward, matmul_backward, matmul_forward,
-    relu_backward, softmax_rows_backward, softmax_rows_forward, L1NormalizeCache, Linear,
+    relu_backward, softmax_rows_backward, softmax_rows_forward, Compute, L1NormalizeCache, Linear,
     Parameters,
 };
 
@@ -156,9 +156,13 @@ fn sinkhorn_config(config: &Config) -> SinkhornConfig {
 }
 
 /// Ê = column-L1-normalised softmax_rows(T Tᵀ / √C). `t`: (R, C).
-fn edges_forward<T: Element>(side: &mut Side<T>, t: ArrayView2<'_, T>) -> Result<()> {
+fn edges_forward<T: Element>(
+    side: &mut Side<T>,
+    t: ArrayView2<'_, T>,
+    compute: Compute,
+) -> Result<()> {
     let scale = T::one() / T::from_f64(t.ncols() as f64).sqrt();
-    mat_mul(scale, &t, &t.t(), T::zero(), &mut side.scores);
+    mat_mul(scale, &t, &t.t(), T::zero(), &mut side.scores, compute);
     softmax_rows_forward(side.adj.view_mut(), side.scores.view())?;
     l1_normalize_columns_forward(side.adj_norm.view_mut(), side.adj.view(), &mut side.l1)?;
     Ok(())
@@ -166,7 +170,11 @@ fn edges_forward<T: Element>(side: &mut Side<T>, t: ArrayView2<'_, T>) -> Result
 
 /// Adds into `side.dt` the gradient of [`edges_forward`] given `side.dadj_norm`:
 /// Z = T Tᵀ / √C  →  dT = (dZ + dZᵀ) T / √C.
-fn edges_backward<T: Element>(side: &mut Side<T>, t: ArrayView2<'_, T>) -> Result<()> {
+fn edges_backward<T: Element>(
+    side: &mut Side<T>,
+    t: ArrayView2<'_, T>,
+    compute: Compute,
+) -> Result<()> {
     zeroed(&mut side.dadj, side.adj.dim());
     zeroed(&mut side.dscores, side.adj.dim());
     l1_normalize_columns_backward(
@@ -181,7 +189,7 @@ fn edges_backward<T: Element>(side: &mut Side<T>, t: ArrayView2<'_, T>) -> Resul
     side.dadj.assign(&side.dscores.t());
     side.dadj += &side.dscores;
     let scale = T::one() / T::from_f64(t.ncols() as f64).sqrt();
-    mat_mul(scale, &side.dadj, &t, T::one(), &mut side.dt);
+    mat_mul(scale, &side.dadj, &t, T::one(), &mut side.dt, compute);
     Ok(())
 }
 
@@ -217,11 +225,21 @@ impl<T: Element> Block<T> {
     }
 
     /// F' = Ê·ReLU(f_adj(F)) + ReLU(f_self(F)) for one side. `f`: (R, C).
-    fn gconv_forward(&self, side: &mut Side<T>, f: ArrayView2<'_, T>) -> Result<()> {
+    fn gconv_forward(
+        &self,
+        side: &mut Side<T>,
+        f: ArrayView2<'_, T>,
+        compute: Compute,
+    ) -> Result<()> {
         // The ReLUs in the products' write-backs: the backward reads their outputs only.
-        self.a_fc.forward_relu(side.a_adj.view_mut(), f)?;
-        self.u_fc.forward_relu(side.a_self.view_mut(), f)?;
-        matmul_forward(side.fp.view_mut(), side.adj_norm.view(), side.a_adj.view())?;
+        self.a_fc.forward_relu(side.a_adj.view_mut(), f, compute)?;
+        self.u_fc.forward_relu(side.a_self.view_mut(), f, compute)?;
+        matmul_forward(
+            side.fp.view_mut(),
+            side.adj_norm.view(),
+            side.a_adj.view(),
+            compute,
+        )?;
         side.fp += &side.a_self;
         Ok(())
     }
@@ -234,6 +252,7 @@ impl<T: Element> Block<T> {
         mut df: ArrayViewMut2<'_, T>,
         side: &mut Side<T>,
         f: ArrayView2<'_, T>,
+        compute: Compute,
     ) -> Result<()> {
         // F'_adj = Ê A, A = ReLU(H)  →  dÊ = dF' Aᵀ, dH = (Êᵀ dF') ⊙ [A > 0] (ReLU's backward in
         // the product's write-back)
@@ -246,13 +265,15 @@ impl<T: Element> Block<T> {
             &side.a_adj.t(),
             T::zero(),
             &mut side.dadj_norm,
+            compute,
         );
         let relu_grad = Then::ReluGrad(side.a_adj.view());
-        mat_mul_then(&side.adj_norm.t(), &dfp, relu_grad, &mut side.dh);
-        self.a_fc.backward(df.view_mut(), side.dh.view(), f)?;
+        mat_mul_then(&side.adj_norm.t(), &dfp, relu_grad, &mut side.dh, compute);
+        self.a_fc
+            .backward(df.view_mut(), side.dh.view(), f, compute)?;
         side.dh.fill(T::zero());
         relu_backward(side.dh.view_mut(), side.dfp.view(), side.a_self.view())?;
-        self.u_fc.backward(df, side.dh.view(), f)?;
+        self.u_fc.backward(df, side.dh.view(), f, compute)?;
         Ok(())
     }
 
@@ -265,9 +286,10 @@ impl<T: Element> Block<T> {
         fy: ArrayView2<'_, T>,
         cache: &mut BlockCache<T>,
         test_time: bool,
+        compute: Compute,
     ) -> Result<()> {
-        self.graph_forward(fx, fy, cache, test_time)?;
-        self.match_forward(cache, test_time)
+        self.graph_forward(fx, fy, cache, test_time, compute)?;
+        self.match_forward(cache, test_time, compute)
     }
 
     /// Takes into `cache` (sized (M, N)) the graph features of the block's pass on (X, Y) in
@@ -305,10 +327,11 @@ impl<T: Element> Block<T> {
         fy: ArrayView2<'_, T>,
         cache: &mut BlockCache<T>,
         test_time: bool,
+        compute: Compute,
     ) -> Result<()> {
         let edges = match &self.transformer {
             Some(tf) => {
-                tf.forward(fx, fy, &mut cache.transformer, test_time)?;
+                tf.forward(fx, fy, &mut cache.transformer, test_time, compute)?;
                 Some((cache.transformer.tx().view(), cache.transformer.ty().view()))
             }
             None => None,
@@ -316,10 +339,10 @@ impl<T: Element> Block<T> {
         // One side: its edges (the transformer's T, or all of them), then its convolution.
         let side = |side: &mut Side<T>, f: ArrayView2<'_, T>, t: Option<ArrayView2<'_, T>>| {
             match t {
-                Some(t) => edges_forward(side, t)?,
+                Some(t) => edges_forward(side, t, compute)?,
                 None => full_adjacency(&mut side.adj_norm),
             }
-            self.gconv_forward(side, f)
+            self.gconv_forward(side, f, compute)
         };
         let (x, y) = (&mut cache.x, &mut cache.y);
         let (a, b) = both(
@@ -333,7 +356,12 @@ impl<T: Element> Block<T> {
     /// Scoring of F'_X, F'_Y (AIS or Var1), Sinkhorn → C̃, and the cross-graph convolution
     /// when the block has one, all in `cache`; at `test_time` (no backward follows) the
     /// convolution's two sides side by side on rayon's pool.
-    pub fn match_forward(&self, cache: &mut BlockCache<T>, test_time: bool) -> Result<()> {
+    pub fn match_forward(
+        &self,
+        cache: &mut BlockCache<T>,
+        test_time: bool,
+        compute: Compute,
+    ) -> Result<()> {
         let (x, y) = (&mut cache.x, &mut cache.y);
         match &self.scorer {
             Scorer::Ais {
@@ -345,6 +373,7 @@ impl<T: Element> Block<T> {
                     x.fp.view(),
                     y.fp.view(),
                     &mut cache.affinity,
+                    compute,
                 )?;
                 inst_norm.forward(
                     cache.s_norm.view_mut(),
@@ -379,8 +408,8 @@ impl<T: Element> Block<T> {
                         c: ArrayView2<'_, T>,
                         other: ArrayView2<'_, T>| {
                 cat.slice_mut(s![.., ..q]).assign(&own);
-                matmul_forward(cat.slice_mut(s![.., q..]), c, other)?;
-                cross.forward(next.view_mut(), cat.view())
+                matmul_forward(cat.slice_mut(s![.., q..]), c, other, compute)?;
+                cross.forward(next.view_mut(), cat.view(), compute)
             };
             let c_soft = cache.c_soft.view();
             let (fpx, fpy) = (x.fp.view(), y.fp.view());
@@ -408,6 +437,7 @@ impl<T: Element> Block<T> {
         fx: ArrayView2<'_, T>,
         fy: ArrayView2<'_, T>,
         cache: &mut BlockCache<T>,
+        compute: Compute,
     ) -> Result<()> {
         let (x, y) = (&mut cache.x, &mut cache.y);
         zeroed(&mut x.dfp, x.fp.dim());
@@ -421,7 +451,7 @@ impl<T: Element> Block<T> {
                 let q = x.fp.ncols();
                 for (side, dnext) in [(&mut *y, dny), (&mut *x, dnx)] {
                     zeroed(&mut side.dcat, side.cat.dim());
-                    cross.backward(side.dcat.view_mut(), dnext, side.cat.view())?;
+                    cross.backward(side.dcat.view_mut(), dnext, side.cat.view(), compute)?;
                     side.dfp += &side.dcat.slice(s![.., ..q]);
                 }
                 // cat_Y[:, Q..] = C̃ᵀ F'_X  →  dC̃ᵀ += dcat_Y F'_Xᵀ, dF'_X += C̃ dcat_Y
@@ -431,6 +461,7 @@ impl<T: Element> Block<T> {
                     y.dcat.slice(s![.., q..]),
                     cache.c_soft.t(),
                     x.fp.view(),
+                    compute,
                 )?;
                 // cat_X[:, Q..] = C̃ F'_Y  →  dC̃ += dcat_X F'_Yᵀ, dF'_Y += C̃ᵀ dcat_X
                 matmul_backward(
@@ -439,6 +470,7 @@ impl<T: Element> Block<T> {
                     x.dcat.slice(s![.., q..]),
                     cache.c_soft.view(),
                     y.fp.view(),
+                    compute,
                 )?;
             }
             (None, Some((dnx, dny))) => {
@@ -474,6 +506,7 @@ impl<T: Element> Block<T> {
                     x.fp.view(),
                     y.fp.view(),
                     &cache.affinity,
+                    compute,
                 )?;
             }
             Scorer::Var1 => var1_backward(
@@ -484,14 +517,21 @@ impl<T: Element> Block<T> {
                 y.fp.view(),
             )?,
         }
-        self.gconv_backward(dfy.view_mut(), y, fy)?;
-        self.gconv_backward(dfx.view_mut(), x, fx)?;
+        self.gconv_backward(dfy.view_mut(), y, fy, compute)?;
+        self.gconv_backward(dfx.view_mut(), x, fx, compute)?;
         if let Some(tf) = &mut self.transformer {
             zeroed(&mut x.dt, cache.transformer.tx().dim());
             zeroed(&mut y.dt, cache.transformer.ty().dim());
-            edges_backward(y, cache.transformer.ty().view())?;
-            edges_backward(x, cache.transformer.tx().view())?;
-            tf.backward(dfx, dfy, x.dt.view(), y.dt.view(), &mut cache.transformer)?;
+            edges_backward(y, cache.transformer.ty().view(), compute)?;
+            edges_backward(x, cache.transformer.tx().view(), compute)?;
+            tf.backward(
+                dfx,
+                dfy,
+                x.dt.view(),
+                y.dt.view(),
+                &mut cache.transformer,
+                compute,
+            )?;
         }
         Ok(())
     }

@@ -8,10 +8,9 @@ use ndarray::{s, Array2, ArrayView2, ArrayViewMut2, Axis};
 use rgm_geom::{knn_graph, Point3};
 use rgm_nn::init::Init;
 use rgm_nn::param::{join_name, ParamView, ParamViewMut};
-use rgm_nn::precision;
 use rgm_nn::{
     edge_features_forward, max_k_backward, max_k_forward, relu_backward, relu_forward, BatchNorm,
-    BatchNormCache, Linear, MaxKCache, Parameters,
+    BatchNormCache, Compute, Linear, MaxKCache, Parameters,
 };
 use serde::{Deserialize, Serialize};
 
@@ -86,6 +85,7 @@ impl<T: Element> PointFeaturer<T> {
         points: ArrayView2<'_, T>,
         mode: Mode,
         cache: &mut FeaturerCache<T>,
+        compute: Compute,
     ) -> Result<()> {
         match mode {
             Mode::Train => {
@@ -97,9 +97,10 @@ impl<T: Element> PointFeaturer<T> {
                     cache,
                     false,
                     |i, out, inp, bn| bns[i].forward(out, inp, true, bn),
+                    compute,
                 )
             }
-            Mode::Eval => self.forward_eval(points, cache),
+            Mode::Eval => self.forward_eval(points, cache, compute),
         }
     }
 
@@ -110,6 +111,7 @@ impl<T: Element> PointFeaturer<T> {
         &self,
         points: ArrayView2<'_, T>,
         cache: &mut FeaturerCache<T>,
+        compute: Compute,
     ) -> Result<()> {
         let cloud_statistics = self.test_statistics == TestStatistics::Cloud;
         Self::run(
@@ -119,6 +121,7 @@ impl<T: Element> PointFeaturer<T> {
             cache,
             true,
             |i, out, inp, bn| self.bns[i].normalise(out, inp, cloud_statistics, bn),
+            compute,
         )
     }
 
@@ -137,6 +140,7 @@ impl<T: Element> PointFeaturer<T> {
             ArrayView2<'_, T>,
             &mut BatchNormCache<T>,
         ) -> rgm_nn::Result<()>,
+        compute: Compute,
     ) -> Result<()> {
         let (n, node) = (points.nrows(), convs[4].c_in());
         let cloud: Vec<Point3<f64>> = points
@@ -168,7 +172,7 @@ impl<T: Element> PointFeaturer<T> {
                 cache.features.slice(s![.., ..node])
             };
             by_rows(side_by_side, cache.pre[i].view_mut(), inp, |out, inp| {
-                convs[i].forward(out, inp)
+                convs[i].forward(out, inp, compute)
             })?;
             normalise(
                 i,
@@ -215,6 +219,7 @@ impl<T: Element> PointFeaturer<T> {
         &mut self,
         dfeatures: ArrayView2<'_, T>,
         cache: &mut FeaturerCache<T>,
+        compute: Compute,
     ) -> Result<()> {
         let (n, k, node) = (cache.idx.nrows(), self.k, self.node_width());
         let widths: Vec<usize> = self.convs.iter().map(|c| c.c_out()).collect();
@@ -249,6 +254,7 @@ impl<T: Element> PointFeaturer<T> {
             cache.dnode.view_mut(),
             cache.dpre[4].view(),
             cache.features.slice(s![.., ..node]),
+            compute,
         )?;
         let mut offset = node;
         for i in (0..4).rev() {
@@ -277,11 +283,16 @@ impl<T: Element> PointFeaturer<T> {
             )?;
             // act_i = ReLU(normed_{i−1}) for i > 0: dnormed_{i−1} written through that ReLU.
             match i {
-                0 => self.convs[0].backward_params(cache.dpre[0].view(), cache.act[0].view())?,
+                0 => self.convs[0].backward_params(
+                    cache.dpre[0].view(),
+                    cache.act[0].view(),
+                    compute,
+                )?,
                 _ => self.convs[i].backward_through_relu(
                     cache.dnormed[i - 1].view_mut(),
                     cache.dpre[i].view(),
                     cache.act[i].view(),
+                    compute,
                 )?,
             }
         }
@@ -339,6 +350,6 @@ fn by_rows<T: Element>(
     }
     let (out_top, out_bottom) = out.split_at(Axis(0), half);
     let (inp_top, inp_bottom) = inp.split_at(Axis(0), half);
-    let (top, bottom) = precision::join(|| f(out_top, inp_top), || f(out_bottom, inp_bottom));
+    let (top, bottom) = rayon::join(|| f(out_top, inp_top), || f(out_bottom, inp_bottom));
     top.and(bottom)
 }

@@ -36,8 +36,7 @@ use rayon::prelude::*;
 use rgm_match::{bce_backward, bce_forward, Correspondences};
 use rgm_nn::init::{Init, Unset};
 use rgm_nn::param::{join_name, try_visit_buffers, try_visit_params, ParamView, ParamViewMut};
-use rgm_nn::precision::{self, Precision};
-use rgm_nn::{Parameters, Scalar};
+use rgm_nn::{Compute, Parameters, Scalar};
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -73,9 +72,9 @@ pub(crate) fn shaped<T: Element>(buf: &mut Array2<T>, shape: (usize, usize)) {
     }
 }
 
-/// `a` then `b` on this thread, or side by side on rayon's pool when `side_by_side`, each in
-/// the calling thread's precision of matrix products (a per-thread setting). The two must be
-/// independent: each is computed as on one thread, so the results are the same bits either way.
+/// `a` then `b` on this thread, or side by side on rayon's pool when `side_by_side`. The two
+/// must be independent: each is computed as on one thread, so the results are the same bits
+/// either way.
 pub(crate) fn both<A, B>(
     side_by_side: bool,
     a: impl FnOnce() -> A + Send,
@@ -88,7 +87,7 @@ where
     if !side_by_side {
         return (a(), b());
     }
-    precision::join(a, b)
+    rayon::join(a, b)
 }
 
 /// The RGM network: `pointfeaturer`, then L [`Block`]s.
@@ -97,9 +96,9 @@ pub struct Rgm<T: Element> {
     config: Config,
     pub featurer: PointFeaturer<T>,
     pub blocks: Vec<Block<T>>,
-    /// How its f32 matrix products run ([`Rgm::set_precision`]); every pass enters it on the
-    /// thread that runs the pass.
-    precision: Precision,
+    /// How its matrix products run ([`Rgm::set_compute`]): every pass hands it to the layers,
+    /// whichever threads run them.
+    compute: Compute,
 }
 
 /// One forward pass of a pair: every intermediate the backward needs, and the backward's
@@ -155,7 +154,7 @@ impl<T: Element> Rgm<T> {
             config,
             featurer,
             blocks,
-            precision: Precision::F32,
+            compute: Compute::default(),
         })
     }
 
@@ -195,7 +194,7 @@ impl<T: Element> Rgm<T> {
             config,
             featurer: featurer?,
             blocks: blocks?,
-            precision: Precision::F32,
+            compute: Compute::default(),
         })
     }
 
@@ -203,16 +202,17 @@ impl<T: Element> Rgm<T> {
         &self.config
     }
 
-    /// Runs the matrix products of every later pass in `precision` (f32 by default; bf16 on AMX
-    /// or AVX-512 BF16 where the processor has either, f32 elsewhere). Parameters, batch-norm
-    /// statistics, softmax, norms, Sinkhorn and the loss stay f32 either way; f64 networks
-    /// ignore it.
-    pub fn set_precision(&mut self, precision: Precision) {
-        self.precision = precision;
+    /// Runs the matrix products of every later pass as `compute` says: its precision f32 (the
+    /// default) or bf16 (on AMX or AVX-512 BF16 where the processor has either, f32
+    /// elsewhere). Parameters, batch-norm statistics, softmax, norms, Sinkhorn and the loss
+    /// stay f32 either way; f64 networks ignore it.
+    pub fn set_compute(&mut self, compute: Compute) {
+        self.compute = compute;
     }
 
-    pub fn precision(&self) -> Precision {
-        self.precision
+    /// The compute settings of its passes ([`Rgm::set_compute`]).
+    pub fn compute(&self) -> Compute {
+        self.compute
     }
 
     /// Sets every parameter and buffer from `tensors` by name (the authors' state-dict names).
@@ -256,9 +256,10 @@ impl<T: Element> Rgm<T> {
     ) -> Result<()> {
         check_cloud("x", x)?;
         check_cloud("y", y)?;
-        let _precision = precision::enter(self.precision);
-        self.featurer.forward(x, mode, &mut cache.fx)?;
-        self.featurer.forward(y, mode, &mut cache.fy)?;
+        self.featurer
+            .forward(x, mode, &mut cache.fx, self.compute)?;
+        self.featurer
+            .forward(y, mode, &mut cache.fy, self.compute)?;
         cache.from_features = false;
         let (fx, fy) = (cache.fx.features.view(), cache.fy.features.view());
         self.forward_blocks(fx, fy, &mut cache.blocks, false)
@@ -270,8 +271,7 @@ impl<T: Element> Rgm<T> {
     /// run once; [`Rgm::forward_from_features`] then gives the same C̃ as [`Rgm::forward`].
     pub fn features(&self, points: ArrayView2<'_, T>, cache: &mut FeaturerCache<T>) -> Result<()> {
         check_cloud("points", points)?;
-        let _precision = precision::enter(self.precision);
-        self.featurer.forward_eval(points, cache)
+        self.featurer.forward_eval(points, cache, self.compute)
     }
 
     /// The blocks of an evaluation-mode forward on the local features `fx` (N, ΣC + E) and
@@ -302,14 +302,13 @@ impl<T: Element> Rgm<T> {
         reverse: &mut RgmCache<T>,
     ) -> Result<()> {
         self.check_features(fx, fy)?;
-        let _precision = precision::enter(self.precision);
         let (n, m) = (fx.nrows(), fy.nrows());
         for (cache, dims) in [(&mut *forward, (n, m)), (&mut *reverse, (m, n))] {
             cache.from_features = true;
             self.size_blocks(&mut cache.blocks, dims);
         }
         let first = &self.blocks[0];
-        first.graph_forward(fx, fy, &mut forward.blocks[0], true)?;
+        first.graph_forward(fx, fy, &mut forward.blocks[0], true, self.compute)?;
         first.graph_from_swapped(&forward.blocks[0], &mut reverse.blocks[0])?;
         let (a, b) = both(
             true,
@@ -357,20 +356,19 @@ impl<T: Element> Rgm<T> {
         blocks: &mut Vec<BlockCache<T>>,
         test_time: bool,
     ) -> Result<()> {
-        let _precision = precision::enter(self.precision);
         self.size_blocks(blocks, (fx.nrows(), fy.nrows()));
-        self.blocks[0].graph_forward(fx, fy, &mut blocks[0], test_time)?;
+        self.blocks[0].graph_forward(fx, fy, &mut blocks[0], test_time, self.compute)?;
         self.blocks_after_graph(blocks, test_time)
     }
 
     /// The rest of the L blocks once block 0's graph features are in `blocks[0]`: its
     /// scoring, Sinkhorn and cross convolution, then blocks 1 to L − 1.
     fn blocks_after_graph(&self, blocks: &mut [BlockCache<T>], test_time: bool) -> Result<()> {
-        self.blocks[0].match_forward(&mut blocks[0], test_time)?;
+        self.blocks[0].match_forward(&mut blocks[0], test_time, self.compute)?;
         for b in 1..self.blocks.len() {
             let (done, rest) = blocks.split_at_mut(b);
             let (fx, fy) = done[b - 1].outputs(self.blocks[b - 1].cross.is_some());
-            self.blocks[b].forward(fx, fy, &mut rest[0], test_time)?;
+            self.blocks[b].forward(fx, fy, &mut rest[0], test_time, self.compute)?;
         }
         Ok(())
     }
@@ -396,7 +394,6 @@ impl<T: Element> Rgm<T> {
                 ),
             });
         }
-        let _precision = precision::enter(self.precision);
         cache.dfeat.resize_with(blocks, Default::default);
         for b in (0..blocks).rev() {
             let (before, after) = cache.blocks.split_at_mut(b);
@@ -418,11 +415,14 @@ impl<T: Element> Rgm<T> {
                 fx,
                 fy,
                 &mut after[0],
+                self.compute,
             )?;
         }
         let (dx, dy) = &cache.dfeat[0];
-        self.featurer.backward(dy.view(), &mut cache.fy)?;
-        self.featurer.backward(dx.view(), &mut cache.fx)?;
+        self.featurer
+            .backward(dy.view(), &mut cache.fy, self.compute)?;
+        self.featurer
+            .backward(dx.view(), &mut cache.fx, self.compute)?;
         Ok(())
     }
 

@@ -7,8 +7,8 @@ use ndarray::{Array2, ArrayView2, ArrayViewMut2};
 use rgm_nn::init::Init;
 use rgm_nn::param::{join_name, ParamView, ParamViewMut};
 use rgm_nn::{
-    AttentionCache, FeedForward, FeedForwardCache, LayerNorm, LayerNormCache, MultiHeadAttention,
-    Parameters,
+    AttentionCache, Compute, FeedForward, FeedForwardCache, LayerNorm, LayerNormCache,
+    MultiHeadAttention, Parameters,
 };
 
 /// An encoder (sub-layers: self-attention, feed-forward) or decoder (self-attention,
@@ -80,6 +80,7 @@ impl<T: Element> Stack<T> {
         memory: ArrayView2<'_, T>,
         cache: &mut StackCache<T>,
         test_time: bool,
+        compute: Compute,
     ) -> Result<()> {
         let subs = self.sublayer_norms.len();
         let shape = x.dim();
@@ -105,6 +106,7 @@ impl<T: Element> Stack<T> {
                     normed,
                     &mut cache.attn[0],
                     !test_time,
+                    compute,
                 )?,
                 Op::CrossAttention => self.src_attn.as_ref().expect("decoder").forward_keeping(
                     out,
@@ -112,8 +114,12 @@ impl<T: Element> Stack<T> {
                     memory,
                     &mut cache.attn[1],
                     !test_time,
+                    compute,
                 )?,
-                Op::FeedForward => self.feed_forward.forward(out, normed, &mut cache.ff)?,
+                Op::FeedForward => {
+                    self.feed_forward
+                        .forward(out, normed, &mut cache.ff, compute)?
+                }
             }
             // x_{i+1} = x_i + op_i(LN_i(x_i))
             let (done, rest) = cache.xs.split_at_mut(i + 1);
@@ -139,6 +145,7 @@ impl<T: Element> Stack<T> {
         dout: ArrayView2<'_, T>,
         memory: ArrayView2<'_, T>,
         cache: &mut StackCache<T>,
+        compute: Compute,
     ) -> Result<()> {
         let subs = self.sublayer_norms.len();
         let shape = cache.out.dim();
@@ -167,6 +174,7 @@ impl<T: Element> Stack<T> {
                     normed,
                     normed,
                     &mut cache.attn[0],
+                    compute,
                 )?,
                 Op::CrossAttention => self.src_attn.as_mut().expect("decoder").backward(
                     dnormed,
@@ -175,10 +183,11 @@ impl<T: Element> Stack<T> {
                     normed,
                     memory,
                     &mut cache.attn[1],
+                    compute,
                 )?,
                 Op::FeedForward => {
                     self.feed_forward
-                        .backward(dnormed, d_op, normed, &mut cache.ff)?
+                        .backward(dnormed, d_op, normed, &mut cache.ff, compute)?
                 }
             }
             self.sublayer_norms[i].backward(
@@ -274,20 +283,21 @@ impl<T: Element> EdgeTransformer<T> {
         fy: ArrayView2<'_, T>,
         cache: &mut EdgeTransformerCache<T>,
         test_time: bool,
+        compute: Compute,
     ) -> Result<()> {
         let (enc_x, enc_y) = (&mut cache.enc_x, &mut cache.enc_y);
         let (a, b) = both(
             test_time,
-            || self.encoder.forward(fx, fx, enc_x, test_time),
-            || self.encoder.forward(fy, fy, enc_y, test_time),
+            || self.encoder.forward(fx, fx, enc_x, test_time, compute),
+            || self.encoder.forward(fy, fy, enc_y, test_time, compute),
         );
         a.and(b)?;
         let (mem_x, mem_y) = (cache.enc_y.out.view(), cache.enc_x.out.view());
         let (dec_x, dec_y) = (&mut cache.dec_x, &mut cache.dec_y);
         let (a, b) = both(
             test_time,
-            || self.decoder.forward(fx, mem_x, dec_x, test_time),
-            || self.decoder.forward(fy, mem_y, dec_y, test_time),
+            || self.decoder.forward(fx, mem_x, dec_x, test_time, compute),
+            || self.decoder.forward(fy, mem_y, dec_y, test_time, compute),
         );
         a.and(b)
     }
@@ -301,6 +311,7 @@ impl<T: Element> EdgeTransformer<T> {
         dtx: ArrayView2<'_, T>,
         dty: ArrayView2<'_, T>,
         cache: &mut EdgeTransformerCache<T>,
+        compute: Compute,
     ) -> Result<()> {
         zeroed(&mut cache.dmem_x, cache.enc_x.out.dim());
         zeroed(&mut cache.dmem_y, cache.enc_y.out.dim());
@@ -310,6 +321,7 @@ impl<T: Element> EdgeTransformer<T> {
             dty,
             cache.enc_x.out.view(),
             &mut cache.dec_y,
+            compute,
         )?;
         self.decoder.backward(
             dfx.view_mut(),
@@ -317,6 +329,7 @@ impl<T: Element> EdgeTransformer<T> {
             dtx,
             cache.enc_y.out.view(),
             &mut cache.dec_x,
+            compute,
         )?;
         let empty = Array2::zeros((0, 0));
         self.encoder.backward(
@@ -325,6 +338,7 @@ impl<T: Element> EdgeTransformer<T> {
             cache.dmem_y.view(),
             empty.view(),
             &mut cache.enc_y,
+            compute,
         )?;
         self.encoder.backward(
             dfx,
@@ -332,6 +346,7 @@ impl<T: Element> EdgeTransformer<T> {
             cache.dmem_x.view(),
             empty.view(),
             &mut cache.enc_x,
+            compute,
         )
     }
 }

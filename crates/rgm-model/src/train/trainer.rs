@@ -14,7 +14,7 @@ use rgm_data::pairs::train_seed;
 use rgm_data::{ModelNet40, Pair, PairGenerator, Shape, Split};
 use rgm_match::Correspondences;
 use rgm_nn::optim::{MultiStepLr, Optimizer};
-use rgm_nn::{Parameters, Scalar};
+use rgm_nn::{Compute, Parameters, Scalar};
 
 use super::run_dir::{read_json, write_json, CheckpointFile, RunDir};
 use super::{Event, LogRecord, Result, TrainConfig, TrainError, TrainState};
@@ -88,7 +88,7 @@ impl Trainer {
             )
         };
         let mut network = network;
-        network.set_precision(config.precision); // the workers' copies inherit it
+        network.set_compute(Compute::with_precision(config.precision)); // the workers' copies inherit it
         write_json(&dir.join("config.json"), &config)?;
         let workers = (0..config.workers)
             .map(|_| Worker {

@@ -102,8 +102,9 @@ pub fn f32_mat_mul_then(
                 c.shape()
             );
             if y.strides()[1] != 1 || c.strides()[1] != 1 {
-                // The masked write-back reads rows of y and writes rows of C as vectors.
-                return super::then_by_passes(a, b, then, c);
+                // The masked write-back reads rows of y and writes rows of C as vectors; the
+                // passes run this f32 product (the default compute settings).
+                return super::then_by_passes(a, b, then, c, crate::Compute::default());
             }
             let finish = Finish {
                 keep: Some((y.as_ptr(), y.strides()[0])),

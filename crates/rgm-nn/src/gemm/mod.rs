@@ -1,7 +1,7 @@
 //! The matrix product every op calls, [`mat_mul`]: f32 on AVX-512 where the processor has it
 //! ([`f32_mat_mul`]) and BLAS elsewhere, f64 on BLAS, or bf16 on the processor's AMX tile units
-//! (or its AVX-512 BF16 dot products where it has no AMX) when the calling thread asked for
-//! [`Precision::Bf16`].
+//! (or its AVX-512 BF16 dot products where it has no AMX) when the [`Compute`] it is given asks
+//! for [`Precision::Bf16`].
 //!
 //! The bf16 product ([`bf16_mat_mul`]) takes and returns f32: both inputs are rounded to bf16
 //! (nearest even) while they are packed, the products are accumulated in f32. It runs on the
@@ -48,7 +48,7 @@ pub fn f32_avx512_available() -> bool {
 }
 
 use crate::bf16::bf16_bits;
-use crate::precision::{self, Precision};
+use crate::compute::{Compute, Precision};
 use crate::Scalar;
 use ndarray::linalg::general_mat_mul;
 use ndarray::{
@@ -57,8 +57,8 @@ use ndarray::{
 };
 use std::cell::RefCell;
 
-/// `c = alpha · a · b + beta · c`, `a`: (M, K), `b`: (K, N), `c`: (M, N), in the calling
-/// thread's [`precision`] for f32 (f64 is always BLAS). `beta = 0` ignores what `c` held.
+/// `c = alpha · a · b + beta · c`, `a`: (M, K), `b`: (K, N), `c`: (M, N), in `compute`'s
+/// precision for f32 (f64 is always BLAS). `beta = 0` ignores what `c` held.
 /// Panics if the shapes do not agree (as `general_mat_mul`, which it replaces).
 pub fn mat_mul<T, S1, S2, S3>(
     alpha: T,
@@ -66,13 +66,14 @@ pub fn mat_mul<T, S1, S2, S3>(
     b: &ArrayBase<S2, Ix2>,
     beta: T,
     c: &mut ArrayBase<S3, Ix2>,
+    compute: Compute,
 ) where
     T: Scalar,
     S1: Data<Elem = T>,
     S2: Data<Elem = T>,
     S3: DataMut<Elem = T>,
 {
-    T::mat_mul(alpha, a.view(), b.view(), beta, c.view_mut());
+    T::mat_mul(alpha, a.view(), b.view(), beta, c.view_mut(), compute);
 }
 
 /// How [`mat_mul_then`] finishes the product `a · b` (M, N).
@@ -88,22 +89,23 @@ pub enum Then<'a, T> {
     ReluGrad(ArrayView2<'a, T>),
 }
 
-/// `c = a · b` finished as `then` says; what `c` held is ignored.
-/// Where the f32 product runs on AVX-512 the bias, the ReLU and ReLU's backward are applied
-/// in the product's write-back, bit for bit what [`then_by_passes`] gives with passes over C.
-/// Panics if the shapes disagree.
+/// `c = a · b` finished as `then` says, in `compute`'s precision for f32; what `c` held is
+/// ignored. Where the f32 product runs on AVX-512 the bias, the ReLU and ReLU's backward are
+/// applied in the product's write-back, bit for bit what [`then_by_passes`] gives with passes
+/// over C. Panics if the shapes disagree.
 pub fn mat_mul_then<T, S1, S2, S3>(
     a: &ArrayBase<S1, Ix2>,
     b: &ArrayBase<S2, Ix2>,
     then: Then<'_, T>,
     c: &mut ArrayBase<S3, Ix2>,
+    compute: Compute,
 ) where
     T: Scalar,
     S1: Data<Elem = T>,
     S2: Data<Elem = T>,
     S3: DataMut<Elem = T>,
 {
-    T::mat_mul_then(a.view(), b.view(), then, c.view_mut());
+    T::mat_mul_then(a.view(), b.view(), then, c.view_mut(), compute);
 }
 
 /// [`mat_mul_then`] as [`mat_mul`] and passes over C (every type and product but the f32 one
@@ -114,6 +116,7 @@ pub(crate) fn then_by_passes<T: Scalar>(
     b: ArrayView2<'_, T>,
     then: Then<'_, T>,
     mut c: ArrayViewMut2<'_, T>,
+    compute: Compute,
 ) {
     let kept = |x: T, y: T| if y > T::zero() { x } else { T::zero() };
     match then {
@@ -121,16 +124,16 @@ pub(crate) fn then_by_passes<T: Scalar>(
             match bias {
                 Some(bias) => {
                     c.assign(&bias);
-                    T::mat_mul(T::one(), a, b, T::one(), c.view_mut());
+                    T::mat_mul(T::one(), a, b, T::one(), c.view_mut(), compute);
                 }
-                None => T::mat_mul(T::one(), a, b, T::zero(), c.view_mut()),
+                None => T::mat_mul(T::one(), a, b, T::zero(), c.view_mut(), compute),
             }
             if relu {
                 c.mapv_inplace(|x| kept(x, x));
             }
         }
         Then::ReluGrad(y) => {
-            T::mat_mul(T::one(), a, b, T::zero(), c.view_mut());
+            T::mat_mul(T::one(), a, b, T::zero(), c.view_mut(), compute);
             Zip::from(c).and(y).for_each(|c, &y| *c = kept(*c, y));
         }
     }
@@ -143,17 +146,18 @@ pub(crate) fn mat_mul_then_f32(
     b: ArrayView2<'_, f32>,
     then: Then<'_, f32>,
     c: ArrayViewMut2<'_, f32>,
+    compute: Compute,
 ) {
-    let bf16 = precision::current() == Precision::Bf16 && bf16_available();
+    let bf16 = compute.precision == Precision::Bf16 && bf16_available();
     if !bf16 && f32_avx512_available() {
         #[cfg(target_arch = "x86_64")]
         f32_mat_mul_then(a, b, then, c);
     } else {
-        then_by_passes(a, b, then, c);
+        then_by_passes(a, b, then, c, compute);
     }
 }
 
-/// [`mat_mul`] for f32: bf16 when the thread's precision is bf16 and [`bf16_available`];
+/// [`mat_mul`] for f32: bf16 when `compute`'s precision is bf16 and [`bf16_available`];
 /// otherwise the f32 product, on AVX-512 where the processor has it ([`f32_mat_mul`]: the
 /// BLAS this workspace builds runs AVX2 kernels only), BLAS elsewhere.
 pub(crate) fn mat_mul_f32(
@@ -162,8 +166,9 @@ pub(crate) fn mat_mul_f32(
     b: ArrayView2<'_, f32>,
     beta: f32,
     c: ArrayViewMut2<'_, f32>,
+    compute: Compute,
 ) {
-    mat_mul_f32_in(precision::current(), bf16_available(), alpha, a, b, beta, c);
+    mat_mul_f32_in(compute.precision, bf16_available(), alpha, a, b, beta, c);
 }
 
 /// [`mat_mul_f32`] with the precision and the processor's bf16 support given (so that the
@@ -639,7 +644,7 @@ mod tests {
                 .num_threads(threads)
                 .build()
                 .unwrap();
-            pool.install(|| mat_mul(1.0, &a, &b, 2.0, &mut c));
+            pool.install(|| mat_mul(1.0, &a, &b, 2.0, &mut c, Compute::default()));
             c
         };
         assert_eq!(product(1), product(2));
@@ -928,14 +933,14 @@ mod tests {
             let nan = Array2::from_elem((m, n), f32::NAN);
             for then in finishes(bias.row(0), y.view()) {
                 let mut want = nan.clone();
-                then_by_passes(a.view(), bt.t(), then, want.view_mut());
+                then_by_passes(a.view(), bt.t(), then, want.view_mut(), Compute::default());
                 let expected = finished(then, &product);
                 assert!(
                     want.abs_diff_eq(&expected, 1e-4),
                     "({m}, {k}, {n}) {then:?}: the passes give {want}, not {expected}"
                 );
                 let mut got = nan.clone();
-                mat_mul_then(&a, &bt.t(), then, &mut got);
+                mat_mul_then(&a, &bt.t(), then, &mut got, Compute::default());
                 let bits = |c: ArrayView2<'_, f32>| c.mapv(f32::to_bits);
                 assert_eq!(
                     bits(got.view()),
@@ -943,7 +948,13 @@ mod tests {
                     "({m}, {k}, {n}) {then:?}"
                 );
                 let mut got_t = nan.t().to_owned();
-                mat_mul_then(&a, &bt.t(), then, &mut got_t.view_mut().reversed_axes());
+                mat_mul_then(
+                    &a,
+                    &bt.t(),
+                    then,
+                    &mut got_t.view_mut().reversed_axes(),
+                    Compute::default(),
+                );
                 assert_eq!(
                     bits(got_t.t()),
                     bits(want.view()),
@@ -960,19 +971,19 @@ mod tests {
         let bias = ndarray::array![0.5, -1.0, 2.0];
         for then in finishes(bias.view(), y.view()) {
             let mut c = Array2::from_elem((9, 3), f64::NAN);
-            mat_mul_then(&a, &b, then, &mut c);
+            mat_mul_then(&a, &b, then, &mut c, Compute::default());
             let want = finished(then, &a.dot(&b));
             assert!(c.abs_diff_eq(&want, 1e-12), "{then:?}: {c}");
         }
     }
 
     #[test]
-    fn mat_mul_is_the_f32_product_by_default_and_bf16_in_a_bf16_scope() {
+    fn mat_mul_is_the_f32_product_by_default_and_bf16_when_asked() {
         let (a, b) = (uniform(50, 70, 5), uniform(70, 30, 6));
         let mut blas = Array2::zeros((50, 30));
         general_mat_mul(1.0, &a, &b, 0.0, &mut blas);
         let mut f32_out = Array2::zeros((50, 30));
-        mat_mul(1.0, &a, &b, 0.0, &mut f32_out);
+        mat_mul(1.0, &a, &b, 0.0, &mut f32_out, Compute::default());
         if f32_avx512_available() {
             let mut direct = Array2::zeros((50, 30));
             #[cfg(target_arch = "x86_64")]
@@ -990,10 +1001,8 @@ mod tests {
             (0.0, blas.view()),
         );
         let mut bf16_out = Array2::zeros((50, 30));
-        {
-            let _bf16 = precision::enter(Precision::Bf16);
-            mat_mul(1.0, &a, &b, 0.0, &mut bf16_out);
-        }
+        let bf16 = Compute::with_precision(Precision::Bf16);
+        mat_mul(1.0, &a, &b, 0.0, &mut bf16_out, bf16);
         // Without a bf16 kernel, bf16 is the f32 product, bit for bit (on every machine).
         let mut fallback = Array2::zeros((50, 30));
         mat_mul_f32_in(
@@ -1019,10 +1028,9 @@ mod tests {
         }
         // f64 ignores the setting.
         let (a64, b64) = (a.mapv(f64::from), b.mapv(f64::from));
-        let (mut in_scope, mut plain) = (Array2::zeros((50, 30)), Array2::zeros((50, 30)));
+        let (mut asked_bf16, mut plain) = (Array2::zeros((50, 30)), Array2::zeros((50, 30)));
         general_mat_mul(1.0, &a64, &b64, 0.0, &mut plain);
-        let _bf16 = precision::enter(Precision::Bf16);
-        mat_mul(1.0, &a64, &b64, 0.0, &mut in_scope);
-        assert_eq!(in_scope, plain);
+        mat_mul(1.0, &a64, &b64, 0.0, &mut asked_bf16, bf16);
+        assert_eq!(asked_bf16, plain);
     }
 }

@@ -8,8 +8,7 @@ use crate::error::check_shape;
 use crate::gemm::mat_mul;
 use crate::init::Init;
 use crate::param::{join_name, ParamView, ParamViewMut};
-use crate::precision;
-use crate::{NnError, Parameters, Result, Scalar};
+use crate::{Compute, NnError, Parameters, Result, Scalar};
 use ndarray::{s, Array2, Array3, ArrayView2, ArrayViewMut2, Axis, Zip};
 use rayon::prelude::*;
 
@@ -124,8 +123,9 @@ impl<T: Scalar> MultiHeadAttention<T> {
         q_in: ArrayView2<'_, T>,
         kv_in: ArrayView2<'_, T>,
         cache: &mut AttentionCache<T>,
+        compute: Compute,
     ) -> Result<()> {
-        self.forward_keeping(out, q_in, kv_in, cache, true)
+        self.forward_keeping(out, q_in, kv_in, cache, true, compute)
     }
 
     /// [`MultiHeadAttention::forward`], keeping the attention weights (H, Nq, Nk) for a
@@ -140,6 +140,7 @@ impl<T: Scalar> MultiHeadAttention<T> {
         kv_in: ArrayView2<'_, T>,
         cache: &mut AttentionCache<T>,
         keep: bool,
+        compute: Compute,
     ) -> Result<()> {
         let (c, h) = (self.channels(), self.heads);
         let (nq, nk, dk) = (q_in.nrows(), kv_in.nrows(), c / h);
@@ -154,25 +155,23 @@ impl<T: Scalar> MultiHeadAttention<T> {
         // Without kept weights no backward follows: the three projections side by side.
         let (q, k, v) = (cache.q.view_mut(), cache.k.view_mut(), cache.v.view_mut());
         let (query, key, value) = (
-            || self.query.forward(q, q_in),
-            || self.key.forward(k, kv_in),
-            || self.value.forward(v, kv_in),
+            || self.query.forward(q, q_in, compute),
+            || self.key.forward(k, kv_in, compute),
+            || self.value.forward(v, kv_in, compute),
         );
         let (queried, (keyed, valued)) = if keep {
             (query(), (key(), value()))
         } else {
-            precision::join(query, || precision::join(key, value))
+            rayon::join(query, || rayon::join(key, value))
         };
         queried.and(keyed).and(valued)?;
         let scale = T::one() / T::from_f64(dk as f64).sqrt();
         // Head by head and block by block of query rows, so that a block's score rows are
         // still in cache for their softmax and their product with V; rayon spreads the blocks
         // over the cores (each entry is computed as by whole-matrix products, on any thread).
-        let precision = precision::current();
         let (q, k, v) = (cache.q.view(), cache.k.view(), cache.v.view());
         let probs = keep.then_some(&mut cache.probs);
         head_row_blocks(probs, &mut cache.heads, dk).for_each(|(head, r0, mut kept, mut heads)| {
-            let _precision = precision::enter(precision);
             let (rows, cols) = (r0..r0 + heads.nrows(), head * dk..(head + 1) * dk);
             let mut own: Array2<T>; // (rows, Nk) when the weights are not kept
             let mut p = match &mut kept {
@@ -188,13 +187,21 @@ impl<T: Scalar> MultiHeadAttention<T> {
                 &k.slice(s![.., cols.clone()]).t(),
                 T::zero(),
                 &mut p,
+                compute,
             );
             for row in p.rows_mut() {
                 softmax_slice(row.into_slice().expect("probs rows are contiguous"));
             }
-            mat_mul(T::one(), &p, &v.slice(s![.., cols]), T::zero(), &mut heads);
+            mat_mul(
+                T::one(),
+                &p,
+                &v.slice(s![.., cols]),
+                T::zero(),
+                &mut heads,
+                compute,
+            );
         });
-        self.output.forward(out, cache.heads.view())
+        self.output.forward(out, cache.heads.view(), compute)
     }
 
     /// Differentiates the attention, head by head, in reverse:
@@ -202,6 +209,7 @@ impl<T: Scalar> MultiHeadAttention<T> {
     /// `P ⊙ (dP − Σ dP ⊙ P)`), `dQ_h += dS_h K_h / √d`, `dK_h += dS_hᵀ Q_h / √d`, then the four
     /// linear backwards. `dkv_in = None` means keys and values came from `q_in` (self-attention):
     /// their gradient is added to `dq_in`. Inputs as given to forward.
+    #[allow(clippy::too_many_arguments)]
     pub fn backward(
         &mut self,
         mut dq_in: ArrayViewMut2<'_, T>,
@@ -210,6 +218,7 @@ impl<T: Scalar> MultiHeadAttention<T> {
         q_in: ArrayView2<'_, T>,
         kv_in: ArrayView2<'_, T>,
         cache: &mut AttentionCache<T>,
+        compute: Compute,
     ) -> Result<()> {
         let (c, h) = (self.channels(), self.heads);
         let (nq, nk, dk) = (q_in.nrows(), kv_in.nrows(), c / h);
@@ -235,7 +244,7 @@ impl<T: Scalar> MultiHeadAttention<T> {
         }
         cache.dsums.fill(T::zero());
         self.output
-            .backward(cache.dheads.view_mut(), dout, cache.heads.view())?;
+            .backward(cache.dheads.view_mut(), dout, cache.heads.view(), compute)?;
         let scale = T::one() / T::from_f64(dk as f64).sqrt();
         // Head by head (spread over the cores by rayon), block by block of query rows: the
         // block's dP, dS and dQ, then its shares of dVᵀ += dOᵀ P and dKᵀ += Qᵀ dS while its
@@ -244,7 +253,6 @@ impl<T: Scalar> MultiHeadAttention<T> {
         // multiples of 32 rows, alpha 1), which the bf16 products accumulate as one
         // whole-matrix product would; dK is scaled once, at the end, as the whole product's
         // write-back onto zeros does (`+ 0` turns a −0 into 0 as that does).
-        let precision = precision::current();
         let (probs, d_o) = (cache.probs.view(), cache.dheads.view());
         let (q, k, v) = (cache.q.view(), cache.k.view(), cache.v.view());
         let heads: Vec<_> = cache
@@ -258,7 +266,6 @@ impl<T: Scalar> MultiHeadAttention<T> {
             .collect();
         heads.into_par_iter().for_each(
             |(head, ((((mut ds_rows, sums), mut dq), mut dk_h), mut dv))| {
-                let _precision = precision::enter(precision);
                 let cols = s![.., head * dk..(head + 1) * dk];
                 let (q, k, v, d_o) = (q.slice(cols), k.slice(cols), v.slice(cols), d_o.slice(cols));
                 let (mut dv_t, mut dk_t) = sums.split_at(Axis(0), dk); // (dk, Nk) each
@@ -270,13 +277,14 @@ impl<T: Scalar> MultiHeadAttention<T> {
                         d_o.slice(s![rows.clone(), ..]),
                     );
                     let mut ds = ds_rows.slice_mut(s![..p.nrows(), ..]); // (rows, Nk)
-                    mat_mul(T::one(), &d_o, &v.t(), T::zero(), &mut ds);
+                    mat_mul(T::one(), &d_o, &v.t(), T::zero(), &mut ds, compute);
                     for (d, y) in ds.rows_mut().into_iter().zip(p.rows()) {
                         softmax_backward_in_place(d, y);
                     }
-                    mat_mul(scale, &ds, &k, T::one(), &mut dq.slice_mut(s![rows, ..]));
-                    mat_mul(T::one(), &d_o.t(), &p, T::one(), &mut dv_t);
-                    mat_mul(T::one(), &q.t(), &ds, T::one(), &mut dk_t);
+                    let mut dq_rows = dq.slice_mut(s![rows, ..]); // (rows, dk)
+                    mat_mul(scale, &ds, &k, T::one(), &mut dq_rows, compute);
+                    mat_mul(T::one(), &d_o.t(), &p, T::one(), &mut dv_t, compute);
+                    mat_mul(T::one(), &q.t(), &ds, T::one(), &mut dk_t, compute);
                 }
                 dv.assign(&dv_t.t());
                 Zip::from(&mut dk_h)
@@ -285,16 +293,17 @@ impl<T: Scalar> MultiHeadAttention<T> {
             },
         );
         self.query
-            .backward(dq_in.view_mut(), cache.dq.view(), q_in)?;
+            .backward(dq_in.view_mut(), cache.dq.view(), q_in, compute)?;
         match dkv_in {
             Some(mut dkv) => {
-                self.key.backward(dkv.view_mut(), cache.dk.view(), kv_in)?;
-                self.value.backward(dkv, cache.dv.view(), kv_in)
+                self.key
+                    .backward(dkv.view_mut(), cache.dk.view(), kv_in, compute)?;
+                self.value.backward(dkv, cache.dv.view(), kv_in, compute)
             }
             None => {
                 self.key
-                    .backward(dq_in.view_mut(), cache.dk.view(), kv_in)?;
-                self.value.backward(dq_in, cache.dv.view(), kv_in)
+                    .backward(dq_in.view_mut(), cache.dk.view(), kv_in, compute)?;
+                self.value.backward(dq_in, cache.dv.view(), kv_in, compute)
             }
         }
     }
@@ -382,8 +391,14 @@ mod tests {
         let mut mha = layer(&random_params(300));
         let (q, kv) = (ix2(&uniform(&[3, C], 301)), ix2(&uniform(&[5, C], 302)));
         let (mut out, mut cache) = (ndarray::Array2::zeros((3, C)), AttentionCache::default());
-        mha.forward(out.view_mut(), q.view(), kv.view(), &mut cache)
-            .unwrap();
+        mha.forward(
+            out.view_mut(),
+            q.view(),
+            kv.view(),
+            &mut cache,
+            Compute::default(),
+        )
+        .unwrap();
         let (mut dq, mut dkv) = (
             ndarray::Array2::zeros((3, C)),
             ndarray::Array2::zeros((5, C)),
@@ -396,6 +411,7 @@ mod tests {
             q.view(),
             kv.view(),
             &mut cache,
+            Compute::default(),
         )
         .unwrap();
         let dbk = &mha.key.bias.as_ref().unwrap().grad;
@@ -426,8 +442,14 @@ mod tests {
         };
         let (q, kv) = (ix2(&uniform(&[2, C], 310)), ix2(&uniform(&[1, C], 311)));
         let (mut out, mut cache) = (ndarray::Array2::zeros((2, C)), AttentionCache::default());
-        mha.forward(out.view_mut(), q.view(), kv.view(), &mut cache)
-            .unwrap();
+        mha.forward(
+            out.view_mut(),
+            q.view(),
+            kv.view(),
+            &mut cache,
+            Compute::default(),
+        )
+        .unwrap();
         assert_eq!(out.row(0), kv.row(0));
         assert_eq!(out.row(1), kv.row(0));
     }
@@ -439,12 +461,19 @@ mod tests {
         let f32s = |shape: &[usize], seed| ix2(&uniform(shape, seed)).mapv(|v| v as f32);
         let (q_in, kv_in) = (f32s(&[150, C], 320), f32s(&[70, C], 321));
         let (mut out, mut cache) = (Array2::zeros((150, C)), AttentionCache::default());
-        mha.forward(out.view_mut(), q_in.view(), kv_in.view(), &mut cache)
-            .unwrap();
+        mha.forward(
+            out.view_mut(),
+            q_in.view(),
+            kv_in.view(),
+            &mut cache,
+            Compute::default(),
+        )
+        .unwrap();
         // The same products over whole matrices, head by head.
         let project = |lin: &Linear<f32>, x: &Array2<f32>| {
             let mut y = Array2::zeros((x.nrows(), C));
-            lin.forward(y.view_mut(), x.view()).unwrap();
+            lin.forward(y.view_mut(), x.view(), Compute::default())
+                .unwrap();
             y
         };
         let (q, k, v) = (
@@ -457,11 +486,25 @@ mod tests {
             let cols = s![.., head * dk..(head + 1) * dk];
             let mut p = Array2::zeros((150, 70));
             let scale = 1.0 / (dk as f32).sqrt();
-            mat_mul(scale, &q.slice(cols), &k.slice(cols).t(), 0.0, &mut p);
+            mat_mul(
+                scale,
+                &q.slice(cols),
+                &k.slice(cols).t(),
+                0.0,
+                &mut p,
+                Compute::default(),
+            );
             for row in p.rows_mut() {
                 softmax_slice(row.into_slice().unwrap());
             }
-            mat_mul(1.0, &p, &v.slice(cols), 0.0, &mut heads.slice_mut(cols));
+            mat_mul(
+                1.0,
+                &p,
+                &v.slice(cols),
+                0.0,
+                &mut heads.slice_mut(cols),
+                Compute::default(),
+            );
         }
         assert_eq!(out, project(&mha.output, &heads));
     }
@@ -485,7 +528,13 @@ mod tests {
             let (q, kv) = (ix2(&i[0]), ix2(&i[streams - 1]));
             let (mut out, mut cache) = (ndarray::Array2::zeros((nq, C)), AttentionCache::default());
             layer(&i[streams..])
-                .forward(out.view_mut(), q.view(), kv.view(), &mut cache)
+                .forward(
+                    out.view_mut(),
+                    q.view(),
+                    kv.view(),
+                    &mut cache,
+                    Compute::default(),
+                )
                 .unwrap();
             (out, cache)
         };
@@ -515,6 +564,7 @@ mod tests {
                     q.view(),
                     kv.view(),
                     &mut cache,
+                    Compute::default(),
                 )
                 .unwrap();
                 let mut g = vec![dq.into_dyn()];
@@ -563,6 +613,7 @@ mod tests {
                 q.view(),
                 kv.view(),
                 &mut AttentionCache::default(),
+                Compute::default(),
             )
             .unwrap();
         let (q32, kv32) = (q.mapv(|v| v as f32), kv.mapv(|v| v as f32));
@@ -572,6 +623,7 @@ mod tests {
                 q32.view(),
                 kv32.view(),
                 &mut AttentionCache::default(),
+                Compute::default(),
             )
             .unwrap();
         let worst = out64

@@ -3,7 +3,7 @@
 use super::linear::Linear;
 use crate::init::Init;
 use crate::param::{join_name, ParamView, ParamViewMut};
-use crate::{Parameters, Result, Scalar};
+use crate::{Compute, Parameters, Result, Scalar};
 use ndarray::{Array2, ArrayView2, ArrayViewMut2};
 
 /// `out = ReLU(inp W1ᵀ + b1) W2ᵀ + b2`; parameters named `w_1`, `w_2` as in the reference.
@@ -36,13 +36,15 @@ impl<T: Scalar> FeedForward<T> {
         out: ArrayViewMut2<'_, T>,
         inp: ArrayView2<'_, T>,
         cache: &mut FeedForwardCache<T>,
+        compute: Compute,
     ) -> Result<()> {
         let shape = (inp.nrows(), self.w_1.c_out());
         if cache.active.dim() != shape {
             cache.active = Array2::zeros(shape);
         }
-        self.w_1.forward_relu(cache.active.view_mut(), inp)?;
-        self.w_2.forward(out, cache.active.view())
+        self.w_1
+            .forward_relu(cache.active.view_mut(), inp, compute)?;
+        self.w_2.forward(out, cache.active.view(), compute)
     }
 
     /// Chains the backwards of `w_2` through the ReLU and of `w_1` (see each). Inputs as given
@@ -53,14 +55,19 @@ impl<T: Scalar> FeedForward<T> {
         dout: ArrayView2<'_, T>,
         inp: ArrayView2<'_, T>,
         cache: &mut FeedForwardCache<T>,
+        compute: Compute,
     ) -> Result<()> {
         let shape = cache.active.dim();
         if cache.dhidden.dim() != shape {
             cache.dhidden = Array2::zeros(shape);
         }
-        self.w_2
-            .backward_through_relu(cache.dhidden.view_mut(), dout, cache.active.view())?;
-        self.w_1.backward(dinp, cache.dhidden.view(), inp)
+        self.w_2.backward_through_relu(
+            cache.dhidden.view_mut(),
+            dout,
+            cache.active.view(),
+            compute,
+        )?;
+        self.w_1.backward(dinp, cache.dhidden.view(), inp, compute)
     }
 }
 
@@ -98,7 +105,12 @@ mod tests {
         let run = |i: &[ArrayD<f64>]| {
             let (mut out, mut cache) = (Array2::zeros((5, 3)), FeedForwardCache::default());
             layer(i)
-                .forward(out.view_mut(), ix2(&i[0]).view(), &mut cache)
+                .forward(
+                    out.view_mut(),
+                    ix2(&i[0]).view(),
+                    &mut cache,
+                    Compute::default(),
+                )
                 .unwrap();
             (out, cache)
         };
@@ -106,7 +118,11 @@ mod tests {
         let mut hidden = Array2::zeros((5, 6));
         layer(&inputs)
             .w_1
-            .forward(hidden.view_mut(), ix2(&inputs[0]).view())
+            .forward(
+                hidden.view_mut(),
+                ix2(&inputs[0]).view(),
+                Compute::default(),
+            )
             .unwrap();
         assert!(hidden.iter().all(|h: &f64| h.abs() > 1e-3));
         assert_gradients(
@@ -123,6 +139,7 @@ mod tests {
                     ix2(dout).view(),
                     ix2(&i[0]).view(),
                     &mut cache,
+                    Compute::default(),
                 )
                 .unwrap();
                 let (w1, w2) = (ff.w_1, ff.w_2);

@@ -4,7 +4,7 @@ use crate::error::check_shape;
 use crate::gemm::{mat_mul, mat_mul_then, Then};
 use crate::init::{self, Init};
 use crate::param::{join_name, ParamView, ParamViewMut};
-use crate::{Param, Parameters, Result, Scalar};
+use crate::{Compute, Param, Parameters, Result, Scalar};
 use ndarray::{Array1, Array2, ArrayView2, ArrayViewMut2, Ix1, Ix2};
 
 /// `out = inp · weightᵀ + bias`, PyTorch's `nn.Linear` (and `nn.Conv{1,2}d` with a 1×1 kernel,
@@ -44,15 +44,25 @@ impl<T: Scalar> Linear<T> {
     }
 
     /// `out = inp · weightᵀ + bias`. `out`: (R, C_out), `inp`: (R, C_in).
-    pub fn forward(&self, out: ArrayViewMut2<'_, T>, inp: ArrayView2<'_, T>) -> Result<()> {
-        self.forward_then(out, inp, false)
+    pub fn forward(
+        &self,
+        out: ArrayViewMut2<'_, T>,
+        inp: ArrayView2<'_, T>,
+        compute: Compute,
+    ) -> Result<()> {
+        self.forward_then(out, inp, false, compute)
     }
 
     /// `out = ReLU(inp · weightᵀ + bias)`, the ReLU in the product's write-back: the value of
     /// [`Linear::forward`] and [`crate::relu_in_place`], bit for bit, one pass over `out`
     /// fewer. Shapes as [`Linear::forward`].
-    pub fn forward_relu(&self, out: ArrayViewMut2<'_, T>, inp: ArrayView2<'_, T>) -> Result<()> {
-        self.forward_then(out, inp, true)
+    pub fn forward_relu(
+        &self,
+        out: ArrayViewMut2<'_, T>,
+        inp: ArrayView2<'_, T>,
+        compute: Compute,
+    ) -> Result<()> {
+        self.forward_then(out, inp, true, compute)
     }
 
     fn forward_then(
@@ -60,13 +70,14 @@ impl<T: Scalar> Linear<T> {
         mut out: ArrayViewMut2<'_, T>,
         inp: ArrayView2<'_, T>,
         relu: bool,
+        compute: Compute,
     ) -> Result<()> {
         let rows = inp.nrows();
         check_shape("linear forward", "inp", inp.shape(), &[rows, self.c_in()])?;
         check_shape("linear forward", "out", out.shape(), &[rows, self.c_out()])?;
         let bias = self.bias.as_ref().map(|b| b.value.view());
         let then = Then::Layer { bias, relu };
-        mat_mul_then(&inp, &self.weight.value.t(), then, &mut out);
+        mat_mul_then(&inp, &self.weight.value.t(), then, &mut out, compute);
         Ok(())
     }
 
@@ -78,8 +89,9 @@ impl<T: Scalar> Linear<T> {
         dinp: ArrayViewMut2<'_, T>,
         dout: ArrayView2<'_, T>,
         inp: ArrayView2<'_, T>,
+        compute: Compute,
     ) -> Result<()> {
-        self.backward_then(dinp, dout, inp, false)
+        self.backward_then(dinp, dout, inp, false, compute)
     }
 
     /// Differentiates `out = ReLU(pre) · weightᵀ + bias` given `inp = ReLU(pre)`, this layer's
@@ -93,8 +105,9 @@ impl<T: Scalar> Linear<T> {
         dpre: ArrayViewMut2<'_, T>,
         dout: ArrayView2<'_, T>,
         inp: ArrayView2<'_, T>,
+        compute: Compute,
     ) -> Result<()> {
-        self.backward_then(dpre, dout, inp, true)
+        self.backward_then(dpre, dout, inp, true, compute)
     }
 
     fn backward_then(
@@ -103,6 +116,7 @@ impl<T: Scalar> Linear<T> {
         dout: ArrayView2<'_, T>,
         inp: ArrayView2<'_, T>,
         through_relu: bool,
+        compute: Compute,
     ) -> Result<()> {
         let rows = self.check_backward(dout, inp)?;
         check_shape(
@@ -113,11 +127,11 @@ impl<T: Scalar> Linear<T> {
         )?;
         let weight = &self.weight.value;
         if through_relu {
-            mat_mul_then(&dout, weight, Then::ReluGrad(inp), &mut dinp);
+            mat_mul_then(&dout, weight, Then::ReluGrad(inp), &mut dinp, compute);
         } else {
-            mat_mul(T::one(), &dout, weight, T::one(), &mut dinp);
+            mat_mul(T::one(), &dout, weight, T::one(), &mut dinp, compute);
         }
-        self.backward_params(dout, inp)
+        self.backward_params(dout, inp, compute)
     }
 
     /// Checks a backward's `inp` (R, C_in) and `dout` (R, C_out); returns R.
@@ -139,9 +153,17 @@ impl<T: Scalar> Linear<T> {
         &mut self,
         dout: ArrayView2<'_, T>,
         inp: ArrayView2<'_, T>,
+        compute: Compute,
     ) -> Result<()> {
         self.check_backward(dout, inp)?;
-        mat_mul(T::one(), &dout.t(), &inp, T::one(), &mut self.weight.grad);
+        mat_mul(
+            T::one(),
+            &dout.t(),
+            &inp,
+            T::one(),
+            &mut self.weight.grad,
+            compute,
+        );
         if let Some(b) = &mut self.bias {
             for row in dout.rows() {
                 b.grad += &row;
@@ -183,8 +205,12 @@ mod tests {
         )
         .unwrap();
         let mut out = Array2::zeros((1, 3));
-        lin.forward(out.view_mut(), array![[1.0, 2.0]].view())
-            .unwrap();
+        lin.forward(
+            out.view_mut(),
+            array![[1.0, 2.0]].view(),
+            Compute::default(),
+        )
+        .unwrap();
         assert_eq!(out, array![[1.5, 2.0, 2.0]]);
     }
 
@@ -208,14 +234,21 @@ mod tests {
                 &inputs,
                 &mut |i| {
                     let mut out = Array2::zeros((9, 3));
-                    layer(i).forward(out.view_mut(), ix2(&i[0]).view()).unwrap();
+                    layer(i)
+                        .forward(out.view_mut(), ix2(&i[0]).view(), Compute::default())
+                        .unwrap();
                     out.into_dyn()
                 },
                 &mut |i, dout| {
                     let mut lin = layer(i);
                     let mut dinp = Array2::zeros((9, 5));
-                    lin.backward(dinp.view_mut(), ix2(dout).view(), ix2(&i[0]).view())
-                        .unwrap();
+                    lin.backward(
+                        dinp.view_mut(),
+                        ix2(dout).view(),
+                        ix2(&i[0]).view(),
+                        Compute::default(),
+                    )
+                    .unwrap();
                     let mut grads = vec![dinp.into_dyn(), lin.weight.grad.into_dyn()];
                     grads.extend(lin.bias.map(|b| b.grad.into_dyn()));
                     grads
@@ -240,14 +273,21 @@ mod tests {
             &inputs,
             &mut |i| {
                 let mut out = Array2::zeros((9, 3));
-                layer(i).forward(out.view_mut(), relu(i).view()).unwrap();
+                layer(i)
+                    .forward(out.view_mut(), relu(i).view(), Compute::default())
+                    .unwrap();
                 out.into_dyn()
             },
             &mut |i, dout| {
                 let mut lin = layer(i);
                 let mut dpre = Array2::zeros((9, 5));
-                lin.backward_through_relu(dpre.view_mut(), ix2(dout).view(), relu(i).view())
-                    .unwrap();
+                lin.backward_through_relu(
+                    dpre.view_mut(),
+                    ix2(dout).view(),
+                    relu(i).view(),
+                    Compute::default(),
+                )
+                .unwrap();
                 vec![
                     dpre.into_dyn(),
                     lin.weight.grad.into_dyn(),
@@ -265,9 +305,11 @@ mod tests {
         let lin = Linear::<f32>::new(300, 40, true, &mut rng);
         let inp = Array2::from_shape_fn((37, 300), |(i, j)| ((i * 7 + j * 3) % 11) as f32 - 3.0);
         let mut fused = Array2::from_elem((37, 40), f32::NAN);
-        lin.forward_relu(fused.view_mut(), inp.view()).unwrap();
+        lin.forward_relu(fused.view_mut(), inp.view(), Compute::default())
+            .unwrap();
         let mut unfused = Array2::zeros((37, 40));
-        lin.forward(unfused.view_mut(), inp.view()).unwrap();
+        lin.forward(unfused.view_mut(), inp.view(), Compute::default())
+            .unwrap();
         crate::relu_in_place(unfused.view_mut());
         assert_eq!(fused.mapv(f32::to_bits), unfused.mapv(f32::to_bits));
         assert!(unfused.iter().any(|&x| x == 0.0) && unfused.iter().any(|&x| x > 0.0));
@@ -276,11 +318,11 @@ mod tests {
         let dout = Array2::from_shape_fn((37, 40), |(i, j)| ((i * 5 + j) % 9) as f32 * 0.25 - 1.0);
         let mut a = lin.clone();
         let mut dpre = Array2::from_elem((37, 300), f32::NAN); // written, not added to
-        a.backward_through_relu(dpre.view_mut(), dout.view(), inp.view())
+        a.backward_through_relu(dpre.view_mut(), dout.view(), inp.view(), Compute::default())
             .unwrap();
         let mut b = lin.clone();
         let mut dinp = Array2::zeros((37, 300));
-        b.backward(dinp.view_mut(), dout.view(), inp.view())
+        b.backward(dinp.view_mut(), dout.view(), inp.view(), Compute::default())
             .unwrap();
         let mut want = Array2::zeros((37, 300));
         crate::relu_backward(want.view_mut(), dinp.view(), inp.view()).unwrap();
@@ -288,7 +330,8 @@ mod tests {
         assert_eq!(a.weight.grad, b.weight.grad);
         assert_eq!(a.bias.unwrap().grad, b.bias.as_ref().unwrap().grad);
         let mut c = lin.clone();
-        c.backward_params(dout.view(), inp.view()).unwrap();
+        c.backward_params(dout.view(), inp.view(), Compute::default())
+            .unwrap();
         assert_eq!(c.weight.grad, b.weight.grad);
         assert_eq!(c.bias.unwrap().grad, b.bias.unwrap().grad);
         assert!(c.weight.grad.iter().any(|&g| g != 0.0));
@@ -300,10 +343,10 @@ mod tests {
         assert_eq!(lin.num_params(), 6, "2×2 weight and 2 biases");
         let (inp, dout) = (array![[1.0, 2.0]], array![[1.0, -1.0]]);
         let mut dinp = Array2::zeros((1, 2));
-        lin.backward(dinp.view_mut(), dout.view(), inp.view())
+        lin.backward(dinp.view_mut(), dout.view(), inp.view(), Compute::default())
             .unwrap();
         let once = (dinp.clone(), lin.weight.grad.clone());
-        lin.backward(dinp.view_mut(), dout.view(), inp.view())
+        lin.backward(dinp.view_mut(), dout.view(), inp.view(), Compute::default())
             .unwrap();
         assert_eq!(dinp, &once.0 * 2.0);
         assert_eq!(lin.weight.grad, &once.1 * 2.0);
@@ -321,7 +364,11 @@ mod tests {
         let lin = Linear::<f32>::new(4, 3, false, &mut StdRng::seed_from_u64(0));
         let mut out = Array2::zeros((2, 3));
         let err = lin
-            .forward(out.view_mut(), Array2::zeros((2, 5)).view())
+            .forward(
+                out.view_mut(),
+                Array2::zeros((2, 5)).view(),
+                Compute::default(),
+            )
             .unwrap_err();
         assert_eq!(
             err.to_string(),

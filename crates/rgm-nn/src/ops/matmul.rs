@@ -4,7 +4,7 @@
 
 use crate::error::check_shape;
 use crate::gemm::mat_mul;
-use crate::{Result, Scalar};
+use crate::{Compute, Result, Scalar};
 use ndarray::{ArrayView2, ArrayView3, ArrayViewMut2, ArrayViewMut3, Axis};
 
 /// `out = a · b`. `out`: (P, R), `a`: (P, Q), `b`: (Q, R).
@@ -12,6 +12,7 @@ pub fn matmul_forward<T: Scalar>(
     mut out: ArrayViewMut2<'_, T>,
     a: ArrayView2<'_, T>,
     b: ArrayView2<'_, T>,
+    compute: Compute,
 ) -> Result<()> {
     check_shape("matmul forward", "b", b.shape(), &[a.ncols(), b.ncols()])?;
     check_shape(
@@ -20,7 +21,7 @@ pub fn matmul_forward<T: Scalar>(
         out.shape(),
         &[a.nrows(), b.ncols()],
     )?;
-    mat_mul(T::one(), &a, &b, T::zero(), &mut out);
+    mat_mul(T::one(), &a, &b, T::zero(), &mut out, compute);
     Ok(())
 }
 
@@ -31,6 +32,7 @@ pub fn matmul_backward<T: Scalar>(
     dout: ArrayView2<'_, T>,
     a: ArrayView2<'_, T>,
     b: ArrayView2<'_, T>,
+    compute: Compute,
 ) -> Result<()> {
     check_shape("matmul backward", "b", b.shape(), &[a.ncols(), b.ncols()])?;
     check_shape(
@@ -41,8 +43,8 @@ pub fn matmul_backward<T: Scalar>(
     )?;
     check_shape("matmul backward", "da", da.shape(), a.shape())?;
     check_shape("matmul backward", "db", db.shape(), b.shape())?;
-    mat_mul(T::one(), &dout, &b.t(), T::one(), &mut da);
-    mat_mul(T::one(), &a.t(), &dout, T::one(), &mut db);
+    mat_mul(T::one(), &dout, &b.t(), T::one(), &mut da, compute);
+    mat_mul(T::one(), &a.t(), &dout, T::one(), &mut db, compute);
     Ok(())
 }
 
@@ -51,6 +53,7 @@ pub fn bmm_forward<T: Scalar>(
     mut out: ArrayViewMut3<'_, T>,
     a: ArrayView3<'_, T>,
     b: ArrayView3<'_, T>,
+    compute: Compute,
 ) -> Result<()> {
     check_shape("bmm forward", "b", &b.shape()[..1], &a.shape()[..1])?;
     check_shape("bmm forward", "out", &out.shape()[..1], &a.shape()[..1])?;
@@ -59,7 +62,7 @@ pub fn bmm_forward<T: Scalar>(
         .zip(a.axis_iter(Axis(0)))
         .zip(b.axis_iter(Axis(0)))
     {
-        matmul_forward(o, a, b)?;
+        matmul_forward(o, a, b, compute)?;
     }
     Ok(())
 }
@@ -71,6 +74,7 @@ pub fn bmm_backward<T: Scalar>(
     dout: ArrayView3<'_, T>,
     a: ArrayView3<'_, T>,
     b: ArrayView3<'_, T>,
+    compute: Compute,
 ) -> Result<()> {
     let batch = &a.shape()[..1];
     for (what, shape) in [
@@ -86,7 +90,7 @@ pub fn bmm_backward<T: Scalar>(
         .zip(dout.axis_iter(Axis(0)))
         .zip(a.axis_iter(Axis(0)).zip(b.axis_iter(Axis(0))))
     {
-        matmul_backward(da, db, dout, a, b)?;
+        matmul_backward(da, db, dout, a, b, compute)?;
     }
     Ok(())
 }
@@ -104,7 +108,7 @@ mod tests {
             array![[1.0, 0.0], [1.0, 1.0]],
         );
         let mut out = Array2::zeros((2, 2));
-        matmul_forward(out.view_mut(), a.view(), b.t()).unwrap();
+        matmul_forward(out.view_mut(), a.view(), b.t(), Compute::default()).unwrap();
         // a · bᵀ = [[1 2],[3 4]] · [[1 1],[0 1]]
         assert_eq!(out, array![[1.0, 3.0], [3.0, 7.0]]);
     }
@@ -119,7 +123,13 @@ mod tests {
             &[uniform(&[9, 4], 41), uniform(&[10, 4], 42)],
             &mut |i| {
                 let mut out = Array2::zeros((9, 10));
-                matmul_forward(out.view_mut(), ix2(&i[0]).view(), ix2(&i[1]).t()).unwrap();
+                matmul_forward(
+                    out.view_mut(),
+                    ix2(&i[0]).view(),
+                    ix2(&i[1]).t(),
+                    Compute::default(),
+                )
+                .unwrap();
                 out.into_dyn()
             },
             &mut |i, dout| {
@@ -130,6 +140,7 @@ mod tests {
                     ix2(dout).view(),
                     ix2(&i[0]).view(),
                     ix2(&i[1]).t(),
+                    Compute::default(),
                 )
                 .unwrap();
                 vec![da.into_dyn(), db.into_dyn()]
@@ -145,7 +156,13 @@ mod tests {
             &[uniform(&[2, 3, 4], 43), uniform(&[2, 4, 2], 44)],
             &mut |i| {
                 let mut out = Array3::zeros((2, 3, 2));
-                bmm_forward(out.view_mut(), ix3(&i[0]).view(), ix3(&i[1]).view()).unwrap();
+                bmm_forward(
+                    out.view_mut(),
+                    ix3(&i[0]).view(),
+                    ix3(&i[1]).view(),
+                    Compute::default(),
+                )
+                .unwrap();
                 out.into_dyn()
             },
             &mut |i, dout| {
@@ -156,6 +173,7 @@ mod tests {
                     ix3(dout).view(),
                     ix3(&i[0]).view(),
                     ix3(&i[1]).view(),
+                    Compute::default(),
                 )
                 .unwrap();
                 vec![da.into_dyn(), db.into_dyn()]
