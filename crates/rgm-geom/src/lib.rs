@@ -27,6 +27,7 @@ pub mod normals;
 pub mod refine;
 pub mod refiner;
 pub mod registrar;
+pub mod ransac;
 pub mod registration;
 pub mod thinning;
 pub mod transform;
