@@ -33,12 +33,13 @@ use std::str::FromStr;
 use rgm_geom::best_of::{Acceptance, BestOf, Cascade, SCORE_DISTANCE};
 use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::icp::{self, IcpConfig};
+use rgm_geom::ransac::RansacConfig;
 use rgm_geom::refine::{RefineConfig, ResolutionConfig};
 use rgm_geom::refiner::AtSpacing;
 use rgm_geom::registrar::{
     AtResolution, DynRegistrar, Normalised, OnFirstUse, Refined, Registrar, UpTo,
 };
-use rgm_geom::thinning::{Thinned, Thinning};
+use rgm_geom::thinning::{Thinned, Thinning, DENSITY_POINTS};
 use rgm_geom::triplets::TripletConfig;
 
 use rgm_nn::Precision;
@@ -145,6 +146,22 @@ pub const WHOLE_DISTANCE: f64 = 0.05;
 /// that changes no partial validation pair's course, far above any wrong result's
 /// (`docs/training/default-study/cascade-whole-overlap.md`).
 pub const WHOLE_OVERLAP: f64 = 1.98;
+
+/// When the default takes the scene stage's RANSAC result on a dense pair without running the
+/// object cascade after it: an overlap score of at least [`ACCEPT`]'s, whatever its turned
+/// share (a room overlaps itself turned about the vertical as a box does, and the measure on
+/// a dense pair costs more than it tells there).
+pub const SCENE_ACCEPT: Acceptance = Acceptance {
+    score: ACCEPT.score,
+    turned_share: f64::INFINITY,
+    whole: (WHOLE_DISTANCE, 0.0),
+};
+
+/// The scene stage's RANSAC ([`RansacConfig`]): Open3D's tutorial settings, its voxel read as
+/// the thinned pair's point spacing.
+pub fn scene_ransac() -> RansacConfig {
+    RansacConfig::default()
+}
 
 /// Points matched per cloud with given weights unless `match_points` says otherwise: the paper
 /// trains on 1,024-point clouds, and the network's memory grows with the square of the points.
@@ -358,7 +375,19 @@ where
     let composite: Box<dyn DynRegistrar<MethodError>> = match refine {
         None => composite,
         Some(_) => Box::new(AtResolution {
-            inner: composite,
+            // A pair denser than the training clouds may be a scene: RANSAC on its own
+            // features first, the object cascade where its result overlaps too little.
+            inner: UpTo {
+                points: DENSITY_POINTS,
+                small: composite.clone(),
+                other: Cascade {
+                    base: AUTO,
+                    first: Box::new(scene_ransac()),
+                    rest: vec![composite],
+                    accept: SCENE_ACCEPT,
+                    scoring_distance,
+                },
+            },
             refiner: AtSpacing {
                 coarser_than: scoring_distance,
                 scoring_distance,
