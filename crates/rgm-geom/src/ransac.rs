@@ -283,7 +283,8 @@ fn chunk_winners(
     let per_chunk: Vec<(usize, usize, Option<RigidTransform>)> = (0..chunks)
         .into_par_iter()
         .map(|c| {
-            let mut rng = StdRng::seed_from_u64(config.seed.wrapping_add(c as u64));
+            // The seed in the high bits: another seed draws from other generators, not shifted ones.
+            let mut rng = StdRng::seed_from_u64(config.seed << 32 ^ c as u64);
             let draws = CHUNK.min(config.draws - c * CHUNK);
             let mut best = (0, 0, None);
             for _ in 0..draws {
