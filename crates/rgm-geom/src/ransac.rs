@@ -427,8 +427,13 @@ fn thinned_pair(
 
 /// RANSAC on FPFH matches ([`register`]).
 impl<E: From<GeomError>> Registrar<E> for RansacConfig {
+    /// `ransac+icp`: its last step is point-to-plane ICP ([`RansacConfig::refinement`]), so a
+    /// composite of it and candidates refined by [`crate::refine`] is named as refined too.
     fn id(&self) -> MethodId {
-        MethodId::plain(NAME)
+        MethodId {
+            base: NAME,
+            refiner: (!self.refinement.spacings.is_empty()).then_some(crate::refine::NAME),
+        }
     }
 
     fn register_with_progress(

@@ -14,7 +14,9 @@
 //!
 //! (`BestOf[first, rest]` in place of the `Cascade` when `accept` takes nothing; inside the
 //! `Normalised`, `UpTo { points: 32, small: TripletConfig, .. }` sends a pair of a few points to
-//! [`rgm_geom::triplets`].)
+//! [`rgm_geom::triplets`]; with `+icp`, a pair denser than the training clouds (a scan, a room)
+//! goes through `Cascade { first: RansacConfig, rest: [the Thinned composite] }` first judged by
+//! [`SCENE_ACCEPT`]: RANSAC on the pair's own FPFH matches, [`rgm_geom::ransac`].)
 //!
 //! `Refined<R>` refines with [`RefineConfig`] (`+icp`); any other [`rgm_geom::refiner::Refiner`]
 //! composes the same way (`Refined::new(FgrConfig::default(), IcpConfig::default())` is
