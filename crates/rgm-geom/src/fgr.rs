@@ -290,6 +290,34 @@ fn mutual_matches_reporting(
     target: &[Fpfh],
     rows_done: &mut dyn FnMut(f64),
 ) -> Vec<(usize, usize)> {
+    let (row_best, col_best) = nearest_features_reporting(source, target, rows_done);
+    row_best
+        .iter()
+        .enumerate()
+        .filter(|&(i, &(_, j))| j != usize::MAX && col_best[j].1 == i)
+        .map(|(i, &(_, j))| (i, j))
+        .collect()
+}
+
+/// Each source feature's nearest target feature, as (i, j) sorted by i (exact, brute force;
+/// ties to the lowest index): Open3D's matching without its mutual filter.
+pub fn nearest_matches(source: &[Fpfh], target: &[Fpfh]) -> Vec<(usize, usize)> {
+    let (row_best, _) = nearest_features_reporting(source, target, &mut |_| {});
+    row_best
+        .iter()
+        .enumerate()
+        .filter(|&(_, &(_, j))| j != usize::MAX)
+        .map(|(i, &(_, j))| (i, j))
+        .collect()
+}
+
+/// Each source feature's nearest target feature (N,) and each target feature's nearest source
+/// feature (M,), telling `rows_done` as [`mutual_matches_reporting`] does.
+fn nearest_features_reporting(
+    source: &[Fpfh],
+    target: &[Fpfh],
+    rows_done: &mut dyn FnMut(f64),
+) -> (Vec<Nearest>, Vec<Nearest>) {
     // One pass over the (N, M) squared distances keeps each row's and each column's minimum,
     // in blocks of rows that run side by side, a wave of them per thread at a time.
     let tiles = feature_tiles(target); // (⌈M/T⌉, 33, T)
@@ -322,12 +350,7 @@ fn mutual_matches_reporting(
             }
         }
     }
-    row_best
-        .iter()
-        .enumerate()
-        .filter(|&(i, &(_, j))| j != usize::MAX && col_best[j].1 == i)
-        .map(|(i, &(_, j))| (i, j))
-        .collect()
+    (row_best, col_best)
 }
 
 /// Each row's nearest tile lane and each column's nearest row between the source rows `rows`

@@ -25,6 +25,7 @@ pub mod knn;
 pub mod lockstep;
 pub mod metrics;
 pub mod normals;
+pub mod ransac;
 pub mod refine;
 pub mod refiner;
 pub mod registrar;

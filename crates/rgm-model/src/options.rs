@@ -14,7 +14,9 @@
 //!
 //! (`BestOf[first, rest]` in place of the `Cascade` when `accept` takes nothing; inside the
 //! `Normalised`, `UpTo { points: 32, small: TripletConfig, .. }` sends a pair of a few points to
-//! [`rgm_geom::triplets`].)
+//! [`rgm_geom::triplets`]; with `+icp`, a pair denser than the training clouds (a scan, a room)
+//! goes through `Cascade { first: RansacConfig, rest: [the Thinned composite] }` first judged by
+//! [`SCENE_ACCEPT`]: RANSAC on the pair's own FPFH matches, [`rgm_geom::ransac`].)
 //!
 //! [`Checked`] doubts a refined result whose overlap is not one where the clouds coincide
 //! ([`REFINED_CHECKS`]); the unrefined methods, calibrated on no data, are not checked.
@@ -37,12 +39,13 @@ use rgm_geom::best_of::{Acceptance, BestOf, Cascade, SCORE_DISTANCE};
 use rgm_geom::coincidence::{Checked, Coincides, CoincidesAtSpacing};
 use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::icp::{self, IcpConfig};
+use rgm_geom::ransac::RansacConfig;
 use rgm_geom::refine::{RefineConfig, ResolutionConfig};
 use rgm_geom::refiner::AtSpacing;
 use rgm_geom::registrar::{
     AtResolution, DynRegistrar, Normalised, OnFirstUse, Refined, Registrar, UpTo,
 };
-use rgm_geom::thinning::{Thinned, Thinning};
+use rgm_geom::thinning::{Thinned, Thinning, DENSITY_POINTS};
 use rgm_geom::triplets::TripletConfig;
 
 use rgm_nn::Precision;
@@ -171,6 +174,22 @@ pub const COINCIDES_AT_SPACING: CoincidesAtSpacing = CoincidesAtSpacing(Coincide
 
 /// The checks of a refined result: [`COINCIDES`], then [`COINCIDES_AT_SPACING`].
 pub const REFINED_CHECKS: (Coincides, CoincidesAtSpacing) = (COINCIDES, COINCIDES_AT_SPACING);
+
+/// When the default takes the scene stage's RANSAC result on a dense pair without running the
+/// object cascade after it: an overlap score of at least [`ACCEPT`]'s, whatever its turned
+/// share (a room overlaps itself turned about the vertical as a box does, and the measure on
+/// a dense pair costs more than it tells there).
+pub const SCENE_ACCEPT: Acceptance = Acceptance {
+    score: ACCEPT.score,
+    turned_share: f64::INFINITY,
+    whole: (WHOLE_DISTANCE, 0.0),
+};
+
+/// The scene stage's RANSAC ([`RansacConfig`]): Open3D's tutorial settings, its voxel read as
+/// the thinned pair's point spacing.
+pub fn scene_ransac() -> RansacConfig {
+    RansacConfig::default()
+}
 
 /// Points matched per cloud with given weights unless `match_points` says otherwise: the paper
 /// trains on 1,024-point clouds, and the network's memory grows with the square of the points.
@@ -388,7 +407,19 @@ where
         None => composite,
         Some(_) => Box::new(Checked {
             inner: AtResolution {
-                inner: composite,
+                // A pair denser than the training clouds may be a scene: RANSAC on its own
+                // features first, the object cascade where its result overlaps too little.
+                inner: UpTo {
+                    points: DENSITY_POINTS,
+                    small: composite.clone(),
+                    other: Cascade {
+                        base: AUTO,
+                        first: Box::new(scene_ransac()),
+                        rest: vec![composite],
+                        accept: SCENE_ACCEPT,
+                        scoring_distance,
+                    },
+                },
                 refiner: AtSpacing {
                     coarser_than: scoring_distance,
                     scoring_distance,
