@@ -15,6 +15,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
+use crate::coincidence::CoincidesAtSpacing;
 use crate::fgr::Progress;
 use crate::registrar::{elapsed_ms, Candidate, DynRegistrar, MethodId, Registrar, Registration};
 use crate::registration::{score, RegistrationResult};
@@ -44,6 +45,10 @@ pub struct Acceptance {
     /// lowers the overlap at [`SCORE_DISTANCE`] far more than at a looser distance, would
     /// otherwise make a right result look as doubtful as a symmetric shape's.
     pub whole: (f64, f64),
+    /// A check the result must pass too (the coincidence of a dense pair at its point
+    /// spacing): a result that overlaps enough without coinciding is not taken, and the later
+    /// candidates run.
+    pub coincides: Option<CoincidesAtSpacing>,
 }
 
 impl Acceptance {
@@ -52,6 +57,7 @@ impl Acceptance {
         score: f64::INFINITY,
         turned_share: 0.0,
         whole: (SCORE_DISTANCE, f64::INFINITY),
+        coincides: None,
     };
 
     /// Whether `transform`, which scores `score` on the pair, ends the cascade; its
@@ -69,6 +75,9 @@ impl Acceptance {
             && (whole <= 0.0
                 || overlap_score_at(source, target, transform, distance) >= whole
                 || turned_share(source, target, transform) <= self.turned_share)
+            && self
+                .coincides
+                .is_none_or(|check| check.takes(source, target, transform))
     }
 }
 
@@ -614,6 +623,7 @@ mod tests {
             score,
             turned_share: f64::INFINITY,
             whole: (SCORE_DISTANCE, f64::INFINITY),
+            coincides: None,
         };
         // A first result at the threshold is taken; the second never runs.
         let (right, wrong) = (Fixed::new("right", 0.0), Fixed::new("wrong", 0.05));
@@ -636,6 +646,7 @@ mod tests {
             score: 2.0,
             turned_share: 0.5,
             whole: (SCORE_DISTANCE, whole),
+            coincides: None,
         };
         let found = run(&right, &wrong, symmetric(f64::INFINITY));
         assert_eq!((found.candidates.len(), found.chosen), (2, Some(0)));
@@ -649,6 +660,7 @@ mod tests {
             score: 0.0,
             turned_share: 0.0,
             whole: (distance, 1.95),
+            coincides: None,
         };
         let found = run(&near, &wrong, whole_at(0.04));
         assert_eq!((found.candidates.len(), found.chosen), (1, Some(0)));

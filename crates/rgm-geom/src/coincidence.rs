@@ -15,7 +15,6 @@ use std::time::Instant;
 
 use crate::best_of::pair_trees;
 use crate::fgr::Progress;
-use crate::refine::median_spacing;
 use crate::registrar::{elapsed_ms, MethodId, Registrar, Registration};
 use crate::thinning::DENSITY_POINTS;
 use crate::{GeomError, KnnIndex, PointCloud, RigidTransform};
@@ -129,13 +128,87 @@ impl Check for Coincides {
 }
 
 /// [`Coincides`] with its lengths in point spacings (the larger of the two clouds' median
-/// nearest-neighbour distances), on pairs denser than [`DENSITY_POINTS`] only: a sparse pair's
-/// noise may exceed its spacing, and the spacing then says nothing of a fit.
+/// nearest-neighbour distances), on pairs denser than [`DENSITY_POINTS`] whose points spread
+/// over their surfaces only: a sparse pair's noise may exceed its spacing, and a scan-line
+/// cloud's (a LiDAR sweep's rings) spacing is the gap along a line, far below the gap between
+/// lines that a right fit leaves between two sweeps. On those the spacing says nothing of a fit:
+/// the check doubts nothing and takes nothing.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CoincidesAtSpacing(pub Coincides);
 
-/// Points whose nearest neighbour sets a cloud's spacing.
+/// Points whose neighbours set a cloud's spacing.
 const SPACING_SAMPLE: usize = 2000;
+
+/// The least ratio of a cloud's median distance to its 16th nearest neighbour to the median
+/// distance to its nearest that marks scan lines: points spread over a surface reach 16
+/// neighbours within about 4 spacings (2.0–3.5 measured on the Stanford scans, the redkitchen
+/// fragments and the merged bunny), points along lines within about 8 (7.5 on both sweeps of
+/// the LiDAR pair; `docs/confidence.md`).
+const SCAN_LINES: f64 = 5.0;
+
+/// `cloud`'s median nearest-neighbour distance, or `None` when its points lie along scan lines
+/// ([`SCAN_LINES`]).
+fn surface_spacing(cloud: &PointCloud, index: &KnnIndex) -> Option<f64> {
+    let (mut first, mut sixteenth): (Vec<f64>, Vec<f64>) = cloud
+        .points
+        .iter()
+        .step_by(cloud.len().div_ceil(SPACING_SAMPLE).max(1))
+        .filter_map(|p| {
+            let near = index.k_nearest(p, 17);
+            Some((near.get(1)?.1, near.get(16)?.1))
+        })
+        .unzip();
+    if first.is_empty() {
+        return None;
+    }
+    let median = |v: &mut Vec<f64>| {
+        let middle = v.len() / 2;
+        *v.select_nth_unstable_by(middle, f64::total_cmp).1
+    };
+    let (spacing, wide) = (median(&mut first), median(&mut sixteenth));
+    (wide < SCAN_LINES * spacing).then_some(spacing)
+}
+
+impl CoincidesAtSpacing {
+    /// The pair's spacing, when the check applies to it.
+    fn spacing(
+        &self,
+        source: (&PointCloud, &KnnIndex),
+        target: (&PointCloud, &KnnIndex),
+    ) -> Option<f64> {
+        if source.0.len().max(target.0.len()) <= DENSITY_POINTS {
+            return None;
+        }
+        Some(surface_spacing(source.0, source.1)?.max(surface_spacing(target.0, target.1)?))
+    }
+
+    /// Its doubt of `transform` on the pair: none where it does not apply.
+    pub fn doubt_of(
+        &self,
+        source: (&PointCloud, &KnnIndex),
+        target: (&PointCloud, &KnnIndex),
+        transform: &RigidTransform,
+    ) -> Option<String> {
+        let spacing = self.spacing(source, target)?;
+        self.0
+            .doubt_at(source, target, transform, spacing, "point spacings")
+    }
+
+    /// Whether it takes `transform` as coinciding: never where it does not apply, so that a
+    /// cascade it judges runs its later candidates there.
+    pub fn takes(
+        &self,
+        source: (&PointCloud, &KnnIndex),
+        target: (&PointCloud, &KnnIndex),
+        transform: &RigidTransform,
+    ) -> bool {
+        self.spacing(source, target).is_some_and(|spacing| {
+            self.0
+                .doubt_at(source, target, transform, spacing, "point spacings")
+                .is_none()
+        })
+    }
+}
 
 impl Check for CoincidesAtSpacing {
     fn doubt(
@@ -144,18 +217,7 @@ impl Check for CoincidesAtSpacing {
         target: (&PointCloud, &KnnIndex),
         found: &Registration,
     ) -> Option<String> {
-        if source.0.len().max(target.0.len()) <= DENSITY_POINTS {
-            return None;
-        }
-        let spacing = median_spacing(&source.0.points, source.1, SPACING_SAMPLE)
-            .max(median_spacing(&target.0.points, target.1, SPACING_SAMPLE));
-        self.0.doubt_at(
-            source,
-            target,
-            &found.result.t_target_source,
-            spacing,
-            "point spacings",
-        )
+        self.doubt_of(source, target, &found.result.t_target_source)
     }
 }
 
@@ -303,5 +365,35 @@ mod tests {
         assert!(doubt.starts_with("the clouds lie near each other but do not coincide"));
         let off = RigidTransform::new(Matrix3::identity(), Vector3::new(0.0, 0.0, 5.0));
         assert!(checked(off.compose(&right)).is_some());
+    }
+
+    /// A grid over a plane has a surface spacing; lines of points 0.001 apart, 0.05 from each
+    /// other, as a LiDAR sweep's rings, have none: the check neither doubts nor takes there.
+    #[test]
+    fn points_along_scan_lines_have_no_surface_spacing() {
+        let grid = |step: (f64, f64), n: (usize, usize)| {
+            PointCloud::new(
+                (0..n.0)
+                    .flat_map(|i| (0..n.1).map(move |j| (i, j)))
+                    .map(|(i, j)| Point3::new(i as f64 * step.0, j as f64 * step.1, 0.0))
+                    .collect(),
+            )
+        };
+        let surface = grid((0.01, 0.01), (60, 60));
+        let (s, si) = indexed(&surface);
+        let spacing = surface_spacing(s, &si).expect("a surface");
+        assert!((spacing - 0.01).abs() < 1e-9, "{spacing}");
+        let lines = grid((0.05, 0.001), (20, 200));
+        let (l, li) = indexed(&lines);
+        assert_eq!(surface_spacing(l, &li), None);
+        let check = CoincidesAtSpacing(Coincides {
+            near: 1.5,
+            far: 16.0,
+            least: 0.5,
+        });
+        let same = RigidTransform::identity();
+        assert!(check.takes((s, &si), (s, &si), &same));
+        assert!(!check.takes((l, &li), (l, &li), &same));
+        assert_eq!(check.doubt_of((l, &li), (l, &li), &same), None);
     }
 }

@@ -41,6 +41,11 @@ pub const NAME: &str = "ransac";
 /// Draws per chunk: a chunk's draws come from one generator seeded by the chunk's index.
 const CHUNK: usize = 1024;
 
+/// Chunks run side by side before the draws made so far are weighed against
+/// [`RansacConfig::confidence`]: a fixed wave, so that where the draws stop does not depend on
+/// the threads.
+const WAVE: usize = 8;
+
 /// Settings of [`register`]. Lengths are in point spacings of the thinned pair; the defaults
 /// are Open3D's tutorial settings (normals at 2 voxels, FPFH at 5, inliers within 1.5, edges
 /// within 0.9, 100,000 draws) with its voxel read as one spacing.
@@ -61,8 +66,12 @@ pub struct RansacConfig {
     /// Match only mutual nearest features (default false: each source point's nearest target
     /// feature, as Open3D's tutorial; the mutual filter leaves too few right matches on rooms).
     pub mutual: bool,
-    /// Triples drawn (default 100,000).
+    /// Triples drawn, at most (default 100,000).
     pub draws: usize,
+    /// The draws stop, after a wave of chunks, once they make it this likely that one of them
+    /// was three inliers of the best hypothesis found (Open3D's `confidence`, default 0.999): a
+    /// scan pair whose matches are mostly right needs a few hundred, a room all of them.
+    pub confidence: f64,
     /// Refits of the best hypothesis on its inliers, at most (default 5).
     pub refits: usize,
     /// Seed of the draws (default 0).
@@ -84,6 +93,7 @@ impl Default for RansacConfig {
             edge_similarity: 0.9,
             mutual: false,
             draws: 100_000,
+            confidence: 0.999,
             refits: 5,
             seed: 0,
             refinement: ResolutionConfig::default(),
@@ -271,7 +281,8 @@ fn no_hypothesis(op: &'static str, matches: usize) -> GeomError {
 }
 
 /// Each chunk's best hypothesis, as (inliers, transform), in chunk order, and the hypotheses
-/// scored in all.
+/// scored in all; the chunks run in waves of [`WAVE`] until the draws reach `config.draws` or
+/// [`draws_needed`] for the best hypothesis so far.
 fn chunk_winners(
     from: &[Point3<f64>],
     to: &[Point3<f64>],
@@ -280,33 +291,63 @@ fn chunk_winners(
 ) -> (Vec<(usize, RigidTransform)>, usize) {
     let chunks = config.draws.div_ceil(CHUNK);
     // Per chunk: (inliers, hypotheses scored, transform) of its best hypothesis.
-    let per_chunk: Vec<(usize, usize, Option<RigidTransform>)> = (0..chunks)
-        .into_par_iter()
-        .map(|c| {
-            // The seed in the high bits: another seed draws from other generators, not shifted ones.
-            let mut rng = StdRng::seed_from_u64(config.seed << 32 ^ c as u64);
-            let draws = CHUNK.min(config.draws - c * CHUNK);
-            let mut best = (0, 0, None);
-            for _ in 0..draws {
-                let Some(t) = hypothesis(from, to, &mut rng, squared, config.edge_similarity)
-                else {
-                    continue;
-                };
-                best.1 += 1;
-                let count = inliers_of(from, to, &t, squared).count();
-                if count > best.0 {
-                    (best.0, best.2) = (count, Some(t));
-                }
-            }
-            best
-        })
-        .collect();
+    let mut per_chunk: Vec<(usize, usize, Option<RigidTransform>)> = Vec::with_capacity(chunks);
+    while per_chunk.len() < chunks {
+        let wave = per_chunk.len()..(per_chunk.len() + WAVE).min(chunks);
+        per_chunk.par_extend(
+            wave.into_par_iter()
+                .map(|c| chunk_winner(from, to, squared, config, c)),
+        );
+        let best = per_chunk.iter().map(|c| c.0).max().unwrap_or(0);
+        let drawn = (per_chunk.len() * CHUNK).min(config.draws);
+        if drawn as f64 >= draws_needed(best as f64 / from.len() as f64, config.confidence) {
+            break;
+        }
+    }
     let hypotheses = per_chunk.iter().map(|c| c.1).sum();
     let winners = per_chunk
         .into_iter()
         .filter_map(|(count, _, t)| t.map(|t| (count, t)))
         .collect();
     (winners, hypotheses)
+}
+
+/// Chunk `c`'s best hypothesis: (inliers, hypotheses scored, transform).
+fn chunk_winner(
+    from: &[Point3<f64>],
+    to: &[Point3<f64>],
+    squared: f64,
+    config: &RansacConfig,
+    c: usize,
+) -> (usize, usize, Option<RigidTransform>) {
+    // The seed in the high bits: another seed draws from other generators, not shifted ones.
+    let mut rng = StdRng::seed_from_u64(config.seed << 32 ^ c as u64);
+    let draws = CHUNK.min(config.draws - c * CHUNK);
+    let mut best = (0, 0, None);
+    for _ in 0..draws {
+        let Some(t) = hypothesis(from, to, &mut rng, squared, config.edge_similarity) else {
+            continue;
+        };
+        best.1 += 1;
+        let count = inliers_of(from, to, &t, squared).count();
+        if count > best.0 {
+            (best.0, best.2) = (count, Some(t));
+        }
+    }
+    best
+}
+
+/// Draws after which one of them was three inliers with probability `confidence`, when a share
+/// `inliers` of the matches are (infinite when none is).
+fn draws_needed(inliers: f64, confidence: f64) -> f64 {
+    let all_three = inliers.powi(3);
+    if all_three <= 0.0 {
+        return f64::INFINITY;
+    }
+    if all_three >= 1.0 {
+        return 0.0;
+    }
+    (1.0 - confidence).ln() / (1.0 - all_three).ln()
 }
 
 /// `transform` refitted (Kabsch) on the matches within √`squared` of it, at most `refits`
@@ -492,6 +533,15 @@ mod tests {
         let found = consensus(&from, &to, 0.01, &config).unwrap();
         assert_near(&found.t_target_source, &truth, 1e-6, 1e-6);
         assert_eq!(found.inliers, (0..60).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn the_draws_needed_follow_the_inlier_share() {
+        // 0.999 confidence: 6 draws at 90 % inliers, 6,905 at 10 %, none without an inlier.
+        assert_eq!(draws_needed(0.9, 0.999).ceil(), 6.0);
+        assert_eq!(draws_needed(0.1, 0.999).ceil(), 6905.0);
+        assert_eq!(draws_needed(0.0, 0.999), f64::INFINITY);
+        assert_eq!(draws_needed(1.0, 0.999), 0.0);
     }
 
     #[test]

@@ -208,6 +208,7 @@ mod tests {
                     score: 1.9,
                     turned_share: f64::INFINITY,
                     whole: (SCORE_DISTANCE, f64::INFINITY),
+                    coincides: None,
                 },
                 scoring_distance: SCORE_DISTANCE,
             },

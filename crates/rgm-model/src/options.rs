@@ -141,6 +141,7 @@ pub const ACCEPT: Acceptance = Acceptance {
     score: 0.55,
     turned_share: 0.3,
     whole: (WHOLE_DISTANCE, WHOLE_OVERLAP),
+    coincides: None,
 };
 
 /// The distance (unit-sphere units) of [`ACCEPT`]'s whole overlap: the bound of the benchmark's
@@ -175,14 +176,16 @@ pub const COINCIDES_AT_SPACING: CoincidesAtSpacing = CoincidesAtSpacing(Coincide
 /// The checks of a refined result: [`COINCIDES`], then [`COINCIDES_AT_SPACING`].
 pub const REFINED_CHECKS: (Coincides, CoincidesAtSpacing) = (COINCIDES, COINCIDES_AT_SPACING);
 
-/// When the default takes the scene stage's RANSAC result on a dense pair without running the
-/// object cascade after it: an overlap score of at least [`ACCEPT`]'s, whatever its turned
-/// share (a room overlaps itself turned about the vertical as a box does, and the measure on
-/// a dense pair costs more than it tells there).
+/// When the default takes the object cascade's result on a dense pair without running the
+/// scene stage's RANSAC after it: an overlap score of at least [`ACCEPT`]'s, whatever its
+/// turned share (a room overlaps itself turned about the vertical as a box does, and the
+/// measure on a dense pair costs more than it tells there), and clouds that coincide at their
+/// point spacing ([`COINCIDES_AT_SPACING`]; a room slid along its floor overlaps well).
 pub const SCENE_ACCEPT: Acceptance = Acceptance {
     score: ACCEPT.score,
     turned_share: f64::INFINITY,
     whole: (WHOLE_DISTANCE, 0.0),
+    coincides: Some(COINCIDES_AT_SPACING),
 };
 
 /// The scene stage's RANSAC ([`RansacConfig`]): Open3D's tutorial settings, its voxel read as
@@ -407,15 +410,15 @@ where
         None => composite,
         Some(_) => Box::new(Checked {
             inner: AtResolution {
-                // A pair denser than the training clouds may be a scene: RANSAC on its own
-                // features first, the object cascade where its result overlaps too little.
+                // A pair denser than the training clouds may be a scene: the object cascade
+                // first, RANSAC on the pair's own features where its result is not taken.
                 inner: UpTo {
                     points: DENSITY_POINTS,
                     small: composite.clone(),
                     other: Cascade {
                         base: AUTO,
-                        first: Box::new(scene_ransac()),
-                        rest: vec![composite],
+                        first: composite,
+                        rest: vec![Box::new(scene_ransac())],
                         accept: SCENE_ACCEPT,
                         scoring_distance,
                     },
