@@ -15,8 +15,9 @@
 //! (`BestOf[first, rest]` in place of the `Cascade` when `accept` takes nothing; inside the
 //! `Normalised`, `UpTo { points: 32, small: TripletConfig, .. }` sends a pair of a few points to
 //! [`rgm_geom::triplets`]; with `+icp`, a pair denser than the training clouds (a scan, a room)
-//! goes through `Cascade { first: RansacConfig, rest: [the Thinned composite] }` first judged by
-//! [`SCENE_ACCEPT`]: RANSAC on the pair's own FPFH matches, [`rgm_geom::ransac`].)
+//! goes through `Cascade { first: the Thinned composite, rest: [RansacConfig] }` judged by
+//! [`SCENE_ACCEPT`]: RANSAC on the pair's own FPFH matches, [`rgm_geom::ransac`], where the
+//! object cascade's result does not coincide with the target at the pair's spacing.)
 //!
 //! [`Checked`] doubts a refined result whose overlap is not one where the clouds coincide
 //! ([`REFINED_CHECKS`]); the unrefined methods, calibrated on no data, are not checked.
