@@ -37,10 +37,10 @@ pub struct Acceptance {
     pub score: f64,
     /// The largest [`turned_share`] taken: above it the shape overlaps itself turned about an
     /// axis (a lamp, a box), the overlap cannot tell its pose, and the later candidates run.
+    /// Infinite: any, and neither it nor the whole overlap is measured.
     pub turned_share: f64,
     /// (distance, least overlap): a result whose [`overlap_score_at`] that distance reaches the
-    /// overlap is taken whatever its turned share (an overlap of 0 or less: any result scoring
-    /// `score`, without measuring anything more). Clouds that lie wholly on each other (full
+    /// overlap is taken whatever its turned share. Clouds that lie wholly on each other (full
     /// scans of one object) leave a turned pose nothing to fit better, while noise, which
     /// lowers the overlap at [`SCORE_DISTANCE`] far more than at a looser distance, would
     /// otherwise make a right result look as doubtful as a symmetric shape's.
@@ -72,7 +72,7 @@ impl Acceptance {
     ) -> bool {
         let (distance, whole) = self.whole;
         score >= self.score
-            && (whole <= 0.0
+            && (self.turned_share == f64::INFINITY
                 || overlap_score_at(source, target, transform, distance) >= whole
                 || turned_share(source, target, transform) <= self.turned_share)
             && self

@@ -162,7 +162,7 @@ impl PointCloud {
 }
 
 /// The median of `values` (the upper one of an even count); NaN for none.
-fn median(mut values: Vec<f64>) -> f64 {
+pub(crate) fn median(mut values: Vec<f64>) -> f64 {
     if values.is_empty() {
         return f64::NAN;
     }

@@ -14,6 +14,7 @@
 use std::time::Instant;
 
 use crate::best_of::pair_trees;
+use crate::cloud::median;
 use crate::fgr::Progress;
 use crate::registrar::{elapsed_ms, MethodId, Registrar, Registration};
 use crate::thinning::DENSITY_POINTS;
@@ -93,6 +94,17 @@ pub struct Coincides {
 }
 
 impl Coincides {
+    /// [`coincidence`] of `transform` at its lengths scaled by `unit`.
+    fn share_at(
+        &self,
+        source: (&PointCloud, &KnnIndex),
+        target: (&PointCloud, &KnnIndex),
+        transform: &RigidTransform,
+        unit: f64,
+    ) -> f64 {
+        coincidence(source, target, transform, self.near * unit, self.far * unit)
+    }
+
     /// Its doubt of `transform`, lengths scaled by `unit` and named `in_units`.
     fn doubt_at(
         &self,
@@ -102,8 +114,7 @@ impl Coincides {
         unit: f64,
         in_units: &str,
     ) -> Option<String> {
-        let (near, far) = (self.near * unit, self.far * unit);
-        let share = coincidence(source, target, transform, near, far);
+        let share = self.share_at(source, target, transform, unit);
         (share < self.least).then(|| {
             format!(
                 "the clouds lie near each other but do not coincide: of the points within {} \
@@ -149,7 +160,7 @@ const SCAN_LINES: f64 = 5.0;
 /// `cloud`'s median nearest-neighbour distance, or `None` when its points lie along scan lines
 /// ([`SCAN_LINES`]).
 fn surface_spacing(cloud: &PointCloud, index: &KnnIndex) -> Option<f64> {
-    let (mut first, mut sixteenth): (Vec<f64>, Vec<f64>) = cloud
+    let (first, sixteenth): (Vec<f64>, Vec<f64>) = cloud
         .points
         .iter()
         .step_by(cloud.len().div_ceil(SPACING_SAMPLE).max(1))
@@ -158,14 +169,8 @@ fn surface_spacing(cloud: &PointCloud, index: &KnnIndex) -> Option<f64> {
             Some((near.get(1)?.1, near.get(16)?.1))
         })
         .unzip();
-    if first.is_empty() {
-        return None;
-    }
-    let median = |v: &mut Vec<f64>| {
-        let middle = v.len() / 2;
-        *v.select_nth_unstable_by(middle, f64::total_cmp).1
-    };
-    let (spacing, wide) = (median(&mut first), median(&mut sixteenth));
+    // Both NaN for a cloud of fewer than 17 points, which the comparison then refuses.
+    let (spacing, wide) = (median(first), median(sixteenth));
     (wide < SCAN_LINES * spacing).then_some(spacing)
 }
 
@@ -203,9 +208,7 @@ impl CoincidesAtSpacing {
         transform: &RigidTransform,
     ) -> bool {
         self.spacing(source, target).is_some_and(|spacing| {
-            self.0
-                .doubt_at(source, target, transform, spacing, "point spacings")
-                .is_none()
+            self.0.share_at(source, target, transform, spacing) >= self.0.least
         })
     }
 }

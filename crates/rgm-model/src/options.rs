@@ -185,7 +185,7 @@ pub const REFINED_CHECKS: (Coincides, CoincidesAtSpacing) = (COINCIDES, COINCIDE
 pub const SCENE_ACCEPT: Acceptance = Acceptance {
     score: ACCEPT.score,
     turned_share: f64::INFINITY,
-    whole: (WHOLE_DISTANCE, 0.0),
+    whole: (WHOLE_DISTANCE, f64::INFINITY),
     coincides: Some(COINCIDES_AT_SPACING),
 };
 
