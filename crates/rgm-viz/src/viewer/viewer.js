@@ -2,7 +2,7 @@
 // object whose point arrays are base64 of little-endian f32 (x, y, z) rows in the page's frame
 // (centred, within [-1, 1]); `after` moves the source into the target's frame.
 // With `#selftest` in the URL it draws both states, compares them and writes a verdict into
-// #selftest, for scripts/test-browser.sh.
+// #selftest, for scripts/test-browser.sh; `#before` opens it on the clouds before the transform.
 "use strict";
 (function () {
   var data = JSON.parse(document.getElementById("rgm-data").textContent);
@@ -235,7 +235,7 @@
       azimuth: Math.PI / 4, elevation: Math.PI / 6 };
   }
   resetCamera();
-  var state = { after: true };
+  var state = { after: location.hash.indexOf("before") < 0 }; // `#before`: open on the clouds as given
 
   function sub(a, b) { return [a[0] - b[0], a[1] - b[1], a[2] - b[2]]; }
   function cross(a, b) { return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]; }
@@ -308,11 +308,12 @@
       swatch(COLOURS.source, "source");
     }
     swatch(COLOURS.target, "target");
+    if (linesBox.checked && k > 0) swatch(COLOURS.line, "correspondence");
     legend.appendChild(document.createTextNode(state.after ? "(after the transform)" : "(before it)"));
   }
   toggle.addEventListener("click", function () { state.after = !state.after; showState(); redraw(); });
   colourBox.addEventListener("change", function () { showState(); redraw(); });
-  linesBox.addEventListener("change", redraw);
+  linesBox.addEventListener("change", function () { showState(); redraw(); });
   sizeSlider.addEventListener("input", redraw);
   document.getElementById("reset").addEventListener("click", function () { resetCamera(); redraw(); });
   window.addEventListener("resize", redraw);
@@ -383,6 +384,8 @@
       for (var i = 0; i < p.length; i += 4) if (p[i] < 250 || p[i + 1] < 250 || p[i + 2] < 250) count++;
       return count;
     };
+    state.after = true;
+    draw();
     var afterPixels = pixels();
     state.after = false;
     draw();
