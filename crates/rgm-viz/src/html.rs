@@ -88,15 +88,11 @@ pub struct ResultNotes {
 }
 
 impl ResultNotes {
-    /// The notes of `registration` by method `method`; its correspondences are drawn only when
-    /// `matches_are_rgms` (the network's hard matches: RGM unrefined), since a refined result's
-    /// correspondences are its inliers, which the colouring shows already.
-    pub fn of_registration(
-        method: &str,
-        registration: &Registration,
-        matches_are_rgms: bool,
-    ) -> Self {
-        let (correspondences, correspondences_note) = if matches_are_rgms {
+    /// The notes of `registration` by method `method` (as [`rgm_geom::MethodId`] spells it).
+    /// Its correspondences are drawn only when they are RGM's hard matches (`rgm`, unrefined):
+    /// a refined result's correspondences are its inliers, which the colouring shows already.
+    pub fn of_registration(method: &str, registration: &Registration) -> Self {
+        let (correspondences, correspondences_note) = if method == "rgm" {
             (
                 registration.correspondences.clone(),
                 "RGM's hard correspondences of its last pass".to_string(),
@@ -135,6 +131,20 @@ pub struct Page<'a> {
     pub notes: ResultNotes,
     /// Most points shown, both clouds together (at least 2).
     pub point_budget: usize,
+}
+
+/// Height of the frame of [`inline_frame`], in CSS pixels.
+pub const INLINE_HEIGHT_PX: u32 = 520;
+
+/// `page` inside an iframe (as its `srcdoc`), for a notebook's output cell: the page keeps its
+/// own document, so its script and style touch nothing of the notebook's, and the notebook file
+/// holds it whole (no file beside it to lose).
+pub fn inline_frame(page: &str) -> String {
+    let escaped = page.replace('&', "&amp;").replace('"', "&quot;");
+    format!(
+        "<iframe srcdoc=\"{escaped}\" sandbox=\"allow-scripts\" style=\"width: 100%; \
+         height: {INLINE_HEIGHT_PX}px; border: 1px solid #ccc\"></iframe>"
+    )
 }
 
 /// How many points of clouds of `n_source` and `n_target` points are shown within `budget`:
@@ -651,6 +661,49 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("finite"));
+    }
+
+    #[test]
+    fn the_inline_frame_holds_the_page_escaped() {
+        let cloud = helix(10);
+        let mut page = page(&cloud, &cloud, RigidTransform::identity());
+        page.title = "\"quoted\" & <b>".to_string();
+        let html = page.to_html().unwrap();
+        let frame = inline_frame(&html);
+        let srcdoc = frame
+            .strip_prefix("<iframe srcdoc=\"")
+            .and_then(|rest| rest.split_once('"'))
+            .unwrap()
+            .0;
+        assert_eq!(srcdoc.replace("&quot;", "\"").replace("&amp;", "&"), html);
+        assert!(frame.contains(&format!("height: {INLINE_HEIGHT_PX}px")));
+    }
+
+    #[test]
+    fn only_rgms_own_matches_are_drawn() {
+        let result = rgm_geom::RegistrationResult::scored(
+            RigidTransform::identity(),
+            2,
+            true,
+            score(
+                &[],
+                &KnnIndex::new(&[]),
+                &RigidTransform::identity(),
+                1.0,
+                None,
+            ),
+        );
+        let registration =
+            Registration::single(result, vec![(0, 1), (2, 3)], std::time::Instant::now());
+        assert_eq!(
+            ResultNotes::of_registration("rgm", &registration)
+                .correspondences
+                .len(),
+            2
+        );
+        let refined = ResultNotes::of_registration("rgm+icp", &registration);
+        assert!(refined.correspondences.is_empty());
+        assert!(refined.correspondences_note.contains("inliers"));
     }
 
     #[test]

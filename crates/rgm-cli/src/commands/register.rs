@@ -59,12 +59,11 @@ pub fn run(args: Args) -> Result<()> {
     if let (Some(out), None) = (&args.out, doubt) {
         write_point_cloud(out, &source.transformed(&result.t_target_source))?;
     }
-    let name = method.name();
     args.page.write(
         (&source, &target),
         (source_path, target_path),
         result.t_target_source,
-        ResultNotes::of_registration(&name, &registration, name == "rgm"),
+        ResultNotes::of_registration(&method.name(), &registration),
     )?;
     let rows = result.t_target_source.to_rows();
     if args.json {

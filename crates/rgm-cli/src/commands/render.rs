@@ -98,7 +98,7 @@ pub fn run(args: Args) -> Result<()> {
         ),
         (None, Some((name, found))) => (
             found.result.t_target_source,
-            ResultNotes::of_registration(name, found, name == "rgm"),
+            ResultNotes::of_registration(name, found),
         ),
         (None, None) => bail!("no transform given or found"),
     };
