@@ -216,22 +216,33 @@
   // ---- the camera: orbiting `centre` at `distance`, z up ----
   var IDENTITY = [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1];
   var FIELD_OF_VIEW = Math.PI / 4; // vertical
-  // The radius about the origin that holds the target and the source before and after.
-  var reach = 0;
-  for (var t = 0; t < m; t++) {
-    reach = Math.max(reach, Math.hypot(targetXyz[3 * t], targetXyz[3 * t + 1], targetXyz[3 * t + 2]));
+  // The view's centre, the target's per-axis median, and the radius about it that holds nearly
+  // everything drawn (the target and the source before and after): its 99.5th percentile, so
+  // a scanner's stray return far away does not shrink the view to a dot (zoom out to see it).
+  function median(values) {
+    var sorted = Float32Array.from(values).sort();
+    return sorted[Math.floor(sorted.length / 2)];
   }
+  var home = [0, 1, 2].map(function (axis) {
+    return median(targetXyz.filter(function (_, i) { return i % 3 === axis; }));
+  });
   var A = data.after;
+  var norms = new Float32Array(m + 2 * n); // (m + 2n,) distances from `home`
+  var away = function (x, y, z) { return Math.hypot(x - home[0], y - home[1], z - home[2]); };
+  for (var t = 0; t < m; t++) norms[t] = away(targetXyz[3 * t], targetXyz[3 * t + 1], targetXyz[3 * t + 2]);
   for (var s = 0; s < n; s++) {
     var x = sourceXyz[3 * s], y = sourceXyz[3 * s + 1], z = sourceXyz[3 * s + 2];
-    reach = Math.max(reach, Math.hypot(x, y, z), Math.hypot(A[0] * x + A[4] * y + A[8] * z + A[12],
-      A[1] * x + A[5] * y + A[9] * z + A[13], A[2] * x + A[6] * y + A[10] * z + A[14]));
+    norms[m + 2 * s] = away(x, y, z);
+    norms[m + 2 * s + 1] = away(A[0] * x + A[4] * y + A[8] * z + A[12],
+      A[1] * x + A[5] * y + A[9] * z + A[13], A[2] * x + A[6] * y + A[10] * z + A[14]);
   }
+  norms.sort();
+  var reach = norms[Math.floor(0.995 * (norms.length - 1))];
   var camera;
   function resetCamera() {
     var aspect = Math.min(1, (canvas.clientWidth || 1) / (canvas.clientHeight || 1));
     var half = Math.atan(Math.tan(FIELD_OF_VIEW / 2) * aspect); // the narrower half-angle
-    camera = { centre: [0, 0, 0], distance: 1.05 * Math.max(reach, 1e-3) / Math.sin(half),
+    camera = { centre: home.slice(), distance: 1.05 * Math.max(reach, 1e-3) / Math.sin(half),
       azimuth: Math.PI / 4, elevation: Math.PI / 6 };
   }
   resetCamera();
@@ -252,7 +263,7 @@
   function viewProjection() {
     var a = axes();
     var eye = [0, 1, 2].map(function (i) { return camera.centre[i] + camera.distance * a.back[i]; });
-    var near = camera.distance / 100, far = camera.distance + 2 * reach + 1;
+    var near = camera.distance / 100, far = camera.distance + 2 * norms[norms.length - 1] + 1;
     var f = 1 / Math.tan(FIELD_OF_VIEW / 2);
     var aspect = canvas.width / canvas.height;
     var tx = -dot(a.right, eye), ty = -dot(a.up, eye), tz = -dot(a.back, eye);
