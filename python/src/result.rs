@@ -84,6 +84,9 @@ impl Candidate {
     }
 }
 
+/// The arrays of a pair's clouds: (N, 3) source and (M, 3) target, float64.
+pub type CloudArrays = (Py<PyArray2<f64>>, Py<PyArray2<f64>>);
+
 /// The outcome of registering a source cloud onto a target cloud.
 ///
 /// Attributes:
@@ -144,7 +147,7 @@ pub struct RegistrationResult {
     #[pyo3(get)]
     reason: Option<String>,
     /// The arrays `register` was given, for the page; `None` for other results.
-    clouds: Option<(Py<PyArray2<f64>>, Py<PyArray2<f64>>)>, // (N, 3), (M, 3)
+    clouds: Option<CloudArrays>,
 }
 
 impl RegistrationResult {
@@ -155,7 +158,7 @@ impl RegistrationResult {
         name: &str,
         registration: &Registration,
         pairs: &[(usize, usize)],
-        clouds: Option<(Py<PyArray2<f64>>, Py<PyArray2<f64>>)>,
+        clouds: Option<CloudArrays>,
     ) -> PyResult<Self> {
         let result = &registration.result;
         let candidates = registration
