@@ -234,8 +234,8 @@ impl Page<'_> {
             inlier_flags[i] = 1;
         }
 
-        // One frame for the page: centred on the middle of everything drawn and scaled into the
-        // unit cube, so f32 holds any input; the moved source follows by `after`.
+        // One frame for the page: centred on the middle of everything drawn and scaled into
+        // [-1, 1]³, so f32 holds any input; the moved source follows by `after`.
         let frame = PageFrame::of(&[self.source, self.target, &moved_all]);
         let line_pairs: Vec<(usize, usize)> = {
             let k = self.notes.correspondences.len();
