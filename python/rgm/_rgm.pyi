@@ -78,6 +78,14 @@ class RegistrationResult:
     def rotation(self) -> npt.NDArray[np.float64]: ...  # (3, 3)
     @property
     def translation(self) -> npt.NDArray[np.float64]: ...  # (3,)
+    def to_html(
+        self,
+        path: str,
+        source: Optional[npt.NDArray[np.float64]] = None,  # (N, 3)
+        target: Optional[npt.NDArray[np.float64]] = None,  # (M, 3)
+        points: int = 200000,
+    ) -> None: ...
+    def _repr_html_(self) -> Optional[str]: ...
 
 class ModelNetPairs:
     def __init__(

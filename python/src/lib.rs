@@ -298,6 +298,8 @@ impl Registrar {
         source: PyReadonlyArray2<'_, f64>,
         target: PyReadonlyArray2<'_, f64>,
     ) -> PyResult<RegistrationResult> {
+        // The arrays themselves, for the result's page (to_html): no copy of the points.
+        let arrays = ((*source).clone().unbind(), (*target).clone().unbind());
         let (source, target) = (cloud(&source, "source")?, cloud(&target, "target")?);
         let copies = self.copies.clone();
         let name = &self.name();
@@ -309,7 +311,7 @@ impl Registrar {
             )
         })?
         .map_err(|e| method_error(name, e))?;
-        RegistrationResult::from_registration(py, name, &registration, &pairs)
+        RegistrationResult::from_registration(py, name, &registration, &pairs, Some(arrays))
     }
 
     /// Registers each (source, target) of the iterator `pairs` (float64 clouds) on all of the
@@ -353,6 +355,7 @@ impl Registrar {
                         &name,
                         &registration,
                         &pairs,
+                        None,
                     )?));
                 }
                 Err(why) => {

@@ -1,14 +1,21 @@
 //! The result classes of `rgm._rgm`, `rgm.RegistrationResult` and `rgm.Candidate`: named,
-//! read-only fields, a `repr`, and pickling by their fields (results travel back from process
-//! pools and Dask workers).
+//! read-only fields, a `repr`, pickling by their fields (results travel back from process
+//! pools and Dask workers), and the page of a result (`to_html`, `_repr_html_`: rgm-viz's).
 
-use numpy::PyArray2;
+use std::path::PathBuf;
+
+use numpy::{PyArray2, PyArrayMethods, PyReadonlyArray2};
+use pyo3::exceptions::PyOSError;
 use pyo3::prelude::*;
 use pyo3::types::{PyList, PySlice, PyTuple};
 use pyo3::IntoPyObjectExt;
+use rgm_geom::registrar::Candidate as GeomCandidate;
 use rgm_model::Registration;
+use rgm_viz::html::{
+    inline_frame, InlierDistance, Page, ResultNotes, DEFAULT_POINT_BUDGET, INLINE_POINT_BUDGET,
+};
 
-use crate::{matrix_array, pairs_array};
+use crate::{cloud, matrix_array, pairs_array, transform, value_error};
 
 /// Python's `repr` of `value`.
 fn repr<'py>(py: Python<'py>, value: impl IntoPyObject<'py>) -> PyResult<String> {
@@ -77,6 +84,9 @@ impl Candidate {
     }
 }
 
+/// The arrays of a pair's clouds: (N, 3) source and (M, 3) target, float64.
+pub type CloudArrays = (Py<PyArray2<f64>>, Py<PyArray2<f64>>);
+
 /// The outcome of registering a source cloud onto a target cloud.
 ///
 /// Attributes:
@@ -105,29 +115,50 @@ impl Candidate {
 ///         the other), ``reason`` says why; ``transformation`` is then the best guess, not to
 ///         be used as a registration.
 ///     reason: why ``registered`` is ``False``, or ``None``.
-#[pyclass(frozen, module = "rgm", get_all)]
+///
+/// ``to_html(path)`` writes the registration as a page that turns in a browser; in Jupyter a
+/// result shows that page inline. A result of ``register`` holds its two clouds for it (the
+/// arrays themselves, not copies); other results (``register_many``'s, unpickled ones) take
+/// them as arguments.
+#[pyclass(frozen, module = "rgm")]
 pub struct RegistrationResult {
+    #[pyo3(get)]
     transformation: Py<PyArray2<f64>>, // (4, 4)
+    #[pyo3(get)]
     fitness: f64,
+    #[pyo3(get)]
     inlier_rmse: f64,
+    #[pyo3(get)]
     correspondences: Py<PyArray2<i64>>, // (K, 2)
+    #[pyo3(get)]
     time_ms: f64,
+    #[pyo3(get)]
     method: String,
+    #[pyo3(get)]
     iterations: usize,
+    #[pyo3(get)]
     converged: bool,
+    #[pyo3(get)]
     candidates: Py<PyList>, // of Candidate
+    #[pyo3(get)]
     chosen: Option<String>,
+    #[pyo3(get)]
     registered: bool,
+    #[pyo3(get)]
     reason: Option<String>,
+    /// The arrays `register` was given, for the page; `None` for other results.
+    clouds: Option<CloudArrays>,
 }
 
 impl RegistrationResult {
-    /// The result of `registration` by method `name`, with its correspondences `pairs`.
+    /// The result of `registration` by method `name`, with its correspondences `pairs`, holding
+    /// the arrays of the pair's clouds when given (for its page).
     pub fn from_registration(
         py: Python<'_>,
         name: &str,
         registration: &Registration,
         pairs: &[(usize, usize)],
+        clouds: Option<CloudArrays>,
     ) -> PyResult<Self> {
         let result = &registration.result;
         let candidates = registration
@@ -157,7 +188,98 @@ impl RegistrationResult {
                 .map(|k| registration.candidates[k].method.to_string()),
             registered: registration.doubt.is_none(),
             reason: registration.doubt.clone(),
+            clouds,
         })
+    }
+
+    /// The page of this result on `source` and `target` (the held clouds when not given),
+    /// showing at most `budget` points.
+    fn page(
+        &self,
+        py: Python<'_>,
+        source: Option<PyReadonlyArray2<'_, f64>>,
+        target: Option<PyReadonlyArray2<'_, f64>>,
+        budget: usize,
+    ) -> PyResult<String> {
+        let (source, target) =
+            match (source, target, &self.clouds) {
+                (Some(source), Some(target), _) => {
+                    (cloud(&source, "source")?, cloud(&target, "target")?)
+                }
+                (None, None, Some((source, target))) => (
+                    cloud(&source.bind(py).readonly(), "source")?,
+                    cloud(&target.bind(py).readonly(), "target")?,
+                ),
+                (None, None, None) => return Err(value_error(
+                    "this result holds no clouds (only register's results do; register_many's, \
+                     unpickled and constructed ones do not): give them, \
+                     to_html(path, source, target)",
+                )),
+                _ => return Err(value_error("give both source and target, or neither")),
+            };
+        let t_target_source =
+            transform(&self.transformation.bind(py).readonly(), "transformation")?;
+        let candidates = self
+            .candidates
+            .bind(py)
+            .iter()
+            .map(|item| {
+                let item = item.cast_into::<Candidate>()?;
+                let c = item.get();
+                Ok(GeomCandidate {
+                    method: c.method.clone(),
+                    t_target_source: transform(
+                        &c.transformation.bind(py).readonly(),
+                        "a candidate's transformation",
+                    )?,
+                    score: c.score,
+                    failure: c.failure.clone(),
+                    time_ms: f64::NAN, // not kept in Python: the page shows none
+                })
+            })
+            .collect::<PyResult<Vec<_>>>()?;
+        let pairs = self.correspondences.bind(py).readonly();
+        let pairs = pairs.as_array(); // (K, 2)
+        let correspondences = pairs
+            .rows()
+            .into_iter()
+            .map(
+                |row| match (usize::try_from(row[0]), usize::try_from(row[1])) {
+                    (Ok(i), Ok(j)) => Ok((i, j)),
+                    _ => Err(value_error(format!(
+                        "a correspondence has a negative index: {row}"
+                    ))),
+                },
+            )
+            .collect::<PyResult<Vec<_>>>()?;
+        let registration = Registration {
+            result: rgm_geom::RegistrationResult {
+                t_target_source,
+                iterations: self.iterations,
+                converged: self.converged,
+                inlier_count: correspondences.len(),
+                fitness: self.fitness,
+                inlier_rmse: self.inlier_rmse,
+            },
+            correspondences,
+            time_ms: self.time_ms,
+            chosen: self
+                .chosen
+                .as_ref()
+                .and_then(|name| candidates.iter().position(|c| &c.method == name)),
+            candidates,
+            doubt: self.reason.clone(),
+        };
+        let page = Page {
+            title: format!("rgm.register ({})", self.method),
+            source: &source,
+            target: &target,
+            t_target_source,
+            inlier_distance: InlierDistance::of_refinement(&source, &target),
+            notes: ResultNotes::of_registration(&self.method, &registration),
+            point_budget: budget,
+        };
+        page.to_html().map_err(value_error)
     }
 
     /// `transformation[rows, 3 or :3]`, a view.
@@ -211,6 +333,7 @@ impl RegistrationResult {
             chosen,
             registered,
             reason,
+            clouds: None,
         })
     }
 
@@ -246,7 +369,41 @@ impl RegistrationResult {
         ))
     }
 
-    /// Pickles as its fields (results travel back from process pools and Dask workers).
+    /// Writes the registration as one self-contained HTML page at `path` (no network needed to
+    /// view it): the clouds before and after, the source coloured by its distance to the
+    /// target, the transform and the candidates; at most `points` points in all (larger clouds
+    /// thinned by stride, as the page says). `source` and `target` (float64 (N, 3)) default to
+    /// the clouds `register` was given.
+    #[pyo3(signature = (path, source=None, target=None, points=DEFAULT_POINT_BUDGET))]
+    fn to_html(
+        &self,
+        py: Python<'_>,
+        path: PathBuf,
+        source: Option<PyReadonlyArray2<'_, f64>>,
+        target: Option<PyReadonlyArray2<'_, f64>>,
+        points: usize,
+    ) -> PyResult<()> {
+        let html = self.page(py, source, target, points)?;
+        rgm_data::io::output::write_file(&path, |out| out.write_all(html.as_bytes()))
+            .map_err(|err| PyOSError::new_err(format!("writing {}: {err}", path.display())))
+    }
+
+    /// The page, inline in a notebook (an iframe, at most 50,000 points); `None` (the plain
+    /// repr) for a result that holds no clouds.
+    fn _repr_html_(&self, py: Python<'_>) -> PyResult<Option<String>> {
+        if self.clouds.is_none() {
+            return Ok(None);
+        }
+        Ok(Some(inline_frame(&self.page(
+            py,
+            None,
+            None,
+            INLINE_POINT_BUDGET,
+        )?)))
+    }
+
+    /// Pickles as its fields (results travel back from process pools and Dask workers); the
+    /// clouds stay behind.
     fn __reduce__<'py>(
         slf: &Bound<'py, Self>,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {

@@ -218,3 +218,105 @@ fn the_matrix_of_the_built_in_model_is_drawn_in_blocks() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The JSON data of the page at `path`.
+fn page_data(path: &Path) -> serde_json::Value {
+    let page = std::fs::read_to_string(path).unwrap();
+    let start = page.find(r#"type="application/json">"#).unwrap() + 24;
+    let end = start + page[start..].find("</script>").unwrap();
+    serde_json::from_str(&page[start..end]).unwrap()
+}
+
+#[test]
+fn render_html_writes_the_page_of_a_given_transform_without_a_png() {
+    let dir = scratch("html-given");
+    let (src, tgt, pose) = clouds(&dir);
+    let transform = dir.join("t.txt");
+    write_transform(&transform, &pose);
+    let page = dir.join("page.html");
+    let out = rgm(&[
+        "render",
+        &src,
+        &tgt,
+        "--transform",
+        transform.to_str().unwrap(),
+        "--html",
+        page.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let data = page_data(&page);
+    assert_eq!(data["source"]["points"], 1024);
+    assert_eq!(data["target"]["shown"], 1024);
+    assert!(data["method"].as_str().unwrap().contains("t.txt"));
+    let rows = data["transform"].as_array().unwrap();
+    assert!((rows[0][3].as_f64().unwrap() - 0.2).abs() < 1e-12);
+    // The true transform puts every source point on the target: 1,024 flag bytes of 1, in
+    // base64 "AQEB" per three.
+    let every_one = "AQEB".repeat(341) + "AQ==";
+    assert_eq!(data["inlier"], every_one.as_str());
+}
+
+#[test]
+fn register_html_thins_to_the_budget_and_lists_the_candidates() {
+    let dir = scratch("html-register");
+    let (src, tgt, _) = clouds(&dir);
+    let page = dir.join("page.html");
+    let out = rgm(&[
+        "register",
+        &src,
+        &tgt,
+        "--method",
+        "icp",
+        "--html",
+        page.to_str().unwrap(),
+        "--html-points",
+        "500",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let data = page_data(&page);
+    assert_eq!(data["method"], "icp");
+    assert_eq!(
+        (
+            data["source"]["shown"].as_u64(),
+            data["target"]["shown"].as_u64()
+        ),
+        (Some(250), Some(250))
+    );
+    assert_eq!(data["budget"], 500);
+    assert_eq!(data["correspondences"]["total"], 0);
+}
+
+#[test]
+fn html_options_are_checked_before_any_work() {
+    let dir = scratch("html-bad");
+    let (src, tgt, _) = clouds(&dir);
+    let txt = dir.join("page.txt");
+    let out = rgm(&["register", &src, &tgt, "--html", txt.to_str().unwrap()]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("give the file an .html name"));
+    assert!(!txt.exists());
+    let html = dir.join("page.html");
+    let out = rgm(&[
+        "register",
+        &src,
+        &tgt,
+        "--html",
+        html.to_str().unwrap(),
+        "--html-points",
+        "1",
+    ]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("1 is too few"));
+    let out = rgm(&["register", &src, &tgt, "--html-points", "100"]);
+    assert!(!out.status.success(), "--html-points needs --html");
+    let out = rgm(&["render", &src, &tgt]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--out"));
+    assert!(!html.exists());
+}

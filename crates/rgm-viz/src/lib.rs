@@ -4,11 +4,18 @@
 //! - [`correspondence_figure`]: the hard correspondence matrix in blocks, black where the
 //!   correspondences are correct and red where they are not (the paper's Figure 5).
 //!
-//! Layering rule: builds on rgm-geom (clouds, transforms) and rgm-data (correspondences) only, so
-//! anyone holding clouds and a transform can draw them, without BLAS or the network; the `rgm
-//! render` command is its one user in the workspace.
+//! - [`html`]: the same registration as one self-contained HTML page that turns in a browser
+//!   (WebGL, rgm's own small renderer), with the source coloured by its distance to the target
+//!   and the result's candidates.
+//!
+//! Layering rule: builds on rgm-geom (clouds, transforms, kNN, the [`rgm_geom::Registration`] a
+//! page describes) and rgm-data (correspondences) only, so anyone holding clouds and a transform
+//! can draw them, without BLAS or the network; the `rgm render` and `rgm register` commands and
+//! the Python package (`to_html`) are its users.
 
 use std::path::{Path, PathBuf};
+
+pub mod html;
 
 use rgm_data::Correspondence;
 use rgm_geom::{Point3, PointCloud, RigidTransform, Vector3};
@@ -34,6 +41,9 @@ pub enum RenderError {
     /// A figure of nothing.
     #[error("render: {op} needs at least one point, got none")]
     Empty { op: &'static str },
+    /// An argument outside what the figure can show.
+    #[error("render: {op}: {why}")]
+    Invalid { op: &'static str, why: String },
     /// A correspondence names a point the cloud does not have.
     #[error("render: {op}: correspondence ({source_index}, {target_index}) is outside a {n_source}×{n_target} matrix")]
     OutOfRange {

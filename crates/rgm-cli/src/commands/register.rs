@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use rgm_data::write_point_cloud;
+use rgm_viz::html::ResultNotes;
 
 use crate::MethodArgs;
 
@@ -30,14 +31,20 @@ pub struct Args {
     #[arg(long)]
     json: bool,
     #[command(flatten)]
+    page: super::page::HtmlArgs,
+    #[command(flatten)]
     batch: super::batch::BatchArgs,
 }
 
 pub fn run(args: Args) -> Result<()> {
     let (Some(source_path), Some(target_path)) = (&args.source, &args.target) else {
+        if args.page.html.is_some() {
+            anyhow::bail!("--html writes the page of one pair (SOURCE TARGET), not of --pairs");
+        }
         return super::batch::run(&args.batch, &args.method);
     };
     args.batch.refuse_without_pairs()?;
+    args.page.check()?;
     if let Some(out) = &args.out {
         rgm_data::io::format_of(out)?;
         crate::check_writable(out)?;
@@ -52,6 +59,12 @@ pub fn run(args: Args) -> Result<()> {
     if let (Some(out), None) = (&args.out, doubt) {
         write_point_cloud(out, &source.transformed(&result.t_target_source))?;
     }
+    args.page.write(
+        (&source, &target),
+        (source_path, target_path),
+        result.t_target_source,
+        ResultNotes::of_registration(&method.name(), &registration),
+    )?;
     let rows = result.t_target_source.to_rows();
     if args.json {
         let value =

@@ -1,11 +1,13 @@
 //! `rgm render SRC TGT --out fig.png`: a picture of a registration, the clouds before and after;
-//! with `--matrix` and `--truth`, also RGM's hard correspondences coloured correct or wrong.
+//! with `--matrix` and `--truth`, also RGM's hard correspondences coloured correct or wrong;
+//! with `--html page.html`, a page that turns in a browser ([`super::page`]).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use rgm_data::Correspondence;
 use rgm_geom::{Matrix4, RigidTransform};
+use rgm_viz::html::ResultNotes;
 use rgm_viz::{correct_fraction, correspondence_figure, registration_figure};
 
 use crate::MethodArgs;
@@ -28,8 +30,9 @@ pub struct Args {
     #[command(flatten)]
     method: MethodArgs,
     /// The PNG to write: source orange, target blue; before (left) and after (right).
-    #[arg(long, value_name = "FILE")]
-    out: PathBuf,
+    /// Needed unless --html is given.
+    #[arg(long, value_name = "FILE", required_unless_present = "html")]
+    out: Option<PathBuf>,
     /// Also write the correspondence matrix of the found transform as a PNG (as the paper's
     /// Figure 5: black correct, red wrong, grey missed), judged against --truth: the network's
     /// hard matches with `--method rgm --no-refine`, otherwise the source points the transform
@@ -40,6 +43,8 @@ pub struct Args {
     /// correspondences are rebuilt from it as the benchmark does (spec §1).
     #[arg(long, value_name = "FILE")]
     truth: Option<PathBuf>,
+    #[command(flatten)]
+    page: super::page::HtmlArgs,
 }
 
 /// Refuses `path` unless it is a writable `.png` file, before any work.
@@ -57,29 +62,57 @@ fn check_png(path: &Path, option: &str) -> Result<()> {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    check_png(&args.out, "--out")?;
+    if let Some(out) = &args.out {
+        check_png(out, "--out")?;
+    }
+    args.page.check()?;
     if let Some(matrix) = &args.matrix {
         check_png(matrix, "--matrix")?;
     }
     let (source, target) = crate::read_pair(&args.source, &args.target)?;
-    let given = args.transform.as_deref().map(read_transform).transpose()?;
+    let given = args
+        .transform
+        .as_deref()
+        .map(|path| read_transform(path).map(|t| (path, t)))
+        .transpose()?;
     let found = match (&given, &args.matrix) {
         (Some(_), None) => None, // nothing to find
         _ => {
             let mut method = args.method.build(crate::Defaults::Register)?;
-            Some(crate::register_files(
+            let registration = crate::register_files(
                 &mut method,
                 (&source, &target),
                 (&args.source, &args.target),
-            )?)
+            )?;
+            Some((method.name(), registration))
         }
     };
-    let transform = given
-        .or(found.as_ref().map(|found| found.result.t_target_source))
-        .context("no transform given or found")?;
-    registration_figure(&source, &target, &transform)?.write_png(&args.out)?;
-    println!("wrote {}", args.out.display());
-    if let (Some(path), Some(truth), Some(found)) = (&args.matrix, &args.truth, &found) {
+    let (transform, notes) = match (given, &found) {
+        (Some((path, transform)), _) => (
+            transform,
+            ResultNotes {
+                method: format!("the transform of {}", path.display()),
+                correspondences_note: "none: no method ran".to_string(),
+                ..ResultNotes::default()
+            },
+        ),
+        (None, Some((name, found))) => (
+            found.result.t_target_source,
+            ResultNotes::of_registration(name, found),
+        ),
+        (None, None) => bail!("no transform given or found"),
+    };
+    if let Some(out) = &args.out {
+        registration_figure(&source, &target, &transform)?.write_png(out)?;
+        println!("wrote {}", out.display());
+    }
+    args.page.write(
+        (&source, &target),
+        (&args.source, &args.target),
+        transform,
+        notes,
+    )?;
+    if let (Some(path), Some(truth), Some((_, found))) = (&args.matrix, &args.truth, &found) {
         let moved = source.transformed(&read_transform(truth)?);
         let correct = Correspondence::rebuild(&moved.points, &target.points);
         let pairs = &found.correspondences;
