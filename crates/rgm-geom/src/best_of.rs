@@ -115,10 +115,9 @@ pub fn overlap_score_at(
     there.fitness + back.fitness
 }
 
-/// How little `transform`'s overlap tells the shape's pose: the best [`overlap_score`] of the
-/// source first turned by a quarter, a half or three quarters about one of its principal axes
-/// (through its centroid), as a share of `transform`'s own. Near 1 or above, a pose turned
-/// about that axis fits as well, as for a symmetric shape.
+/// How little `transform`'s overlap tells the shape's pose: the best [`overlap_score`] of its
+/// [`turned_poses`], as a share of `transform`'s own. Near 1 or above, a pose turned about one of
+/// the source's axes fits as well, as for a symmetric shape.
 pub fn turned_share(
     source: (&PointCloud, &KnnIndex),
     target: (&PointCloud, &KnnIndex),
@@ -128,14 +127,24 @@ pub fn turned_share(
     if source.0.len() < 3 || score <= 0.0 {
         return f64::INFINITY;
     }
-    let centre = source.0.centroid();
+    let best = turned_poses(source.0, transform)
+        .iter()
+        .map(|turned| overlap_score(source, target, turned))
+        .fold(0.0, f64::max);
+    best / score
+}
+
+/// `transform` with the source first turned by a quarter, a half or three quarters about each
+/// of its principal axes (through its centroid): the nine poses a symmetric shape fits as well.
+pub fn turned_poses(source: &PointCloud, transform: &RigidTransform) -> Vec<RigidTransform> {
+    let centre = source.centroid();
     let mut covariance = crate::Matrix3::zeros();
-    for p in &source.0.points {
+    for p in &source.points {
         let d = p - centre;
         covariance += d * d.transpose();
     }
     let axes = covariance.symmetric_eigen().eigenvectors; // (3, 3), one axis a column
-    let mut best: f64 = 0.0;
+    let mut poses = Vec::with_capacity(9);
     for axis in axes.column_iter() {
         let axis = nalgebra::Unit::new_normalize(axis.into_owned());
         for quarters in 1..4 {
@@ -146,10 +155,10 @@ pub fn turned_share(
             .into_inner();
             // About the centroid: p ↦ c + R (p − c).
             let about = RigidTransform::new(turn, centre.coords - turn * centre.coords);
-            best = best.max(overlap_score(source, target, &transform.compose(&about)));
+            poses.push(transform.compose(&about));
         }
     }
-    best / score
+    poses
 }
 
 /// Two transforms within [`AGREEMENT`] of each other: rotations less than its degrees apart,

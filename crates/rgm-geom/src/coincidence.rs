@@ -13,7 +13,7 @@
 
 use std::time::Instant;
 
-use crate::best_of::pair_trees;
+use crate::best_of::{pair_trees, turned_poses, SCORE_DISTANCE};
 use crate::cloud::median;
 use crate::fgr::Progress;
 use crate::registrar::{elapsed_ms, MethodId, Registrar, Registration};
@@ -60,18 +60,39 @@ pub fn coincidence(
 
 /// A ground-truth-free test of a registration, made after it.
 pub trait Check {
+    /// Why `transform` (a pose of `source` on `target`) is not to be trusted, if it is not.
+    fn doubt_of(
+        &self,
+        source: (&PointCloud, &KnnIndex),
+        target: (&PointCloud, &KnnIndex),
+        transform: &RigidTransform,
+    ) -> Option<String>;
+
     /// Why `found` (the registration of `source` onto `target`) is not to be trusted, if it is
-    /// not.
+    /// not: its transform's doubt, unless the check weighs more of it (its candidates).
     fn doubt(
         &self,
         source: (&PointCloud, &KnnIndex),
         target: (&PointCloud, &KnnIndex),
         found: &Registration,
-    ) -> Option<String>;
+    ) -> Option<String> {
+        self.doubt_of(source, target, &found.result.t_target_source)
+    }
 }
 
 /// Both checks, the first's doubt first.
 impl<A: Check, B: Check> Check for (A, B) {
+    fn doubt_of(
+        &self,
+        source: (&PointCloud, &KnnIndex),
+        target: (&PointCloud, &KnnIndex),
+        transform: &RigidTransform,
+    ) -> Option<String> {
+        self.0
+            .doubt_of(source, target, transform)
+            .or_else(|| self.1.doubt_of(source, target, transform))
+    }
+
     fn doubt(
         &self,
         source: (&PointCloud, &KnnIndex),
@@ -128,13 +149,13 @@ impl Coincides {
 }
 
 impl Check for Coincides {
-    fn doubt(
+    fn doubt_of(
         &self,
         source: (&PointCloud, &KnnIndex),
         target: (&PointCloud, &KnnIndex),
-        found: &Registration,
+        transform: &RigidTransform,
     ) -> Option<String> {
-        self.doubt_at(source, target, &found.result.t_target_source, 1.0, "units")
+        self.doubt_at(source, target, transform, 1.0, "units")
     }
 }
 
@@ -187,18 +208,6 @@ impl CoincidesAtSpacing {
         Some(surface_spacing(source.0, source.1)?.max(surface_spacing(target.0, target.1)?))
     }
 
-    /// Its doubt of `transform` on the pair: none where it does not apply.
-    pub fn doubt_of(
-        &self,
-        source: (&PointCloud, &KnnIndex),
-        target: (&PointCloud, &KnnIndex),
-        transform: &RigidTransform,
-    ) -> Option<String> {
-        let spacing = self.spacing(source, target)?;
-        self.0
-            .doubt_at(source, target, transform, spacing, "point spacings")
-    }
-
     /// Whether it takes `transform` as coinciding: never where it does not apply, so that a
     /// cascade it judges runs its later candidates there.
     pub fn takes(
@@ -214,13 +223,112 @@ impl CoincidesAtSpacing {
 }
 
 impl Check for CoincidesAtSpacing {
+    /// None where it does not apply.
+    fn doubt_of(
+        &self,
+        source: (&PointCloud, &KnnIndex),
+        target: (&PointCloud, &KnnIndex),
+        transform: &RigidTransform,
+    ) -> Option<String> {
+        let spacing = self.spacing(source, target)?;
+        self.0
+            .doubt_at(source, target, transform, spacing, "point spacings")
+    }
+}
+
+/// The share of the points of each cloud that `transform` brings within `distance` of the
+/// other, both ways (0 to 2, as [`crate::best_of::overlap_score`]), measured on at most
+/// [`SAMPLE`] points of each cloud.
+pub fn sampled_overlap(
+    source: (&PointCloud, &KnnIndex),
+    target: (&PointCloud, &KnnIndex),
+    transform: &RigidTransform,
+    distance: f64,
+) -> f64 {
+    let share = |points: &[crate::Point3<f64>], onto: &KnnIndex, moved: &RigidTransform| {
+        let (mut within, mut all) = (0usize, 0usize);
+        for p in sample(points) {
+            all += 1;
+            within += usize::from(onto.nearest_within(&moved.apply(p), distance).is_some());
+        }
+        within as f64 / all.max(1) as f64
+    };
+    share(&source.0.points, target.1, transform)
+        + share(&target.0.points, source.1, &transform.inverse())
+}
+
+/// No other pose fits nearly as well: a result is doubted when a rival pose overlaps the
+/// target at least `share` as much (by [`sampled_overlap`] at [`SCORE_DISTANCE`], or by the
+/// composite's own scores) and passes `rivals_pass` too. Rivals are the other candidates of a
+/// composite more than `apart` (degrees, distance) from the chosen one, and the result turned
+/// about the source's axes ([`turned_poses`]). A symmetric shape, or a part that fits two places
+/// of the other cloud, has no one pose that the clouds tell; reporting one as registered would
+/// be a guess.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Unambiguous<C> {
+    pub share: f64,
+    pub apart: (f64, f64),
+    pub rivals_pass: C,
+}
+
+impl<C: Check> Unambiguous<C> {
+    fn rival_doubt(&self, what: &str, ratio: f64) -> String {
+        format!(
+            "another pose fits nearly as well ({what}, {ratio:.2} of the result's overlap, at \
+             least {}): the pose is ambiguous (a symmetric shape, or a part that fits two places)",
+            self.share
+        )
+    }
+
+    fn far_apart(&self, a: &RigidTransform, b: &RigidTransform) -> bool {
+        let (degrees, distance) = self.apart;
+        a.inverse().compose(b).rotation_angle_deg() > degrees
+            || (a.translation - b.translation).norm() > distance
+    }
+}
+
+impl<C: Check> Check for Unambiguous<C> {
+    /// The turned poses of `transform` as its rivals.
+    fn doubt_of(
+        &self,
+        source: (&PointCloud, &KnnIndex),
+        target: (&PointCloud, &KnnIndex),
+        transform: &RigidTransform,
+    ) -> Option<String> {
+        let own = sampled_overlap(source, target, transform, SCORE_DISTANCE);
+        if own <= 0.0 {
+            return None;
+        }
+        turned_poses(source.0, transform).iter().find_map(|turned| {
+            let ratio = sampled_overlap(source, target, turned, SCORE_DISTANCE) / own;
+            (ratio >= self.share && self.rivals_pass.doubt_of(source, target, turned).is_none())
+                .then(|| self.rival_doubt("the result turned about an axis of the source", ratio))
+        })
+    }
+
+    /// The other candidates as rivals too, weighed by the composite's scores.
     fn doubt(
         &self,
         source: (&PointCloud, &KnnIndex),
         target: (&PointCloud, &KnnIndex),
         found: &Registration,
     ) -> Option<String> {
-        self.doubt_of(source, target, &found.result.t_target_source)
+        let chosen = found.chosen.and_then(|i| found.candidates.get(i));
+        let rival = chosen.and_then(|chosen| {
+            let score = chosen.score.filter(|&score| score > 0.0)?;
+            found.candidates.iter().find_map(|other| {
+                let ratio = other.score? / score;
+                (!std::ptr::eq(other, chosen)
+                    && ratio >= self.share
+                    && self.far_apart(&chosen.t_target_source, &other.t_target_source)
+                    && self
+                        .rivals_pass
+                        .doubt_of(source, target, &other.t_target_source)
+                        .is_none())
+                .then(|| self.rival_doubt(&format!("{}'s", other.method), ratio))
+            })
+        });
+        rival.or_else(|| self.doubt_of(source, target, &found.result.t_target_source))
     }
 }
 
@@ -398,5 +506,73 @@ mod tests {
         assert!(check.takes((s, &si), (s, &si), &same));
         assert!(!check.takes((l, &li), (l, &li), &same));
         assert_eq!(check.doubt_of((l, &li), (l, &li), &same), None);
+    }
+
+    /// Issue 44, D1: a box's surface fits itself as well turned half about an axis, so its
+    /// pose is doubted as ambiguous; the airplane is not. A composite's rival candidate far from
+    /// the chosen one doubts it when it scores nearly as well and coincides, not when it scores
+    /// little or lies within `apart`.
+    #[test]
+    fn a_pose_that_a_rival_fits_as_well_is_doubted() {
+        let check = Unambiguous {
+            share: 0.75,
+            apart: (5.0, 0.05),
+            rivals_pass: Coincides {
+                near: 0.02,
+                far: 0.08,
+                least: 0.35,
+            },
+        };
+        let same = RigidTransform::identity();
+        let boxed = crate::testing::box_surface(20_000, 7); // dense: a turned copy lies on it
+        let (b, bi) = indexed(&boxed);
+        let doubt = check
+            .doubt_of((b, &bi), (b, &bi), &same)
+            .expect("a box is ambiguous");
+        assert!(
+            doubt.starts_with("another pose fits nearly as well"),
+            "{doubt}"
+        );
+        let plane = airplane();
+        let (a, ai) = indexed(&plane);
+        assert_eq!(check.doubt_of((a, &ai), (a, &ai), &same), None);
+
+        let turn = |deg: f64| {
+            RigidTransform::new(
+                crate::euler::rotation_xyz_intrinsic(0.0, 0.0, deg.to_radians()),
+                Vector3::zeros(),
+            )
+        };
+        let found = |rival: RigidTransform, rival_score: f64| {
+            let unscored = crate::registration::Score {
+                inlier_count: 0,
+                fitness: 0.0,
+                inlier_rmse: 0.0,
+            };
+            let result = crate::RegistrationResult::scored(same, 0, true, unscored);
+            let mut found = Registration::single(result, Vec::new(), Instant::now());
+            let candidate = |method: &str, t_target_source, score| crate::registrar::Candidate {
+                method: method.to_string(),
+                t_target_source,
+                score: Some(score),
+                failure: None,
+                time_ms: 0.0,
+            };
+            found.candidates = vec![
+                candidate("a", same, 2.0),
+                candidate("b", rival, rival_score),
+            ];
+            found.chosen = Some(0);
+            found
+        };
+        // A rival half a turn away coincides on the box and not on the airplane.
+        let on_box = |rival, score| check.doubt((b, &bi), (b, &bi), &found(rival, score));
+        let half = turn(180.0);
+        assert!(on_box(half, 1.9).unwrap().contains("b's"));
+        assert!(on_box(turn(3.0), 1.9).is_none_or(|d| !d.contains("b's")));
+        assert!(on_box(half, 1.0).is_none_or(|d| !d.contains("b's")));
+        let on_plane = |rival, score| check.doubt((a, &ai), (a, &ai), &found(rival, score));
+        assert_eq!(on_plane(half, 1.9), None);
+        assert_eq!(on_plane(turn(3.0), 1.9), None);
     }
 }

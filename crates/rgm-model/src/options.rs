@@ -19,8 +19,9 @@
 //! [`SCENE_ACCEPT`]: RANSAC on the pair's own FPFH matches, [`rgm_geom::ransac`], where the
 //! object cascade's result does not coincide with the target at the pair's spacing.)
 //!
-//! [`Checked`] doubts a refined result whose overlap is not one where the clouds coincide
-//! ([`REFINED_CHECKS`]); the unrefined methods, calibrated on no data, are not checked.
+//! [`Checked`] doubts a refined result whose overlap is not one where the clouds coincide, or
+//! that a rival pose fits nearly as well ([`REFINED_CHECKS`]); the unrefined methods,
+//! calibrated on no data, are not checked.
 //!
 //! `Refined<R>` refines with [`RefineConfig`] (`+icp`); any other [`rgm_geom::refiner::Refiner`]
 //! composes the same way (`Refined::new(FgrConfig::default(), IcpConfig::default())` is
@@ -37,7 +38,7 @@ use std::path::PathBuf;
 use std::str::FromStr;
 
 use rgm_geom::best_of::{Acceptance, BestOf, Cascade, SCORE_DISTANCE};
-use rgm_geom::coincidence::{Checked, Coincides, CoincidesAtSpacing};
+use rgm_geom::coincidence::{Checked, Coincides, CoincidesAtSpacing, Unambiguous};
 use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::icp::{self, IcpConfig};
 use rgm_geom::ransac::RansacConfig;
@@ -174,8 +175,28 @@ pub const COINCIDES_AT_SPACING: CoincidesAtSpacing = CoincidesAtSpacing(Coincide
     least: 0.5,
 });
 
-/// The checks of a refined result: [`COINCIDES`], then [`COINCIDES_AT_SPACING`].
-pub const REFINED_CHECKS: (Coincides, CoincidesAtSpacing) = (COINCIDES, COINCIDES_AT_SPACING);
+/// How a refined result must coincide: [`COINCIDES`], then [`COINCIDES_AT_SPACING`].
+pub const REFINED_COINCIDES: (Coincides, CoincidesAtSpacing) = (COINCIDES, COINCIDES_AT_SPACING);
+
+/// No rival pose of a refined result may fit nearly as well and coincide: a rival overlapping
+/// at least 0.75 of the result's overlap, midway between the right validation results' rivals
+/// (at most 0.60, one symmetric shape's turned pose aside) and the wrong results' that
+/// [`REFINED_COINCIDES`] left registered (at least 0.89); candidates within 5° and 0.05 are
+/// one pose (`docs/confidence.md`).
+pub const UNAMBIGUOUS: Unambiguous<(Coincides, CoincidesAtSpacing)> = Unambiguous {
+    share: 0.75,
+    apart: (5.0, 0.05),
+    rivals_pass: REFINED_COINCIDES,
+};
+
+/// The type of [`REFINED_CHECKS`].
+pub type RefinedChecks = (
+    (Coincides, CoincidesAtSpacing),
+    Unambiguous<(Coincides, CoincidesAtSpacing)>,
+);
+
+/// The checks of a refined result: [`REFINED_COINCIDES`], then [`UNAMBIGUOUS`].
+pub const REFINED_CHECKS: RefinedChecks = (REFINED_COINCIDES, UNAMBIGUOUS);
 
 /// When the default takes the object cascade's result on a dense pair without running the
 /// scene stage's RANSAC after it: an overlap score of at least [`ACCEPT`]'s, whatever its
