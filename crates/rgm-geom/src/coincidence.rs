@@ -29,6 +29,26 @@ fn sample(points: &[crate::Point3<f64>]) -> impl Iterator<Item = &crate::Point3<
     points.iter().step_by(points.len().div_ceil(SAMPLE).max(1))
 }
 
+/// Of at most [`SAMPLE`] of `points` moved by `moved`: how many lie within `near` of `onto`,
+/// how many within `far`, and how many were measured.
+fn within(
+    points: &[crate::Point3<f64>],
+    onto: &KnnIndex,
+    moved: &RigidTransform,
+    near: f64,
+    far: f64,
+) -> (usize, usize, usize) {
+    let (mut within_near, mut within_far, mut all) = (0usize, 0usize, 0usize);
+    for p in sample(points) {
+        all += 1;
+        if let Some((_, d)) = onto.nearest_within(&moved.apply(p), far) {
+            within_far += 1;
+            within_near += usize::from(d < near);
+        }
+    }
+    (within_near, within_far, all)
+}
+
 /// Of the points of both clouds that `transform` brings within `far` of the other cloud, the
 /// share within `near` (0 when none is within `far`). Measured on at most [`SAMPLE`] points of
 /// each cloud, against the other whole.
@@ -39,18 +59,9 @@ pub fn coincidence(
     near: f64,
     far: f64,
 ) -> f64 {
-    let count = |points: &[crate::Point3<f64>], onto: &KnnIndex, moved: &RigidTransform| {
-        let (mut within_near, mut within_far) = (0usize, 0usize);
-        for p in sample(points) {
-            if let Some((_, d)) = onto.nearest_within(&moved.apply(p), far) {
-                within_far += 1;
-                within_near += usize::from(d < near);
-            }
-        }
-        (within_near, within_far)
-    };
-    let (there_near, there_far) = count(&source.0.points, target.1, transform);
-    let (back_near, back_far) = count(&target.0.points, source.1, &transform.inverse());
+    let (there_near, there_far, _) = within(&source.0.points, target.1, transform, near, far);
+    let (back_near, back_far, _) =
+        within(&target.0.points, source.1, &transform.inverse(), near, far);
     let far_total = there_far + back_far;
     if far_total == 0 {
         return 0.0;
@@ -246,12 +257,8 @@ pub fn sampled_overlap(
     distance: f64,
 ) -> f64 {
     let share = |points: &[crate::Point3<f64>], onto: &KnnIndex, moved: &RigidTransform| {
-        let (mut within, mut all) = (0usize, 0usize);
-        for p in sample(points) {
-            all += 1;
-            within += usize::from(onto.nearest_within(&moved.apply(p), distance).is_some());
-        }
-        within as f64 / all.max(1) as f64
+        let (_, within_distance, all) = within(points, onto, moved, distance, distance);
+        within_distance as f64 / all.max(1) as f64
     };
     share(&source.0.points, target.1, transform)
         + share(&target.0.points, source.1, &transform.inverse())
