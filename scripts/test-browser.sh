@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The page of `rgm register --html` in a real browser: headless Chromium (Debian's package,
-# installed with apt-get when missing), WebGL in software (SwiftShader). For each page it checks
+# which scripts/setup.sh installs), WebGL in software (SwiftShader). For each page it checks
 # that it loads with no error (the page keeps window errors and console.error in #errors), that
 # its own self-test (`#selftest`: reads the canvas back, both states) finds a non-blank canvas
 # that the before/after toggle changes, and that screenshots of the two states differ.
@@ -12,18 +12,12 @@
 # The `rgm` binary: $RGM_BIN, else target/debug/rgm (`cargo test --workspace` builds it), else
 # target/release/rgm. The ModelNet40 data: $RGM_DATA, else ../shared/data/modelnet40_npy1024;
 # without it the page is of a synthetic pair (a helix and its turned copy).
-# CI time: the apt-get install of chromium on a fresh machine (about a minute), then about 5 s a
-# page on 2 cores; one page in CI.
+# CI time: about 5 s a page on 2 cores; one page in CI.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-if ! command -v chromium >/dev/null 2>&1; then
-  sudo=""
-  [ "$(id -u)" -ne 0 ] && sudo="sudo -n"
-  echo "test-browser: installing chromium with apt-get"
-  $sudo apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq chromium >/dev/null
-fi
+command -v chromium >/dev/null 2>&1 ||
+  { echo "test-browser: no chromium (bash scripts/setup.sh installs it)" >&2; exit 1; }
 
 work=target/browser-test
 rm -rf "$work"
