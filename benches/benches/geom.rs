@@ -8,7 +8,7 @@ use rand::{rngs::StdRng, SeedableRng};
 use rgm_benches::{unit_ball_points, SIZES};
 use rgm_geom::fpfh::{features, FpfhConfig};
 use rgm_geom::normals::NormalsConfig;
-use rgm_geom::{fgr, icp, kabsch, knn_graph, refine, Point3, PointCloud, RigidTransform};
+use rgm_geom::{fgr, icp, kabsch, knn_graph, refine, KnnIndex, Point3, PointCloud, RigidTransform};
 
 const K: usize = 20;
 
@@ -131,6 +131,7 @@ fn registration(c: &mut Criterion) {
         b.iter(|| {
             features(
                 &source.points,
+                &KnnIndex::new(&source.points),
                 &NormalsConfig::default(),
                 &FpfhConfig::default(),
             )

@@ -10,16 +10,16 @@
 //! pair. The score and its distance were chosen on validation pairs (`docs/training/README.md`,
 //! session 6: `cargo run --release -p rgm-benches --example default_study`).
 
-use std::sync::OnceLock;
 use std::time::Instant;
 
 use rayon::prelude::*;
 
 use crate::coincidence::CoincidesAtSpacing;
 use crate::fgr::Progress;
+use crate::prepared::indexed_pair;
 use crate::registrar::{elapsed_ms, Candidate, DynRegistrar, MethodId, Registrar, Registration};
 use crate::registration::{score, RegistrationResult};
-use crate::{GeomError, KnnIndex, PointCloud, RigidTransform};
+use crate::{GeomError, KnnIndex, PointCloud, Prepared, RigidTransform};
 
 /// Distance (unit-sphere units) within which a moved point counts as overlapping the other
 /// cloud in [`overlap_score`].
@@ -169,58 +169,32 @@ pub fn agree(a: &RigidTransform, b: &RigidTransform) -> bool {
         && (a.translation - b.translation).norm() < distance
 }
 
-/// The k-d trees of `source` and `target`, built side by side.
-pub fn pair_trees(source: &PointCloud, target: &PointCloud) -> (KnnIndex, KnnIndex) {
-    rayon::join(
-        || KnnIndex::new(&source.points),
-        || KnnIndex::new(&target.points),
-    )
-}
-
-/// The pair a composite's candidates are judged on (the clouds as its caller gave them, with
-/// their trees) and the best result an earlier stage found there. The candidates may run on a
-/// thinned version of the pair ([`crate::thinning::Thinned`]); they are scored on this one.
+/// The pair a composite's candidates are judged on (the clouds as its caller gave them) and the
+/// best result an earlier stage found there. The candidates may run on a thinned version of the
+/// pair ([`crate::thinning::Thinned`]); they are scored on this one.
 pub struct Judge<'a> {
-    pub source: (&'a PointCloud, &'a KnnIndex),
-    pub target: (&'a PointCloud, &'a KnnIndex),
-    /// The trees of the thinned clouds the candidates run on, built when an [`Acceptance`]
-    /// first needs them; `None` when they run on the judged clouds themselves.
-    thinned_trees: Option<OnceLock<(KnnIndex, KnnIndex)>>,
+    pub source: &'a Prepared<'a>,
+    pub target: &'a Prepared<'a>,
     /// The best (score, transform) found before: a candidate wins only by beating it, and an
     /// acceptance weighs it as a result of this stage.
     pub before: Option<(f64, RigidTransform)>,
 }
 
 impl<'a> Judge<'a> {
-    /// A judge of candidates that run on the judged clouds, with nothing found before.
-    pub fn new(
-        source: (&'a PointCloud, &'a KnnIndex),
-        target: (&'a PointCloud, &'a KnnIndex),
-    ) -> Self {
+    /// A judge on `source` and `target` with nothing found before; their trees are built (side
+    /// by side), as every score needs them.
+    pub fn new(source: &'a Prepared<'a>, target: &'a Prepared<'a>) -> Self {
+        indexed_pair(source, target);
         Self {
             source,
             target,
-            thinned_trees: None,
             before: None,
-        }
-    }
-
-    /// A judge of candidates that run on a thinned version of the judged clouds, after `before`.
-    pub fn of_thinned(
-        source: (&'a PointCloud, &'a KnnIndex),
-        target: (&'a PointCloud, &'a KnnIndex),
-        before: Option<(f64, RigidTransform)>,
-    ) -> Self {
-        Self {
-            thinned_trees: Some(OnceLock::new()),
-            before,
-            ..Self::new(source, target)
         }
     }
 
     /// `transform`'s [`overlap_score`] on the judged pair.
     pub fn score(&self, transform: &RigidTransform) -> f64 {
-        overlap_score(self.source, self.target, transform)
+        overlap_score(self.source.indexed(), self.target.indexed(), transform)
     }
 
     /// Whether `accept` takes the best of `tally` (or of what came before), its turned share
@@ -229,19 +203,13 @@ impl<'a> Judge<'a> {
         &self,
         accept: &Acceptance,
         tally: &Tally,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
     ) -> bool {
         tally.best.as_ref().is_some_and(|best| {
             best.score >= accept.score && {
-                let (si, ti) = match &self.thinned_trees {
-                    Some(trees) => {
-                        let (si, ti) = trees.get_or_init(|| pair_trees(source, target));
-                        (si, ti)
-                    }
-                    None => (self.source.1, self.target.1),
-                };
-                accept.takes(best.score, (source, si), (target, ti), &best.transform)
+                let (source, target) = indexed_pair(source, target);
+                accept.takes(best.score, source, target, &best.transform)
             }
         })
     }
@@ -264,7 +232,7 @@ pub struct Outcome {
 /// ([`crate::thinning::Thinned`]) judges on the pair as given.
 pub trait Composite<E>: Registrar<E> {
     /// The candidates run on `source` and `target`, judged by `judge`.
-    fn run_judged(&mut self, source: &PointCloud, target: &PointCloud, judge: &Judge) -> Outcome;
+    fn run_judged(&mut self, source: &Prepared, target: &Prepared, judge: &Judge) -> Outcome;
 
     /// The distance at which the chosen result is scored and its correspondences found.
     fn scoring_distance(&self) -> f64;
@@ -303,15 +271,15 @@ impl Tally {
     fn run<E: ToString + Send>(
         &mut self,
         wave: &mut [Box<dyn DynRegistrar<E>>],
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         judge: &Judge,
     ) {
         let outcomes: Vec<(Result<Registration, E>, f64)> = wave
             .par_iter_mut()
             .map(|candidate| {
                 let start = Instant::now();
-                let outcome = candidate.register(source, target);
+                let outcome = candidate.register_prepared(source, target, &mut |_| {});
                 (outcome, elapsed_ms(start))
             })
             .collect();
@@ -402,8 +370,8 @@ pub fn conclude<E: From<GeomError>>(
     });
     let mut correspondences = Vec::new();
     let scored = score(
-        &judge.source.0.points,
-        judge.target.1,
+        &judge.source.points,
+        judge.target.index(),
         &transform,
         scoring_distance,
         Some(&mut correspondences),
@@ -421,12 +389,11 @@ pub fn conclude<E: From<GeomError>>(
 /// `composite` on the pair as given, judged there.
 fn register_composite<E: From<GeomError>>(
     composite: &mut impl Composite<E>,
-    source: &PointCloud,
-    target: &PointCloud,
+    source: &Prepared,
+    target: &Prepared,
 ) -> Result<Registration, E> {
     let start = Instant::now();
-    let (source_index, target_index) = pair_trees(source, target);
-    let judge = Judge::new((source, &source_index), (target, &target_index));
+    let judge = Judge::new(source, target);
     let outcome = composite.run_judged(source, target, &judge);
     conclude(
         &judge,
@@ -462,7 +429,7 @@ impl<E: 'static> Clone for BestOf<E> {
 }
 
 impl<E: From<GeomError> + ToString + Send> Composite<E> for BestOf<E> {
-    fn run_judged(&mut self, source: &PointCloud, target: &PointCloud, judge: &Judge) -> Outcome {
+    fn run_judged(&mut self, source: &Prepared, target: &Prepared, judge: &Judge) -> Outcome {
         let mut tally = Tally::new(judge);
         tally.run(&mut self.candidates, source, target, judge);
         tally.outcome(false)
@@ -479,10 +446,10 @@ impl<E: From<GeomError> + ToString + Send> Registrar<E> for BestOf<E> {
         composite_id(self.base, &self.candidates)
     }
 
-    fn register_with_progress(
+    fn register_prepared(
         &mut self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         _: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
         register_composite(self, source, target)
@@ -517,7 +484,7 @@ impl<E: 'static> Clone for Cascade<E> {
 }
 
 impl<E: From<GeomError> + ToString + Send> Composite<E> for Cascade<E> {
-    fn run_judged(&mut self, source: &PointCloud, target: &PointCloud, judge: &Judge) -> Outcome {
+    fn run_judged(&mut self, source: &Prepared, target: &Prepared, judge: &Judge) -> Outcome {
         let mut tally = Tally::new(judge);
         tally.run(std::slice::from_mut(&mut self.first), source, target, judge);
         let mut settled = judge.takes(&self.accept, &tally, source, target);
@@ -539,10 +506,10 @@ impl<E: From<GeomError> + ToString + Send> Registrar<E> for Cascade<E> {
         composite_id(self.base, std::iter::once(&self.first).chain(&self.rest))
     }
 
-    fn register_with_progress(
+    fn register_prepared(
         &mut self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         _: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
         register_composite(self, source, target)

@@ -13,12 +13,13 @@
 
 use std::time::Instant;
 
-use crate::best_of::{pair_trees, turned_poses, SCORE_DISTANCE};
+use crate::best_of::{turned_poses, SCORE_DISTANCE};
 use crate::cloud::median;
 use crate::fgr::Progress;
+use crate::prepared::indexed_pair;
 use crate::registrar::{elapsed_ms, MethodId, Registrar, Registration};
 use crate::thinning::DENSITY_POINTS;
-use crate::{GeomError, KnnIndex, PointCloud, RigidTransform};
+use crate::{GeomError, KnnIndex, PointCloud, Prepared, RigidTransform};
 
 /// At most this many points of each cloud are measured: the shares settle long before a dense
 /// scan's 300,000 points.
@@ -352,21 +353,17 @@ impl<E: From<GeomError>, R: Registrar<E>, C: Check> Registrar<E> for Checked<R, 
         self.inner.id()
     }
 
-    fn register_with_progress(
+    fn register_prepared(
         &mut self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         progress: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
         let start = Instant::now();
-        let mut found = self
-            .inner
-            .register_with_progress(source, target, progress)?;
+        let mut found = self.inner.register_prepared(source, target, progress)?;
         if found.doubt.is_none() {
-            let (source_index, target_index) = pair_trees(source, target);
-            found.doubt =
-                self.check
-                    .doubt((source, &source_index), (target, &target_index), &found);
+            let (source, target) = indexed_pair(source, target);
+            found.doubt = self.check.doubt(source, target, &found);
         }
         found.time_ms = elapsed_ms(start);
         Ok(found)

@@ -46,7 +46,7 @@ use crate::icp::check_clouds;
 use crate::lockstep;
 use crate::normals::NormalsConfig;
 use crate::registration::{score, RegistrationResult};
-use crate::{GeomError, KnnIndex, PointCloud, Result, RigidTransform};
+use crate::{GeomError, PointCloud, Prepared, Result, RigidTransform};
 
 /// Open3D returns the identity below this many matches.
 const MIN_MATCHES: usize = 10;
@@ -133,31 +133,49 @@ pub fn register_with_progress(
     config: &FgrConfig,
     progress: &mut dyn FnMut(Progress),
 ) -> Result<RegistrationResult> {
+    register_prepared(
+        &Prepared::new(source),
+        &Prepared::new(target),
+        config,
+        progress,
+    )
+}
+
+/// [`register_with_progress`] on prepared clouds: the trees of clouds small enough to be used
+/// whole are those of the stages before, kept for the stages after.
+pub fn register_prepared(
+    source: &Prepared,
+    target: &Prepared,
+    config: &FgrConfig,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<RegistrationResult> {
     check_clouds("fgr::register", source, target)?;
     let mut report = |step, done| progress(Progress { step, done });
     report("downsampling", 0.0);
-    let small_source = downsampled(source, config.max_points);
-    let small_target = downsampled(target, config.max_points);
+    let (source_downsampled, target_downsampled) = (
+        downsampled(source, config.max_points).map(Prepared::new),
+        downsampled(target, config.max_points).map(Prepared::new),
+    );
+    let small_source = source_downsampled.as_ref().unwrap_or(source);
+    let small_target = target_downsampled.as_ref().unwrap_or(target);
     // The fractions are rough shares of the time on a million points.
     report("features", 0.15);
     // The two clouds' features are independent: side by side when there are cores to spare.
-    let (source_features, target_features) = rayon::join(
-        || features(&small_source.points, &config.normals, &config.fpfh),
-        || features(&small_target.points, &config.normals, &config.fpfh),
-    );
+    let of =
+        |cloud: &Prepared| features(&cloud.points, cloud.index(), &config.normals, &config.fpfh);
+    let (source_features, target_features) = rayon::join(|| of(small_source), || of(small_target));
     report("matching", 0.25);
     let matches = mutual_matches_reporting(&source_features, &target_features, &mut |rows| {
         report("matching", 0.25 + 0.3 * rows)
     });
     report("optimising", 0.55);
-    let mut result = register_matches(&small_source, &small_target, matches, config)?;
-    if small_source.len() < source.len() || small_target.len() < target.len() {
+    let mut result = register_matches(small_source, small_target, matches, config)?;
+    if source_downsampled.is_some() || target_downsampled.is_some() {
         // The transform is for the full clouds; so is its score.
         report("scoring", 0.6);
-        let index = KnnIndex::new(&target.points);
         let s = score(
             &source.points,
-            &index,
+            target.index(),
             &result.t_target_source,
             config.maximum_correspondence_distance,
             None,
@@ -173,14 +191,14 @@ pub fn register_with_progress(
     Ok(result)
 }
 
-/// `cloud`, or its voxel downsampling to at most `max_points` points: the finest voxel of the
-/// ladder `extent / √max_points · 1.25ᵏ` that leaves so few (a surface of side `extent` fills
-/// about `(extent / voxel)²` cubes, so the ladder starts near the answer).
-fn downsampled(cloud: &PointCloud, max_points: usize) -> PointCloud {
+/// `cloud`'s voxel downsampling to at most `max_points` points, if it has more: the finest
+/// voxel of the ladder `extent / √max_points · 1.25ᵏ` that leaves so few (a surface of side
+/// `extent` fills about `(extent / voxel)²` cubes, so the ladder starts near the answer).
+fn downsampled(cloud: &PointCloud, max_points: usize) -> Option<PointCloud> {
     // Cubes are aligned on the origin: however large, up to 8 may hold points.
     let max_points = max_points.max(8);
     if cloud.len() <= max_points {
-        return cloud.clone();
+        return None;
     }
     let (lo, hi) = cloud.points.iter().fold(
         (
@@ -192,13 +210,13 @@ fn downsampled(cloud: &PointCloud, max_points: usize) -> PointCloud {
     let extent = (hi - lo).max();
     if !(extent > 0.0) {
         // One point repeated.
-        return PointCloud::new(vec![cloud.points[0]]);
+        return Some(PointCloud::new(vec![cloud.points[0]]));
     }
     let mut voxel = extent / (max_points as f64).sqrt() / 1.25;
     loop {
         let small = cloud.voxel_downsampled(voxel);
         if small.len() <= max_points {
-            return small;
+            return Some(small);
         }
         voxel *= 1.25;
     }
@@ -230,7 +248,7 @@ pub fn register_features(
     }
     register_matches(
         source,
-        target,
+        &Prepared::new(target),
         mutual_matches(source_features, target_features),
         config,
     )
@@ -239,7 +257,7 @@ pub fn register_features(
 /// Steps 3–6 from the mutual matches.
 fn register_matches(
     source: &PointCloud,
-    target: &PointCloud,
+    target: &Prepared,
     mut matches: Vec<(usize, usize)>,
     config: &FgrConfig,
 ) -> Result<RegistrationResult> {
@@ -261,10 +279,9 @@ fn register_matches(
     } else {
         optimise(source, target, &matches, config)
     };
-    let index = KnnIndex::new(&target.points);
     let s = score(
         &source.points,
-        &index,
+        target.index(),
         &transform,
         config.maximum_correspondence_distance,
         None,
@@ -757,6 +774,7 @@ fn rotation_block(p: &[Vector3<f64>], q: &[Vector3<f64>], mu: f64) -> Matrix3<f6
 mod tests {
     use super::*;
     use crate::testing::box_surface;
+    use crate::KnnIndex;
 
     fn feature(values: &[(usize, f64)]) -> Fpfh {
         let mut f = [0.0; 33];
@@ -1099,7 +1117,7 @@ mod tests {
             max_points: 1500,
             ..FgrConfig::default()
         };
-        let small = downsampled(&target, config.max_points);
+        let small = downsampled(&target, config.max_points).expect("more points than max_points");
         assert!(
             small.len() <= 1500 && small.len() > 1500 / 3,
             "{}",

@@ -100,16 +100,20 @@ fn bin(value: f64, lo: f64, width: f64) -> usize {
     ((BINS as f64 * (value - lo) / width) as usize).min(BINS - 1)
 }
 
-/// FPFH features of a bare cloud: normals by [`estimate_normals`], then [`compute_fpfh`],
-/// sharing one k-d tree and, when the normals' neighbourhood fits inside FPFH's (the defaults),
-/// one neighbour search. // (N, 33)
-pub fn features(points: &[Point3<f64>], normals: &NormalsConfig, fpfh: &FpfhConfig) -> Vec<Fpfh> {
-    let index = KnnIndex::new(points);
-    let neighbourhoods = Neighbourhoods::hybrid(&index, points, fpfh.radius, fpfh.max_nn);
+/// FPFH features of a bare cloud (`index` must index `points`): normals by
+/// [`estimate_normals`], then [`compute_fpfh`], sharing one neighbour search when the normals'
+/// neighbourhood fits inside FPFH's (the defaults). // (N, 33)
+pub fn features(
+    points: &[Point3<f64>],
+    index: &KnnIndex,
+    normals: &NormalsConfig,
+    fpfh: &FpfhConfig,
+) -> Vec<Fpfh> {
+    let neighbourhoods = Neighbourhoods::hybrid(index, points, fpfh.radius, fpfh.max_nn);
     let normal_vectors = if normals.radius <= fpfh.radius && normals.max_nn <= fpfh.max_nn {
         normals_from_neighbourhoods(points, &neighbourhoods, normals)
     } else {
-        estimate_normals(points, &index, normals)
+        estimate_normals(points, index, normals)
     };
     fpfh_from_neighbourhoods(points, &normal_vectors, &neighbourhoods)
 }
@@ -343,6 +347,7 @@ mod tests {
         let cloud = crate::testing::airplane();
         let f = features(
             &cloud.points,
+            &KnnIndex::new(&cloud.points),
             &NormalsConfig::default(),
             &FpfhConfig::default(),
         );
@@ -481,7 +486,12 @@ mod tests {
         let pose = RigidTransform::random(&mut StdRng::seed_from_u64(3), 45.0, 0.5);
         let moved = cloud.transformed(&pose);
         let of = |c: &crate::PointCloud| {
-            features(&c.points, &NormalsConfig::default(), &FpfhConfig::default())
+            features(
+                &c.points,
+                &KnnIndex::new(&c.points),
+                &NormalsConfig::default(),
+                &FpfhConfig::default(),
+            )
         };
         let (a, b) = (of(&cloud), of(&moved));
         let mut max_diff: f64 = 0.0;

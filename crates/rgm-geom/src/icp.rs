@@ -11,7 +11,7 @@
 use nalgebra::Point3;
 
 use crate::registration::{score, RegistrationResult};
-use crate::{kabsch, GeomError, KnnIndex, PointCloud, Result, RigidTransform};
+use crate::{kabsch, GeomError, KnnIndex, PointCloud, Prepared, Result, RigidTransform};
 
 /// The method's name ([`crate::registrar::MethodId`]).
 pub const NAME: &str = "icp";
@@ -52,6 +52,15 @@ pub fn register(
     target: &PointCloud,
     config: &IcpConfig,
 ) -> Result<RegistrationResult> {
+    register_prepared(source, &Prepared::new(target), config)
+}
+
+/// [`register`] onto a prepared target, its tree shared with the stages before and after.
+pub fn register_prepared(
+    source: &PointCloud,
+    target: &Prepared,
+    config: &IcpConfig,
+) -> Result<RegistrationResult> {
     const OP: &str = "icp::register";
     check_clouds(OP, source, target)?;
     if !(config.max_correspondence_distance > 0.0) {
@@ -63,12 +72,7 @@ pub fn register(
             ),
         });
     }
-    Ok(register_with_index(
-        source,
-        target,
-        &KnnIndex::new(&target.points),
-        config,
-    ))
+    Ok(register_with_index(source, target, target.index(), config))
 }
 
 /// [`register`] with the target's index built already (`index` over `target.points`), for

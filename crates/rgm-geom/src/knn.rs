@@ -9,6 +9,8 @@
 //! The file is long because its unit tests sit beside the code they check (as everywhere in
 //! rgm); the code itself is one job, kept in one place.
 
+use std::sync::OnceLock;
+
 use nalgebra::Point3;
 use rayon::prelude::*;
 
@@ -45,9 +47,22 @@ pub struct KnnIndex {
     points: Vec<([f64; 3], u32)>,
 }
 
+/// What [`KnnIndex::new`] calls with the points of every index it builds, once set.
+static ON_BUILD: OnceLock<fn(&[Point3<f64>])> = OnceLock::new();
+
+/// Has `hook` called with the points of every [`KnnIndex`] this process builds from now on: how
+/// a test holds a registration to one tree per cloud it searches. The first hook set stays;
+/// false when one was set already.
+pub fn watch_index_builds(hook: fn(&[Point3<f64>])) -> bool {
+    ON_BUILD.set(hook).is_ok()
+}
+
 impl KnnIndex {
     /// An index over `points`; reported indices are positions in this slice.
     pub fn new(points: &[Point3<f64>]) -> Self {
+        if let Some(hook) = ON_BUILD.get() {
+            hook(points);
+        }
         let mut tree_points = tree_points(points);
         let mut nodes = Vec::with_capacity(2 * points.len() / LEAF_SIZE + 1);
         if !tree_points.is_empty() {

@@ -33,7 +33,7 @@ use crate::refine::{median_spacing, refine_at_resolution, ResolutionConfig};
 use crate::registrar::{MethodId, Registrar, Registration};
 use crate::registration::score;
 use crate::registration::RegistrationResult;
-use crate::{kabsch, GeomError, KnnIndex, PointCloud, Result, RigidTransform};
+use crate::{kabsch, GeomError, PointCloud, Prepared, Result, RigidTransform};
 
 /// The method's name ([`crate::registrar::MethodId`]).
 pub const NAME: &str = "ransac";
@@ -119,6 +119,16 @@ pub fn register(
     target: &PointCloud,
     config: &RansacConfig,
 ) -> Result<RegistrationResult> {
+    register_prepared(&Prepared::new(source), &Prepared::new(target), config)
+}
+
+/// [`register`] on prepared clouds, whose trees serve when they are small enough to be used
+/// whole.
+pub fn register_prepared(
+    source: &Prepared,
+    target: &Prepared,
+    config: &RansacConfig,
+) -> Result<RegistrationResult> {
     const OP: &str = "ransac::register";
     check_clouds(OP, source, target)?;
     if !(config.edge_similarity > 0.0 && config.edge_similarity <= 1.0) {
@@ -130,13 +140,16 @@ pub fn register(
             ),
         });
     }
-    let (small_source, small_target) = thinned_pair(source, target, config.max_points);
-    let (source_index, target_index) = rayon::join(
-        || KnnIndex::new(&small_source.points),
-        || KnnIndex::new(&small_target.points),
-    );
-    let spacing = median_spacing(&small_source.points, &source_index, config.spacing_sample).max(
-        median_spacing(&small_target.points, &target_index, config.spacing_sample),
+    let thinned = thinned_pair(source, target, config.max_points)
+        .map(|(s, t)| (Prepared::new(s), Prepared::new(t)));
+    let (small_source, small_target) = match &thinned {
+        Some((s, t)) => (s, t),
+        None => (source, target),
+    };
+    let (source_index, target_index) =
+        rayon::join(|| small_source.index(), || small_target.index());
+    let spacing = median_spacing(&small_source.points, source_index, config.spacing_sample).max(
+        median_spacing(&small_target.points, target_index, config.spacing_sample),
     );
     if !(spacing > 0.0) {
         return Err(GeomError::Degenerate {
@@ -153,8 +166,8 @@ pub fn register(
         max_nn: 100,
     };
     let (source_features, target_features) = rayon::join(
-        || features(&small_source.points, &normals, &fpfh), // (N', 33)
-        || features(&small_target.points, &normals, &fpfh), // (M', 33)
+        || features(&small_source.points, source_index, &normals, &fpfh), // (N', 33)
+        || features(&small_target.points, target_index, &normals, &fpfh), // (M', 33)
     );
     let matches = if config.mutual {
         mutual_matches(&source_features, &target_features)
@@ -184,7 +197,7 @@ pub fn register(
     // matches of look-alike floor agree with lays little of one room on the other.
     let fitness: Vec<f64> = winners
         .par_iter()
-        .map(|(_, t)| score(&small_source.points, &target_index, t, distance, None).fitness)
+        .map(|(_, t)| score(&small_source.points, target_index, t, distance, None).fitness)
         .collect();
     let best = (0..winners.len()).fold(None, |best: Option<usize>, w| match best {
         Some(b) if fitness[b] >= fitness[w] => best,
@@ -202,16 +215,16 @@ pub fn register(
         hypotheses,
     );
     let (transform, iterations) = refine_at_resolution(
-        &small_source,
-        &small_target,
-        &target_index,
+        small_source,
+        small_target,
+        target_index,
         &found.t_target_source,
         f64::INFINITY,
         &config.refinement,
     )?;
     let scored = score(
         &small_source.points,
-        &target_index,
+        target_index,
         &transform,
         distance,
         None,
@@ -426,15 +439,15 @@ fn hypothesis(
 }
 
 /// Both clouds voxel-averaged with one voxel, the finest of a ladder that leaves at most
-/// `max_points` in each; a pair already that small is returned as it is.
+/// `max_points` in each; `None` for a pair already that small.
 fn thinned_pair(
     source: &PointCloud,
     target: &PointCloud,
     max_points: usize,
-) -> (PointCloud, PointCloud) {
+) -> Option<(PointCloud, PointCloud)> {
     let max_points = max_points.max(8);
     if source.len() <= max_points && target.len() <= max_points {
-        return (source.clone(), target.clone());
+        return None;
     }
     let (lo, hi) = source.points.iter().chain(&target.points).fold(
         (
@@ -445,10 +458,10 @@ fn thinned_pair(
     );
     let extent = (hi - lo).max();
     if !(extent > 0.0) {
-        return (
+        return Some((
             PointCloud::new(vec![source.points[0]]),
             PointCloud::new(vec![target.points[0]]),
-        );
+        ));
     }
     // A surface of side `extent` fills about (extent / voxel)² cubes: start finer than that and
     // grow the voxel by the square root of how many times too many points are left.
@@ -460,7 +473,7 @@ fn thinned_pair(
         );
         let most = s.len().max(t.len());
         if most <= max_points {
-            return (s, t);
+            return Some((s, t));
         }
         voxel *= (most as f64 / max_points as f64).sqrt().max(1.05);
     }
@@ -477,14 +490,14 @@ impl<E: From<GeomError>> Registrar<E> for RansacConfig {
         }
     }
 
-    fn register_with_progress(
+    fn register_prepared(
         &mut self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         _: &mut dyn FnMut(Progress),
     ) -> std::result::Result<Registration, E> {
         let start = Instant::now();
-        let result = register(source, target, self)?;
+        let result = register_prepared(source, target, self)?;
         Ok(Registration::single(result, Vec::new(), start))
     }
 }

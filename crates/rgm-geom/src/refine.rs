@@ -31,9 +31,9 @@ use nalgebra::{Matrix6, Point3, Rotation3, Vector3, Vector6};
 use rayon::prelude::*;
 
 use crate::icp::{self, check_clouds, IcpConfig};
-use crate::normals::{estimate_normals, normal_at, NormalsConfig};
+use crate::normals::{normal_at, NormalsConfig};
 use crate::registration::{nearest_each, score, RegistrationResult};
-use crate::{GeomError, KnnIndex, PointCloud, Result, RigidTransform};
+use crate::{GeomError, KnnIndex, PointCloud, Prepared, Result, RigidTransform};
 
 /// What a method refined by [`refine`] is called after its `+` (`fgr+icp`): it is ICP, point to
 /// plane and then point to point.
@@ -115,11 +115,22 @@ pub fn refine(
     initial: &RigidTransform,
     config: &RefineConfig,
 ) -> Result<RegistrationResult> {
+    refine_prepared(source, &Prepared::new(target), initial, config)
+}
+
+/// [`refine`] onto a prepared target: its tree and normals those of the stages before, kept for
+/// the stages after.
+pub fn refine_prepared(
+    source: &PointCloud,
+    target: &Prepared,
+    initial: &RigidTransform,
+    config: &RefineConfig,
+) -> Result<RegistrationResult> {
     const OP: &str = "refine::refine";
     check_clouds(OP, source, target)?;
     config.validate(OP)?;
-    let index = KnnIndex::new(&target.points);
-    let normals = estimate_normals(&target.points, &index, &config.normals); // (M,)
+    let index = target.index();
+    let normals = target.normals(&config.normals); // (M,)
     let mut transform = *initial;
     let mut scratch = PlaneScratch::default();
     let mut iterations = 0;
@@ -127,7 +138,7 @@ pub fn refine(
     let plane = PlaneFit {
         source,
         target,
-        index: &index,
+        index,
         normals: TargetNormals::Given(&normals),
     };
     for &max_distance in &config.distances {
@@ -149,7 +160,7 @@ pub fn refine(
         let stage = icp::register_with_index(
             source,
             target,
-            &index,
+            index,
             &IcpConfig {
                 max_correspondence_distance,
                 initial: transform,
@@ -162,7 +173,7 @@ pub fn refine(
     }
     let moved_score = score(
         &source.points,
-        &index,
+        index,
         &transform,
         config.finest_distance(),
         None,

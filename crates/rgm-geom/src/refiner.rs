@@ -11,7 +11,7 @@ use crate::icp::{self, IcpConfig};
 use crate::refine::{self, RefineConfig, ResolutionConfig};
 use crate::registrar::Registration;
 use crate::registration::{score, RegistrationResult};
-use crate::{KnnIndex, PointCloud, Result, RigidTransform};
+use crate::{Prepared, Result, RigidTransform};
 
 /// A local method: from a transform near the truth to a better one.
 pub trait Refiner: Send + Sync {
@@ -20,11 +20,12 @@ pub trait Refiner: Send + Sync {
 
     /// `initial` (a `t_target_source`) improved so that `source` lies on `target`, with the
     /// refinement's own iterations, inlier statistics and correspondences (the pairs behind its
-    /// inlier count); `candidates` empty.
+    /// inlier count); `candidates` empty. The clouds' trees and normals are the stages' before
+    /// it, and stay for the stages after it.
     fn refine(
         &self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         initial: &RigidTransform,
     ) -> Result<Registration>;
 }
@@ -36,8 +37,8 @@ impl<F: Refiner + ?Sized> Refiner for &F {
 
     fn refine(
         &self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         initial: &RigidTransform,
     ) -> Result<Registration> {
         (**self).refine(source, target, initial)
@@ -53,12 +54,12 @@ impl Refiner for RefineConfig {
 
     fn refine(
         &self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         initial: &RigidTransform,
     ) -> Result<Registration> {
         let start = Instant::now();
-        let result = refine::refine(source, target, initial, self)?;
+        let result = refine::refine_prepared(source, target, initial, self)?;
         Ok(Registration::scored_within(
             result,
             source,
@@ -80,8 +81,8 @@ impl Refiner for IcpConfig {
 
     fn refine(
         &self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         initial: &RigidTransform,
     ) -> Result<Registration> {
         let start = Instant::now();
@@ -89,7 +90,7 @@ impl Refiner for IcpConfig {
             initial: *initial,
             ..*self
         };
-        let result = icp::register(source, target, &config)?;
+        let result = icp::register_prepared(source, target, &config)?;
         Ok(Registration::scored_within(
             result,
             source,
@@ -120,16 +121,16 @@ impl Refiner for AtSpacing {
 
     fn refine(
         &self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         initial: &RigidTransform,
     ) -> Result<Registration> {
         let start = Instant::now();
-        let index = KnnIndex::new(&target.points);
+        let index = target.index();
         let (transform, iterations) = refine::refine_at_resolution(
             source,
             target,
-            &index,
+            index,
             initial,
             self.coarser_than,
             &self.config,
@@ -137,7 +138,7 @@ impl Refiner for AtSpacing {
         let mut correspondences = Vec::new();
         let scored = score(
             &source.points,
-            &index,
+            index,
             &transform,
             self.scoring_distance,
             Some(&mut correspondences),
@@ -176,7 +177,8 @@ mod tests {
                 [(&shape, &moved, pose), (&moved, &shape, pose.inverse())]
             {
                 let start = truth.compose(&off);
-                let found = refiner.refine(source, target, &start).unwrap();
+                let (source, target) = (Prepared::new(source), Prepared::new(target));
+                let found = refiner.refine(&source, &target, &start).unwrap();
                 let t = found.result.t_target_source;
                 let angle = t.inverse().compose(&truth).rotation_angle_deg();
                 let name = refiner.name();
@@ -206,6 +208,7 @@ mod tests {
             scoring_distance: 0.03,
             config: ResolutionConfig::default(),
         };
+        let shape = Prepared::new(&shape);
         let found = refiner.refine(&shape, &shape, &start).unwrap();
         assert_eq!(found.result.t_target_source, start);
         assert_eq!(found.result.iterations, 0);

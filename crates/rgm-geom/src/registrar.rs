@@ -21,7 +21,7 @@ use crate::refine::RefineConfig;
 use crate::refiner::{AtSpacing, Refiner};
 use crate::registration::{score, RegistrationResult};
 use crate::thinning::DENSITY_POINTS;
-use crate::{GeomError, KnnIndex, PointCloud, RigidTransform};
+use crate::{GeomError, PointCloud, Prepared, RigidTransform};
 
 /// What users call a method: its base name and the refiner its transform went through, spelled
 /// `base` or `base+refiner` (`fgr+icp`) in the command line, the tables, the Python package
@@ -99,14 +99,14 @@ impl Registration {
     pub fn scored_within(
         result: RegistrationResult,
         source: &PointCloud,
-        target: &PointCloud,
+        target: &Prepared,
         max_distance: f64,
         start: Instant,
     ) -> Self {
         let mut correspondences = Vec::new();
         score(
             &source.points,
-            &KnnIndex::new(&target.points),
+            target.index(),
             &result.t_target_source,
             max_distance,
             Some(&mut correspondences),
@@ -156,13 +156,25 @@ pub trait Registrar<E> {
     fn id(&self) -> MethodId;
 
     /// Registers `source` onto `target`, telling `progress` where it is (methods that take
-    /// long on large clouds report; others say nothing).
+    /// long on large clouds report; others say nothing). What a stage makes of the clouds (their
+    /// trees, normals) stays with them for the stages after it: a wrapper hands its inner method
+    /// the clouds it was given, or clouds it prepared itself when it changes them.
+    fn register_prepared(
+        &mut self,
+        source: &Prepared,
+        target: &Prepared,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E>;
+
+    /// Registers `source` onto `target`, telling `progress` where it is.
     fn register_with_progress(
         &mut self,
         source: &PointCloud,
         target: &PointCloud,
         progress: &mut dyn FnMut(Progress),
-    ) -> Result<Registration, E>;
+    ) -> Result<Registration, E> {
+        self.register_prepared(&Prepared::new(source), &Prepared::new(target), progress)
+    }
 
     /// Registers `source` onto `target`.
     fn register(&mut self, source: &PointCloud, target: &PointCloud) -> Result<Registration, E> {
@@ -200,13 +212,13 @@ impl<E> Registrar<E> for Box<dyn DynRegistrar<E>> {
         (**self).id()
     }
 
-    fn register_with_progress(
+    fn register_prepared(
         &mut self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         progress: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
-        (**self).register_with_progress(source, target, progress)
+        (**self).register_prepared(source, target, progress)
     }
 }
 
@@ -216,14 +228,14 @@ impl<E: From<GeomError>> Registrar<E> for IcpConfig {
         MethodId::plain(icp::NAME)
     }
 
-    fn register_with_progress(
+    fn register_prepared(
         &mut self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         _: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
         let start = Instant::now();
-        let result = icp::register(source, target, self)?;
+        let result = icp::register_prepared(source, target, self)?;
         let distance = self.max_correspondence_distance;
         Ok(Registration::scored_within(
             result, source, target, distance, start,
@@ -237,14 +249,14 @@ impl<E: From<GeomError>> Registrar<E> for FgrConfig {
         MethodId::plain(fgr::NAME)
     }
 
-    fn register_with_progress(
+    fn register_prepared(
         &mut self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         progress: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
         let start = Instant::now();
-        let result = fgr::register_with_progress(source, target, self, progress)?;
+        let result = fgr::register_prepared(source, target, self, progress)?;
         let distance = self.maximum_correspondence_distance;
         Ok(Registration::scored_within(
             result, source, target, distance, start,
@@ -276,16 +288,14 @@ impl<E: From<GeomError>, R: Registrar<E>, F: Refiner> Registrar<E> for Refined<R
         }
     }
 
-    fn register_with_progress(
+    fn register_prepared(
         &mut self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         progress: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
         let start = Instant::now();
-        let coarse = self
-            .inner
-            .register_with_progress(source, target, progress)?;
+        let coarse = self.inner.register_prepared(source, target, progress)?;
         let fine = self
             .refiner
             .refine(source, target, &coarse.result.t_target_source)?;
@@ -319,7 +329,7 @@ impl<R> Normalised<R> {
     fn in_frame<E>(
         source: &PointCloud,
         target: &PointCloud,
-        run: impl FnOnce(&PointCloud, &PointCloud, &Normalisation) -> Result<Registration, E>,
+        run: impl FnOnce(&Prepared, &Prepared, &Normalisation) -> Result<Registration, E>,
     ) -> Result<Registration, E> {
         let start = Instant::now();
         // Each cloud's own steps side by side: its far outliers left out, then moved.
@@ -335,7 +345,7 @@ impl<R> Normalised<R> {
             || frame.source(&source_kept), // (N', 3)
             || frame.target(&target_kept), // (M', 3)
         );
-        let mut found = run(&fs, &ft, &frame)?;
+        let mut found = run(&Prepared::new(&fs), &Prepared::new(&ft), &frame)?;
         let result = &mut found.result;
         result.t_target_source = frame.undo(&result.t_target_source);
         result.inlier_rmse *= frame.scale;
@@ -358,15 +368,15 @@ impl<E: From<GeomError>, R: Registrar<E>> Registrar<E> for Normalised<R> {
         self.inner.id()
     }
 
-    fn register_with_progress(
+    fn register_prepared(
         &mut self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         progress: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
         let inner = &mut self.inner;
         Self::in_frame(source, target, |fs, ft, _| {
-            inner.register_with_progress(fs, ft, progress)
+            inner.register_prepared(fs, ft, progress)
         })
     }
 }
@@ -378,8 +388,8 @@ impl<F: Refiner> Refiner for Normalised<F> {
 
     fn refine(
         &self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         initial: &RigidTransform,
     ) -> crate::Result<Registration> {
         Self::in_frame(source, target, |fs, ft, frame| {
@@ -404,16 +414,14 @@ impl<E: From<GeomError>, R: Registrar<E>, F: Refiner> Registrar<E> for AtResolut
         self.inner.id()
     }
 
-    fn register_with_progress(
+    fn register_prepared(
         &mut self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         progress: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
         let start = Instant::now();
-        let found = self
-            .inner
-            .register_with_progress(source, target, progress)?;
+        let found = self.inner.register_prepared(source, target, progress)?;
         if source.len().max(target.len()) <= DENSITY_POINTS {
             return Ok(found);
         }
@@ -449,16 +457,16 @@ impl<E, S: Registrar<E>, R: Registrar<E>> Registrar<E> for UpTo<S, R> {
         self.other.id()
     }
 
-    fn register_with_progress(
+    fn register_prepared(
         &mut self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         progress: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
         if source.len().max(target.len()) <= self.points {
-            self.small.register_with_progress(source, target, progress)
+            self.small.register_prepared(source, target, progress)
         } else {
-            self.other.register_with_progress(source, target, progress)
+            self.other.register_prepared(source, target, progress)
         }
     }
 }
@@ -514,17 +522,17 @@ impl<E, R: Registrar<E>> Registrar<E> for OnFirstUse<R, E> {
         self.id
     }
 
-    fn register_with_progress(
+    fn register_prepared(
         &mut self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         progress: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
         let method = match &mut self.made {
             Some(method) => method,
             None => self.made.insert((self.make)()?),
         };
-        method.register_with_progress(source, target, progress)
+        method.register_prepared(source, target, progress)
     }
 }
 
@@ -648,8 +656,8 @@ mod tests {
             }
             fn refine(
                 &self,
-                _: &PointCloud,
-                _: &PointCloud,
+                _: &Prepared,
+                _: &Prepared,
                 initial: &RigidTransform,
             ) -> crate::Result<Registration> {
                 *self.started_from.lock().unwrap() = Some(*initial);

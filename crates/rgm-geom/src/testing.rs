@@ -9,7 +9,7 @@ use rand::{rngs::StdRng, Rng, SeedableRng};
 use crate::fgr::Progress;
 use crate::registrar::{MethodId, Registrar, Registration};
 use crate::registration::RegistrationResult;
-use crate::{GeomError, PointCloud, RigidTransform};
+use crate::{GeomError, PointCloud, Prepared, RigidTransform};
 
 /// `n` points uniform in the cube [−1, 1)³.
 pub fn uniform_cube(n: usize, rng: &mut StdRng) -> Vec<Point3<f64>> {
@@ -107,10 +107,10 @@ impl Registrar<GeomError> for Fixed {
         MethodId::plain(self.name)
     }
 
-    fn register_with_progress(
+    fn register_prepared(
         &mut self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         _: &mut dyn FnMut(Progress),
     ) -> Result<Registration, GeomError> {
         self.seen.lock().unwrap().push((source.len(), target.len()));

@@ -5,10 +5,10 @@
 use std::borrow::Cow;
 use std::time::Instant;
 
-use crate::best_of::{agree, conclude, pair_trees, Composite, Judge};
+use crate::best_of::{agree, conclude, Composite, Judge};
 use crate::fgr::Progress;
 use crate::registrar::{MethodId, Registrar, Registration};
-use crate::{GeomError, PointCloud, RigidTransform};
+use crate::{GeomError, PointCloud, Prepared, RigidTransform};
 
 /// Points of a training cloud (1,024 per ModelNet40 shape; 717 after the partial crop): a cloud
 /// with more points is denser than the methods were tuned for.
@@ -82,33 +82,36 @@ where
         self.inner.id()
     }
 
-    fn register_with_progress(
+    fn register_prepared(
         &mut self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         _: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
         let start = Instant::now();
-        let (source_index, target_index) = pair_trees(source, target);
+        let judge = Judge::new(source, target);
         let dense = source.len().max(target.len()) > DENSITY_POINTS;
         let thinnings = if dense {
             &self.thinnings[..]
         } else {
             &self.thinnings[..1.min(self.thinnings.len())]
         };
-        let judged = ((source, &source_index), (target, &target_index));
         let mut candidates = Vec::new();
         // (score, transform, iterations, index in `candidates`) of the best so far.
         let mut best: Option<(f64, RigidTransform, usize, usize)> = None;
         for &how in thinnings {
-            let (s, t) = rayon::join(|| thinned(source, how), || thinned(target, how));
-            let before = best.map(|(score, transform, ..)| (score, transform));
-            let judge = if dense {
-                Judge::of_thinned(judged.0, judged.1, before)
-            } else {
-                Judge::new(judged.0, judged.1)
+            // A cloud no denser than the training clouds is used as it is, its tree shared.
+            let prepared_thinning = |cloud: &Prepared| match thinned(cloud, how) {
+                Cow::Owned(thin) => Some(Prepared::new(thin)),
+                Cow::Borrowed(_) => None,
             };
-            let outcome = self.inner.run_judged(&s, &t, &judge);
+            let (s, t) = rayon::join(|| prepared_thinning(source), || prepared_thinning(target));
+            let (s, t) = (s.as_ref().unwrap_or(source), t.as_ref().unwrap_or(target));
+            let judge = Judge {
+                before: best.map(|(score, transform, ..)| (score, transform)),
+                ..judge
+            };
+            let outcome = self.inner.run_judged(s, t, &judge);
             if let Some((i, iterations)) = outcome.best {
                 let winner = &outcome.candidates[i];
                 let score = winner.score.expect("a winner is scored");
@@ -134,7 +137,6 @@ where
                 break;
             }
         }
-        let judge = Judge::new(judged.0, judged.1);
         let chosen = best.map(|(_, _, iterations, index)| (index, iterations));
         conclude(
             &judge,

@@ -11,7 +11,7 @@ use std::time::Instant;
 
 use crate::registrar::{MethodId, Registrar, Registration};
 use crate::registration::{score, RegistrationResult};
-use crate::{kabsch, GeomError, KnnIndex, PointCloud, Result, RigidTransform};
+use crate::{kabsch, GeomError, PointCloud, Prepared, Result, RigidTransform};
 
 /// The method's name ([`crate::registrar::MethodId`]).
 pub const NAME: &str = "triplets";
@@ -60,6 +60,15 @@ pub fn register(
     target: &PointCloud,
     config: &TripletConfig,
 ) -> Result<(RegistrationResult, f64)> {
+    register_prepared(source, &Prepared::new(target), config)
+}
+
+/// [`register`] onto a prepared target, its tree shared with the stages after.
+pub fn register_prepared(
+    source: &PointCloud,
+    target: &Prepared,
+    config: &TripletConfig,
+) -> Result<(RegistrationResult, f64)> {
     const OP: &str = "triplets::register";
     let bad = |why: String| Err(GeomError::Degenerate { op: OP, why });
     for (name, cloud) in [("source", source), ("target", target)] {
@@ -84,7 +93,7 @@ pub fn register(
         return bad("the source's points lie on a line: no rotation about it is told".into());
     }
     let tolerance = config.tolerance * longest;
-    let index = KnnIndex::new(&target.points);
+    let index = target.index();
     let t = &target.points;
     let close = |a: usize, b: usize, side: f64| ((t[a] - t[b]).norm() - side).abs() <= tolerance;
     // (inliers, RMSE, transform) of the best match so far.
@@ -100,7 +109,7 @@ pub fn register(
                 else {
                     continue;
                 };
-                let fit = score(&source.points, &index, &transform, tolerance, None);
+                let fit = score(&source.points, index, &transform, tolerance, None);
                 let better = best.as_ref().is_none_or(|&(count, rmse, _)| {
                     fit.inlier_count > count || fit.inlier_count == count && fit.inlier_rmse < rmse
                 });
@@ -118,7 +127,7 @@ pub fn register(
                 false,
                 score(
                     &source.points,
-                    &index,
+                    index,
                     &RigidTransform::identity(),
                     tolerance,
                     None,
@@ -129,10 +138,10 @@ pub fn register(
     };
     // Fitted again on every pair the match brings within the tolerance.
     let mut pairs = Vec::new();
-    score(&source.points, &index, &found, tolerance, Some(&mut pairs));
+    score(&source.points, index, &found, tolerance, Some(&mut pairs));
     let (from, to): (Vec<_>, Vec<_>) = pairs.iter().map(|&(i, j)| (s[i], t[j])).unzip();
     let transform = kabsch(&from, &to, &vec![1.0; from.len()]).unwrap_or(found);
-    let fit = score(&source.points, &index, &transform, tolerance, None);
+    let fit = score(&source.points, index, &transform, tolerance, None);
     Ok((
         RegistrationResult::scored(transform, 1, true, fit),
         tolerance,
@@ -144,14 +153,14 @@ impl<E: From<GeomError>> Registrar<E> for TripletConfig {
         MethodId::plain(NAME)
     }
 
-    fn register_with_progress(
+    fn register_prepared(
         &mut self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         _: &mut dyn FnMut(crate::fgr::Progress),
     ) -> std::result::Result<Registration, E> {
         let start = Instant::now();
-        let (result, tolerance) = register(source, target, self)?;
+        let (result, tolerance) = register_prepared(source, target, self)?;
         Ok(Registration::scored_within(
             result, source, target, tolerance, start,
         ))

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use rgm_data::{Pair, ScanPair};
 use rgm_geom::metrics::{MetricsSummary, PairMetrics};
-use rgm_geom::RigidTransform;
+use rgm_geom::{Prepared, RigidTransform};
 use serde::Serialize;
 
 use rgm_geom::refiner::Refiner;
@@ -76,8 +76,11 @@ impl PairRecord {
             return Ok(self.clone());
         }
         let start = Instant::now();
-        let refined =
-            Normalised { inner: refiner }.refine(&pair.source, &pair.target, &self.transform);
+        let refined = Normalised { inner: refiner }.refine(
+            &Prepared::new(&pair.source),
+            &Prepared::new(&pair.target),
+            &self.transform,
+        );
         let time_ms = self.time_ms + start.elapsed().as_secs_f64() * 1e3;
         let (transform, correspondences, failure) = match refined {
             Ok(r) => (r.result.t_target_source, r.result.inlier_count, None),

@@ -6,7 +6,7 @@ use std::fmt;
 
 use rgm_geom::fgr::Progress;
 use rgm_geom::registrar::{DynRegistrar, MethodId, Registrar, Registration};
-use rgm_geom::PointCloud;
+use rgm_geom::Prepared;
 
 use crate::error::MethodError;
 
@@ -43,13 +43,13 @@ impl Registrar<MethodError> for Method {
         self.0.id()
     }
 
-    fn register_with_progress(
+    fn register_prepared(
         &mut self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         progress: &mut dyn FnMut(Progress),
     ) -> Result<Registration, MethodError> {
-        let found = self.0.register_with_progress(source, target, progress)?;
+        let found = self.0.register_prepared(source, target, progress)?;
         let result = &found.result;
         let t = &result.t_target_source;
         let values = t.rotation.iter().chain(t.translation.iter());

@@ -27,7 +27,7 @@ use rgm_geom::fgr::Progress;
 use rgm_geom::kabsch::kabsch;
 use rgm_geom::registrar::{MethodId, Registrar, Registration};
 use rgm_geom::thinning::DENSITY_POINTS;
-use rgm_geom::{Point3, PointCloud, RegistrationResult, RigidTransform};
+use rgm_geom::{Point3, PointCloud, Prepared, RegistrationResult, RigidTransform};
 use rgm_match::{hard_match, Correspondences, MatchConfig};
 use rgm_nn::{Compute, Parameters, Precision};
 
@@ -443,10 +443,10 @@ impl Registrar<MethodError> for RgmRegistrar {
         Self::ID
     }
 
-    fn register_with_progress(
+    fn register_prepared(
         &mut self,
-        source: &PointCloud,
-        target: &PointCloud,
+        source: &Prepared,
+        target: &Prepared,
         _: &mut dyn FnMut(Progress),
     ) -> Result<Registration, MethodError> {
         let start = Instant::now();

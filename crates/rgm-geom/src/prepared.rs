@@ -1,0 +1,139 @@
+//! A cloud prepared for registration: what the methods search it by (its k-d tree, its normals)
+//! made when a stage first needs it and shared by every later stage of the registration, so that
+//! a composite of several methods, checks and refinements builds each cloud's tree once.
+//!
+//! A [`Prepared`] borrows the cloud it is given (or owns one a wrapper made: the pair in another
+//! frame, a thinning) and derefs to it, so that a method reads it as a [`PointCloud`].
+
+use std::borrow::Cow;
+use std::ops::Deref;
+use std::sync::{Arc, Mutex, OnceLock};
+
+use crate::normals::{estimate_normals, NormalsConfig};
+use crate::{KnnIndex, PointCloud, Vector3};
+
+/// A cloud and what is made of it lazily: its [`KnnIndex`] and its normals per
+/// [`NormalsConfig`].
+#[derive(Debug)]
+pub struct Prepared<'a> {
+    cloud: Cow<'a, PointCloud>,
+    index: OnceLock<KnnIndex>,
+    /// The normals made so far, one entry per configuration asked for. // [(config, (N,))]
+    normals: Mutex<Vec<(NormalsConfig, Arc<Vec<Vector3<f64>>>)>>,
+}
+
+impl<'a> Prepared<'a> {
+    /// `cloud`, nothing made of it yet.
+    pub fn new(cloud: impl Into<Cow<'a, PointCloud>>) -> Self {
+        Self {
+            cloud: cloud.into(),
+            index: OnceLock::new(),
+            normals: Mutex::new(Vec::new()),
+        }
+    }
+
+    /// The cloud.
+    pub fn cloud(&self) -> &PointCloud {
+        &self.cloud
+    }
+
+    /// The cloud's k-d tree, built on first use.
+    pub fn index(&self) -> &KnnIndex {
+        if let Some(index) = self.index.get() {
+            return index;
+        }
+        // Built outside the cell's lock: the build runs on rayon, whose threads may take up
+        // another stage that asks for this tree while they wait, and a cell initialised
+        // re-entrantly deadlocks. Two stages that race both build it; the first one set is kept.
+        let built = KnnIndex::new(&self.cloud.points);
+        self.index.get_or_init(|| built)
+    }
+
+    /// The cloud with its tree, as the scoring functions take a searched cloud.
+    pub fn indexed(&self) -> (&PointCloud, &KnnIndex) {
+        (&self.cloud, self.index())
+    }
+
+    /// The cloud's unit normals by [`estimate_normals`] with `config`, estimated on first use
+    /// of that configuration. // (N,)
+    pub fn normals(&self, config: &NormalsConfig) -> Arc<Vec<Vector3<f64>>> {
+        let made = |normals: &[(NormalsConfig, Arc<Vec<Vector3<f64>>>)]| {
+            normals
+                .iter()
+                .find(|(c, _)| c == config)
+                .map(|(_, n)| n.clone())
+        };
+        if let Some(normals) = made(&self.normals.lock().expect("no panic holds the lock")) {
+            return normals;
+        }
+        // Estimated outside the lock, for the reason `index` builds outside its cell's.
+        let estimated = Arc::new(estimate_normals(&self.cloud.points, self.index(), config));
+        let mut normals = self.normals.lock().expect("no panic holds the lock");
+        if let Some(raced) = made(&normals) {
+            return raced;
+        }
+        normals.push((*config, estimated.clone()));
+        estimated
+    }
+}
+
+/// Both clouds with their trees, the trees not yet built built side by side (when there are
+/// cores to spare).
+pub fn indexed_pair<'p>(
+    source: &'p Prepared,
+    target: &'p Prepared,
+) -> (
+    (&'p PointCloud, &'p KnnIndex),
+    (&'p PointCloud, &'p KnnIndex),
+) {
+    rayon::join(|| source.indexed(), || target.indexed())
+}
+
+impl Deref for Prepared<'_> {
+    type Target = PointCloud;
+
+    fn deref(&self) -> &PointCloud {
+        &self.cloud
+    }
+}
+
+// What `Prepared::new` takes: a cloud borrowed or owned.
+impl<'a> From<&'a PointCloud> for Cow<'a, PointCloud> {
+    fn from(cloud: &'a PointCloud) -> Self {
+        Cow::Borrowed(cloud)
+    }
+}
+
+impl From<PointCloud> for Cow<'_, PointCloud> {
+    fn from(cloud: PointCloud) -> Self {
+        Cow::Owned(cloud)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::airplane;
+
+    #[test]
+    fn the_tree_and_normals_are_made_once_and_are_what_the_bare_functions_make() {
+        let cloud = airplane();
+        let prepared = Prepared::new(&cloud);
+        let index = prepared.index();
+        assert!(std::ptr::eq(index, prepared.index()));
+        let direct = KnnIndex::new(&cloud.points);
+        let p = cloud.points[7];
+        assert_eq!(index.k_nearest(&p, 5), direct.k_nearest(&p, 5));
+        let config = NormalsConfig::default();
+        let normals = prepared.normals(&config);
+        assert!(Arc::ptr_eq(&normals, &prepared.normals(&config)));
+        assert_eq!(*normals, estimate_normals(&cloud.points, &direct, &config));
+        // Another configuration is another entry.
+        let wide = NormalsConfig {
+            radius: 0.4,
+            ..config
+        };
+        assert!(!Arc::ptr_eq(&normals, &prepared.normals(&wide)));
+        assert_eq!(prepared.normals.lock().unwrap().len(), 2);
+    }
+}
