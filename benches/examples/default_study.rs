@@ -414,7 +414,8 @@ fn cascade(
         let t = frame.target(&pair.target.select(&near(&pair.target)));
         let (si, ti) = (KnnIndex::new(&s.points), KnnIndex::new(&t.points));
         let fgr = frame.redo(&found.candidates[0].t_target_source);
-        let turned = turned_share((&s, &si), (&t, &ti), &fgr);
+        let distance = rgm_model::options::SCORING.overlap_distance;
+        let turned = turned_share((&s, &si), (&t, &ti), &fgr, distance);
         let loose: Vec<String> = LOOSE_DISTANCES
             .iter()
             .map(|&d| {

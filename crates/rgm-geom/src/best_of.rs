@@ -21,14 +21,19 @@ use crate::registrar::{elapsed_ms, Candidate, DynRegistrar, MethodId, Registrar,
 use crate::registration::{score, RegistrationResult};
 use crate::{GeomError, KnnIndex, PointCloud, Prepared, RigidTransform};
 
-/// Distance (unit-sphere units) within which a moved point counts as overlapping the other
-/// cloud in [`overlap_score`].
-pub const SCORE_DISTANCE: f64 = 0.02;
-
-/// The least [`overlap_score`] of a credible result: below it, fewer than one point in twenty of
-/// each cloud lies on the other after the best transform, and the pair is reported as not
-/// registered ([`Registration::doubt`]) rather than with a transform nothing supports.
-pub const MIN_OVERLAP: f64 = 0.1;
+/// How a composite judges its candidates without ground truth and when it trusts the best:
+/// configuration, its values chosen where methods are composed (on the pairs they were tuned
+/// on). Lengths in the clouds' units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Scoring {
+    /// Within it a moved point counts as overlapping the other cloud ([`overlap_score`]).
+    pub overlap_distance: f64,
+    /// The least [`overlap_score`] of a credible result: below it the pair is reported as not
+    /// registered ([`Registration::doubt`]) rather than with a transform nothing supports.
+    pub min_overlap: f64,
+    /// The distance at which the chosen result is scored and its correspondences found.
+    pub result_distance: f64,
+}
 
 /// When a cascade's result is good enough to end it ([`Cascade::accept`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -42,7 +47,7 @@ pub struct Acceptance {
     /// (distance, least overlap): a result whose [`overlap_score_at`] that distance reaches the
     /// overlap is taken whatever its turned share. Clouds that lie wholly on each other (full
     /// scans of one object) leave a turned pose nothing to fit better, while noise, which
-    /// lowers the overlap at [`SCORE_DISTANCE`] far more than at a looser distance, would
+    /// lowers the overlap at [`Scoring::overlap_distance`] far more than at a looser distance, would
     /// otherwise make a right result look as doubtful as a symmetric shape's.
     pub whole: (f64, f64),
     /// A check the result must pass too (the coincidence of a dense pair at its point
@@ -56,49 +61,38 @@ impl Acceptance {
     pub const NEVER: Self = Self {
         score: f64::INFINITY,
         turned_share: 0.0,
-        whole: (SCORE_DISTANCE, f64::INFINITY),
+        whole: (0.0, f64::INFINITY),
         coincides: None,
     };
 
     /// Whether `transform`, which scores `score` on the pair, ends the cascade; its
-    /// [`turned_share`] is measured on `source` and `target` with their trees, the pair as the
-    /// candidates saw it (at most a few thousand points, whatever the pair's density).
+    /// [`turned_share`] at `overlap_distance` is measured on `source` and `target` with their
+    /// trees, the pair as the candidates saw it (at most a few thousand points, whatever the
+    /// pair's density).
     pub fn takes(
         &self,
         score: f64,
         source: (&PointCloud, &KnnIndex),
         target: (&PointCloud, &KnnIndex),
         transform: &RigidTransform,
+        overlap_distance: f64,
     ) -> bool {
         let (distance, whole) = self.whole;
         score >= self.score
             && (self.turned_share == f64::INFINITY
-                || overlap_score_at(source, target, transform, distance) >= whole
-                || turned_share(source, target, transform) <= self.turned_share)
+                || overlap_score(source, target, transform, distance) >= whole
+                || turned_share(source, target, transform, overlap_distance) <= self.turned_share)
             && self
                 .coincides
                 .is_none_or(|check| check.takes(source, target, transform))
     }
 }
 
-/// How close the candidates' transforms (unit-sphere frame) on a dense pair's first thinning
-/// must be for the next thinning to be skipped: (degrees, distance).
-pub const AGREEMENT: (f64, f64) = (1.0, 0.02);
-
-/// Share of the points of each cloud that the transform brings within [`SCORE_DISTANCE`] of
-/// the other cloud, source → target plus target → source (0 to 2). Counting both ways rewards
-/// an overlap that both clouds agree on, where a one-way fitness is fooled by a small cloud
-/// lying anywhere on a large one.
+/// Share of the points of each cloud that the transform brings within `distance` of the other
+/// cloud, source → target plus target → source (0 to 2). Counting both ways rewards an overlap
+/// that both clouds agree on, where a one-way fitness is fooled by a small cloud lying anywhere
+/// on a large one.
 pub fn overlap_score(
-    source: (&PointCloud, &KnnIndex),
-    target: (&PointCloud, &KnnIndex),
-    transform: &RigidTransform,
-) -> f64 {
-    overlap_score_at(source, target, transform, SCORE_DISTANCE)
-}
-
-/// [`overlap_score`] with points counted within `distance` instead of [`SCORE_DISTANCE`].
-pub fn overlap_score_at(
     source: (&PointCloud, &KnnIndex),
     target: (&PointCloud, &KnnIndex),
     transform: &RigidTransform,
@@ -117,19 +111,20 @@ pub fn overlap_score_at(
 
 /// How little `transform`'s overlap tells the shape's pose: the best [`overlap_score`] of its
 /// [`turned_poses`], as a share of `transform`'s own. Near 1 or above, a pose turned about one of
-/// the source's axes fits as well, as for a symmetric shape.
+/// the source's axes fits as well, as for a symmetric shape. Overlaps counted within `distance`.
 pub fn turned_share(
     source: (&PointCloud, &KnnIndex),
     target: (&PointCloud, &KnnIndex),
     transform: &RigidTransform,
+    distance: f64,
 ) -> f64 {
-    let score = overlap_score(source, target, transform);
+    let score = overlap_score(source, target, transform, distance);
     if source.0.len() < 3 || score <= 0.0 {
         return f64::INFINITY;
     }
     let best = turned_poses(source.0, transform)
         .iter()
-        .map(|turned| overlap_score(source, target, turned))
+        .map(|turned| overlap_score(source, target, turned, distance))
         .fold(0.0, f64::max);
     best / score
 }
@@ -161,10 +156,10 @@ pub fn turned_poses(source: &PointCloud, transform: &RigidTransform) -> Vec<Rigi
     poses
 }
 
-/// Two transforms within [`AGREEMENT`] of each other: rotations less than its degrees apart,
-/// and moving the frame's origin to points less than its distance apart.
-pub fn agree(a: &RigidTransform, b: &RigidTransform) -> bool {
-    let (degrees, distance) = AGREEMENT;
+/// Two transforms `within` (degrees, distance) of each other: rotations less than its degrees
+/// apart, and moving the frame's origin to points less than its distance apart.
+pub fn agree(a: &RigidTransform, b: &RigidTransform, within: (f64, f64)) -> bool {
+    let (degrees, distance) = within;
     a.inverse().compose(b).rotation_angle_deg() < degrees
         && (a.translation - b.translation).norm() < distance
 }
@@ -175,26 +170,33 @@ pub fn agree(a: &RigidTransform, b: &RigidTransform) -> bool {
 pub struct Judge<'a> {
     pub source: &'a Prepared<'a>,
     pub target: &'a Prepared<'a>,
+    pub scoring: Scoring,
     /// The best (score, transform) found before: a candidate wins only by beating it, and an
     /// acceptance weighs it as a result of this stage.
     pub before: Option<(f64, RigidTransform)>,
 }
 
 impl<'a> Judge<'a> {
-    /// A judge on `source` and `target` with nothing found before; their trees are built (side
-    /// by side), as every score needs them.
-    pub fn new(source: &'a Prepared<'a>, target: &'a Prepared<'a>) -> Self {
+    /// A judge on `source` and `target` by `scoring`, with nothing found before; their trees
+    /// are built (side by side), as every score needs them.
+    pub fn new(source: &'a Prepared<'a>, target: &'a Prepared<'a>, scoring: Scoring) -> Self {
         indexed_pair(source, target);
         Self {
             source,
             target,
+            scoring,
             before: None,
         }
     }
 
     /// `transform`'s [`overlap_score`] on the judged pair.
     pub fn score(&self, transform: &RigidTransform) -> f64 {
-        overlap_score(self.source.indexed(), self.target.indexed(), transform)
+        overlap_score(
+            self.source.indexed(),
+            self.target.indexed(),
+            transform,
+            self.scoring.overlap_distance,
+        )
     }
 
     /// Whether `accept` takes the best of `tally` (or of what came before), its turned share
@@ -209,7 +211,8 @@ impl<'a> Judge<'a> {
         tally.best.as_ref().is_some_and(|best| {
             best.score >= accept.score && {
                 let (source, target) = indexed_pair(source, target);
-                accept.takes(best.score, source, target, &best.transform)
+                let distance = self.scoring.overlap_distance;
+                accept.takes(best.score, source, target, &best.transform, distance)
             }
         })
     }
@@ -234,8 +237,8 @@ pub trait Composite<E>: Registrar<E> {
     /// The candidates run on `source` and `target`, judged by `judge`.
     fn run_judged(&mut self, source: &Prepared, target: &Prepared, judge: &Judge) -> Outcome;
 
-    /// The distance at which the chosen result is scored and its correspondences found.
-    fn scoring_distance(&self) -> f64;
+    /// How its candidates are judged.
+    fn scoring(&self) -> Scoring;
 }
 
 /// A result that wins: its score, transform, iterations, and its index among the candidates
@@ -343,15 +346,20 @@ fn composite_id<'c, E: 'c>(
 }
 
 /// The registration of a composite's `outcome` on the judged pair: the best candidate (`best`:
-/// its index among `candidates`), scored at `scoring_distance` with its correspondences;
-/// doubted when it overlaps less than [`MIN_OVERLAP`]; an error when every candidate failed.
+/// its index among `candidates`), scored at the judge's [`Scoring::result_distance`] with its
+/// correspondences; doubted when it overlaps less than [`Scoring::min_overlap`]; an error when
+/// every candidate failed.
 pub fn conclude<E: From<GeomError>>(
     judge: &Judge,
     candidates: Vec<Candidate>,
     best: Option<(usize, usize)>,
-    scoring_distance: f64,
     start: Instant,
 ) -> Result<Registration, E> {
+    let Scoring {
+        min_overlap,
+        result_distance,
+        ..
+    } = judge.scoring;
     let Some((chosen, iterations)) = best else {
         let why: Vec<String> = candidates
             .iter()
@@ -361,10 +369,10 @@ pub fn conclude<E: From<GeomError>>(
     };
     let winner = &candidates[chosen];
     let (transform, value) = (winner.t_target_source, winner.score.unwrap_or(0.0));
-    let doubt = (value < MIN_OVERLAP).then(|| {
+    let doubt = (value < min_overlap).then(|| {
         let method = &winner.method;
         format!(
-            "the best candidate, {method}, overlaps too little (score {value:.3} < {MIN_OVERLAP}): \
+            "the best candidate, {method}, overlaps too little (score {value:.3} < {min_overlap}): \
              the clouds may not overlap, or every method failed on them"
         )
     });
@@ -373,7 +381,7 @@ pub fn conclude<E: From<GeomError>>(
         &judge.source.points,
         judge.target.index(),
         &transform,
-        scoring_distance,
+        result_distance,
         Some(&mut correspondences),
     );
     Ok(Registration {
@@ -393,29 +401,22 @@ fn register_composite<E: From<GeomError>>(
     target: &Prepared,
 ) -> Result<Registration, E> {
     let start = Instant::now();
-    let judge = Judge::new(source, target);
+    let judge = Judge::new(source, target, composite.scoring());
     let outcome = composite.run_judged(source, target, &judge);
-    conclude(
-        &judge,
-        outcome.candidates,
-        outcome.best,
-        composite.scoring_distance(),
-        start,
-    )
+    conclude(&judge, outcome.candidates, outcome.best, start)
 }
 
 /// Every candidate on the pair, side by side, the best by [`overlap_score`] returned (ties to
-/// the earlier candidate). Lengths are in unit-sphere units: wrap it in
-/// [`crate::registrar::Normalised`] for pairs of any size. The result is scored at
-/// `scoring_distance`; its correspondences are the source points within that distance of the
-/// target.
+/// the earlier candidate), judged by `scoring`: wrap it in [`crate::registrar::Normalised`] for
+/// pairs of any size when its lengths are set for unit-sphere shapes. Its correspondences are
+/// the source points within [`Scoring::result_distance`] of the target.
 #[derive(Debug)]
 pub struct BestOf<E> {
     /// The name of the composite (`auto`).
     pub base: &'static str,
     /// In the order they win ties.
     pub candidates: Vec<Box<dyn DynRegistrar<E>>>,
-    pub scoring_distance: f64,
+    pub scoring: Scoring,
 }
 
 impl<E: 'static> Clone for BestOf<E> {
@@ -423,7 +424,7 @@ impl<E: 'static> Clone for BestOf<E> {
         Self {
             base: self.base,
             candidates: self.candidates.clone(),
-            scoring_distance: self.scoring_distance,
+            scoring: self.scoring,
         }
     }
 }
@@ -435,8 +436,8 @@ impl<E: From<GeomError> + ToString + Send> Composite<E> for BestOf<E> {
         tally.outcome(false)
     }
 
-    fn scoring_distance(&self) -> f64 {
-        self.scoring_distance
+    fn scoring(&self) -> Scoring {
+        self.scoring
     }
 }
 
@@ -468,7 +469,7 @@ pub struct Cascade<E> {
     pub rest: Vec<Box<dyn DynRegistrar<E>>>,
     /// When a result is taken as it is, and nothing after it runs.
     pub accept: Acceptance,
-    pub scoring_distance: f64,
+    pub scoring: Scoring,
 }
 
 impl<E: 'static> Clone for Cascade<E> {
@@ -478,7 +479,7 @@ impl<E: 'static> Clone for Cascade<E> {
             first: self.first.clone(),
             rest: self.rest.clone(),
             accept: self.accept,
-            scoring_distance: self.scoring_distance,
+            scoring: self.scoring,
         }
     }
 }
@@ -495,8 +496,8 @@ impl<E: From<GeomError> + ToString + Send> Composite<E> for Cascade<E> {
         tally.outcome(settled)
     }
 
-    fn scoring_distance(&self) -> f64 {
-        self.scoring_distance
+    fn scoring(&self) -> Scoring {
+        self.scoring
     }
 }
 
@@ -519,7 +520,7 @@ impl<E: From<GeomError> + ToString + Send> Registrar<E> for Cascade<E> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testing::Fixed;
+    use crate::testing::{Fixed, SCORING};
     use crate::{Point3, Vector3};
 
     #[test]
@@ -531,10 +532,10 @@ mod tests {
             )
         };
         let a = turn(10.0, 0.1);
-        assert!(agree(&a, &turn(10.9, 0.1)));
-        assert!(agree(&a, &turn(10.0, 0.119)));
-        assert!(!agree(&a, &turn(11.1, 0.1)));
-        assert!(!agree(&a, &turn(10.0, 0.121)));
+        assert!(agree(&a, &turn(10.9, 0.1), (1.0, 0.02)));
+        assert!(agree(&a, &turn(10.0, 0.119), (1.0, 0.02)));
+        assert!(!agree(&a, &turn(11.1, 0.1), (1.0, 0.02)));
+        assert!(!agree(&a, &turn(10.0, 0.121), (1.0, 0.02)));
     }
 
     #[test]
@@ -556,7 +557,7 @@ mod tests {
                 Box::new(right.clone()),
                 Box::new(also.clone()),
             ],
-            scoring_distance: SCORE_DISTANCE,
+            scoring: SCORING,
         };
         let found = best_of.register(&line, &line).unwrap();
         let scores: Vec<Option<f64>> = found.candidates.iter().map(|c| c.score).collect();
@@ -591,14 +592,14 @@ mod tests {
                 first: Box::new(first.clone()),
                 rest: vec![Box::new(second.clone())],
                 accept,
-                scoring_distance: SCORE_DISTANCE,
+                scoring: SCORING,
             };
             cascade.register(&line, &line).unwrap()
         };
         let at = |score: f64| Acceptance {
             score,
             turned_share: f64::INFINITY,
-            whole: (SCORE_DISTANCE, f64::INFINITY),
+            whole: (SCORING.overlap_distance, f64::INFINITY),
             coincides: None,
         };
         // A first result at the threshold is taken; the second never runs.
@@ -621,7 +622,7 @@ mod tests {
         let symmetric = |whole: f64| Acceptance {
             score: 2.0,
             turned_share: 0.5,
-            whole: (SCORE_DISTANCE, whole),
+            whole: (SCORING.overlap_distance, whole),
             coincides: None,
         };
         let found = run(&right, &wrong, symmetric(f64::INFINITY));
@@ -640,7 +641,7 @@ mod tests {
         };
         let found = run(&near, &wrong, whole_at(0.04));
         assert_eq!((found.candidates.len(), found.chosen), (1, Some(0)));
-        let found = run(&near, &wrong, whole_at(SCORE_DISTANCE));
+        let found = run(&near, &wrong, whole_at(SCORING.overlap_distance));
         assert_eq!(found.candidates.len(), 2);
     }
 
@@ -653,6 +654,7 @@ mod tests {
                 (&cloud, &index),
                 (&cloud, &index),
                 &RigidTransform::identity(),
+                SCORING.overlap_distance,
             )
         };
         // A box's corners: half a turn about any of its axes maps the box onto itself.
@@ -690,11 +692,17 @@ mod tests {
         let part = PointCloud::new(line.points[..4].to_vec());
         let (li, pi) = (KnnIndex::new(&line.points), KnnIndex::new(&part.points));
         let identity = RigidTransform::identity();
-        assert_eq!(overlap_score((&line, &li), (&line, &li), &identity), 2.0);
+        assert_eq!(
+            overlap_score((&line, &li), (&line, &li), &identity, 0.02),
+            2.0
+        );
         // The part lies on the line (1.0), which it covers for 4 of 10 points (0.4).
-        assert!((overlap_score((&part, &pi), (&line, &li), &identity) - 1.4).abs() < 1e-12);
+        assert!((overlap_score((&part, &pi), (&line, &li), &identity, 0.02) - 1.4).abs() < 1e-12);
         // Shifted by 0.05 every point is 0.05 from the other cloud: beyond 0.02.
         let shifted = RigidTransform::new(crate::Matrix3::identity(), Vector3::new(0.0, 0.05, 0.0));
-        assert_eq!(overlap_score((&line, &li), (&line, &li), &shifted), 0.0);
+        assert_eq!(
+            overlap_score((&line, &li), (&line, &li), &shifted, 0.02),
+            0.0
+        );
     }
 }

@@ -13,12 +13,12 @@
 
 use std::time::Instant;
 
-use crate::best_of::{turned_poses, SCORE_DISTANCE};
+use crate::best_of::turned_poses;
 use crate::cloud::median;
 use crate::fgr::Progress;
 use crate::prepared::indexed_pair;
 use crate::registrar::{elapsed_ms, MethodId, Registrar, Registration};
-use crate::thinning::DENSITY_POINTS;
+use crate::thinning::Density;
 use crate::{GeomError, KnnIndex, PointCloud, Prepared, RigidTransform};
 
 /// At most this many points of each cloud are measured: the shares settle long before a dense
@@ -172,27 +172,27 @@ impl Check for Coincides {
 }
 
 /// [`Coincides`] with its lengths in point spacings (the larger of the two clouds' median
-/// nearest-neighbour distances), on pairs denser than [`DENSITY_POINTS`] whose points spread
-/// over their surfaces only: a sparse pair's noise may exceed its spacing, and a scan-line
-/// cloud's (a LiDAR sweep's rings) spacing is the gap along a line, far below the gap between
-/// lines that a right fit leaves between two sweeps. On those the spacing says nothing of a fit:
-/// the check doubts nothing and takes nothing.
+/// nearest-neighbour distances), on pairs denser than `density` whose points spread over their
+/// surfaces only: a sparse pair's noise may exceed its spacing, and a scan-line cloud's (a LiDAR
+/// sweep's rings) spacing is the gap along a line, far below the gap between lines that a right
+/// fit leaves between two sweeps. On those the spacing says nothing of a fit: the check doubts
+/// nothing and takes nothing.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct CoincidesAtSpacing(pub Coincides);
+pub struct CoincidesAtSpacing {
+    pub coincides: Coincides,
+    pub density: Density,
+    /// The least ratio of a cloud's median distance to its 16th nearest neighbour to the median
+    /// distance to its nearest that marks scan lines: points spread over a surface reach 16
+    /// neighbours within about 4 spacings, points along lines within about 8.
+    pub scan_lines: f64,
+}
 
 /// Points whose neighbours set a cloud's spacing.
 const SPACING_SAMPLE: usize = 2000;
 
-/// The least ratio of a cloud's median distance to its 16th nearest neighbour to the median
-/// distance to its nearest that marks scan lines: points spread over a surface reach 16
-/// neighbours within about 4 spacings (2.0–3.5 measured on the Stanford scans, the redkitchen
-/// fragments and the merged bunny), points along lines within about 8 (7.5 on both sweeps of
-/// the LiDAR pair; `docs/confidence.md`).
-const SCAN_LINES: f64 = 5.0;
-
 /// `cloud`'s median nearest-neighbour distance, or `None` when its points lie along scan lines
-/// ([`SCAN_LINES`]).
-fn surface_spacing(cloud: &PointCloud, index: &KnnIndex) -> Option<f64> {
+/// ([`CoincidesAtSpacing::scan_lines`]).
+fn surface_spacing(cloud: &PointCloud, index: &KnnIndex, scan_lines: f64) -> Option<f64> {
     let (first, sixteenth): (Vec<f64>, Vec<f64>) = cloud
         .points
         .iter()
@@ -204,7 +204,7 @@ fn surface_spacing(cloud: &PointCloud, index: &KnnIndex) -> Option<f64> {
         .unzip();
     // Both NaN for a cloud of fewer than 17 points, which the comparison then refuses.
     let (spacing, wide) = (median(first), median(sixteenth));
-    (wide < SCAN_LINES * spacing).then_some(spacing)
+    (wide < scan_lines * spacing).then_some(spacing)
 }
 
 impl CoincidesAtSpacing {
@@ -214,10 +214,11 @@ impl CoincidesAtSpacing {
         source: (&PointCloud, &KnnIndex),
         target: (&PointCloud, &KnnIndex),
     ) -> Option<f64> {
-        if source.0.len().max(target.0.len()) <= DENSITY_POINTS {
+        if !self.density.is_exceeded_by(source.0.len(), target.0.len()) {
             return None;
         }
-        Some(surface_spacing(source.0, source.1)?.max(surface_spacing(target.0, target.1)?))
+        let spacing = |(cloud, index)| surface_spacing(cloud, index, self.scan_lines);
+        Some(spacing(source)?.max(spacing(target)?))
     }
 
     /// Whether it takes `transform` as coinciding: never where it does not apply, so that a
@@ -229,7 +230,7 @@ impl CoincidesAtSpacing {
         transform: &RigidTransform,
     ) -> bool {
         self.spacing(source, target).is_some_and(|spacing| {
-            self.0.share_at(source, target, transform, spacing) >= self.0.least
+            self.coincides.share_at(source, target, transform, spacing) >= self.coincides.least
         })
     }
 }
@@ -243,7 +244,7 @@ impl Check for CoincidesAtSpacing {
         transform: &RigidTransform,
     ) -> Option<String> {
         let spacing = self.spacing(source, target)?;
-        self.0
+        self.coincides
             .doubt_at(source, target, transform, spacing, "point spacings")
     }
 }
@@ -266,7 +267,7 @@ pub fn sampled_overlap(
 }
 
 /// No other pose fits nearly as well: a result is doubted when a rival pose overlaps the
-/// target at least `share` as much (by [`sampled_overlap`] at [`SCORE_DISTANCE`], or by the
+/// target at least `share` as much (by [`sampled_overlap`] at `distance`, or by the
 /// composite's own scores) and passes `rivals_pass` too. Rivals are the other candidates of a
 /// composite more than `apart` (degrees, distance) from the chosen one, and the result turned
 /// about the source's axes ([`turned_poses`]). A symmetric shape, or a part that fits two places
@@ -275,6 +276,7 @@ pub fn sampled_overlap(
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Unambiguous<C> {
     pub share: f64,
+    pub distance: f64,
     pub apart: (f64, f64),
     pub rivals_pass: C,
 }
@@ -303,12 +305,12 @@ impl<C: Check> Check for Unambiguous<C> {
         target: (&PointCloud, &KnnIndex),
         transform: &RigidTransform,
     ) -> Option<String> {
-        let own = sampled_overlap(source, target, transform, SCORE_DISTANCE);
+        let own = sampled_overlap(source, target, transform, self.distance);
         if own <= 0.0 {
             return None;
         }
         turned_poses(source.0, transform).iter().find_map(|turned| {
-            let ratio = sampled_overlap(source, target, turned, SCORE_DISTANCE) / own;
+            let ratio = sampled_overlap(source, target, turned, self.distance) / own;
             (ratio >= self.share && self.rivals_pass.doubt_of(source, target, turned).is_none())
                 .then(|| self.rival_doubt("the result turned about an axis of the source", ratio))
         })
@@ -373,7 +375,7 @@ impl<E: From<GeomError>, R: Registrar<E>, C: Check> Registrar<E> for Checked<R, 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testing::{airplane, Fixed};
+    use crate::testing::{airplane, Fixed, DENSITY};
     use crate::{Matrix3, Point3, Vector3};
 
     fn indexed(cloud: &PointCloud) -> (&PointCloud, KnnIndex) {
@@ -407,11 +409,15 @@ mod tests {
                 .collect();
             let plane = PointCloud::new(points);
             let (p, pi) = indexed(&plane);
-            let check = CoincidesAtSpacing(Coincides {
-                near: 1.5,
-                far: 16.0,
-                least: 0.5,
-            });
+            let check = CoincidesAtSpacing {
+                coincides: Coincides {
+                    near: 1.5,
+                    far: 16.0,
+                    least: 0.5,
+                },
+                density: DENSITY,
+                scan_lines: 5.0,
+            };
             let found = |t: Vector3<f64>| {
                 let transform = RigidTransform::new(crate::Matrix3::identity(), t * unit);
                 let unscored = crate::registration::Score {
@@ -461,11 +467,15 @@ mod tests {
                 .into_inner(),
             Vector3::new(-0.5, 0.3, 0.0),
         );
-        let check = CoincidesAtSpacing(Coincides {
-            near: 1.5,
-            far: 16.0,
-            least: 0.5,
-        });
+        let check = CoincidesAtSpacing {
+            coincides: Coincides {
+                near: 1.5,
+                far: 16.0,
+                least: 0.5,
+            },
+            density: DENSITY,
+            scan_lines: 5.0,
+        };
         let checked = |transform: RigidTransform| {
             let mut fixed = Fixed::new("fixed", 0.0);
             fixed.transform = transform;
@@ -496,16 +506,20 @@ mod tests {
         };
         let surface = grid((0.01, 0.01), (60, 60));
         let (s, si) = indexed(&surface);
-        let spacing = surface_spacing(s, &si).expect("a surface");
+        let spacing = surface_spacing(s, &si, 5.0).expect("a surface");
         assert!((spacing - 0.01).abs() < 1e-9, "{spacing}");
         let lines = grid((0.05, 0.001), (20, 200));
         let (l, li) = indexed(&lines);
-        assert_eq!(surface_spacing(l, &li), None);
-        let check = CoincidesAtSpacing(Coincides {
-            near: 1.5,
-            far: 16.0,
-            least: 0.5,
-        });
+        assert_eq!(surface_spacing(l, &li, 5.0), None);
+        let check = CoincidesAtSpacing {
+            coincides: Coincides {
+                near: 1.5,
+                far: 16.0,
+                least: 0.5,
+            },
+            density: DENSITY,
+            scan_lines: 5.0,
+        };
         let same = RigidTransform::identity();
         assert!(check.takes((s, &si), (s, &si), &same));
         assert!(!check.takes((l, &li), (l, &li), &same));
@@ -520,6 +534,7 @@ mod tests {
     fn a_pose_that_a_rival_fits_as_well_is_doubted() {
         let check = Unambiguous {
             share: 0.75,
+            distance: 0.02,
             apart: (5.0, 0.05),
             rivals_pass: Coincides {
                 near: 0.02,

@@ -50,7 +50,7 @@ fn radius(cloud: &PointCloud, centre: &Point3<f64>) -> f64 {
 }
 
 impl Normalisation {
-    /// Pairs within this radius of the origin are in the training frame…
+    /// Pairs within this radius of the origin are in the unit-sphere frame…
     pub const FRAME_RADIUS: f64 = 2.0;
     /// …when the larger extent is in this range: a ModelNet40 shape reaches 1 from its centre,
     /// a 70 % crop of it 0.80–1.11 (10th and 90th percentiles over 400 training shapes; the

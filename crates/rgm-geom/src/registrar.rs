@@ -20,7 +20,7 @@ use crate::icp::{self, IcpConfig};
 use crate::refine::RefineConfig;
 use crate::refiner::{AtSpacing, Refiner};
 use crate::registration::{score, RegistrationResult};
-use crate::thinning::DENSITY_POINTS;
+use crate::thinning::Density;
 use crate::{GeomError, PointCloud, Prepared, RigidTransform};
 
 /// What users call a method: its base name and the refiner its transform went through, spelled
@@ -86,8 +86,8 @@ pub struct Registration {
     pub candidates: Vec<Candidate>,
     pub chosen: Option<usize>,
     /// Why the result is not to be trusted, when it is not (the best candidate overlaps too
-    /// little, [`crate::best_of::MIN_OVERLAP`]): the caller reports the pair as not
-    /// registered, with this reason.
+    /// little, [`crate::best_of::Scoring::min_overlap`], or a check doubts it): the caller
+    /// reports the pair as not registered, with this reason.
     pub doubt: Option<String>,
 }
 
@@ -398,15 +398,16 @@ impl<F: Refiner> Refiner for Normalised<F> {
     }
 }
 
-/// `inner`, then, on a pair denser than [`DENSITY_POINTS`], `refiner` from its transform
+/// `inner`, then, on a pair denser than `density`, `refiner` from its transform
 /// (by default [`AtSpacing`]: point-to-plane stages at the clouds' own point spacing, finer than
 /// the coarse refinement `inner` ran); named as `inner`, whose last refinement this completes.
-/// A pair as sparse as the training clouds is returned as `inner` found it: its noise may exceed
-/// its spacing, and stages finer than the coarse ones would fit the noise.
+/// A pair no denser (the density the methods were tuned at) is returned as `inner` found it:
+/// its noise may exceed its spacing, and stages finer than the coarse ones would fit the noise.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AtResolution<R, F = AtSpacing> {
     pub inner: R,
     pub refiner: F,
+    pub density: Density,
 }
 
 impl<E: From<GeomError>, R: Registrar<E>, F: Refiner> Registrar<E> for AtResolution<R, F> {
@@ -422,7 +423,7 @@ impl<E: From<GeomError>, R: Registrar<E>, F: Refiner> Registrar<E> for AtResolut
     ) -> Result<Registration, E> {
         let start = Instant::now();
         let found = self.inner.register_prepared(source, target, progress)?;
-        if source.len().max(target.len()) <= DENSITY_POINTS {
+        if !self.density.is_exceeded_by(source.len(), target.len()) {
             return Ok(found);
         }
         let fine = self

@@ -6,10 +6,26 @@ use std::time::Instant;
 use nalgebra::{Matrix3, Point3, Vector3};
 use rand::{rngs::StdRng, Rng, SeedableRng};
 
+use crate::best_of::Scoring;
 use crate::fgr::Progress;
 use crate::registrar::{MethodId, Registrar, Registration};
 use crate::registration::RegistrationResult;
+use crate::thinning::Density;
 use crate::{GeomError, PointCloud, Prepared, RigidTransform};
+
+/// The scoring the default composes its methods with (rgm-model's options): distances in
+/// unit-sphere units.
+pub const SCORING: Scoring = Scoring {
+    overlap_distance: 0.02,
+    min_overlap: 0.1,
+    result_distance: 0.02,
+};
+
+/// ModelNet40's density: 1,024 points in the unit sphere.
+pub const DENSITY: Density = Density {
+    points: 1024,
+    voxel: 0.035,
+};
 
 /// `n` points uniform in the cube [−1, 1)³.
 pub fn uniform_cube(n: usize, rng: &mut StdRng) -> Vec<Point3<f64>> {

@@ -1,6 +1,7 @@
-//! Dense clouds thinned to the density of the training clouds (1,024-point ModelNet40 shapes
-//! in the unit sphere), for methods whose settings were chosen at that density, and
-//! [`Thinned`], a composite run on several thinnings of a dense pair.
+//! Dense clouds thinned to the density a method was tuned at ([`Density`]), for methods whose
+//! settings were chosen at that density, and [`Thinned`], a composite run on several thinnings of
+//! a dense pair. The density is configuration: the caller that composes the methods knows what
+//! they were tuned on.
 
 use std::borrow::Cow;
 use std::time::Instant;
@@ -10,19 +11,27 @@ use crate::fgr::Progress;
 use crate::registrar::{MethodId, Registrar, Registration};
 use crate::{GeomError, PointCloud, Prepared, RigidTransform};
 
-/// Points of a training cloud (1,024 per ModelNet40 shape; 717 after the partial crop): a cloud
-/// with more points is denser than the methods were tuned for.
-pub const DENSITY_POINTS: usize = 1024;
+/// The density methods were tuned at: a cloud of more than `points` points is denser, and is
+/// thinned to `points`, averaged over voxels of `voxel` first ([`Thinning::Voxels`]; in the
+/// clouds' units, unit-sphere units inside [`crate::registrar::Normalised`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Density {
+    pub points: usize,
+    pub voxel: f64,
+}
 
-/// Voxel of the first thinning step of a cloud denser than [`DENSITY_POINTS`], in unit-sphere
-/// units (the training clouds' median nearest-neighbour distance is 0.011–0.042).
-pub const DENSITY_VOXEL: f64 = 0.035;
+impl Density {
+    /// Whether a pair of clouds of `source` and `target` points is denser.
+    pub fn is_exceeded_by(&self, source: usize, target: usize) -> bool {
+        source.max(target) > self.points
+    }
+}
 
-/// How a cloud denser than [`DENSITY_POINTS`] (in the unit-sphere frame) is thinned to
-/// [`DENSITY_POINTS`] points; a cloud of no more points is used as it is.
+/// How a cloud denser than a [`Density`] is thinned to its points; a cloud of no more points is
+/// used as it is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Thinning {
-    /// Averaged over voxels of [`DENSITY_VOXEL`] (merging duplicates and averaging their
+    /// Averaged over voxels of [`Density::voxel`] (merging duplicates and averaging their
     /// noise), then thinned by farthest-point sampling (`docs/training/README.md`, the
     /// robustness study of `default_study`).
     Voxels,
@@ -43,34 +52,37 @@ impl Thinning {
     }
 }
 
-/// `cloud` thinned `how` if it has more than [`DENSITY_POINTS`].
-pub fn thinned(cloud: &PointCloud, how: Thinning) -> Cow<'_, PointCloud> {
-    if cloud.len() <= DENSITY_POINTS {
+/// `cloud` thinned `how` to `density` if it has more points.
+pub fn thinned(cloud: &PointCloud, how: Thinning, density: Density) -> Cow<'_, PointCloud> {
+    if cloud.len() <= density.points {
         return Cow::Borrowed(cloud);
     }
     Cow::Owned(match how {
         Thinning::Voxels => {
-            let averaged = cloud.voxel_downsampled(DENSITY_VOXEL);
-            averaged.select(&averaged.farthest_point_indices(DENSITY_POINTS))
+            let averaged = cloud.voxel_downsampled(density.voxel);
+            averaged.select(&averaged.farthest_point_indices(density.points))
         }
         Thinning::Cells => {
-            let seeds = cloud.select(&cloud.farthest_point_indices(DENSITY_POINTS));
+            let seeds = cloud.select(&cloud.farthest_point_indices(density.points));
             cloud.cell_means(&seeds.points)
         }
     })
 }
 
-/// A composite on a dense pair thinned each of `thinnings` ways in turn, its candidates judged
-/// on the pair as given: a pair denser than [`DENSITY_POINTS`] can be thinned many ways, none of
-/// them the sampling the methods were tuned on. The next thinning runs unless the composite's
-/// acceptance took a result ([`crate::best_of::Outcome::settled`]) or the candidates of this one agree
-/// ([`agree`]), which leaves nothing for the next to fix. A pair no denser runs once, as it is.
-/// The best of every thinning wins (ties to the earlier); a candidate's name carries its
-/// thinning ([`Thinning::suffix`]).
+/// A composite on a pair denser than `density` thinned each of `thinnings` ways in turn, its
+/// candidates judged on the pair as given: a dense pair can be thinned many ways, none of them
+/// the sampling the methods were tuned on. The next thinning runs unless the composite's
+/// acceptance took a result ([`crate::best_of::Outcome::settled`]) or the candidates of this one
+/// agree within `agreement` ([`agree`]), which leaves nothing for the next to fix. A pair no
+/// denser runs once, as it is. The best of every thinning wins (ties to the earlier); a
+/// candidate's name carries its thinning ([`Thinning::suffix`]).
 #[derive(Clone, Debug)]
 pub struct Thinned<C> {
     pub inner: C,
     pub thinnings: Vec<Thinning>,
+    pub density: Density,
+    /// (degrees, distance) within which candidates agree.
+    pub agreement: (f64, f64),
 }
 
 impl<E, C> Registrar<E> for Thinned<C>
@@ -89,8 +101,8 @@ where
         _: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
         let start = Instant::now();
-        let judge = Judge::new(source, target);
-        let dense = source.len().max(target.len()) > DENSITY_POINTS;
+        let judge = Judge::new(source, target, self.inner.scoring());
+        let dense = self.density.is_exceeded_by(source.len(), target.len());
         let thinnings = if dense {
             &self.thinnings[..]
         } else {
@@ -100,8 +112,8 @@ where
         // (score, transform, iterations, index in `candidates`) of the best so far.
         let mut best: Option<(f64, RigidTransform, usize, usize)> = None;
         for &how in thinnings {
-            // A cloud no denser than the training clouds is used as it is, its tree shared.
-            let prepared_thinning = |cloud: &Prepared| match thinned(cloud, how) {
+            // A cloud no denser than `density` is used as it is, its tree shared.
+            let prepared_thinning = |cloud: &Prepared| match thinned(cloud, how, self.density) {
                 Cow::Owned(thin) => Some(Prepared::new(thin)),
                 Cow::Borrowed(_) => None,
             };
@@ -132,27 +144,21 @@ where
                 c.method.push_str(how.suffix());
                 c
             }));
-            if outcome.settled || found.len() > 1 && found[1..].iter().all(|t| agree(&found[0], t))
-            {
+            let agreeing = |t| agree(&found[0], t, self.agreement);
+            if outcome.settled || found.len() > 1 && found[1..].iter().all(agreeing) {
                 break;
             }
         }
         let chosen = best.map(|(_, _, iterations, index)| (index, iterations));
-        conclude(
-            &judge,
-            candidates,
-            chosen,
-            self.inner.scoring_distance(),
-            start,
-        )
+        conclude(&judge, candidates, chosen, start)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::best_of::{Acceptance, BestOf, Cascade, SCORE_DISTANCE};
-    use crate::testing::{box_surface, Fixed};
+    use crate::best_of::{Acceptance, BestOf, Cascade};
+    use crate::testing::{box_surface, Fixed, DENSITY, SCORING};
 
     fn thinned_best_of(candidates: &[&Fixed]) -> Thinned<BestOf<GeomError>> {
         Thinned {
@@ -162,9 +168,11 @@ mod tests {
                     .iter()
                     .map(|&c| Box::new(c.clone()) as _)
                     .collect(),
-                scoring_distance: SCORE_DISTANCE,
+                scoring: SCORING,
             },
             thinnings: vec![Thinning::Voxels, Thinning::Cells],
+            density: DENSITY,
+            agreement: (1.0, 0.02),
         }
     }
 
@@ -182,7 +190,7 @@ mod tests {
         assert_eq!(found.chosen, Some(0));
         assert_eq!(found.result.inlier_count, 3000);
         for (s, t) in right.seen() {
-            assert!(s <= DENSITY_POINTS && t <= DENSITY_POINTS, "{s} {t}");
+            assert!(s <= DENSITY.points && t <= DENSITY.points, "{s} {t}");
         }
         // They agree: the first thinning is enough.
         let (a, b) = (Fixed::new("a", 0.0), Fixed::new("b", 0.001));
@@ -209,12 +217,14 @@ mod tests {
                 accept: Acceptance {
                     score: 1.9,
                     turned_share: f64::INFINITY,
-                    whole: (SCORE_DISTANCE, f64::INFINITY),
+                    whole: (SCORING.overlap_distance, f64::INFINITY),
                     coincides: None,
                 },
-                scoring_distance: SCORE_DISTANCE,
+                scoring: SCORING,
             },
             thinnings: vec![Thinning::Voxels, Thinning::Cells],
+            density: DENSITY,
+            agreement: (1.0, 0.02),
         };
         let found = thinned.register(&dense, &dense).unwrap();
         assert_eq!(found.candidates.len(), 1);

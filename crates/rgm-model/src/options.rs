@@ -37,7 +37,7 @@
 use std::path::PathBuf;
 use std::str::FromStr;
 
-use rgm_geom::best_of::{Acceptance, BestOf, Cascade, SCORE_DISTANCE};
+use rgm_geom::best_of::{Acceptance, BestOf, Cascade, Scoring};
 use rgm_geom::coincidence::{Checked, Coincides, CoincidesAtSpacing, Unambiguous};
 use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::icp::{self, IcpConfig};
@@ -47,7 +47,7 @@ use rgm_geom::refiner::AtSpacing;
 use rgm_geom::registrar::{
     AtResolution, DynRegistrar, Normalised, OnFirstUse, Refined, Registrar, UpTo,
 };
-use rgm_geom::thinning::{Thinned, Thinning, DENSITY_POINTS};
+use rgm_geom::thinning::{Density, Thinned, Thinning};
 use rgm_geom::triplets::TripletConfig;
 
 use rgm_nn::Precision;
@@ -97,10 +97,11 @@ impl MethodName {
             Self::Rgm => "The RGM network: the model built into rgm, or --weights".into(),
             Self::Auto => format!(
                 "FGR, then RGM when FGR's result overlaps less than --accept (both clouds' \
-                 share of points within {SCORE_DISTANCE} of the other, in the unit-sphere \
+                 share of points within {} of the other, in the unit-sphere \
                  frame) or, short of a whole overlap, fits as well turned about one of the \
                  source's axes, each refined, \
-                 and the result that overlaps better: `rgm register`'s default"
+                 and the result that overlaps better: `rgm register`'s default",
+                SCORING.overlap_distance
             ),
         }
     }
@@ -132,6 +133,38 @@ impl FromStr for MethodName {
                     known.join(", ")
                 ))
             })
+    }
+}
+
+/// The density the network and the default's settings were tuned at: ModelNet40's 1,024 points
+/// per shape in the unit sphere (717 after the partial crop). A denser pair is thinned to it,
+/// first averaged over voxels of 0.035 (the training clouds' median nearest-neighbour distance is
+/// 0.011–0.042).
+pub const TRAINING_DENSITY: Density = Density {
+    points: 1024,
+    voxel: 0.035,
+};
+
+/// How the default's composites judge their candidates (unit-sphere units): a point within
+/// 0.02 of the other cloud overlaps it, and a best result overlapping less than 0.1 (fewer than
+/// one point in twenty of each cloud on the other) is reported as not registered; chosen on
+/// validation pairs (`docs/training/README.md`, the default study). The chosen result is scored
+/// at the overlap distance too, or at its refinement's finest ([`scoring`]).
+pub const SCORING: Scoring = Scoring {
+    overlap_distance: 0.02,
+    min_overlap: 0.1,
+    result_distance: 0.02,
+};
+
+/// How close the candidates' transforms on a dense pair's first thinning must be for the next
+/// thinning to be skipped: (degrees, distance in unit-sphere units).
+pub const AGREEMENT: (f64, f64) = (1.0, 0.02);
+
+/// [`SCORING`], the chosen result scored at `refine`'s finest distance when it is refined.
+pub fn scoring(refine: Option<&RefineConfig>) -> Scoring {
+    Scoring {
+        result_distance: refine.map_or(SCORING.result_distance, RefineConfig::finest_distance),
+        ..SCORING
     }
 }
 
@@ -169,11 +202,19 @@ pub const COINCIDES: Coincides = Coincides {
 /// The same on a dense pair, in point spacings: midway between the right results of the
 /// Stanford and redkitchen pairs and the wrong ones of part-of-the-whole crops, non-overlapping
 /// scans and slid rooms (`docs/confidence.md`).
-pub const COINCIDES_AT_SPACING: CoincidesAtSpacing = CoincidesAtSpacing(Coincides {
-    near: 1.5,
-    far: 16.0,
-    least: 0.5,
-});
+/// It applies to pairs denser than [`TRAINING_DENSITY`] whose points spread over surfaces: a
+/// ratio of the median distance to the 16th nearest neighbour to the nearest's below 5 (2.0–3.5
+/// measured on the Stanford scans, the redkitchen fragments and the merged bunny; 7.5 on both
+/// sweeps of the LiDAR pair, whose points lie along scan lines; `docs/confidence.md`).
+pub const COINCIDES_AT_SPACING: CoincidesAtSpacing = CoincidesAtSpacing {
+    coincides: Coincides {
+        near: 1.5,
+        far: 16.0,
+        least: 0.5,
+    },
+    density: TRAINING_DENSITY,
+    scan_lines: 5.0,
+};
 
 /// How a refined result must coincide: [`COINCIDES`], then [`COINCIDES_AT_SPACING`].
 pub const REFINED_COINCIDES: (Coincides, CoincidesAtSpacing) = (COINCIDES, COINCIDES_AT_SPACING);
@@ -182,9 +223,10 @@ pub const REFINED_COINCIDES: (Coincides, CoincidesAtSpacing) = (COINCIDES, COINC
 /// at least 0.75 of the result's overlap, midway between the right validation results' rivals
 /// (at most 0.60, one symmetric shape's turned pose aside) and the wrong results' that
 /// [`REFINED_COINCIDES`] left registered (at least 0.89); candidates within 5° and 0.05 are
-/// one pose (`docs/confidence.md`).
+/// one pose (`docs/confidence.md`). Overlaps are counted at [`SCORING`]'s distance.
 pub const UNAMBIGUOUS: Unambiguous<(Coincides, CoincidesAtSpacing)> = Unambiguous {
     share: 0.75,
+    distance: SCORING.overlap_distance,
     apart: (5.0, 0.05),
     rivals_pass: REFINED_COINCIDES,
 };
@@ -394,39 +436,37 @@ where
 {
     let rgm = Normalised { inner: rgm };
     let fgr = FgrConfig::default();
-    let (candidates, scoring_distance): ([Box<dyn DynRegistrar<MethodError>>; 2], f64) =
-        match &refine {
-            None => ([Box::new(fgr), Box::new(rgm)], SCORE_DISTANCE),
-            Some(refine) => (
-                [
-                    Box::new(Refined::new(fgr, refine.clone())),
-                    Box::new(Refined::new(rgm, refine.clone())),
-                ],
-                refine.finest_distance(),
-            ),
-        };
-    let thinnings = vec![Thinning::Voxels, Thinning::Cells];
+    let scoring = scoring(refine.as_ref());
+    let candidates: [Box<dyn DynRegistrar<MethodError>>; 2] = match &refine {
+        None => [Box::new(fgr), Box::new(rgm)],
+        Some(refine) => [
+            Box::new(Refined::new(fgr, refine.clone())),
+            Box::new(Refined::new(rgm, refine.clone())),
+        ],
+    };
+    fn thinned<C>(inner: C) -> Thinned<C> {
+        Thinned {
+            inner,
+            thinnings: vec![Thinning::Voxels, Thinning::Cells],
+            density: TRAINING_DENSITY,
+            agreement: AGREEMENT,
+        }
+    }
     let [first, second] = candidates;
     let composite: Box<dyn DynRegistrar<MethodError>> = if accept.score.is_finite() {
-        Box::new(Thinned {
-            inner: Cascade {
-                base: AUTO,
-                first,
-                rest: vec![second],
-                accept,
-                scoring_distance,
-            },
-            thinnings,
-        })
+        Box::new(thinned(Cascade {
+            base: AUTO,
+            first,
+            rest: vec![second],
+            accept,
+            scoring,
+        }))
     } else {
-        Box::new(Thinned {
-            inner: BestOf {
-                base: AUTO,
-                candidates: vec![first, second],
-                scoring_distance,
-            },
-            thinnings,
-        })
+        Box::new(thinned(BestOf {
+            base: AUTO,
+            candidates: vec![first, second],
+            scoring,
+        }))
     };
     let composite: Box<dyn DynRegistrar<MethodError>> = match refine {
         None => composite,
@@ -435,21 +475,22 @@ where
                 // A pair denser than the training clouds may be a scene: the object cascade
                 // first, RANSAC on the pair's own features where its result is not taken.
                 inner: UpTo {
-                    points: DENSITY_POINTS,
+                    points: TRAINING_DENSITY.points,
                     small: composite.clone(),
                     other: Cascade {
                         base: AUTO,
                         first: composite,
                         rest: vec![Box::new(scene_ransac())],
                         accept: SCENE_ACCEPT,
-                        scoring_distance,
+                        scoring,
                     },
                 },
                 refiner: AtSpacing {
-                    coarser_than: scoring_distance,
-                    scoring_distance,
+                    coarser_than: scoring.result_distance,
+                    scoring_distance: scoring.result_distance,
                     config: ResolutionConfig::default(),
                 },
+                density: TRAINING_DENSITY,
             },
             check: REFINED_CHECKS,
         }),

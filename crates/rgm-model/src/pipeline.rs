@@ -21,12 +21,12 @@
 
 use std::time::Instant;
 
+use crate::options::TRAINING_DENSITY;
 use ndarray::Array2;
 use rand::{rngs::StdRng, SeedableRng};
 use rgm_geom::fgr::Progress;
 use rgm_geom::kabsch::kabsch;
 use rgm_geom::registrar::{MethodId, Registrar, Registration};
-use rgm_geom::thinning::DENSITY_POINTS;
 use rgm_geom::{Point3, PointCloud, Prepared, RegistrationResult, RigidTransform};
 use rgm_match::{hard_match, Correspondences, MatchConfig};
 use rgm_nn::{Compute, Parameters, Precision};
@@ -46,7 +46,7 @@ pub struct PipelineConfig {
     /// Rows and columns of C̃ whose sums exceed this are inliers (0.5).
     pub inlier_threshold: f64,
     /// Match on at most this many points of each cloud, drawn at random with a fixed seed (so a
-    /// pair always gives the same result) from the cloud thinned to [`DENSITY_POINTS`] when it
+    /// pair always gives the same result) from the cloud thinned to [`TRAINING_DENSITY`] points when it
     /// is denser ([`matched_indices`]); `None` (the paper) matches on every point. A model
     /// trained on subsampled clouds matches best on as many points as it was trained on.
     pub match_points: Option<usize>,
@@ -75,12 +75,12 @@ const SOURCE_SEED: u64 = 0;
 const TARGET_SEED: u64 = 1;
 
 /// The indices of `cloud` that RGM matches on: at most `count` (all when `None`), drawn at
-/// random from `seed` after the thinning of [`DENSITY_POINTS`], sorted.
+/// random from `seed` after the thinning of [`TRAINING_DENSITY`] points, sorted.
 pub fn matched_indices(cloud: &PointCloud, count: Option<usize>, seed: u64) -> Vec<usize> {
     let Some(count) = count else {
         return (0..cloud.len()).collect();
     };
-    let thinned = cloud.farthest_point_indices(count.max(DENSITY_POINTS)); // (T,)
+    let thinned = cloud.farthest_point_indices(count.max(TRAINING_DENSITY.points)); // (T,)
     let mut picked: Vec<usize> = subsample(thinned.len(), Some(count), seed)
         .into_iter()
         .map(|k| thinned[k])

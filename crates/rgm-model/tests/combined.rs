@@ -5,10 +5,10 @@
 use std::path::PathBuf;
 
 use rgm_data::{ModelNet40, PairGenerator, Setting, Split};
-use rgm_geom::best_of::MIN_OVERLAP;
 use rgm_geom::refine::RefineConfig;
 use rgm_geom::{GeomError, PairMetrics, Point3, PointCloud, RigidTransform};
 use rgm_model::network::{Config, Rgm};
+use rgm_model::options::SCORING;
 use rgm_model::{
     Method, MethodError, MethodOptions, PipelineConfig, Registrar, Registration, RgmRegistrar,
 };
@@ -351,5 +351,5 @@ fn clouds_that_do_not_overlap_are_reported_as_not_registered() {
     let why = found.doubt.expect("not registered");
     assert!(why.contains("overlaps too little"), "{why}");
     let best = found.candidates[found.chosen.unwrap()].score.unwrap();
-    assert!(best < MIN_OVERLAP, "{best}");
+    assert!(best < SCORING.min_overlap, "{best}");
 }
