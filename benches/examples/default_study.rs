@@ -46,11 +46,12 @@ use std::time::Instant;
 use rgm_data::{ModelNet40, PairGenerator, Setting, Split};
 use rgm_geom::best_of::turned_share;
 use rgm_geom::fgr::{self, FgrConfig};
-use rgm_geom::frame::{near, Normalisation};
+use rgm_geom::frame::Normalisation;
 use rgm_geom::metrics::PairMetrics;
 use rgm_geom::refine::{self, RefineConfig};
 use rgm_geom::registration::score;
 use rgm_geom::{KnnIndex, PointCloud, RigidTransform};
+use rgm_model::options::FRAME;
 use rgm_model::{MethodOptions, Registrar};
 
 fn arg(args: &[String], name: &str) -> Option<String> {
@@ -409,9 +410,9 @@ fn cascade(
             }
         };
         // FGR's transform in the frame where the default scores it.
-        let frame = Normalisation::of_pair(&pair.source, &pair.target);
-        let s = frame.source(&pair.source.select(&near(&pair.source)));
-        let t = frame.target(&pair.target.select(&near(&pair.target)));
+        let frame = Normalisation::of_pair(&pair.source, &pair.target, &FRAME);
+        let s = frame.source(&pair.source.select(&FRAME.near(&pair.source)));
+        let t = frame.target(&pair.target.select(&FRAME.near(&pair.target)));
         let (si, ti) = (KnnIndex::new(&s.points), KnnIndex::new(&t.points));
         let fgr = frame.redo(&found.candidates[0].t_target_source);
         let distance = rgm_model::options::SCORING.overlap_distance;

@@ -10,6 +10,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyList, PySlice, PyTuple};
 use pyo3::IntoPyObjectExt;
 use rgm_geom::registrar::Candidate as GeomCandidate;
+use rgm_model::options::FRAME;
 use rgm_model::Registration;
 use rgm_viz::html::{
     inline_frame, InlierDistance, Page, ResultNotes, DEFAULT_POINT_BUDGET, INLINE_POINT_BUDGET,
@@ -275,7 +276,7 @@ impl RegistrationResult {
             source: &source,
             target: &target,
             t_target_source,
-            inlier_distance: InlierDistance::of_refinement(&source, &target),
+            inlier_distance: InlierDistance::of_refinement(&source, &target, &FRAME),
             notes: ResultNotes::of_registration(&self.method, &registration),
             point_budget: budget,
         };

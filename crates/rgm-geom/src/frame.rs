@@ -10,18 +10,16 @@ use crate::{PointCloud, RigidTransform};
 /// How a pair is moved into the unit-sphere frame: `p' = (p − centre) / scale`,
 /// each cloud about its own centre, both by one scale.
 ///
-/// The benchmark's pairs (unit-sphere shapes, one moved by at most 0.5 per axis, jitter ≤ 0.05:
-/// every point within 1.95 of the origin) are already in that frame and are left as they are:
-/// the identity whenever both clouds lie within [`Normalisation::FRAME_RADIUS`] of the origin
-/// and the larger cloud's extent (its largest distance from its centroid) is within
-/// [`Normalisation::FRAME_EXTENT`]. Any other pair is centred (each cloud on its centroid) and
-/// scaled by one common factor so that the farthest point of either cloud lies on the unit
-/// sphere ([`Normalisation::centred`]): the same pair at half or twice the size reaches the
-/// methods as the same clouds, centred.
+/// A pair already in that frame by its [`FrameRule`] is left as it is (the identity): both clouds
+/// within [`FrameRule::within`] of the origin, the larger cloud's extent (its largest distance
+/// from its centroid) in [`FrameRule::extent`]. Any other pair is centred (each cloud on its
+/// centroid) and scaled by one common factor so that the farthest point of either cloud lies on
+/// the unit sphere ([`Normalisation::centred`]): the same pair at half or twice the size reaches
+/// the methods as the same clouds, centred.
 ///
-/// All of it is measured on each cloud's [`near`] points: a far outlier (a stray return of a
-/// scanner) neither decides the frame nor shrinks the pair to a dot in it, and the methods
-/// leave it out. Lengths are taken at any scale ([`crate::length`]): a pair at 1e200 or
+/// All of it is measured on each cloud's [`FrameRule::near`] points: a far outlier (a stray
+/// return of a scanner) neither decides the frame nor shrinks the pair to a dot in it, and the
+/// methods leave it out. Lengths are taken at any scale ([`crate::length`]): a pair at 1e200 or
 /// 1e-200 reaches the methods as it does at 1.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Normalisation {
@@ -30,14 +28,25 @@ pub struct Normalisation {
     pub scale: f64,
 }
 
-/// A point farther from its cloud's coordinate-wise median than this many times the median
-/// distance from it is a far outlier ([`PointCloud::near_indices`]); no ModelNet40 shape has one
-/// (`docs/geom.md`, "Far outliers").
-pub const FAR_OUTLIER: f64 = 12.0;
+/// Which pairs a [`Normalisation`] leaves as they are and which points it leaves out:
+/// configuration, its values chosen where methods are composed (the pairs the methods were
+/// tuned on are left as they are, bit for bit).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameRule {
+    /// A point farther from its cloud's coordinate-wise median than this many times the median
+    /// distance from it is a far outlier ([`PointCloud::near_indices`]).
+    pub far_outlier: f64,
+    /// A pair whose clouds lie within this radius of the origin…
+    pub within: f64,
+    /// …and whose larger extent lies in this range (inclusive) is in the frame already.
+    pub extent: (f64, f64),
+}
 
-/// The indices of `cloud`'s points that are not far outliers ([`FAR_OUTLIER`]), in order.
-pub fn near(cloud: &PointCloud) -> Vec<usize> {
-    cloud.near_indices(FAR_OUTLIER)
+impl FrameRule {
+    /// The indices of `cloud`'s points that are not far outliers, in order.
+    pub fn near(&self, cloud: &PointCloud) -> Vec<usize> {
+        cloud.near_indices(self.far_outlier)
+    }
 }
 
 /// The largest distance of `cloud`'s points from `centre`; 0 for an empty cloud.
@@ -50,13 +59,6 @@ fn radius(cloud: &PointCloud, centre: &Point3<f64>) -> f64 {
 }
 
 impl Normalisation {
-    /// Pairs within this radius of the origin are in the unit-sphere frame…
-    pub const FRAME_RADIUS: f64 = 2.0;
-    /// …when the larger extent is in this range: a ModelNet40 shape reaches 1 from its centre,
-    /// a 70 % crop of it 0.80–1.11 (10th and 90th percentiles over 400 training shapes; the
-    /// larger of a test pair's two crops at most 1.38).
-    pub const FRAME_EXTENT: std::ops::RangeInclusive<f64> = 0.7..=1.7;
-
     /// No change.
     pub fn identity() -> Self {
         Self {
@@ -66,17 +68,18 @@ impl Normalisation {
         }
     }
 
-    /// The normalisation of the pair (`source`, `target`), as described on the type.
-    pub fn of_pair(source: &PointCloud, target: &PointCloud) -> Self {
+    /// The normalisation of the pair (`source`, `target`) by `rule`, as described on the type.
+    pub fn of_pair(source: &PointCloud, target: &PointCloud, rule: &FrameRule) -> Self {
         let (source, target) = rayon::join(
-            || source.select(&near(source)),
-            || target.select(&near(target)),
+            || source.select(&rule.near(source)),
+            || target.select(&rule.near(target)),
         );
-        Self::of_near_pair(&source, &target)
+        Self::of_near_pair(&source, &target, rule)
     }
 
-    /// [`Normalisation::of_pair`] of clouds whose far outliers ([`near`]) are left out already.
-    pub(crate) fn of_near_pair(source: &PointCloud, target: &PointCloud) -> Self {
+    /// [`Normalisation::of_pair`] of clouds whose far outliers ([`FrameRule::near`]) are left
+    /// out already.
+    pub(crate) fn of_near_pair(source: &PointCloud, target: &PointCloud, rule: &FrameRule) -> Self {
         // (centroid, extent from it, reach from the origin) of one cloud; the two side by side.
         let measure = |cloud: &PointCloud| {
             let centre = cloud.centroid();
@@ -87,7 +90,8 @@ impl Normalisation {
             rayon::join(|| measure(source), || measure(target));
         let extent = source_extent.max(target_extent);
         let reach = source_reach.max(target_reach);
-        if reach <= Self::FRAME_RADIUS && Self::FRAME_EXTENT.contains(&extent) || extent == 0.0 {
+        let (least, most) = rule.extent;
+        if reach <= rule.within && (least..=most).contains(&extent) || extent == 0.0 {
             return Self::identity();
         }
         Self::centred_on(cx, cy, extent)

@@ -15,7 +15,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use crate::fgr::{self, FgrConfig, Progress};
-use crate::frame::{near, Normalisation};
+use crate::frame::{FrameRule, Normalisation};
 use crate::icp::{self, IcpConfig};
 use crate::refine::RefineConfig;
 use crate::refiner::{AtSpacing, Refiner};
@@ -313,20 +313,27 @@ impl<E: From<GeomError>, R: Registrar<E>, F: Refiner> Registrar<E> for Refined<R
     }
 }
 
-/// `inner` on the pair in the unit-sphere frame ([`Normalisation::of_pair`]), far outliers
-/// ([`near`]) left out; the result is given back in the caller's frame: transforms undone,
-/// correspondences indexing the clouds as given, RMSE in the caller's units, fitness counting
-/// the far outliers as source points without a partner. It wraps a [`Registrar`] or a
-/// [`Refiner`] (whose starting transform is taken into the frame first).
+/// `inner` on the pair in the unit-sphere frame by `rule` ([`Normalisation::of_pair`]), far
+/// outliers ([`FrameRule::near`]) left out; the result is given back in the caller's frame:
+/// transforms undone, correspondences indexing the clouds as given, RMSE in the caller's units,
+/// fitness counting the far outliers as source points without a partner. It wraps a
+/// [`Registrar`] or a [`Refiner`] (whose starting transform is taken into the frame first).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Normalised<R> {
     pub inner: R,
+    pub rule: FrameRule,
 }
 
 impl<R> Normalised<R> {
+    /// `inner` in the frame `rule` gives.
+    pub fn new(inner: R, rule: FrameRule) -> Self {
+        Self { inner, rule }
+    }
+
     /// `run` on the pair in its unit-sphere frame, given the frame; its registration given back
     /// in the caller's frame.
     fn in_frame<E>(
+        rule: &FrameRule,
         source: &PointCloud,
         target: &PointCloud,
         run: impl FnOnce(&Prepared, &Prepared, &Normalisation) -> Result<Registration, E>,
@@ -334,13 +341,13 @@ impl<R> Normalised<R> {
         let start = Instant::now();
         // Each cloud's own steps side by side: its far outliers left out, then moved.
         let near_of = |cloud: &PointCloud| {
-            let kept = near(cloud);
+            let kept = rule.near(cloud);
             let selected = cloud.select(&kept);
             (kept, selected)
         };
         let ((source_near, source_kept), (target_near, target_kept)) =
             rayon::join(|| near_of(source), || near_of(target));
-        let frame = Normalisation::of_near_pair(&source_kept, &target_kept);
+        let frame = Normalisation::of_near_pair(&source_kept, &target_kept, rule);
         let (fs, ft) = rayon::join(
             || frame.source(&source_kept), // (N', 3)
             || frame.target(&target_kept), // (M', 3)
@@ -375,7 +382,7 @@ impl<E: From<GeomError>, R: Registrar<E>> Registrar<E> for Normalised<R> {
         progress: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
         let inner = &mut self.inner;
-        Self::in_frame(source, target, |fs, ft, _| {
+        Self::in_frame(&self.rule, source, target, |fs, ft, _| {
             inner.register_prepared(fs, ft, progress)
         })
     }
@@ -392,7 +399,7 @@ impl<F: Refiner> Refiner for Normalised<F> {
         target: &Prepared,
         initial: &RigidTransform,
     ) -> crate::Result<Registration> {
-        Self::in_frame(source, target, |fs, ft, frame| {
+        Self::in_frame(&self.rule, source, target, |fs, ft, frame| {
             self.inner.refine(fs, ft, &frame.redo(initial))
         })
     }
@@ -540,7 +547,7 @@ impl<E, R: Registrar<E>> Registrar<E> for OnFirstUse<R, E> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testing::airplane;
+    use crate::testing::{airplane, FRAME};
     use crate::{Point3, Vector3};
 
     /// 200 points on a twisted curve, and the same points moved by 5° and 0.02.
@@ -631,7 +638,7 @@ mod tests {
         assert_eq!(Registrar::<GeomError>::id(&fgr).to_string(), "fgr");
         let refined = Refined::new(fgr, RefineConfig::default());
         assert_eq!(Registrar::<GeomError>::id(&refined).to_string(), "fgr+icp");
-        let normalised = Normalised { inner: refined };
+        let normalised = Normalised::new(refined, FRAME);
         assert_eq!(
             Registrar::<GeomError>::id(&normalised).to_string(),
             "fgr+icp"
@@ -741,9 +748,10 @@ mod tests {
             Vector3::new(30.0, 0.0, -20.0),
         );
         let target = big.transformed(&pose);
-        let mut method = Normalised {
-            inner: Refined::new(FgrConfig::default(), RefineConfig::default()),
-        };
+        let mut method = Normalised::new(
+            Refined::new(FgrConfig::default(), RefineConfig::default()),
+            FRAME,
+        );
         let found: Registration =
             Registrar::<GeomError>::register(&mut method, &big, &target).unwrap();
         let t = found.result.t_target_source;

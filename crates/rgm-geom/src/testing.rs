@@ -8,6 +8,7 @@ use rand::{rngs::StdRng, Rng, SeedableRng};
 
 use crate::best_of::Scoring;
 use crate::fgr::Progress;
+use crate::frame::FrameRule;
 use crate::registrar::{MethodId, Registrar, Registration};
 use crate::registration::RegistrationResult;
 use crate::thinning::Density;
@@ -19,6 +20,14 @@ pub const SCORING: Scoring = Scoring {
     overlap_distance: 0.02,
     min_overlap: 0.1,
     result_distance: 0.02,
+};
+
+/// The frame rule the default composes its methods with (rgm-model's options): ModelNet40's
+/// pairs are in the unit-sphere frame already.
+pub const FRAME: FrameRule = FrameRule {
+    far_outlier: 12.0,
+    within: 2.0,
+    extent: (0.7, 1.7),
 };
 
 /// ModelNet40's density: 1,024 points in the unit sphere.

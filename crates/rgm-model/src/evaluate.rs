@@ -13,6 +13,7 @@ use rgm_geom::refiner::Refiner;
 use rgm_geom::registrar::Normalised;
 use rgm_geom::Registrar;
 
+use crate::options::FRAME;
 use crate::Method;
 
 mod resumable;
@@ -76,7 +77,7 @@ impl PairRecord {
             return Ok(self.clone());
         }
         let start = Instant::now();
-        let refined = Normalised { inner: refiner }.refine(
+        let refined = Normalised::new(refiner, FRAME).refine(
             &Prepared::new(&pair.source),
             &Prepared::new(&pair.target),
             &self.transform,

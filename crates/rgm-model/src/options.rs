@@ -40,6 +40,7 @@ use std::str::FromStr;
 use rgm_geom::best_of::{Acceptance, BestOf, Cascade, Scoring};
 use rgm_geom::coincidence::{Checked, Coincides, CoincidesAtSpacing, Unambiguous};
 use rgm_geom::fgr::{self, FgrConfig};
+use rgm_geom::frame::FrameRule;
 use rgm_geom::icp::{self, IcpConfig};
 use rgm_geom::ransac::RansacConfig;
 use rgm_geom::refine::{RefineConfig, ResolutionConfig};
@@ -135,6 +136,19 @@ impl FromStr for MethodName {
             })
     }
 }
+
+/// The unit-sphere frame the default's methods run in ([`Normalised`]): a point farther from
+/// its cloud's median than 12 times the median distance from it is a far outlier (no ModelNet40
+/// shape has one: `docs/geom.md`, "Far outliers"); a pair within 2 of the origin whose larger
+/// cloud reaches 0.7–1.7 from its centroid is in the frame already and left as it is: a ModelNet40
+/// shape reaches 1, a 70 % crop of it 0.80–1.11 (10th and 90th percentiles over 400 training
+/// shapes; the larger of a test pair's two crops at most 1.38), and the benchmark's pairs (one
+/// cloud moved by at most 0.5 per axis, jitter at most 0.05) lie within 1.95 of the origin.
+pub const FRAME: FrameRule = FrameRule {
+    far_outlier: 12.0,
+    within: 2.0,
+    extent: (0.7, 1.7),
+};
 
 /// The density the network and the default's settings were tuned at: ModelNet40's 1,024 points
 /// per shape in the unit sphere (717 after the partial crop). A denser pair is thinned to it,
@@ -331,15 +345,14 @@ impl MethodOptions {
             (MethodName::Fgr, Some(refine)) => {
                 Method::new(Refined::new(FgrConfig::default(), refine))
             }
-            (MethodName::Rgm, None) => Method::new(Normalised {
-                inner: self.build_rgm()?,
-            }),
-            (MethodName::Rgm, Some(refine)) => Method::new(Normalised {
-                inner: Checked {
+            (MethodName::Rgm, None) => Method::new(Normalised::new(self.build_rgm()?, FRAME)),
+            (MethodName::Rgm, Some(refine)) => Method::new(Normalised::new(
+                Checked {
                     inner: Refined::new(self.build_rgm()?, refine),
                     check: REFINED_CHECKS,
                 },
-            }),
+                FRAME,
+            )),
             (MethodName::Auto, refine) => {
                 let accept = Acceptance {
                     score: self.accept,
@@ -434,7 +447,7 @@ pub fn auto<R>(rgm: R, refine: Option<RefineConfig>, accept: Acceptance) -> Meth
 where
     R: Registrar<MethodError> + Clone + Send + Sync + 'static,
 {
-    let rgm = Normalised { inner: rgm };
+    let rgm = Normalised::new(rgm, FRAME);
     let fgr = FgrConfig::default();
     let scoring = scoring(refine.as_ref());
     let candidates: [Box<dyn DynRegistrar<MethodError>>; 2] = match &refine {
@@ -497,13 +510,14 @@ where
     };
     // A few markers have no neighbourhoods for features or the network: searched whole.
     let triplets = TripletConfig::default();
-    Method::new(Normalised {
-        inner: UpTo {
+    Method::new(Normalised::new(
+        UpTo {
             points: triplets.max_points,
             small: triplets,
             other: composite,
         },
-    })
+        FRAME,
+    ))
 }
 
 #[cfg(test)]

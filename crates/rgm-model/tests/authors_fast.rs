@@ -11,6 +11,7 @@ use rgm_data::{ModelNet40, PairGenerator, Setting, Split};
 use rgm_geom::registrar::Normalised;
 use rgm_geom::{Matrix3, PointCloud, RigidTransform, Vector3};
 use rgm_model::network::{Config, Mode, Rgm, RgmCache};
+use rgm_model::options::FRAME;
 use rgm_model::{PipelineConfig, Registrar, RgmRegistrar};
 use serde::Deserialize;
 
@@ -139,9 +140,10 @@ fn the_first_pass_gives_the_authors_c_soft() {
 
 #[test]
 fn the_procedure_gives_the_authors_transforms_and_correspondences() {
-    let mut registrar = Normalised {
-        inner: RgmRegistrar::new(network(), PipelineConfig::default()),
-    };
+    let mut registrar = Normalised::new(
+        RgmRegistrar::new(network(), PipelineConfig::default()),
+        FRAME,
+    );
     let expected = expected();
     assert_eq!(expected.pairs.len(), 21);
     let mut report = Vec::new();

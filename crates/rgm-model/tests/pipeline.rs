@@ -17,13 +17,12 @@ use rgm_model::evaluate::evaluate_pair;
 use rgm_model::network::{
     Config, Edges, FeaturerCache, Mode, Rgm, RgmCache, Scoring, TestStatistics,
 };
+use rgm_model::options::FRAME;
 use rgm_model::{Method, MethodError, PipelineConfig, Registrar, RgmRegistrar};
 
 /// RGM as `rgm register --method rgm --no-refine` runs it: in the network's frame.
 fn normalised(network: Rgm<f32>, config: PipelineConfig) -> Normalised<RgmRegistrar> {
-    Normalised {
-        inner: RgmRegistrar::new(network, config),
-    }
+    Normalised::new(RgmRegistrar::new(network, config), FRAME)
 }
 
 fn fixture() -> PathBuf {
@@ -278,7 +277,7 @@ fn benchmark_pairs_are_used_as_they_are() {
             .iter()
             .filter(|&&i| {
                 let pair = generator.test_pair(&shapes, i).unwrap();
-                Normalisation::of_pair(&pair.source, &pair.target).is_identity()
+                Normalisation::of_pair(&pair.source, &pair.target, &FRAME).is_identity()
             })
             .count();
         let share = kept as f64 / indices.len() as f64;
@@ -298,7 +297,7 @@ fn a_pair_at_a_quarter_or_four_times_the_size_reaches_the_network_centred_alike(
         .map(|&k| {
             let scaled = |c: &PointCloud| PointCloud::new(c.points.iter().map(|p| p * k).collect());
             let (s, t) = (scaled(&source), scaled(&target));
-            let frame = Normalisation::of_pair(&s, &t);
+            let frame = Normalisation::of_pair(&s, &t, &FRAME);
             assert!(!frame.is_identity(), "×{k}");
             (frame.source(&s), frame.target(&t))
         })
@@ -339,7 +338,7 @@ fn normalisation_is_undone_on_the_transform() {
         &vec![1.0; source.len()],
     )
     .unwrap();
-    let frame = Normalisation::of_pair(&big_source, &big_target);
+    let frame = Normalisation::of_pair(&big_source, &big_target, &FRAME);
     assert!(!frame.is_identity());
     let (ns, nt) = (frame.source(&big_source), frame.target(&big_target));
     let farthest = ns.points.iter().chain(&nt.points).map(|p| p.coords.norm());
@@ -354,9 +353,9 @@ fn normalisation_is_undone_on_the_transform() {
 fn far_large_clouds_register_as_their_normalised_copies() {
     let network = Rgm::<f32>::load(Config::tiny(), &fixture()).unwrap();
     let (source, target) = far_and_large(&fixture_pair().0, &fixture_pair().1);
-    let frame = Normalisation::of_pair(&source, &target);
+    let frame = Normalisation::of_pair(&source, &target, &FRAME);
     let (ns, nt) = (frame.source(&source), frame.target(&target));
-    assert!(Normalisation::of_pair(&ns, &nt).is_identity());
+    assert!(Normalisation::of_pair(&ns, &nt, &FRAME).is_identity());
     let config = PipelineConfig {
         passes: 1,
         cycle_consistency: false,
@@ -390,9 +389,10 @@ fn refinement_starts_from_rgms_transform() {
         .register(&source, &target)
         .unwrap()
         .result;
-    let mut registrar = Normalised {
-        inner: Refined::new(RgmRegistrar::new(network, plain), RefineConfig::default()),
-    };
+    let mut registrar = Normalised::new(
+        Refined::new(RgmRegistrar::new(network, plain), RefineConfig::default()),
+        FRAME,
+    );
     let both = registrar.register(&source, &target).unwrap().result;
     let expected = refine(
         &source,
@@ -438,9 +438,10 @@ fn a_record_refined_afterwards_is_what_the_refined_method_records() {
     };
     let plain_method = Method::new(normalised(network.clone(), plain.clone()));
     let record = evaluate_pair(&mut plain_method.clone(), 3, &pair).unwrap();
-    let mut refined_method = Method::new(Normalised {
-        inner: Refined::new(RgmRegistrar::new(network, plain), RefineConfig::default()),
-    });
+    let mut refined_method = Method::new(Normalised::new(
+        Refined::new(RgmRegistrar::new(network, plain), RefineConfig::default()),
+        FRAME,
+    ));
     let expected = evaluate_pair(&mut refined_method, 3, &pair).unwrap();
     let refined = record.refined(&pair, &RefineConfig::default()).unwrap();
     // The same refinement from the same start, up to the rounding of leaving the network's

@@ -12,7 +12,7 @@
 //! coordinates exact enough. Clouds beyond a point budget are thinned by a fixed stride, and the
 //! page says so.
 
-use rgm_geom::frame::Normalisation;
+use rgm_geom::frame::{FrameRule, Normalisation};
 use rgm_geom::refine::RefineConfig;
 use rgm_geom::registrar::Candidate;
 use rgm_geom::registration::score;
@@ -47,11 +47,11 @@ pub struct InlierDistance {
 
 impl InlierDistance {
     /// The refinement's finest correspondence distance (`RefineConfig::finest_distance`, 0.03 in
-    /// the unit-sphere frame), in the clouds' units: the distance at which a refined result's
-    /// fitness counts a source point as an inlier.
-    pub fn of_refinement(source: &PointCloud, target: &PointCloud) -> Self {
+    /// the unit-sphere frame), in the clouds' units (the frame by `rule`, as the method's): the
+    /// distance at which a refined result's fitness counts a source point as an inlier.
+    pub fn of_refinement(source: &PointCloud, target: &PointCloud, rule: &FrameRule) -> Self {
         let unit = RefineConfig::default().finest_distance();
-        let scale = Normalisation::of_pair(source, target).scale;
+        let scale = Normalisation::of_pair(source, target, rule).scale;
         Self {
             distance: unit * scale,
             why: if scale == 1.0 {
@@ -387,6 +387,13 @@ fn base64(bytes: &[u8]) -> String {
 mod tests {
     use super::*;
     use rgm_geom::{Matrix3, Point3};
+
+    /// The default's frame rule (rgm-model's `options::FRAME`).
+    const FRAME: FrameRule = FrameRule {
+        far_outlier: 12.0,
+        within: 2.0,
+        extent: (0.7, 1.7),
+    };
 
     /// Standard base64 back to bytes (what the page's `atob` does).
     fn unbase64(text: &str) -> Vec<u8> {
@@ -731,10 +738,13 @@ mod tests {
                 .collect(),
         );
         // A unit-sphere shape is in the frame already; a copy 1,000 times the size is scaled.
-        assert_eq!(InlierDistance::of_refinement(&shape, &shape).distance, unit);
+        assert_eq!(
+            InlierDistance::of_refinement(&shape, &shape, &FRAME).distance,
+            unit
+        );
         let big = PointCloud::new(shape.points.iter().map(|p| p * 1000.0).collect());
-        let d = InlierDistance::of_refinement(&big, &big);
-        let scale = Normalisation::of_pair(&big, &big).scale;
+        let d = InlierDistance::of_refinement(&big, &big, &FRAME);
+        let scale = Normalisation::of_pair(&big, &big, &FRAME).scale;
         assert!(scale > 500.0);
         assert!((d.distance - unit * scale).abs() < 1e-9, "{d:?}");
         assert!(d.why.contains("scale"), "{}", d.why);

@@ -25,6 +25,7 @@ use rgm_geom::refine::RefineConfig;
 use rgm_geom::refiner::Refiner;
 use rgm_geom::registrar::{MethodId, Normalised};
 use rgm_model::evaluate::{Resumable, TestPairs};
+use rgm_model::options::FRAME;
 use rgm_model::weights::{weights_dir, Manifest, ModelEntry, Variant, WeightsFile};
 use rgm_model::{Method, MethodName, MethodOptions, PairRecord, Registrar};
 use rgm_viz::{correct_fraction, correspondence_figure, registration_figure};
@@ -375,7 +376,7 @@ fn candidates(set: TestSet, manifest: &Manifest, only: &[String]) -> Result<Vec<
     for entry in models_for(manifest, set).filter(|e| wanted(&e.name)) {
         let method = from_history(entry)?
             .registrar(&weights_dir())
-            .map(|registrar| Method::new(Normalised { inner: registrar }))
+            .map(|registrar| Method::new(Normalised::new(registrar, FRAME)))
             .with_context(|| format!("loading the model {}", entry.name))?;
         list.push(Candidate {
             name: entry.name.clone(),

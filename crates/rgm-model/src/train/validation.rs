@@ -19,6 +19,7 @@ use super::Result;
 use crate::evaluate::{evaluate_pair, PairRecord, Summary};
 use crate::method::Method;
 use crate::network::Mode;
+use crate::options::FRAME;
 use crate::pipeline::{as_rows, PipelineConfig, RgmRegistrar};
 
 /// The validation result of one epoch.
@@ -127,15 +128,16 @@ impl Trainer {
             .enumerate()
             .map(|(w, worker)| {
                 worker.network.featurer.test_statistics = test_statistics;
-                let mut method = Method::new(Normalised {
-                    inner: RgmRegistrar::new(
+                let mut method = Method::new(Normalised::new(
+                    RgmRegistrar::new(
                         worker.network.clone(),
                         PipelineConfig {
                             precision,
                             ..PipelineConfig::default()
                         },
                     ),
-                });
+                    FRAME,
+                ));
                 let mut part = ValidationPart::default();
                 for i in (w..total).step_by(workers) {
                     let full = generator.test_pair(shapes, i)?;

@@ -1,4 +1,4 @@
-//! The combined method (`rgm register`'s default): the candidate that overlaps better wins, a
+//! `auto`, `rgm register`'s default: the candidate that overlaps better wins, a
 //! result that overlaps enough spares the network, a failed candidate leaves the other, and the
 //! pair's size does not matter.
 
@@ -55,7 +55,7 @@ fn metrics_against_truth(found: &Registration, pair: &rgm_data::Pair) -> PairMet
 }
 
 /// `auto+icp` with `rgm`, both candidates on every pair.
-fn combined(rgm: RgmRegistrar) -> Method {
+fn auto_with(rgm: RgmRegistrar) -> Method {
     let never = rgm_geom::best_of::Acceptance::NEVER;
     rgm_model::options::auto(rgm, Some(RefineConfig::default()), never)
 }
@@ -130,7 +130,7 @@ fn a_failed_candidate_leaves_the_other_and_both_failing_names_both() {
     let few = |c: &PointCloud| PointCloud::new(c.points[..40].to_vec());
     let mut rgm = tiny_rgm();
     rgm.config.match_points = Some(4);
-    let mut method = combined(rgm);
+    let mut method = auto_with(rgm);
     let found = method
         .register(&few(&pair.source), &few(&pair.target))
         .unwrap();
