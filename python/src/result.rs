@@ -254,7 +254,7 @@ impl RegistrationResult {
             )
             .collect::<PyResult<Vec<_>>>()?;
         let registration = Registration {
-            result: rgm_geom::RegistrationResult {
+            result: rgm_geom::Fit {
                 t_target_source,
                 iterations: self.iterations,
                 converged: self.converged,

@@ -18,7 +18,7 @@ use crate::coincidence::CoincidesAtSpacing;
 use crate::fgr::Progress;
 use crate::prepared::indexed_pair;
 use crate::registrar::{elapsed_ms, Candidate, DynRegistrar, MethodId, Registrar, Registration};
-use crate::registration::{score, RegistrationResult};
+use crate::registration::{score, Fit};
 use crate::{GeomError, KnnIndex, PointCloud, Prepared, RigidTransform};
 
 /// How a composite judges its candidates without ground truth and when it trusts the best:
@@ -385,7 +385,7 @@ pub fn conclude<E: From<GeomError>>(
         Some(&mut correspondences),
     );
     Ok(Registration {
-        result: RegistrationResult::scored(transform, iterations, true, scored),
+        result: Fit::scored(transform, iterations, true, scored),
         correspondences,
         time_ms: elapsed_ms(start),
         candidates,

@@ -425,7 +425,7 @@ mod tests {
                     fitness: 0.0,
                     inlier_rmse: 0.0,
                 };
-                let result = crate::RegistrationResult::scored(transform, 0, true, unscored);
+                let result = crate::Fit::scored(transform, 0, true, unscored);
                 Registration::single(result, Vec::new(), Instant::now())
             };
             let slid = found(Vector3::new(3.3, 0.0, 0.0));
@@ -568,7 +568,7 @@ mod tests {
                 fitness: 0.0,
                 inlier_rmse: 0.0,
             };
-            let result = crate::RegistrationResult::scored(same, 0, true, unscored);
+            let result = crate::Fit::scored(same, 0, true, unscored);
             let mut found = Registration::single(result, Vec::new(), Instant::now());
             let candidate = |method: &str, t_target_source, score| crate::registrar::Candidate {
                 method: method.to_string(),

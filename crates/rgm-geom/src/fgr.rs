@@ -45,7 +45,7 @@ use crate::fpfh::{features, Fpfh, FpfhConfig, FPFH_LEN};
 use crate::icp::check_clouds;
 use crate::lockstep;
 use crate::normals::NormalsConfig;
-use crate::registration::{score, RegistrationResult};
+use crate::registration::{score, Fit};
 use crate::{GeomError, PointCloud, Prepared, Result, RigidTransform};
 
 /// Open3D returns the identity below this many matches.
@@ -118,11 +118,7 @@ pub struct Progress {
 }
 
 /// Registers `source` onto `target`: features, matching, tuple test, optimisation.
-pub fn register(
-    source: &PointCloud,
-    target: &PointCloud,
-    config: &FgrConfig,
-) -> Result<RegistrationResult> {
+pub fn register(source: &PointCloud, target: &PointCloud, config: &FgrConfig) -> Result<Fit> {
     register_with_progress(source, target, config, &mut |_| {})
 }
 
@@ -132,7 +128,7 @@ pub fn register_with_progress(
     target: &PointCloud,
     config: &FgrConfig,
     progress: &mut dyn FnMut(Progress),
-) -> Result<RegistrationResult> {
+) -> Result<Fit> {
     register_prepared(
         &Prepared::new(source),
         &Prepared::new(target),
@@ -148,7 +144,7 @@ pub fn register_prepared(
     target: &Prepared,
     config: &FgrConfig,
     progress: &mut dyn FnMut(Progress),
-) -> Result<RegistrationResult> {
+) -> Result<Fit> {
     check_clouds("fgr::register", source, target)?;
     let mut report = |step, done| progress(Progress { step, done });
     report("downsampling", 0.0);
@@ -180,7 +176,7 @@ pub fn register_prepared(
             config.maximum_correspondence_distance,
             None,
         );
-        result = RegistrationResult::scored(
+        result = Fit::scored(
             result.t_target_source,
             result.iterations,
             result.converged,
@@ -229,7 +225,7 @@ pub fn register_features(
     source_features: &[Fpfh],
     target_features: &[Fpfh],
     config: &FgrConfig,
-) -> Result<RegistrationResult> {
+) -> Result<Fit> {
     const OP: &str = "fgr::register_features";
     check_clouds(OP, source, target)?;
     if source_features.len() != source.len() {
@@ -260,7 +256,7 @@ fn register_matches(
     target: &Prepared,
     mut matches: Vec<(usize, usize)>,
     config: &FgrConfig,
-) -> Result<RegistrationResult> {
+) -> Result<Fit> {
     const OP: &str = "fgr::register";
     if !(config.division_factor > 1.0 && config.tuple_scale > 0.0 && config.tuple_scale <= 1.0) {
         return Err(GeomError::Degenerate {
@@ -286,9 +282,7 @@ fn register_matches(
         config.maximum_correspondence_distance,
         None,
     );
-    Ok(RegistrationResult::scored(
-        transform, iterations, converged, s,
-    ))
+    Ok(Fit::scored(transform, iterations, converged, s))
 }
 
 /// Mutual nearest neighbours between the two feature sets: pairs (i, j) where j is the nearest

@@ -10,7 +10,7 @@
 
 use nalgebra::Point3;
 
-use crate::registration::{score, RegistrationResult};
+use crate::registration::{score, Fit};
 use crate::{kabsch, GeomError, KnnIndex, PointCloud, Prepared, Result, RigidTransform};
 
 /// The method's name ([`crate::registrar::MethodId`]).
@@ -47,11 +47,7 @@ impl Default for IcpConfig {
 /// Registers `source` onto `target`. Errors on empty clouds, non-finite points or a
 /// non-positive correspondence distance. When fewer than 3 pairs remain (or they are collinear)
 /// the loop stops early with the transform so far and `converged: false`.
-pub fn register(
-    source: &PointCloud,
-    target: &PointCloud,
-    config: &IcpConfig,
-) -> Result<RegistrationResult> {
+pub fn register(source: &PointCloud, target: &PointCloud, config: &IcpConfig) -> Result<Fit> {
     register_prepared(source, &Prepared::new(target), config)
 }
 
@@ -60,7 +56,7 @@ pub fn register_prepared(
     source: &PointCloud,
     target: &Prepared,
     config: &IcpConfig,
-) -> Result<RegistrationResult> {
+) -> Result<Fit> {
     const OP: &str = "icp::register";
     check_clouds(OP, source, target)?;
     if !(config.max_correspondence_distance > 0.0) {
@@ -82,7 +78,7 @@ pub(crate) fn register_with_index(
     target: &PointCloud,
     index: &KnnIndex,
     config: &IcpConfig,
-) -> RegistrationResult {
+) -> Fit {
     let max_d = config.max_correspondence_distance;
     let identity = RigidTransform::identity();
     let mut transform = config.initial;
@@ -118,7 +114,7 @@ pub(crate) fn register_with_index(
             break;
         }
     }
-    RegistrationResult::scored(transform, iterations, converged, current)
+    Fit::scored(transform, iterations, converged, current)
 }
 
 /// Both clouds non-empty with finite coordinates.

@@ -45,7 +45,7 @@ pub use knn::{knn_graph, KnnIndex, Neighbourhoods};
 pub use metrics::{MetricsSummary, PairMetrics};
 pub use prepared::Prepared;
 pub use registrar::{DynRegistrar, MethodId, Registrar, Registration};
-pub use registration::RegistrationResult;
+pub use registration::Fit;
 pub use transform::RigidTransform;
 
 pub use nalgebra::{Matrix3, Matrix4, Point3, Vector3};

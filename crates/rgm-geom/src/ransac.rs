@@ -32,7 +32,7 @@ use crate::normals::NormalsConfig;
 use crate::refine::{median_spacing, refine_at_resolution, ResolutionConfig};
 use crate::registrar::{MethodId, Registrar, Registration};
 use crate::registration::score;
-use crate::registration::RegistrationResult;
+use crate::registration::Fit;
 use crate::{kabsch, GeomError, PointCloud, Prepared, Result, RigidTransform};
 
 /// The method's name ([`crate::registrar::MethodId`]).
@@ -114,11 +114,7 @@ pub struct Consensus {
 
 /// Registers `source` onto `target` by RANSAC on FPFH matches of the thinned pair (steps 1–5 of
 /// the module). The result is scored on the thinned pair at the inlier distance.
-pub fn register(
-    source: &PointCloud,
-    target: &PointCloud,
-    config: &RansacConfig,
-) -> Result<RegistrationResult> {
+pub fn register(source: &PointCloud, target: &PointCloud, config: &RansacConfig) -> Result<Fit> {
     register_prepared(&Prepared::new(source), &Prepared::new(target), config)
 }
 
@@ -128,7 +124,7 @@ pub fn register_prepared(
     source: &Prepared,
     target: &Prepared,
     config: &RansacConfig,
-) -> Result<RegistrationResult> {
+) -> Result<Fit> {
     const OP: &str = "ransac::register";
     check_clouds(OP, source, target)?;
     if !(config.edge_similarity > 0.0 && config.edge_similarity <= 1.0) {
@@ -229,7 +225,7 @@ pub fn register_prepared(
         distance,
         None,
     );
-    Ok(RegistrationResult::scored(
+    Ok(Fit::scored(
         transform,
         found.hypotheses + iterations,
         true,

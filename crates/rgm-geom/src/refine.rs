@@ -32,7 +32,7 @@ use rayon::prelude::*;
 
 use crate::icp::{self, check_clouds, IcpConfig};
 use crate::normals::{normal_at, NormalsConfig};
-use crate::registration::{nearest_each, score, RegistrationResult};
+use crate::registration::{nearest_each, score, Fit};
 use crate::{GeomError, KnnIndex, PointCloud, Prepared, Result, RigidTransform};
 
 /// What a method refined by [`refine`] is called after its `+` (`fgr+icp`): it is ICP, point to
@@ -114,7 +114,7 @@ pub fn refine(
     target: &PointCloud,
     initial: &RigidTransform,
     config: &RefineConfig,
-) -> Result<RegistrationResult> {
+) -> Result<Fit> {
     refine_prepared(source, &Prepared::new(target), initial, config)
 }
 
@@ -125,7 +125,7 @@ pub fn refine_prepared(
     target: &Prepared,
     initial: &RigidTransform,
     config: &RefineConfig,
-) -> Result<RegistrationResult> {
+) -> Result<Fit> {
     const OP: &str = "refine::refine";
     check_clouds(OP, source, target)?;
     config.validate(OP)?;
@@ -178,12 +178,7 @@ pub fn refine_prepared(
         config.finest_distance(),
         None,
     );
-    Ok(RegistrationResult::scored(
-        transform,
-        iterations,
-        converged,
-        moved_score,
-    ))
+    Ok(Fit::scored(transform, iterations, converged, moved_score))
 }
 
 /// The clouds a point-to-plane stage fits: the target indexed, with its normals.

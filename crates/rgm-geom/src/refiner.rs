@@ -10,7 +10,7 @@ use std::time::Instant;
 use crate::icp::{self, IcpConfig};
 use crate::refine::{self, RefineConfig, ResolutionConfig};
 use crate::registrar::Registration;
-use crate::registration::{score, RegistrationResult};
+use crate::registration::{score, Fit};
 use crate::{Prepared, Result, RigidTransform};
 
 /// A local method: from a transform near the truth to a better one.
@@ -143,7 +143,7 @@ impl Refiner for AtSpacing {
             self.scoring_distance,
             Some(&mut correspondences),
         );
-        let result = RegistrationResult::scored(transform, iterations, true, scored);
+        let result = Fit::scored(transform, iterations, true, scored);
         Ok(Registration::single(result, correspondences, start))
     }
 }

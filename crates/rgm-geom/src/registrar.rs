@@ -19,7 +19,7 @@ use crate::frame::{FrameRule, Normalisation};
 use crate::icp::{self, IcpConfig};
 use crate::refine::RefineConfig;
 use crate::refiner::{AtSpacing, Refiner};
-use crate::registration::{score, RegistrationResult};
+use crate::registration::{score, Fit};
 use crate::thinning::Density;
 use crate::{GeomError, PointCloud, Prepared, RigidTransform};
 
@@ -74,7 +74,7 @@ pub struct Candidate {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Registration {
     /// The transform, its iterations and inlier statistics.
-    pub result: RegistrationResult,
+    pub result: Fit,
     /// The (source index, target index) pairs behind `result.inlier_count`: the method's own
     /// matches (RGM's last hard correspondences), or the source points the transform brings
     /// within the scoring distance of their nearest target point (Open3D's correspondence set).
@@ -97,7 +97,7 @@ impl Registration {
     /// timed from `start`; doubted when fewer than 3 are (a result no overlap supports: ICP or
     /// FGR that found nothing hands back the transform it started from).
     pub fn scored_within(
-        result: RegistrationResult,
+        result: Fit,
         source: &PointCloud,
         target: &Prepared,
         max_distance: f64,
@@ -125,11 +125,7 @@ impl Registration {
     }
 
     /// A single method's registration, timed from `start`.
-    pub fn single(
-        result: RegistrationResult,
-        correspondences: Vec<(usize, usize)>,
-        start: Instant,
-    ) -> Self {
+    pub fn single(result: Fit, correspondences: Vec<(usize, usize)>, start: Instant) -> Self {
         Self {
             result,
             correspondences,
@@ -300,7 +296,7 @@ impl<E: From<GeomError>, R: Registrar<E>, F: Refiner> Registrar<E> for Refined<R
             .refiner
             .refine(source, target, &coarse.result.t_target_source)?;
         Ok(Registration {
-            result: RegistrationResult {
+            result: Fit {
                 iterations: coarse.result.iterations + fine.result.iterations,
                 ..fine.result
             },
@@ -437,7 +433,7 @@ impl<E: From<GeomError>, R: Registrar<E>, F: Refiner> Registrar<E> for AtResolut
             .refiner
             .refine(source, target, &found.result.t_target_source)?;
         Ok(Registration {
-            result: RegistrationResult {
+            result: Fit {
                 iterations: found.result.iterations + fine.result.iterations,
                 converged: found.result.converged && fine.result.converged,
                 ..fine.result
@@ -669,7 +665,7 @@ mod tests {
                 initial: &RigidTransform,
             ) -> crate::Result<Registration> {
                 *self.started_from.lock().unwrap() = Some(*initial);
-                let result = RegistrationResult {
+                let result = Fit {
                     t_target_source: RigidTransform::identity(),
                     iterations: 1,
                     converged: true,

@@ -5,9 +5,11 @@ use rayon::prelude::*;
 
 use crate::{KnnIndex, RigidTransform};
 
-/// The outcome of registering a source cloud onto a target cloud.
+/// What one algorithm found on a pair: its transform, and how well the source fits the target
+/// under it (Open3D's `RegistrationResult`). A [`crate::Registration`] carries one, with the
+/// correspondences, the time and a composite's candidates.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct RegistrationResult {
+pub struct Fit {
     /// The estimated transform mapping source coordinates into the target frame.
     pub t_target_source: RigidTransform,
     /// Iterations run (transform updates).
@@ -103,7 +105,7 @@ pub(crate) fn nearest_each(
         });
 }
 
-impl RegistrationResult {
+impl Fit {
     /// A result for `transform` with its Open3D score.
     pub fn scored(
         t_target_source: RigidTransform,
@@ -153,7 +155,7 @@ mod tests {
     /// source onto the target and the target onto the source both land within 2.5° and 0.2 of
     /// the truth. Returns the worst (rotation °, translation) seen.
     fn check_both_directions(
-        method: impl Fn(&PointCloud, &PointCloud) -> Result<RegistrationResult>,
+        method: impl Fn(&PointCloud, &PointCloud) -> Result<Fit>,
         max_angle_deg: f64,
         max_translation: f64,
         seeds: std::ops::Range<u64>,

@@ -10,7 +10,7 @@ use crate::best_of::Scoring;
 use crate::fgr::Progress;
 use crate::frame::FrameRule;
 use crate::registrar::{MethodId, Registrar, Registration};
-use crate::registration::RegistrationResult;
+use crate::registration::Fit;
 use crate::thinning::Density;
 use crate::{GeomError, PointCloud, Prepared, RigidTransform};
 
@@ -139,7 +139,7 @@ impl Registrar<GeomError> for Fixed {
         _: &mut dyn FnMut(Progress),
     ) -> Result<Registration, GeomError> {
         self.seen.lock().unwrap().push((source.len(), target.len()));
-        let result = RegistrationResult {
+        let result = Fit {
             t_target_source: self.transform,
             iterations: 0,
             converged: true,

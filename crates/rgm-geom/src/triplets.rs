@@ -10,7 +10,7 @@
 use std::time::Instant;
 
 use crate::registrar::{MethodId, Registrar, Registration};
-use crate::registration::{score, RegistrationResult};
+use crate::registration::{score, Fit};
 use crate::{kabsch, GeomError, PointCloud, Prepared, Result, RigidTransform};
 
 /// The method's name ([`crate::registrar::MethodId`]).
@@ -59,7 +59,7 @@ pub fn register(
     source: &PointCloud,
     target: &PointCloud,
     config: &TripletConfig,
-) -> Result<(RegistrationResult, f64)> {
+) -> Result<(Fit, f64)> {
     register_prepared(source, &Prepared::new(target), config)
 }
 
@@ -68,7 +68,7 @@ pub fn register_prepared(
     source: &PointCloud,
     target: &Prepared,
     config: &TripletConfig,
-) -> Result<(RegistrationResult, f64)> {
+) -> Result<(Fit, f64)> {
     const OP: &str = "triplets::register";
     let bad = |why: String| Err(GeomError::Degenerate { op: OP, why });
     for (name, cloud) in [("source", source), ("target", target)] {
@@ -121,7 +121,7 @@ pub fn register_prepared(
     }
     let Some((_, _, found)) = best else {
         return Ok((
-            RegistrationResult::scored(
+            Fit::scored(
                 RigidTransform::identity(),
                 0,
                 false,
@@ -142,10 +142,7 @@ pub fn register_prepared(
     let (from, to): (Vec<_>, Vec<_>) = pairs.iter().map(|&(i, j)| (s[i], t[j])).unzip();
     let transform = kabsch(&from, &to, &vec![1.0; from.len()]).unwrap_or(found);
     let fit = score(&source.points, index, &transform, tolerance, None);
-    Ok((
-        RegistrationResult::scored(transform, 1, true, fit),
-        tolerance,
-    ))
+    Ok((Fit::scored(transform, 1, true, fit), tolerance))
 }
 
 impl<E: From<GeomError>> Registrar<E> for TripletConfig {

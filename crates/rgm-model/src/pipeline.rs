@@ -27,7 +27,7 @@ use rand::{rngs::StdRng, SeedableRng};
 use rgm_geom::fgr::Progress;
 use rgm_geom::kabsch::kabsch;
 use rgm_geom::registrar::{MethodId, Registrar, Registration};
-use rgm_geom::{Point3, PointCloud, Prepared, RegistrationResult, RigidTransform};
+use rgm_geom::{Fit, Point3, PointCloud, Prepared, RigidTransform};
 use rgm_match::{hard_match, Correspondences, MatchConfig};
 use rgm_nn::{Compute, Parameters, Precision};
 
@@ -301,7 +301,7 @@ impl RgmRegistrar {
         &mut self,
         source: &PointCloud,
         target: &PointCloud,
-    ) -> Result<(RegistrationResult, Vec<(usize, usize)>), MethodError> {
+    ) -> Result<(Fit, Vec<(usize, usize)>), MethodError> {
         self.times = StageTimes::default();
         if self.config.passes == 0 {
             return Err(MethodError::InvalidConfig {
@@ -420,7 +420,7 @@ impl RgmRegistrar {
             .map(|&(i, j)| (total.apply(&x.points[i]) - y.points[j]).norm_squared())
             .sum();
         let count = found.pairs().len();
-        let result = RegistrationResult {
+        let result = Fit {
             t_target_source: total,
             iterations: self.config.passes,
             converged: true,

@@ -688,7 +688,7 @@ mod tests {
 
     #[test]
     fn only_rgms_own_matches_are_drawn() {
-        let result = rgm_geom::RegistrationResult::scored(
+        let result = rgm_geom::Fit::scored(
             RigidTransform::identity(),
             2,
             true,
