@@ -7,8 +7,7 @@
 //! The composites here run candidate methods and judge them so: [`BestOf`] side by side,
 //! [`Cascade`] the cheap one first and the rest only when its result is in doubt
 //! ([`Acceptance`]); [`crate::thinning::Thinned`] runs either on several thinnings of a dense
-//! pair. The score and its distance were chosen on validation pairs (`docs/training/README.md`,
-//! session 6: `cargo run --release -p rgm-benches --example default_study`).
+//! pair. How they score ([`Scoring`]) is the caller's configuration.
 
 use std::time::Instant;
 

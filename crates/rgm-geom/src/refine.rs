@@ -15,9 +15,8 @@
 //!
 //! It ends with point-to-point stages ([`crate::icp`], untrimmed, at 0.05 then 0.03): once the
 //! clouds lie on each other, the nearest points are mostly the same surface points, and fitting
-//! them point to point pins down the slide along the surface that point-to-plane leaves loose.
-//! On 300 partial validation pairs this took the median rotation error of the registered pairs
-//! from 0.55° to 0.31° and registered 4 points more (docs/training/README.md, session 6).
+//! them point to point pins down the slide along the surface that point-to-plane leaves loose
+//! (measured in docs/training/README.md, "a refinement that suits partial scans").
 //!
 //! Normals of the target are estimated once by PCA ([`crate::normals`]).
 //!
