@@ -15,7 +15,7 @@ use rgm_geom::euler::rotation_xyz_intrinsic;
 use rgm_geom::{PointCloud, RigidTransform, Vector3};
 use rgm_match::Correspondences;
 use rgm_model::network::{Config, Mode, Rgm, RgmCache};
-use rgm_model::{PipelineConfig, Registrar, RgmRegistrar};
+use rgm_model::{ProcedureConfig, Registrar, RgmRegistrar};
 
 /// Points per cloud: the partial setting's crop of 1,024.
 const N: usize = 717;
@@ -65,9 +65,9 @@ fn network(c: &mut Criterion) {
             &[("paper", None)]
         };
         for &(label, match_points) in matched {
-            let config = PipelineConfig {
+            let config = ProcedureConfig {
                 match_points,
-                ..PipelineConfig::default()
+                ..ProcedureConfig::default()
             };
             let mut registrar = RgmRegistrar::new(rgm.clone(), config);
             group.bench_function(BenchmarkId::new("procedure", label), |bench| {

@@ -25,8 +25,8 @@ use rgm_geom::euler::rotation_xyz_intrinsic;
 use rgm_geom::{PointCloud, RigidTransform, Vector3};
 use rgm_match::Correspondences;
 use rgm_model::network::{Config, Mode, Rgm, RgmCache};
-use rgm_model::pipeline::StageTimes;
-use rgm_model::{PipelineConfig, Registrar, RgmRegistrar};
+use rgm_model::procedure::StageTimes;
+use rgm_model::{ProcedureConfig, Registrar, RgmRegistrar};
 use rgm_nn::{Compute, Parameters, Precision};
 
 /// `n` points uniform in the unit ball and their copy at a known pose in reverse order;
@@ -123,10 +123,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
         }
         "procedure" => {
-            let config = PipelineConfig {
+            let config = ProcedureConfig {
                 match_points,
                 precision,
-                ..PipelineConfig::default()
+                ..ProcedureConfig::default()
             };
             let mut registrar = RgmRegistrar::new(network, config);
             for _ in 0..reps + 1 {

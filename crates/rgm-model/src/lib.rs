@@ -1,5 +1,5 @@
 //! rgm-model — RGM put together from the layers below: the network ([`network`]), its
-//! test-time procedure as a [`rgm_geom::Registrar`] ([`pipeline`], spec §4), training
+//! test-time procedure as a [`rgm_geom::Registrar`] ([`procedure`], spec §4), training
 //! ([`train`]) and checkpoints ([`weights`]). [`options`] composes every method users can name
 //! (ICP, FGR, RGM, and `rgm register`'s default, FGR and RGM as a cascade) from the
 //! registrars and wrappers of rgm-geom and this crate, into one [`method::Method`];
@@ -19,7 +19,7 @@ pub mod memory;
 pub mod method;
 pub mod network;
 pub mod options;
-pub mod pipeline;
+pub mod procedure;
 pub mod progress;
 pub mod train;
 pub mod weights;
@@ -28,5 +28,5 @@ pub use error::MethodError;
 pub use evaluate::{PairRecord, ScanRecord, Summary};
 pub use method::Method;
 pub use options::{MethodName, MethodOptions};
-pub use pipeline::{PipelineConfig, RgmRegistrar, StageTimes};
+pub use procedure::{ProcedureConfig, RgmRegistrar, StageTimes};
 pub use rgm_geom::registrar::{Candidate, Registrar, Registration};

@@ -56,7 +56,7 @@ use rgm_nn::Precision;
 use crate::error::MethodError;
 use crate::method::Method;
 use crate::network::{Config, TestStatistics};
-use crate::pipeline::{self, RgmRegistrar};
+use crate::procedure::{self, RgmRegistrar};
 
 /// The name of FGR and RGM as a cascade ([`MethodName::Auto`]).
 pub const AUTO: &str = "auto";
@@ -85,7 +85,7 @@ impl MethodName {
         match self {
             Self::Icp => icp::NAME,
             Self::Fgr => fgr::NAME,
-            Self::Rgm => pipeline::NAME,
+            Self::Rgm => procedure::NAME,
             Self::Auto => AUTO,
         }
     }

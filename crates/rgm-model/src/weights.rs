@@ -18,7 +18,7 @@ use rgm_data::Setting;
 
 use crate::error::MethodError;
 use crate::network::{Config, Edges, Rgm, Scoring, TestStatistics};
-use crate::pipeline::{PipelineConfig, RgmRegistrar};
+use crate::procedure::{ProcedureConfig, RgmRegistrar};
 
 /// The manifest embedded at build time.
 const BUILTIN_MANIFEST: &str = include_str!("../weights/manifest.json");
@@ -242,10 +242,10 @@ impl ModelEntry {
     }
 
     /// The paper's test-time settings, matching on as many points as in training.
-    pub fn pipeline_config(&self) -> PipelineConfig {
-        PipelineConfig {
+    pub fn procedure_config(&self) -> ProcedureConfig {
+        ProcedureConfig {
             match_points: self.match_points,
-            ..PipelineConfig::default()
+            ..ProcedureConfig::default()
         }
     }
 
@@ -257,7 +257,7 @@ impl ModelEntry {
 
     fn registrar_of(&self, mut network: Rgm<f32>) -> RgmRegistrar {
         network.featurer.test_statistics = self.test_statistics;
-        RgmRegistrar::new(network, self.pipeline_config())
+        RgmRegistrar::new(network, self.procedure_config())
     }
 }
 
@@ -265,7 +265,7 @@ impl ModelEntry {
 /// parameter names), and the paper's test-time settings.
 pub fn load_registrar(config: Config, weights: &Path) -> Result<RgmRegistrar, MethodError> {
     let network = Rgm::load(config, weights)?;
-    Ok(RgmRegistrar::new(network, PipelineConfig::default()))
+    Ok(RgmRegistrar::new(network, ProcedureConfig::default()))
 }
 
 /// RGM with the built-in model (weights embedded in the binary) and its test-time settings.
@@ -308,8 +308,8 @@ mod tests {
         assert_eq!(entry.config().unwrap().scoring, Scoring::Var1);
         entry.variant = Variant::Var2;
         assert_eq!(entry.config().unwrap().edges, Edges::Full);
-        assert_eq!(entry.pipeline_config().match_points, Some(100));
-        assert_eq!(entry.pipeline_config().passes, 2);
+        assert_eq!(entry.procedure_config().match_points, Some(100));
+        assert_eq!(entry.procedure_config().passes, 2);
     }
 
     #[test]

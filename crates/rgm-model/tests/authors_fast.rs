@@ -12,7 +12,7 @@ use rgm_geom::registrar::Normalised;
 use rgm_geom::{Matrix3, PointCloud, RigidTransform, Vector3};
 use rgm_model::network::{Config, Mode, Rgm, RgmCache};
 use rgm_model::options::FRAME;
-use rgm_model::{PipelineConfig, Registrar, RgmRegistrar};
+use rgm_model::{ProcedureConfig, Registrar, RgmRegistrar};
 use serde::Deserialize;
 
 fn shared() -> PathBuf {
@@ -141,7 +141,7 @@ fn the_first_pass_gives_the_authors_c_soft() {
 #[test]
 fn the_procedure_gives_the_authors_transforms_and_correspondences() {
     let mut registrar = Normalised::new(
-        RgmRegistrar::new(network(), PipelineConfig::default()),
+        RgmRegistrar::new(network(), ProcedureConfig::default()),
         FRAME,
     );
     let expected = expected();

@@ -10,7 +10,7 @@ use rgm_geom::{GeomError, PairMetrics, Point3, PointCloud, RigidTransform};
 use rgm_model::network::{Config, Rgm};
 use rgm_model::options::SCORING;
 use rgm_model::{
-    Method, MethodError, MethodOptions, PipelineConfig, Registrar, Registration, RgmRegistrar,
+    Method, MethodError, MethodOptions, ProcedureConfig, Registrar, Registration, RgmRegistrar,
 };
 
 /// The tiny network of `tests/fixtures` (random weights: its transforms are poor).
@@ -20,9 +20,9 @@ fn tiny_rgm() -> RgmRegistrar {
     let network = Rgm::load(Config::tiny(), &path).unwrap();
     RgmRegistrar::new(
         network,
-        PipelineConfig {
+        ProcedureConfig {
             match_points: Some(200),
-            ..PipelineConfig::default()
+            ..ProcedureConfig::default()
         },
     )
 }

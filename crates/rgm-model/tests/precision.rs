@@ -2,7 +2,7 @@
 //! AVX-512 BF16 where the processor has either (and is f32, bit for bit, where it has not), on
 //! whatever thread runs the pass.
 //!
-//! The fixture is the PyTorch export of `tests/pipeline.rs` (tiny preset, a 48×48 pair, PyTorch's
+//! The fixture is the PyTorch export of `tests/procedure.rs` (tiny preset, a 48×48 pair, PyTorch's
 //! evaluation-mode C̃).
 
 use std::path::PathBuf;

@@ -494,7 +494,7 @@ impl Run {
         self.draw_clouds(set, &candidate.stem, records, pairs, count)?;
         let mut matched = BTreeMap::new();
         // The network's correspondences; a refined model's are its plain twin's.
-        if candidate.method.id().base != rgm_model::pipeline::NAME || candidate.method.is_refined()
+        if candidate.method.id().base != rgm_model::procedure::NAME || candidate.method.is_refined()
         {
             return Ok(matched);
         }

@@ -19,7 +19,7 @@ use rgm_nn::{Compute, Parameters, Scalar};
 use super::run_dir::{read_json, write_json, CheckpointFile, RunDir};
 use super::{Event, LogRecord, Result, TrainConfig, TrainError, TrainState};
 use crate::network::{Rgm, RgmCache};
-use crate::pipeline::as_rows;
+use crate::procedure::as_rows;
 
 /// One worker's network copy and forward/backward buffers.
 pub(super) struct Worker {

@@ -20,7 +20,7 @@ use crate::evaluate::{evaluate_pair, PairRecord, Summary};
 use crate::method::Method;
 use crate::network::Mode;
 use crate::options::FRAME;
-use crate::pipeline::{as_rows, PipelineConfig, RgmRegistrar};
+use crate::procedure::{as_rows, ProcedureConfig, RgmRegistrar};
 
 /// The validation result of one epoch.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -131,9 +131,9 @@ impl Trainer {
                 let mut method = Method::new(Normalised::new(
                     RgmRegistrar::new(
                         worker.network.clone(),
-                        PipelineConfig {
+                        ProcedureConfig {
                             precision,
-                            ..PipelineConfig::default()
+                            ..ProcedureConfig::default()
                         },
                     ),
                     FRAME,

@@ -18,10 +18,10 @@ use rgm_model::network::{
     Config, Edges, FeaturerCache, Mode, Rgm, RgmCache, Scoring, TestStatistics,
 };
 use rgm_model::options::FRAME;
-use rgm_model::{Method, MethodError, PipelineConfig, Registrar, RgmRegistrar};
+use rgm_model::{Method, MethodError, ProcedureConfig, Registrar, RgmRegistrar};
 
 /// RGM as `rgm register --method rgm --no-refine` runs it: in the network's frame.
-fn normalised(network: Rgm<f32>, config: PipelineConfig) -> Normalised<RgmRegistrar> {
+fn normalised(network: Rgm<f32>, config: ProcedureConfig) -> Normalised<RgmRegistrar> {
     Normalised::new(RgmRegistrar::new(network, config), FRAME)
 }
 
@@ -65,15 +65,15 @@ fn a_pytorch_state_dict_loads_and_gives_pytorchs_c_soft() {
 }
 
 #[test]
-fn the_pipeline_uses_only_cycle_consistent_one_to_one_pairs() {
+fn the_procedure_uses_only_cycle_consistent_one_to_one_pairs() {
     let network = Rgm::<f32>::load(Config::tiny(), &fixture()).unwrap();
     let (source, target) = (cloud(&tensor("input.x")), cloud(&tensor("input.y")));
-    let one_way = PipelineConfig {
+    let one_way = ProcedureConfig {
         passes: 1,
         cycle_consistency: false,
         ..Default::default()
     };
-    let both_ways = PipelineConfig {
+    let both_ways = ProcedureConfig {
         passes: 1,
         ..Default::default()
     };
@@ -225,7 +225,7 @@ fn no_backward_follows_a_pass_from_given_features() {
 }
 
 #[test]
-fn the_pipeline_reports_the_correspondences_the_plain_network_finds() {
+fn the_procedure_reports_the_correspondences_the_plain_network_finds() {
     // One pass, cycle consistent: the registrar (features reused) must find exactly the pairs
     // of the plain forward in both directions.
     let mut network = Rgm::<f32>::load(Config::tiny(), &fixture()).unwrap();
@@ -245,7 +245,7 @@ fn the_pipeline_reports_the_correspondences_the_plain_network_finds() {
         .cycle_consistent(&hard_match(yx.c_soft(), &matching).unwrap())
         .unwrap();
     let (source, target) = fixture_pair();
-    let config = PipelineConfig {
+    let config = ProcedureConfig {
         passes: 1,
         ..Default::default()
     };
@@ -356,7 +356,7 @@ fn far_large_clouds_register_as_their_normalised_copies() {
     let frame = Normalisation::of_pair(&source, &target, &FRAME);
     let (ns, nt) = (frame.source(&source), frame.target(&target));
     assert!(Normalisation::of_pair(&ns, &nt, &FRAME).is_identity());
-    let config = PipelineConfig {
+    let config = ProcedureConfig {
         passes: 1,
         cycle_consistency: false,
         ..Default::default()
@@ -380,7 +380,7 @@ fn far_large_clouds_register_as_their_normalised_copies() {
 fn refinement_starts_from_rgms_transform() {
     let network = Rgm::<f32>::load(Config::tiny(), &fixture()).unwrap();
     let (source, target) = fixture_pair();
-    let plain = PipelineConfig {
+    let plain = ProcedureConfig {
         passes: 1,
         cycle_consistency: false,
         ..Default::default()
@@ -432,7 +432,7 @@ fn a_record_refined_afterwards_is_what_the_refined_method_records() {
         shape_index: 0,
         label: 0,
     };
-    let plain = PipelineConfig {
+    let plain = ProcedureConfig {
         passes: 1,
         ..Default::default()
     };
@@ -458,7 +458,7 @@ fn clouds_smaller_than_the_neighbourhood_are_a_clear_error() {
     let network = Rgm::<f32>::load(Config::tiny(), &fixture()).unwrap();
     let (source, target) = fixture_pair();
     let small = source.select(&[0, 1, 2, 3]); // K = 4 points, the network needs 5
-    let mut registrar = RgmRegistrar::new(network, PipelineConfig::default());
+    let mut registrar = RgmRegistrar::new(network, ProcedureConfig::default());
     let err = registrar.register(&source, &small).unwrap_err();
     assert_eq!(
         err.to_string(),
@@ -490,7 +490,7 @@ fn one_two_and_three_threads_register_to_the_same_bits() {
                     .num_threads(threads)
                     .build()
                     .unwrap();
-                let mut registrar = normalised(network.clone(), PipelineConfig::default());
+                let mut registrar = normalised(network.clone(), ProcedureConfig::default());
                 let found = pool
                     .install(|| registrar.register(&source, &target))
                     .unwrap();

@@ -36,7 +36,7 @@ use crate::network::{both, FeaturerCache, Rgm, RgmCache};
 
 /// Test-time settings; the defaults are the paper's.
 #[derive(Clone, Debug, PartialEq)]
-pub struct PipelineConfig {
+pub struct ProcedureConfig {
     /// Passes of network → matching → Kabsch in each chain, each on the chain's cloud moved by
     /// the passes before (2 in the paper's tables).
     pub passes: usize,
@@ -54,7 +54,7 @@ pub struct PipelineConfig {
     pub precision: Precision,
 }
 
-impl Default for PipelineConfig {
+impl Default for ProcedureConfig {
     fn default() -> Self {
         Self {
             passes: 2,
@@ -149,7 +149,7 @@ pub struct RgmRegistrar {
     /// The network, in evaluation mode at test time.
     pub network: Rgm<f32>,
     /// Passes, cycle consistency, inlier threshold, subsampling, precision.
-    pub config: PipelineConfig,
+    pub config: ProcedureConfig,
     source_features: FeaturerCache<f32>, // the matched source X's features (N, C), once per pair
     target_features: FeaturerCache<f32>, // the matched target Y's features (M, C), once per pair
     forward: ChainBuffers,               // the forward chain's: X' (N, C), pass (X', Y)
@@ -208,7 +208,7 @@ impl ChainRun<'_> {
     fn pass(
         &mut self,
         network: &Rgm<f32>,
-        config: &PipelineConfig,
+        config: &ProcedureConfig,
         pass: usize,
         blocks_ran: bool,
     ) -> Result<(), MethodError> {
@@ -275,7 +275,7 @@ impl RgmRegistrar {
     pub const ID: MethodId = MethodId::plain(NAME);
 
     /// A registrar around `network`.
-    pub fn new(network: Rgm<f32>, config: PipelineConfig) -> Self {
+    pub fn new(network: Rgm<f32>, config: ProcedureConfig) -> Self {
         Self {
             network,
             config,
@@ -460,7 +460,7 @@ mod tests {
     use super::*;
     use crate::network::Config;
 
-    /// The tiny network and 48×48 pair of `tests/fixtures` (see `tests/pipeline.rs`).
+    /// The tiny network and 48×48 pair of `tests/fixtures` (see `tests/procedure.rs`).
     fn fixture() -> (Rgm<f32>, PointCloud, PointCloud) {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("tests/fixtures/rgm_tiny_state_dict.safetensors");
@@ -482,14 +482,14 @@ mod tests {
         // match_points = 30 of 48: the same transform as registering the two drawn subsets,
         // and the correspondences translated back to the full clouds' indices.
         let (network, source, target) = fixture();
-        let config = PipelineConfig {
+        let config = ProcedureConfig {
             passes: 1,
             cycle_consistency: false,
             ..Default::default()
         };
         let mut whole = RgmRegistrar::new(
             network.clone(),
-            PipelineConfig {
+            ProcedureConfig {
                 match_points: Some(30),
                 ..config.clone()
             },
@@ -523,7 +523,7 @@ mod tests {
                 .map(|i| source.points[i % source.len()] * (1.0 + i as f64 * 1e-7))
                 .collect(),
         );
-        let mut registrar = RgmRegistrar::new(network, PipelineConfig::default());
+        let mut registrar = RgmRegistrar::new(network, ProcedureConfig::default());
         match registrar.register(&big, &big) {
             Err(MethodError::TooMuchMemory {
                 points, estimate, ..
