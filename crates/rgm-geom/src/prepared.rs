@@ -12,14 +12,17 @@ use std::sync::{Arc, Mutex, OnceLock};
 use crate::normals::{estimate_normals, NormalsConfig};
 use crate::{KnnIndex, PointCloud, Vector3};
 
+/// Unit normals of a cloud's points, shared by the stages that ask for them. // (N,)
+pub type Normals = Arc<Vec<Vector3<f64>>>;
+
 /// A cloud and what is made of it lazily: its [`KnnIndex`] and its normals per
 /// [`NormalsConfig`].
 #[derive(Debug)]
 pub struct Prepared<'a> {
     cloud: Cow<'a, PointCloud>,
     index: OnceLock<KnnIndex>,
-    /// The normals made so far, one entry per configuration asked for. // [(config, (N,))]
-    normals: Mutex<Vec<(NormalsConfig, Arc<Vec<Vector3<f64>>>)>>,
+    /// The normals made so far, one entry per configuration asked for.
+    normals: Mutex<Vec<(NormalsConfig, Normals)>>,
 }
 
 impl<'a> Prepared<'a> {
@@ -56,8 +59,8 @@ impl<'a> Prepared<'a> {
 
     /// The cloud's unit normals by [`estimate_normals`] with `config`, estimated on first use
     /// of that configuration. // (N,)
-    pub fn normals(&self, config: &NormalsConfig) -> Arc<Vec<Vector3<f64>>> {
-        let made = |normals: &[(NormalsConfig, Arc<Vec<Vector3<f64>>>)]| {
+    pub fn normals(&self, config: &NormalsConfig) -> Normals {
+        let made = |normals: &[(NormalsConfig, Normals)]| {
             normals
                 .iter()
                 .find(|(c, _)| c == config)

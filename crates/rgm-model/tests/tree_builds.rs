@@ -40,7 +40,7 @@ fn pairs() -> Option<Vec<(&'static str, PointCloud, PointCloud)>> {
     if !data.join("modelnet40_npy1024").is_dir() || !bunny.is_dir() {
         return None;
     }
-    let dataset = ModelNet40::open(&data.join("modelnet40_npy1024")).unwrap();
+    let dataset = ModelNet40::open(data.join("modelnet40_npy1024")).unwrap();
     let shapes = dataset.split(Split::Test, false);
     let partial = PairGenerator::new(Setting::Partial)
         .test_pair(&shapes, 0)
