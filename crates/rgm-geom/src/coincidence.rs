@@ -376,6 +376,17 @@ impl<E: From<GeomError>, R: Registrar<E>, C: Check> Registrar<E> for Checked<R, 
 mod tests {
     use super::*;
     use crate::testing::{airplane, Fixed, DENSITY};
+
+    /// The default's spacing check (rgm-model's `options::COINCIDES_AT_SPACING`).
+    const AT_SPACING: CoincidesAtSpacing = CoincidesAtSpacing {
+        coincides: Coincides {
+            near: 1.5,
+            far: 16.0,
+            least: 0.5,
+        },
+        density: DENSITY,
+        scan_lines: 5.0,
+    };
     use crate::{Matrix3, Point3, Vector3};
 
     fn indexed(cloud: &PointCloud) -> (&PointCloud, KnnIndex) {
@@ -409,15 +420,7 @@ mod tests {
                 .collect();
             let plane = PointCloud::new(points);
             let (p, pi) = indexed(&plane);
-            let check = CoincidesAtSpacing {
-                coincides: Coincides {
-                    near: 1.5,
-                    far: 16.0,
-                    least: 0.5,
-                },
-                density: DENSITY,
-                scan_lines: 5.0,
-            };
+            let check = AT_SPACING;
             let found = |t: Vector3<f64>| {
                 let transform = RigidTransform::new(crate::Matrix3::identity(), t * unit);
                 let unscored = crate::registration::Score {
@@ -467,15 +470,7 @@ mod tests {
                 .into_inner(),
             Vector3::new(-0.5, 0.3, 0.0),
         );
-        let check = CoincidesAtSpacing {
-            coincides: Coincides {
-                near: 1.5,
-                far: 16.0,
-                least: 0.5,
-            },
-            density: DENSITY,
-            scan_lines: 5.0,
-        };
+        let check = AT_SPACING;
         let checked = |transform: RigidTransform| {
             let mut fixed = Fixed::new("fixed", 0.0);
             fixed.transform = transform;
@@ -511,15 +506,7 @@ mod tests {
         let lines = grid((0.05, 0.001), (20, 200));
         let (l, li) = indexed(&lines);
         assert_eq!(surface_spacing(l, &li, 5.0), None);
-        let check = CoincidesAtSpacing {
-            coincides: Coincides {
-                near: 1.5,
-                far: 16.0,
-                least: 0.5,
-            },
-            density: DENSITY,
-            scan_lines: 5.0,
-        };
+        let check = AT_SPACING;
         let same = RigidTransform::identity();
         assert!(check.takes((s, &si), (s, &si), &same));
         assert!(!check.takes((l, &li), (l, &li), &same));
