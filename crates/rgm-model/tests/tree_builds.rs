@@ -4,8 +4,9 @@
 //! network's frame, each thinning, the network's moved clouds) have trees of their own.
 //!
 //! The hook of [`rgm_geom::knn::watch_index_builds`] sees every tree this process builds: the test
-//! is alone in its file (its own process). It needs ModelNet40 and the Stanford bunny beside the
-//! repository (`../shared/data`) and says so and passes when they are absent.
+//! is alone in its file (its own process). It needs ModelNet40, the Stanford bunny and the
+//! redkitchen fragments beside the repository (`../shared/data`) and says so and passes when they
+//! are absent.
 
 use std::collections::HashMap;
 use std::hash::{DefaultHasher, Hash, Hasher};
@@ -32,12 +33,14 @@ fn shared_data() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data")
 }
 
-/// A sparse pair (ModelNet40's partial test pair 0, 717 points each) and a dense one (two real
-/// scans of the bunny, 40,256 and 40,097 points), or `None` without the data.
+/// A sparse pair (ModelNet40's partial test pair 0, 717 points each), a dense one (two real
+/// scans of the bunny, 40,256 and 40,097 points) and a room pair that the scene stage's RANSAC
+/// runs on (redkitchen fragment 21 onto 6, 25,337 and 15,953 points), or `None` without the
+/// data.
 fn pairs() -> Option<Vec<(&'static str, PointCloud, PointCloud)>> {
     let data = shared_data();
-    let bunny = data.join("stanford/bunny");
-    if !data.join("modelnet40_npy1024").is_dir() || !bunny.is_dir() {
+    let (bunny, kitchen) = (data.join("stanford/bunny"), data.join("scenes/redkitchen"));
+    if !data.join("modelnet40_npy1024").is_dir() || !bunny.is_dir() || !kitchen.is_dir() {
         return None;
     }
     let dataset = ModelNet40::open(data.join("modelnet40_npy1024")).unwrap();
@@ -46,12 +49,18 @@ fn pairs() -> Option<Vec<(&'static str, PointCloud, PointCloud)>> {
         .test_pair(&shapes, 0)
         .unwrap();
     let scan = |name: &str| rgm_data::io::read_point_cloud(bunny.join(name)).unwrap();
+    let fragment = |name: &str| rgm_data::io::read_point_cloud(kitchen.join(name)).unwrap();
     Some(vec![
         ("modelnet partial 0", partial.source, partial.target),
         (
             "bunny 000 onto 045",
             scan("bun000.ply.gz"),
             scan("bun045.ply.gz"),
+        ),
+        (
+            "redkitchen 21 onto 6",
+            fragment("cloud_bin_21.ply.gz"),
+            fragment("cloud_bin_6.ply.gz"),
         ),
     ])
 }
@@ -83,6 +92,13 @@ fn the_default_builds_one_tree_per_cloud_it_searches() {
         );
         // The pair in the default's frame is searched (its score, its check) at least.
         assert!(built.len() >= 2, "{name}: {} trees", built.len());
+        if name.starts_with("redkitchen") {
+            let ran: Vec<&str> = found.candidates.iter().map(|c| c.method.as_str()).collect();
+            assert!(
+                ran.contains(&"ransac+icp"),
+                "{name}: RANSAC did not run: {ran:?}"
+            );
+        }
         eprintln!("{name}: {} trees, one per cloud", built.len());
     }
 }
