@@ -43,11 +43,11 @@ pub struct Acceptance {
     /// axis (a lamp, a box), the overlap cannot tell its pose, and the later candidates run.
     /// Infinite: any, and neither it nor the whole overlap is measured.
     pub turned_share: f64,
-    /// (distance, least overlap): a result whose [`overlap_score_at`] that distance reaches the
+    /// (distance, least overlap): a result whose [`overlap_score`] at that distance reaches the
     /// overlap is taken whatever its turned share. Clouds that lie wholly on each other (full
     /// scans of one object) leave a turned pose nothing to fit better, while noise, which
-    /// lowers the overlap at [`Scoring::overlap_distance`] far more than at a looser distance, would
-    /// otherwise make a right result look as doubtful as a symmetric shape's.
+    /// lowers the overlap at [`Scoring::overlap_distance`] far more than at a looser distance,
+    /// would otherwise make a right result look as doubtful as a symmetric shape's.
     pub whole: (f64, f64),
     /// A check the result must pass too (the coincidence of a dense pair at its point
     /// spacing): a result that overlaps enough without coinciding is not taken, and the later

@@ -3,7 +3,6 @@
 //! a dense pair. The density is configuration: the caller that composes the methods knows what
 //! they were tuned on.
 
-use std::borrow::Cow;
 use std::time::Instant;
 
 use crate::best_of::{agree, conclude, Composite, Judge};
@@ -52,12 +51,12 @@ impl Thinning {
     }
 }
 
-/// `cloud` thinned `how` to `density` if it has more points.
-pub fn thinned(cloud: &PointCloud, how: Thinning, density: Density) -> Cow<'_, PointCloud> {
+/// `cloud` thinned `how` to `density`; `None` when it has no more points (it is used as it is).
+pub fn thinned(cloud: &PointCloud, how: Thinning, density: Density) -> Option<PointCloud> {
     if cloud.len() <= density.points {
-        return Cow::Borrowed(cloud);
+        return None;
     }
-    Cow::Owned(match how {
+    Some(match how {
         Thinning::Voxels => {
             let averaged = cloud.voxel_downsampled(density.voxel);
             averaged.select(&averaged.farthest_point_indices(density.points))
@@ -113,11 +112,8 @@ where
         let mut best: Option<(f64, RigidTransform, usize, usize)> = None;
         for &how in thinnings {
             // A cloud no denser than `density` is used as it is, its tree shared.
-            let prepared_thinning = |cloud: &Prepared| match thinned(cloud, how, self.density) {
-                Cow::Owned(thin) => Some(Prepared::new(thin)),
-                Cow::Borrowed(_) => None,
-            };
-            let (s, t) = rayon::join(|| prepared_thinning(source), || prepared_thinning(target));
+            let thin = |cloud: &Prepared| thinned(cloud, how, self.density).map(Prepared::new);
+            let (s, t) = rayon::join(|| thin(source), || thin(target));
             let (s, t) = (s.as_ref().unwrap_or(source), t.as_ref().unwrap_or(target));
             let judge = Judge {
                 before: best.map(|(score, transform, ..)| (score, transform)),

@@ -46,8 +46,9 @@ pub struct ProcedureConfig {
     /// Rows and columns of C̃ whose sums exceed this are inliers (0.5).
     pub inlier_threshold: f64,
     /// Match on at most this many points of each cloud, drawn at random with a fixed seed (so a
-    /// pair always gives the same result) from the cloud thinned to [`TRAINING_DENSITY`] points when it
-    /// is denser ([`matched_indices`]); `None` (the paper) matches on every point. A model
+    /// pair always gives the same result) from the cloud thinned to [`TRAINING_DENSITY`]'s
+    /// points when it is denser ([`matched_indices`]); `None` (the paper) matches on every
+    /// point. A model
     /// trained on subsampled clouds matches best on as many points as it was trained on.
     pub match_points: Option<usize>,
     /// The network's matrix products: f32, or bf16 where the processor has AMX or AVX-512 BF16.
