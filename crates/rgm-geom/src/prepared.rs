@@ -35,11 +35,6 @@ impl<'a> Prepared<'a> {
         }
     }
 
-    /// The cloud.
-    pub fn cloud(&self) -> &PointCloud {
-        &self.cloud
-    }
-
     /// The cloud's k-d tree, built on first use.
     pub fn index(&self) -> &KnnIndex {
         if let Some(index) = self.index.get() {
