@@ -263,6 +263,29 @@ impl WorkerArgs {
     }
 }
 
+/// The names of `dirs` (each its own, also for `.`) as tables and output folders show them; an
+/// error when two have one name (their pairs and results would take one name).
+fn folder_names(dirs: &[PathBuf], flag: &str) -> anyhow::Result<Vec<String>> {
+    let mut named: std::collections::HashMap<String, &Path> = Default::default();
+    let mut names = Vec::with_capacity(dirs.len());
+    for dir in dirs {
+        let name = std::fs::canonicalize(dir)
+            .ok()
+            .and_then(|full| full.file_name().map(|n| n.to_string_lossy().into_owned()))
+            .with_context(|| format!("{flag} {}: a folder with no name", dir.display()))?;
+        if let Some(other) = named.insert(name.clone(), dir) {
+            anyhow::bail!(
+                "{flag} {} and {} are both named {name}; their pairs and results would take one \
+                 name: give folders of different names (a link to one, renamed, will do)",
+                other.display(),
+                dir.display()
+            );
+        }
+        names.push(name);
+    }
+    Ok(names)
+}
+
 /// Where the ModelNet40 data is: `--data DIR` or `$RGM_DATA`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct DataArgs {
@@ -317,32 +340,13 @@ impl DataArgs {
     /// would be written over each other) or no folder has a pair.
     fn scan_pairs(&self) -> anyhow::Result<Vec<(String, Vec<ScanPair>)>> {
         let mut folders: Vec<(String, Vec<ScanPair>)> = Vec::new();
-        let mut named: std::collections::HashMap<String, &Path> = Default::default();
         let config = ScanPairConfig::default();
-        for dir in &self.scans {
-            let name = std::fs::canonicalize(dir)
-                .ok()
-                .and_then(|full| full.file_name().map(|n| n.to_string_lossy().into_owned()))
-                .with_context(|| format!("--scans {}: a folder with no name", dir.display()))?;
-            if let Some(other) = named.insert(name.clone(), dir) {
-                anyhow::bail!(
-                    "--scans {} and {} are both named {name}; their pairs and results would \
-                     take one name: give folders of different names (a link to one, renamed, \
-                     will do)",
-                    other.display(),
-                    dir.display()
-                );
-            }
+        for (dir, name) in self.scans.iter().zip(folder_names(&self.scans, "--scans")?) {
             let folder = ScanFolder::open(dir)?;
             for warning in &folder.warnings {
                 eprintln!("rgm: {warning}");
             }
-            let pairs: Vec<ScanPair> = folder
-                .pairs(&config)
-                .into_iter()
-                .step_by(self.every as usize)
-                .take(self.limit.map_or(usize::MAX, |n| n as usize))
-                .collect();
+            let pairs = self.select(folder.pairs(&config));
             if pairs.is_empty() {
                 eprintln!(
                     "rgm: {}: no two of its {} scans overlap by {} % or more, so it has no \
@@ -367,11 +371,17 @@ impl DataArgs {
     /// `--every` and `--limit` select among them.
     fn shapes<'a>(&self, dataset: &'a ModelNet40) -> (Vec<&'a Shape>, Vec<usize>) {
         let shapes = dataset.split(self.split, self.unseen);
-        let indices = (0..shapes.len())
+        let indices = self.select((0..shapes.len()).collect());
+        (shapes, indices)
+    }
+
+    /// The items `--every` and `--limit` keep: every Nth, then the first of those.
+    fn select<T>(&self, items: Vec<T>) -> Vec<T> {
+        items
+            .into_iter()
             .step_by(self.every as usize)
             .take(self.limit.map_or(usize::MAX, |n| n as usize))
-            .collect();
-        (shapes, indices)
+            .collect()
     }
 
     /// The name of the selected pairs in tables: `partial`, `partial-unseen`, and

@@ -13,6 +13,7 @@ pub mod modelnet;
 pub mod pack;
 pub mod pairs;
 pub mod scans;
+pub mod scenes;
 
 pub use correspondence::Correspondence;
 pub use error::{DataError, Result};
@@ -22,3 +23,4 @@ pub use io::{
 pub use modelnet::{ModelNet40, Shape, Split};
 pub use pairs::{Pair, PairConfig, PairGenerator, Setting};
 pub use scans::{ScanFolder, ScanPair, ScanPairConfig};
+pub use scenes::{SceneFolder, ScenePair, Turn};

@@ -4,7 +4,8 @@
 
 use std::time::Instant;
 
-use rgm_data::{Pair, ScanPair};
+use rgm_data::scenes::{MAX_ROTATION_ERROR_DEG, MAX_TRANSLATION_ERROR};
+use rgm_data::{Pair, ScanPair, ScenePair, Turn};
 use rgm_geom::metrics::{MetricsSummary, PairMetrics};
 use rgm_geom::{Prepared, RigidTransform};
 use serde::Serialize;
@@ -220,16 +221,6 @@ pub fn scan_table_row(method: &str, scans: &str, records: &[ScanRecord]) -> Opti
     if records.is_empty() {
         return None;
     }
-    let median = |f: fn(&ScanRecord) -> f64| {
-        let mut v: Vec<f64> = records.iter().map(f).collect();
-        v.sort_by(f64::total_cmp);
-        let n = v.len();
-        if n % 2 == 1 {
-            v[n / 2]
-        } else {
-            (v[n / 2 - 1] + v[n / 2]) / 2.0
-        }
-    };
     let successes = SCAN_SUCCESS.map(|(degrees, share)| {
         let k = records
             .iter()
@@ -245,8 +236,129 @@ pub fn scan_table_row(method: &str, scans: &str, records: &[ScanRecord]) -> Opti
         records.len(),
         successes[0],
         successes[1],
-        median(|r| r.rotation_error_deg),
-        100.0 * median(|r| r.translation_error),
+        median(records.iter().map(|r| r.rotation_error_deg)),
+        100.0 * median(records.iter().map(|r| r.translation_error)),
+        time_ms
+    ))
+}
+
+/// The median of `values` (the mean of the middle two of an even count); NaN when empty.
+fn median(values: impl Iterator<Item = f64>) -> f64 {
+    let mut v: Vec<f64> = values.collect();
+    v.sort_by(f64::total_cmp);
+    match v.len() {
+        0 => f64::NAN,
+        n if n % 2 == 1 => v[n / 2],
+        n => (v[n / 2 - 1] + v[n / 2]) / 2.0,
+    }
+}
+
+/// One scene pair's outcome ([`rgm_data::scenes`]), its source turned or not.
+#[derive(Clone, Debug, Serialize)]
+pub struct SceneRecord {
+    /// The pair's number in its folder's `gt.log`.
+    pub index: usize,
+    /// The fragments' file names.
+    pub source: String,
+    pub target: String,
+    /// The known turn of the source, as `--turns` spells it (`None`: as published).
+    pub turn: Option<String>,
+    /// The predicted `t_target_source` as 4×4 rows (the identity when the method failed).
+    pub transform: [[f64; 4]; 4],
+    /// Rotation error, degrees, and translation error, metres
+    /// ([`rgm_data::scenes::LoadedScenePair::errors`]).
+    pub rotation_error_deg: f64,
+    pub translation_error_m: f64,
+    /// Whether the method trusts its result (it reports no doubt).
+    pub registered: bool,
+    /// The method's own time, in milliseconds.
+    pub time_ms: f64,
+    /// Why the method failed (or the pair could not be read), if it did.
+    pub failure: Option<String>,
+}
+
+impl SceneRecord {
+    /// Whether the result meets the 3DMatch criterion.
+    pub fn succeeds(&self) -> bool {
+        self.rotation_error_deg < MAX_ROTATION_ERROR_DEG
+            && self.translation_error_m < MAX_TRANSLATION_ERROR
+    }
+}
+
+/// Reads `pair` (its source turned by `turn`), runs `method` on it and scores it; a method
+/// error is a failure scored as the identity. An unreadable fragment is an error.
+pub fn evaluate_scene_pair(
+    method: &mut Method,
+    pair: &ScenePair,
+    turn: Option<&Turn>,
+) -> rgm_data::Result<(SceneRecord, Vec<rgm_data::Warning>)> {
+    let loaded = pair.load(turn)?;
+    let start = Instant::now();
+    let (found, registered, time_ms, failure) = match method.register(&loaded.source, &loaded.target)
+    {
+        Ok(reg) => (reg.result.t_target_source, reg.doubt.is_none(), reg.time_ms, None),
+        Err(err) => (
+            RigidTransform::identity(),
+            false,
+            start.elapsed().as_secs_f64() * 1e3,
+            Some(err.to_string()),
+        ),
+    };
+    let (rotation_error_deg, translation_error_m) = loaded.errors(&found);
+    let (source, target) = pair.names();
+    let record = SceneRecord {
+        index: pair.index,
+        source,
+        target,
+        turn: turn.map(|t| t.to_string()),
+        transform: found.to_rows(),
+        rotation_error_deg,
+        translation_error_m,
+        registered,
+        time_ms,
+        failure,
+    };
+    Ok((record, loaded.warnings))
+}
+
+/// The scene table's header: pairs, successes by the 3DMatch criterion, the results the
+/// method trusted that are wrong, median errors, time.
+pub fn scene_table_header() -> String {
+    format!(
+        "| {:<12} | {:<14} | {:>5} | {:>11} | {:>13} | {:>9} | {:>12} | {:>9} |\n|{}|",
+        "method",
+        "scenes",
+        "pairs",
+        "15° / 0.3 m",
+        "wrong, trusted",
+        "median R°",
+        "median t (m)",
+        "ms/pair",
+        ["-"; 8].map(|_| "---").join("|")
+    )
+}
+
+/// One row of the scene table for `records`; `None` when there is none.
+pub fn scene_table_row(method: &str, scenes: &str, records: &[SceneRecord]) -> Option<String> {
+    if records.is_empty() {
+        return None;
+    }
+    let n = records.len();
+    let right = records.iter().filter(|r| r.succeeds()).count();
+    let wrong_trusted = records
+        .iter()
+        .filter(|r| r.registered && !r.succeeds())
+        .count();
+    let time_ms = records.iter().map(|r| r.time_ms).sum::<f64>() / n as f64;
+    Some(format!(
+        "| {:<12} | {:<14} | {:>5} | {:>11} | {:>13} | {:>9.2} | {:>12.3} | {:>9.1} |",
+        method,
+        scenes,
+        n,
+        format!("{right} / {n}"),
+        format!("{wrong_trusted} / {n}"),
+        median(records.iter().map(|r| r.rotation_error_deg)),
+        median(records.iter().map(|r| r.translation_error_m)),
         time_ms
     ))
 }
@@ -422,6 +534,36 @@ mod tests {
         );
         assert_eq!(scan_table_row("x", "y", &[]), None);
         assert_eq!(scan_table_header().lines().count(), 2);
+    }
+
+    #[test]
+    fn a_scene_row_counts_successes_and_trusted_failures() {
+        let record = |rotation_error_deg: f64, translation_error_m: f64, registered| SceneRecord {
+            index: 0,
+            source: "cloud_bin_1.ply".into(),
+            target: "cloud_bin_0.ply".into(),
+            turn: None,
+            transform: RigidTransform::identity().to_rows(),
+            rotation_error_deg,
+            translation_error_m,
+            registered,
+            time_ms: 1000.0,
+            failure: None,
+        };
+        // Within 15° and 0.3 m: the first two; wrong and trusted: the third (the fourth is
+        // doubted).
+        let records = [
+            record(1.0, 0.05, true),
+            record(14.0, 0.2, false),
+            record(2.0, 0.94, true),
+            record(170.0, 3.0, false),
+        ];
+        assert_eq!(
+            scene_table_row("auto+icp", "redkitchen", &records).unwrap(),
+            "| auto+icp     | redkitchen     |     4 |       2 / 4 |         1 / 4 |      8.00 |        0.570 |    1000.0 |"
+        );
+        assert_eq!(scene_table_row("x", "y", &[]), None);
+        assert_eq!(scene_table_header().lines().count(), 2);
     }
 
     #[test]

@@ -25,7 +25,7 @@ pub mod train;
 pub mod weights;
 
 pub use error::MethodError;
-pub use evaluate::{PairRecord, ScanRecord, Summary};
+pub use evaluate::{PairRecord, ScanRecord, SceneRecord, Summary};
 pub use method::Method;
 pub use options::{MethodName, MethodOptions};
 pub use procedure::{ProcedureConfig, RgmRegistrar, StageTimes};

@@ -1,15 +1,18 @@
-//! `rgm eval`: a method over the ModelNet40 test pairs, scored with the paper's metrics, or
-//! over real scan pairs (`--scans`), scored by success rates, median errors and time.
+//! `rgm eval`: a method over the ModelNet40 test pairs, scored with the paper's metrics, over
+//! real scan pairs (`--scans`), scored by success rates, median errors and time, or over scene
+//! pairs (`--scenes`), scored by the 3DMatch criterion.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::Result;
 use rayon::prelude::*;
 use rgm_model::evaluate::{
-    evaluate_pair, evaluate_scan_pair, scan_table_header, scan_table_row, PairRecord, ScanRecord,
+    evaluate_pair, evaluate_scan_pair, evaluate_scene_pair, scan_table_header, scan_table_row,
+    scene_table_header, scene_table_row, PairRecord, ScanRecord, SceneRecord,
 };
+use rgm_data::{SceneFolder, Turn};
 use rgm_model::Method;
 
 use crate::{progress, table, DataArgs, MethodArgs, WorkerArgs};
@@ -21,6 +24,19 @@ pub struct Args {
     method: MethodArgs,
     #[command(flatten)]
     data: DataArgs,
+    /// Scenes instead of ModelNet40: folders in the 3DMatch benchmark's layout (the fragments
+    /// and a `gt.log` whose blocks `i j n` + 4×4 matrix map fragment j onto fragment i;
+    /// fragment k is the file `cloud_bin_k` or `k`, of any format rgm reads), e.g.
+    /// ../shared/data/scenes/redkitchen. Scored by the 3DMatch criterion (rotation error < 15°,
+    /// translation error < 0.3 m) and median errors; also counted: results the method trusted
+    /// (`registered`) that fail it. --every and --limit select among each folder's pairs.
+    #[arg(long, value_name = "DIR", num_args = 1.., conflicts_with = "scans")]
+    scenes: Vec<PathBuf>,
+    /// With --scenes: register each pair once per turn instead, its source first turned about
+    /// its centroid by the known rotation DEG about the z axis (the vertical of LiDAR scans),
+    /// or about the axis X,Y,Z: `--turns 0 90 180 90@1,1,1`.
+    #[arg(long, value_name = "DEG[@X,Y,Z]", num_args = 1.., requires = "scenes")]
+    turns: Vec<Turn>,
     /// Also write every pair's transform and metrics to this JSON file.
     #[arg(long, value_name = "FILE")]
     json: Option<PathBuf>,
@@ -35,6 +51,9 @@ pub fn run(args: Args) -> Result<()> {
     let method = args.method.build(crate::Defaults::Paper)?;
     if !args.data.scans.is_empty() {
         return run_scans(&args, &method);
+    }
+    if !args.scenes.is_empty() {
+        return run_scenes(&args, &method);
     }
     let (dataset, generator) = args.data.open()?;
     let (shapes, indices) = args.data.shapes(&dataset);
@@ -96,33 +115,114 @@ fn run_scans(args: &Args, method: &Method) -> Result<()> {
         results.push((name, records));
     }
     bar.finish_and_clear();
-    println!("{}", scan_table_header());
-    for (name, records) in &results {
-        if let Some(row) = scan_table_row(&method.name(), name, records) {
-            println!("{row}");
-        }
-    }
-    if results.len() > 1 {
-        let all: Vec<ScanRecord> = results.iter().flat_map(|(_, r)| r.clone()).collect();
-        if let Some(row) = scan_table_row(&method.name(), "all", &all) {
-            println!("{row}");
-        }
-    }
-    let failures: usize = results
+    let table = Table {
+        header: scan_table_header(),
+        row: scan_table_row,
+        failed: |r: &ScanRecord| r.failure.is_some(),
+        kind: "scans",
+    };
+    table.report(&method.name(), &results, args.json.as_deref())
+}
+
+/// `rgm eval --scenes`: one table row per folder (every turn of its pairs), and one for all when
+/// there are several.
+fn run_scenes(args: &Args, method: &Method) -> Result<()> {
+    let names = crate::folder_names(&args.scenes, "--scenes")?;
+    let folders: Vec<SceneFolder> = args
+        .scenes
         .iter()
-        .map(|(_, r)| r.iter().filter(|r| r.failure.is_some()).count())
-        .sum();
-    if failures > 0 {
-        println!("({failures} of {total} pairs failed and were scored as the identity)");
+        .map(SceneFolder::open)
+        .collect::<Result<_, _>>()?;
+    // Each run: a pair and its turn (`None`: as published).
+    let turns: Vec<Option<&Turn>> = if args.turns.is_empty() {
+        vec![None]
+    } else {
+        args.turns.iter().map(Some).collect()
+    };
+    let runs: Vec<Vec<_>> = folders
+        .iter()
+        .map(|folder| {
+            let pairs = args.data.select(folder.pairs.iter().collect());
+            pairs
+                .into_iter()
+                .flat_map(|pair| turns.iter().map(move |&turn| (pair, turn)))
+                .collect()
+        })
+        .collect();
+    let total: usize = runs.iter().map(Vec::len).sum();
+    let bar = progress(total, &method.name());
+    let pool = args.workers.pool()?;
+    let mut results: Vec<(String, Vec<SceneRecord>)> = Vec::new();
+    for (name, runs) in names.into_iter().zip(runs) {
+        let records: Vec<SceneRecord> = pool.install(|| {
+            runs.par_iter()
+                .map_init(
+                    || method.clone(),
+                    |method, &(pair, turn)| -> Result<SceneRecord> {
+                        let (record, warnings) = evaluate_scene_pair(method, pair, turn)?;
+                        for warning in warnings {
+                            bar.suspend(|| eprintln!("rgm: {warning}"));
+                        }
+                        bar.inc(1);
+                        Ok(record)
+                    },
+                )
+                .collect::<Result<_>>()
+        })?;
+        results.push((name, records));
     }
-    if let Some(path) = &args.json {
-        let folders: Vec<serde_json::Value> = results
+    bar.finish_and_clear();
+    let table = Table {
+        header: scene_table_header(),
+        row: scene_table_row,
+        failed: |r: &SceneRecord| r.failure.is_some(),
+        kind: "scenes",
+    };
+    table.report(&method.name(), &results, args.json.as_deref())
+}
+
+/// How the records of real-data pairs are shown: the table's header and rows, which records
+/// failed, and the key that names a folder in the JSON.
+struct Table<R> {
+    header: String,
+    row: fn(&str, &str, &[R]) -> Option<String>,
+    failed: fn(&R) -> bool,
+    kind: &'static str,
+}
+
+impl<R: Clone + serde::Serialize> Table<R> {
+    /// Prints one row per folder and one for all when there are several, the count of failed
+    /// pairs, and writes every record to `json` when asked.
+    fn report(&self, method: &str, results: &[(String, Vec<R>)], json: Option<&Path>) -> Result<()> {
+        println!("{}", self.header);
+        for (name, records) in results {
+            if let Some(row) = (self.row)(method, name, records) {
+                println!("{row}");
+            }
+        }
+        if results.len() > 1 {
+            let all: Vec<R> = results.iter().flat_map(|(_, r)| r.clone()).collect();
+            if let Some(row) = (self.row)(method, "all", &all) {
+                println!("{row}");
+            }
+        }
+        let total: usize = results.iter().map(|(_, r)| r.len()).sum();
+        let failures: usize = results
             .iter()
-            .map(|(name, records)| serde_json::json!({"scans": name, "pairs": records}))
-            .collect();
-        let value = serde_json::json!({"method": method.name(), "folders": folders});
-        crate::write_text(path, &serde_json::to_string_pretty(&value)?)?;
-        println!("wrote per-pair results to {}", path.display());
+            .map(|(_, r)| r.iter().filter(|r| (self.failed)(r)).count())
+            .sum();
+        if failures > 0 {
+            println!("({failures} of {total} pairs failed and were scored as the identity)");
+        }
+        if let Some(path) = json {
+            let folders: Vec<serde_json::Value> = results
+                .iter()
+                .map(|(name, records)| serde_json::json!({self.kind: name, "pairs": records}))
+                .collect();
+            let value = serde_json::json!({"method": method, "folders": folders});
+            crate::write_text(path, &serde_json::to_string_pretty(&value)?)?;
+            println!("wrote per-pair results to {}", path.display());
+        }
+        Ok(())
     }
-    Ok(())
 }
