@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Open3D's FPFH + RANSAC + ICP tutorial pipeline on the redkitchen pairs of ../shared/data/scenes
-(3DMatch gt.log), scored as tools/scenes/redkitchen.py scores rgm (rotation error < 15°,
+(3DMatch gt.log), scored as `rgm eval --scenes` scores rgm (rotation error < 15°,
 translation error < 0.3 m), one thread (OMP_NUM_THREADS=1):
 
     /work/o3dvenv/bin/python tools/scenes/redkitchen_open3d.py [--voxel 0.05]

@@ -76,12 +76,11 @@ impl SceneFolder {
                 why: "no `gt.log` (the 3DMatch ground-truth file) in the folder".into(),
             });
         }
-        let text = String::from_utf8(crate::read_regular_file(&log)?).map_err(|_| {
-            DataError::Dataset {
+        let text =
+            String::from_utf8(crate::read_regular_file(&log)?).map_err(|_| DataError::Dataset {
                 path: log.clone(),
                 why: "not UTF-8 text".into(),
-            }
-        })?;
+            })?;
         let fragments = fragment_files(path)?;
         let mut pairs = Vec::new();
         for entry in parse_gt_log(&text, &log)? {
@@ -119,7 +118,12 @@ impl SceneFolder {
 impl ScenePair {
     /// The source's and the target's file names, for tables.
     pub fn names(&self) -> (String, String) {
-        let name = |p: &Path| p.file_name().unwrap_or_default().to_string_lossy().into_owned();
+        let name = |p: &Path| {
+            p.file_name()
+                .unwrap_or_default()
+                .to_string_lossy()
+                .into_owned()
+        };
         (name(&self.source), name(&self.target))
     }
 
@@ -249,7 +253,10 @@ fn parse_gt_log(text: &str, log: &Path) -> Result<Vec<LogEntry>> {
         if block.len() < 5 {
             return Err(bad(
                 head,
-                format!("the file ends {} rows into this pair's 4×4 matrix", block.len() - 1),
+                format!(
+                    "the file ends {} rows into this pair's 4×4 matrix",
+                    block.len() - 1
+                ),
             ));
         }
         let mut m = Matrix4::zeros();
@@ -261,7 +268,10 @@ fn parse_gt_log(text: &str, log: &Path) -> Result<Vec<LogEntry>> {
                 .collect::<Option<_>>()
                 .ok_or_else(|| bad(row, "expected four finite numbers".into()))?;
             if values.len() != 4 {
-                return Err(bad(row, format!("expected 4 numbers, found {}", values.len())));
+                return Err(bad(
+                    row,
+                    format!("expected 4 numbers, found {}", values.len()),
+                ));
             }
             for (c, v) in values.into_iter().enumerate() {
                 m[(r, c)] = v;
@@ -295,7 +305,11 @@ fn fragment_files(folder: &Path) -> Result<HashMap<u64, PathBuf>> {
         }
         let name = path.file_name().unwrap_or_default().to_string_lossy();
         let stem = name.split('.').next().unwrap_or_default();
-        let Ok(k) = stem.strip_prefix("cloud_bin_").unwrap_or(stem).parse::<u64>() else {
+        let Ok(k) = stem
+            .strip_prefix("cloud_bin_")
+            .unwrap_or(stem)
+            .parse::<u64>()
+        else {
             continue;
         };
         if let Some(other) = found.insert(k, path.clone()) {
@@ -361,7 +375,10 @@ mod tests {
         let folder = SceneFolder::open(&dir).unwrap();
         assert_eq!(folder.pairs.len(), 1);
         let pair = &folder.pairs[0];
-        assert_eq!(pair.names(), ("8.xyz".to_string(), "cloud_bin_3.ply".to_string()));
+        assert_eq!(
+            pair.names(),
+            ("8.xyz".to_string(), "cloud_bin_3.ply".to_string())
+        );
         let loaded = pair.load(None).unwrap();
         // The truth brings the source onto the target (the files keep about 7 digits).
         let moved = loaded.source.transformed(&loaded.t_target_source);
@@ -410,8 +427,14 @@ mod tests {
         assert_eq!(t.degrees, 180.0);
         assert_eq!(t.to_string(), "180° about (1, 1, 1)");
         assert!("x".parse::<Turn>().unwrap_err().contains("`x`"));
-        assert!("90@0,0,0".parse::<Turn>().unwrap_err().contains("no direction"));
-        assert!("90@1,2".parse::<Turn>().unwrap_err().contains("three numbers"));
+        assert!("90@0,0,0"
+            .parse::<Turn>()
+            .unwrap_err()
+            .contains("no direction"));
+        assert!("90@1,2"
+            .parse::<Turn>()
+            .unwrap_err()
+            .contains("three numbers"));
     }
 
     #[test]
@@ -427,9 +450,15 @@ mod tests {
         };
         let cases = [
             (with_line(0, "3 8"), ":1: expected `i j n`"),
-            (with_line(2, "0 1 0 nan"), ":3: expected four finite numbers"),
+            (
+                with_line(2, "0 1 0 nan"),
+                ":3: expected four finite numbers",
+            ),
             (with_line(2, "0 1 0"), ":3: expected 4 numbers, found 3"),
-            (with_line(4, "0 0 0 2"), ":1: this pair's matrix is not rigid"),
+            (
+                with_line(4, "0 0 0 2"),
+                ":1: this pair's matrix is not rigid",
+            ),
             (lines[..3].join("\n"), ":1: the file ends 2 rows"),
             (with_line(0, "3 9 60"), "no fragment 9"),
             (String::new(), "no pair"),

@@ -2,38 +2,32 @@
 //! Open3D's `registration_ransac_based_on_feature_matching` tutorial pipeline, with every length
 //! a multiple of the pair's own point spacing.
 //!
-//! 1. Thinning: both clouds voxel-averaged with one voxel, the finest that leaves at most
-//!    [`RansacConfig::max_points`] in each (features of the two clouds compare only at one
-//!    density); the spacing is the thinned pair's median nearest-neighbour distance.
-//! 2. Features: PCA normals and FPFH ([`crate::fpfh::features`]) at radii in spacings.
-//! 3. Matching: each source point's nearest target point in feature space
-//!    ([`crate::fgr::nearest_matches`]), or only the mutual ones ([`RansacConfig::mutual`]).
+//! 1–3. The pair thinned, its FPFH features and their matches ([`crate::feature_matches`]).
 //! 4. Hypotheses: three matches drawn at random; kept only when each side of their triangle
 //!    agrees between the clouds within [`RansacConfig::edge_similarity`] (the correspondence
 //!    check, which rejects most wrong draws before any fit) and the Kabsch fit of the three
 //!    brings each within the inlier distance of its partner (the distance check); then scored
 //!    by the matches it brings within that distance. Draws run in fixed chunks, each from its
 //!    own seeded generator, so the result is the same on any number of threads.
-//! 5. The best hypothesis refitted on its inliers (Kabsch) until they stop changing.
+//! 5. Each chunk's best judged by [`Matched::fitness`]; the best of them refitted on its
+//!    inliers (Kabsch) until they stop changing, then refined ([`crate::feature_matches`]).
 //!
 //! FGR's graduated non-convexity follows the bulk of the matches; on a room most matches are
 //! wrong (floors and walls look alike everywhere) and the bulk can lie at a wrong pose, where a
 //! consensus count still finds the few right ones.
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::Point3;
 use rand::{rngs::StdRng, Rng, SeedableRng};
 use rayon::prelude::*;
 use std::time::Instant;
 
-use crate::fgr::{mutual_matches, nearest_matches, Progress};
-use crate::fpfh::{features, FpfhConfig};
-use crate::icp::check_clouds;
-use crate::normals::NormalsConfig;
-use crate::refine::{median_spacing, refine_at_resolution, ResolutionConfig};
+use crate::feature_matches::{inliers_of, refitted, register_matched, Matched, MatchingConfig};
+use crate::fgr::Progress;
 use crate::registrar::{MethodId, Registrar, Registration};
-use crate::registration::score;
 use crate::registration::Fit;
 use crate::{kabsch, GeomError, PointCloud, Prepared, Result, RigidTransform};
+
+pub use crate::feature_matches::Consensus;
 
 /// The method's name ([`crate::registrar::MethodId`]).
 pub const NAME: &str = "ransac";
@@ -46,26 +40,14 @@ const CHUNK: usize = 1024;
 /// the threads.
 const WAVE: usize = 8;
 
-/// Settings of [`register`]. Lengths are in point spacings of the thinned pair; the defaults
-/// are Open3D's tutorial settings (normals at 2 voxels, FPFH at 5, inliers within 1.5, edges
-/// within 0.9, 100,000 draws) with its voxel read as one spacing.
+/// Settings of [`register`]: the matching's ([`MatchingConfig`]) and the draws'. The defaults
+/// are Open3D's tutorial settings (edges within 0.9, 100,000 draws, confidence 0.999).
 #[derive(Clone, Debug, PartialEq)]
 pub struct RansacConfig {
-    /// Each cloud is thinned to at most this many points (default 5,000).
-    pub max_points: usize,
-    /// Normals' neighbourhood radius, in spacings (default 2), at most 30 neighbours.
-    pub normal_spacings: f64,
-    /// FPFH's neighbourhood radius, in spacings (default 5), at most 100 neighbours.
-    pub feature_spacings: f64,
-    /// A match is an inlier of a transform that brings it within this many spacings
-    /// (default 1.5).
-    pub inlier_spacings: f64,
+    pub matching: MatchingConfig,
     /// The least ratio of a drawn triangle's side in one cloud to the same side in the other
     /// (default 0.9).
     pub edge_similarity: f64,
-    /// Match only mutual nearest features (default false: each source point's nearest target
-    /// feature, as Open3D's tutorial; the mutual filter leaves too few right matches on rooms).
-    pub mutual: bool,
     /// Triples drawn, at most (default 100,000).
     pub draws: usize,
     /// The draws stop, after a wave of chunks, once they make it this likely that one of them
@@ -76,40 +58,19 @@ pub struct RansacConfig {
     pub refits: usize,
     /// Seed of the draws (default 0).
     pub seed: u64,
-    /// The final point-to-plane stages on the thinned pair, from the consensus
-    /// ([`refine_at_resolution`], in the thinned target's spacings; default 4, 2).
-    pub refinement: ResolutionConfig,
-    /// Points sampled to measure the spacing (default 2,000).
-    pub spacing_sample: usize,
 }
 
 impl Default for RansacConfig {
     fn default() -> Self {
         Self {
-            max_points: 5000,
-            normal_spacings: 2.0,
-            feature_spacings: 5.0,
-            inlier_spacings: 1.5,
+            matching: MatchingConfig::default(),
             edge_similarity: 0.9,
-            mutual: false,
             draws: 100_000,
             confidence: 0.999,
             refits: 5,
             seed: 0,
-            refinement: ResolutionConfig::default(),
-            spacing_sample: 2000,
         }
     }
-}
-
-/// What [`consensus`] found: the transform and the matches within the inlier distance of it.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Consensus {
-    pub t_target_source: RigidTransform,
-    /// Indices into the matches given.
-    pub inliers: Vec<usize>,
-    /// Hypotheses that passed both checks and were scored.
-    pub hypotheses: usize,
 }
 
 /// Registers `source` onto `target` by RANSAC on FPFH matches of the thinned pair (steps 1–5 of
@@ -126,7 +87,6 @@ pub fn register_prepared(
     config: &RansacConfig,
 ) -> Result<Fit> {
     const OP: &str = "ransac::register";
-    check_clouds(OP, source, target)?;
     if !(config.edge_similarity > 0.0 && config.edge_similarity <= 1.0) {
         return Err(GeomError::Degenerate {
             op: OP,
@@ -136,101 +96,29 @@ pub fn register_prepared(
             ),
         });
     }
-    let thinned = thinned_pair(source, target, config.max_points)
-        .map(|(s, t)| (Prepared::new(s), Prepared::new(t)));
-    let (small_source, small_target) = match &thinned {
-        Some((s, t)) => (s, t),
-        None => (source, target),
-    };
-    let (source_index, target_index) =
-        rayon::join(|| small_source.index(), || small_target.index());
-    let spacing = median_spacing(&small_source.points, source_index, config.spacing_sample).max(
-        median_spacing(&small_target.points, target_index, config.spacing_sample),
-    );
-    if !(spacing > 0.0) {
-        return Err(GeomError::Degenerate {
-            op: OP,
-            why: "the clouds' points coincide: no spacing to measure lengths by".into(),
+    register_matched(OP, source, target, &config.matching, |matched: &Matched| {
+        let squared = matched.distance * matched.distance;
+        let (winners, hypotheses) = chunk_winners(&matched.from, &matched.to, squared, config);
+        let fitness: Vec<f64> = winners
+            .par_iter()
+            .map(|(_, t)| matched.fitness(t))
+            .collect();
+        let best = (0..winners.len()).fold(None, |best: Option<usize>, w| match best {
+            Some(b) if fitness[b] >= fitness[w] => best,
+            _ => Some(w),
         });
-    }
-    let normals = NormalsConfig {
-        radius: config.normal_spacings * spacing,
-        max_nn: 30,
-    };
-    let fpfh = FpfhConfig {
-        radius: config.feature_spacings * spacing,
-        max_nn: 100,
-    };
-    let (source_features, target_features) = rayon::join(
-        || features(&small_source.points, source_index, &normals, &fpfh), // (N', 33)
-        || features(&small_target.points, target_index, &normals, &fpfh), // (M', 33)
-    );
-    let matches = if config.mutual {
-        mutual_matches(&source_features, &target_features)
-    } else {
-        nearest_matches(&source_features, &target_features)
-    };
-    let from: Vec<Point3<f64>> = matches
-        .iter()
-        .map(|&(i, _)| small_source.points[i])
-        .collect(); // (C, 3)
-    let to: Vec<Point3<f64>> = matches
-        .iter()
-        .map(|&(_, j)| small_target.points[j])
-        .collect(); // (C, 3)
-    let distance = config.inlier_spacings * spacing;
-    if from.len() < 3 {
-        return Err(GeomError::TooFewPoints {
-            op: OP,
-            needed: 3,
-            got: from.len(),
-        });
-    }
-    let squared = distance * distance;
-    let (winners, hypotheses) = chunk_winners(&from, &to, squared, config);
-    // Each chunk's winner judged by the share of the thinned source it brings within the
-    // inlier distance: on a scene the right matches are few, and a wrong pose that many
-    // matches of look-alike floor agree with lays little of one room on the other.
-    let fitness: Vec<f64> = winners
-        .par_iter()
-        .map(|(_, t)| score(&small_source.points, target_index, t, distance, None).fitness)
-        .collect();
-    let best = (0..winners.len()).fold(None, |best: Option<usize>, w| match best {
-        Some(b) if fitness[b] >= fitness[w] => best,
-        _ => Some(w),
-    });
-    let Some(best) = best else {
-        return Err(no_hypothesis(OP, from.len()));
-    };
-    let found = refitted(
-        &from,
-        &to,
-        winners[best].1,
-        squared,
-        config.refits,
-        hypotheses,
-    );
-    let (transform, iterations) = refine_at_resolution(
-        small_source,
-        small_target,
-        target_index,
-        &found.t_target_source,
-        f64::INFINITY,
-        &config.refinement,
-    )?;
-    let scored = score(
-        &small_source.points,
-        target_index,
-        &transform,
-        distance,
-        None,
-    );
-    Ok(Fit::scored(
-        transform,
-        found.hypotheses + iterations,
-        true,
-        scored,
-    ))
+        let Some(best) = best else {
+            return Err(no_hypothesis(OP, matched.from.len()));
+        };
+        Ok(refitted(
+            &matched.from,
+            &matched.to,
+            winners[best].1,
+            squared,
+            config.refits,
+            hypotheses,
+        ))
+    })
 }
 
 /// The transform most matches `from[c] → to[c]` agree with within `distance`, by RANSAC on
@@ -359,50 +247,6 @@ fn draws_needed(inliers: f64, confidence: f64) -> f64 {
     (1.0 - confidence).ln() / (1.0 - all_three).ln()
 }
 
-/// `transform` refitted (Kabsch) on the matches within √`squared` of it, at most `refits`
-/// times, while they do not shrink.
-fn refitted(
-    from: &[Point3<f64>],
-    to: &[Point3<f64>],
-    mut transform: RigidTransform,
-    squared: f64,
-    refits: usize,
-    hypotheses: usize,
-) -> Consensus {
-    let mut inliers: Vec<usize> = inliers_of(from, to, &transform, squared).collect();
-    for _ in 0..refits {
-        let a: Vec<Point3<f64>> = inliers.iter().map(|&c| from[c]).collect(); // (I, 3)
-        let b: Vec<Point3<f64>> = inliers.iter().map(|&c| to[c]).collect(); // (I, 3)
-        let Ok(refit) = kabsch(&a, &b, &vec![1.0; a.len()]) else {
-            break;
-        };
-        let next: Vec<usize> = inliers_of(from, to, &refit, squared).collect();
-        if next.len() < inliers.len() {
-            break;
-        }
-        transform = refit;
-        if next == inliers {
-            break;
-        }
-        inliers = next;
-    }
-    Consensus {
-        t_target_source: transform,
-        inliers,
-        hypotheses,
-    }
-}
-
-/// The indices of the matches that `t` brings within √`squared` of their partners.
-fn inliers_of<'a>(
-    from: &'a [Point3<f64>],
-    to: &'a [Point3<f64>],
-    t: &'a RigidTransform,
-    squared: f64,
-) -> impl Iterator<Item = usize> + 'a {
-    (0..from.len()).filter(move |&c| (t.apply(&from[c]) - to[c]).norm_squared() < squared)
-}
-
 /// The Kabsch fit of three matches drawn with `rng`, when their triangle's sides agree between
 /// the clouds within `similarity` and the fit brings each within √`squared` of its partner.
 fn hypothesis(
@@ -434,55 +278,14 @@ fn hypothesis(
         .then_some(t)
 }
 
-/// Both clouds voxel-averaged with one voxel, the finest of a ladder that leaves at most
-/// `max_points` in each; `None` for a pair already that small.
-fn thinned_pair(
-    source: &PointCloud,
-    target: &PointCloud,
-    max_points: usize,
-) -> Option<(PointCloud, PointCloud)> {
-    let max_points = max_points.max(8);
-    if source.len() <= max_points && target.len() <= max_points {
-        return None;
-    }
-    let (lo, hi) = source.points.iter().chain(&target.points).fold(
-        (
-            Vector3::repeat(f64::INFINITY),
-            Vector3::repeat(f64::NEG_INFINITY),
-        ),
-        |(lo, hi), p| (lo.inf(&p.coords), hi.sup(&p.coords)),
-    );
-    let extent = (hi - lo).max();
-    if !(extent > 0.0) {
-        return Some((
-            PointCloud::new(vec![source.points[0]]),
-            PointCloud::new(vec![target.points[0]]),
-        ));
-    }
-    // A surface of side `extent` fills about (extent / voxel)² cubes: start finer than that and
-    // grow the voxel by the square root of how many times too many points are left.
-    let mut voxel = extent / (max_points as f64).sqrt() / 1.25;
-    loop {
-        let (s, t) = rayon::join(
-            || source.voxel_downsampled(voxel),
-            || target.voxel_downsampled(voxel),
-        );
-        let most = s.len().max(t.len());
-        if most <= max_points {
-            return Some((s, t));
-        }
-        voxel *= (most as f64 / max_points as f64).sqrt().max(1.05);
-    }
-}
-
 /// RANSAC on FPFH matches ([`register`]).
 impl<E: From<GeomError>> Registrar<E> for RansacConfig {
-    /// `ransac+icp`: its last step is point-to-plane ICP ([`RansacConfig::refinement`]), so a
+    /// `ransac+icp`: its last step is point-to-plane ICP ([`MatchingConfig::refinement`]), so a
     /// composite of it and candidates refined by [`crate::refine`] is named as refined too.
     fn id(&self) -> MethodId {
         MethodId {
             base: NAME,
-            refiner: (!self.refinement.spacings.is_empty()).then_some(crate::refine::NAME),
+            refiner: (!self.matching.refinement.spacings.is_empty()).then_some(crate::refine::NAME),
         }
     }
 
@@ -502,6 +305,7 @@ impl<E: From<GeomError>> Registrar<E> for RansacConfig {
 mod tests {
     use super::*;
     use crate::testing::uniform_cube;
+    use nalgebra::Vector3;
 
     fn pose() -> RigidTransform {
         RigidTransform::new(
@@ -590,7 +394,10 @@ mod tests {
     fn a_dense_scene_is_registered_at_any_scale() {
         let truth = pose();
         let config = RansacConfig {
-            max_points: 1500,
+            matching: MatchingConfig {
+                max_points: 1500,
+                ..MatchingConfig::default()
+            },
             draws: 10_000,
             ..RansacConfig::default()
         };

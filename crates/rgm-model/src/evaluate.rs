@@ -294,16 +294,21 @@ pub fn evaluate_scene_pair(
 ) -> rgm_data::Result<(SceneRecord, Vec<rgm_data::Warning>)> {
     let loaded = pair.load(turn)?;
     let start = Instant::now();
-    let (found, registered, time_ms, failure) = match method.register(&loaded.source, &loaded.target)
-    {
-        Ok(reg) => (reg.result.t_target_source, reg.doubt.is_none(), reg.time_ms, None),
-        Err(err) => (
-            RigidTransform::identity(),
-            false,
-            start.elapsed().as_secs_f64() * 1e3,
-            Some(err.to_string()),
-        ),
-    };
+    let (found, registered, time_ms, failure) =
+        match method.register(&loaded.source, &loaded.target) {
+            Ok(reg) => (
+                reg.result.t_target_source,
+                reg.doubt.is_none(),
+                reg.time_ms,
+                None,
+            ),
+            Err(err) => (
+                RigidTransform::identity(),
+                false,
+                start.elapsed().as_secs_f64() * 1e3,
+                Some(err.to_string()),
+            ),
+        };
     let (rotation_error_deg, translation_error_m) = loaded.errors(&found);
     let (source, target) = pair.names();
     let record = SceneRecord {

@@ -15,9 +15,10 @@
 //! (`BestOf[first, rest]` in place of the `Cascade` when `accept` takes nothing; inside the
 //! `Normalised`, `UpTo { points: 32, small: TripletConfig, .. }` sends a pair of a few points to
 //! [`rgm_geom::triplets`]; with `+icp`, a pair denser than the training clouds (a scan, a room)
-//! goes through `Cascade { first: the Thinned composite, rest: [RansacConfig] }` judged by
-//! [`SCENE_ACCEPT`]: RANSAC on the pair's own FPFH matches, [`rgm_geom::ransac`], where the
-//! object cascade's result does not coincide with the target at the pair's spacing.)
+//! goes through `Cascade { first: the Thinned composite, rest: [Sc2Config] }` judged by
+//! [`SCENE_ACCEPT`]: second-order compatibility on the pair's own FPFH matches,
+//! [`rgm_geom::sc2`], where the object cascade's result does not coincide with the target at
+//! the pair's spacing.)
 //!
 //! [`Checked`] doubts a refined result whose overlap is not one where the clouds coincide, or
 //! that a rival pose fits nearly as well ([`REFINED_CHECKS`]); the unrefined methods,
@@ -42,12 +43,12 @@ use rgm_geom::coincidence::{Checked, Coincides, CoincidesAtSpacing, Unambiguous}
 use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::frame::FrameRule;
 use rgm_geom::icp::{self, IcpConfig};
-use rgm_geom::ransac::RansacConfig;
 use rgm_geom::refine::{RefineConfig, ResolutionConfig};
 use rgm_geom::refiner::AtSpacing;
 use rgm_geom::registrar::{
     AtResolution, DynRegistrar, Normalised, OnFirstUse, Refined, Registrar, UpTo,
 };
+use rgm_geom::sc2::Sc2Config;
 use rgm_geom::thinning::{Density, Thinned, Thinning};
 use rgm_geom::triplets::TripletConfig;
 
@@ -255,7 +256,7 @@ pub type RefinedChecks = (
 pub const REFINED_CHECKS: RefinedChecks = (REFINED_COINCIDES, UNAMBIGUOUS);
 
 /// When the default takes the object cascade's result on a dense pair without running the
-/// scene stage's RANSAC after it: an overlap score of at least [`ACCEPT`]'s, whatever its
+/// scene stage after it: an overlap score of at least [`ACCEPT`]'s, whatever its
 /// turned share (a room overlaps itself turned about the vertical as a box does, and the
 /// measure on a dense pair costs more than it tells there), and clouds that coincide at their
 /// point spacing ([`COINCIDES_AT_SPACING`]; a room slid along its floor overlaps well).
@@ -266,10 +267,12 @@ pub const SCENE_ACCEPT: Acceptance = Acceptance {
     coincides: Some(COINCIDES_AT_SPACING),
 };
 
-/// The scene stage's RANSAC ([`RansacConfig`]): Open3D's tutorial settings, its voxel read as
-/// the thinned pair's point spacing.
-pub fn scene_ransac() -> RansacConfig {
-    RansacConfig::default()
+/// The scene stage's global estimator ([`Sc2Config`]): it registered all 12 redkitchen dev
+/// pairs where RANSAC (Open3D's tutorial settings) registered 10 or 11, at any of the seeds,
+/// mates, compatibilities and lengths tried (docs/baselines.md, "Scenes: second-order
+/// compatibility").
+pub fn scene_stage() -> Sc2Config {
+    Sc2Config::default()
 }
 
 /// Points matched per cloud with given weights unless `match_points` says otherwise: the paper
@@ -486,14 +489,15 @@ where
         Some(_) => Box::new(Checked {
             inner: AtResolution {
                 // A pair denser than the training clouds may be a scene: the object cascade
-                // first, RANSAC on the pair's own features where its result is not taken.
+                // first, the scene stage on the pair's own features where its result is not
+                // taken.
                 inner: UpTo {
                     points: TRAINING_DENSITY.points,
                     small: composite.clone(),
                     other: Cascade {
                         base: AUTO,
                         first: composite,
-                        rest: vec![Box::new(scene_ransac())],
+                        rest: vec![Box::new(scene_stage())],
                         accept: SCENE_ACCEPT,
                         scoring,
                     },

@@ -219,10 +219,10 @@ fn a_dense_pair_whose_methods_agree_is_thinned_once_and_refined_at_its_resolutio
     let mut method = both_candidates();
     let found = method.register(&source, &target).unwrap();
     let names = candidate_names(&found);
-    // The scene stage runs RANSAC after the object cascade: points in tight clusters of four
+    // The scene stage runs after the object cascade: points in tight clusters of four
     // reach their 16th neighbour far beyond their nearest, as points along scan lines do, and
     // there the coincidence check takes nothing.
-    assert_eq!(names, ["auto+icp", "ransac+icp"]);
+    assert_eq!(names, ["auto+icp", "sc2+icp"]);
     let scores: Vec<f64> = found.candidates.iter().map(|c| c.score.unwrap()).collect();
     let chosen = found.chosen.unwrap();
     assert!(scores.iter().all(|&s| s <= scores[chosen]), "{scores:?}");

@@ -1,5 +1,5 @@
 //! A registration builds each cloud's k-d tree once (issue 43): the stages of the default
-//! (its checks, the cascade's judge, FGR, the refinements, RANSAC) share one prepared tree per
+//! (its checks, the cascade's judge, FGR, the refinements, the scene stage) share one prepared tree per
 //! cloud they search, whatever they are composed into. Clouds a stage makes (the pair in the
 //! network's frame, each thinning, the network's moved clouds) have trees of their own.
 //!
@@ -34,7 +34,7 @@ fn shared_data() -> PathBuf {
 }
 
 /// A sparse pair (ModelNet40's partial test pair 0, 717 points each), a dense one (two real
-/// scans of the bunny, 40,256 and 40,097 points) and a room pair that the scene stage's RANSAC
+/// scans of the bunny, 40,256 and 40,097 points) and a room pair that the scene stage
 /// runs on (redkitchen fragment 21 onto 6, 25,337 and 15,953 points), or `None` without the
 /// data.
 fn pairs() -> Option<Vec<(&'static str, PointCloud, PointCloud)>> {
@@ -95,8 +95,8 @@ fn the_default_builds_one_tree_per_cloud_it_searches() {
         if name.starts_with("redkitchen") {
             let ran: Vec<&str> = found.candidates.iter().map(|c| c.method.as_str()).collect();
             assert!(
-                ran.contains(&"ransac+icp"),
-                "{name}: RANSAC did not run: {ran:?}"
+                ran.contains(&"sc2+icp"),
+                "{name}: the scene stage did not run: {ran:?}"
             );
         }
         eprintln!("{name}: {} trees, one per cloud", built.len());

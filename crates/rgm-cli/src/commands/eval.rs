@@ -8,11 +8,11 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::Result;
 use rayon::prelude::*;
+use rgm_data::{SceneFolder, Turn};
 use rgm_model::evaluate::{
     evaluate_pair, evaluate_scan_pair, evaluate_scene_pair, scan_table_header, scan_table_row,
     scene_table_header, scene_table_row, PairRecord, ScanRecord, SceneRecord,
 };
-use rgm_data::{SceneFolder, Turn};
 use rgm_model::Method;
 
 use crate::{progress, table, DataArgs, MethodArgs, WorkerArgs};
@@ -193,7 +193,12 @@ struct Table<R> {
 impl<R: Clone + serde::Serialize> Table<R> {
     /// Prints one row per folder and one for all when there are several, the count of failed
     /// pairs, and writes every record to `json` when asked.
-    fn report(&self, method: &str, results: &[(String, Vec<R>)], json: Option<&Path>) -> Result<()> {
+    fn report(
+        &self,
+        method: &str,
+        results: &[(String, Vec<R>)],
+        json: Option<&Path>,
+    ) -> Result<()> {
         println!("{}", self.header);
         for (name, records) in results {
             if let Some(row) = (self.row)(method, name, records) {
