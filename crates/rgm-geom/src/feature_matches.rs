@@ -22,7 +22,8 @@ use crate::{kabsch, GeomError, PointCloud, Prepared, Result, RigidTransform};
 
 /// Steps 1–4 of the module. Lengths are in point spacings of the thinned pair. The defaults are
 /// Open3D's tutorial lengths (normals at 2 voxels, FPFH at 5, inliers within 1.5) with its
-/// voxel read as 5/3 spacings: voxel-averaging leaves points about 0.6 of a voxel apart.
+/// voxel read as 5/3 spacings: voxel-averaging leaves points about 0.6 of a voxel apart, so
+/// these are Open3D's radii at the voxel that thins the pair as much.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MatchingConfig {
     /// Each cloud is thinned to at most this many points (default 5,000).
