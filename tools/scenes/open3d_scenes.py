@@ -1,9 +1,10 @@
 #!/usr/bin/env python3
-"""Open3D's FPFH + RANSAC + ICP tutorial pipeline on the redkitchen pairs of ../shared/data/scenes
-(3DMatch gt.log), scored as `rgm eval --scenes` scores rgm (rotation error < 15°,
+"""Open3D's FPFH + RANSAC + ICP tutorial pipeline on the pairs of a scene folder in the 3DMatch
+layout (gt.log; fragment k the file cloud_bin_k.* or k.*; default the redkitchen pairs of
+../shared/data/scenes), scored as `rgm eval --scenes` scores rgm (rotation error < 15°,
 translation error < 0.3 m), one thread (OMP_NUM_THREADS=1):
 
-    /work/o3dvenv/bin/python tools/scenes/redkitchen_open3d.py [--voxel 0.05]
+    /work/o3dvenv/bin/python tools/scenes/open3d_scenes.py [--voxel 0.05] [--scenes DIR]
 
 The pipeline (as tools/baselines/open3d_scans.py, with a fixed voxel v = 5 cm): each cloud
 voxel-downsampled at v; normals over radius 2v (max 30); FPFH over radius 5v (max 100); RANSAC on
@@ -31,7 +32,7 @@ data = root.parent / "shared/data/scenes/redkitchen"
 
 
 def read(k):
-    for name in (f"cloud_bin_{k}.ply.gz", f"cloud_bin_{k}.pcd"):
+    for name in (f"{prefix}{k}.{ext}" for prefix in ("cloud_bin_", "") for ext in ("ply.gz", "pcd", "ply")):
         path = data / name
         if not path.exists():
             continue
@@ -69,9 +70,12 @@ def register(src, tgt, voxel):
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--voxel", type=float, default=0.05, help="voxel in metres (default 0.05)")
+    parser.add_argument("--scenes", type=pathlib.Path, help="the scene folder (default redkitchen)")
     args = parser.parse_args()
+    global data
+    data = args.scenes or data
     o3d.utility.random.seed(0)
-    lines = (data / "gt.log").read_text().split("\n")
+    lines = [l for l in (data / "gt.log").read_text().split("\n") if l.strip()]
     ok, rot, tra, times = 0, [], [], []
     for b in range(0, len(lines) - 4, 5):
         head = lines[b].split()
