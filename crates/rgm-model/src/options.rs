@@ -344,10 +344,16 @@ impl MethodOptions {
         let refine = self.refine.then(RefineConfig::default);
         Ok(match (self.method, refine) {
             (MethodName::Icp, _) => Method::new(IcpConfig::default()),
-            (MethodName::Fgr, None) => Method::new(FgrConfig::default()),
-            (MethodName::Fgr, Some(refine)) => {
-                Method::new(Refined::new(FgrConfig::default(), refine))
-            }
+            // FGR's lengths are set for unit-sphere shapes: the pair is moved into that frame
+            // first, as the network's is, and its refined result checked there.
+            (MethodName::Fgr, None) => Method::new(Normalised::new(FgrConfig::default(), FRAME)),
+            (MethodName::Fgr, Some(refine)) => Method::new(Normalised::new(
+                Checked {
+                    inner: Refined::new(FgrConfig::default(), refine),
+                    check: REFINED_CHECKS,
+                },
+                FRAME,
+            )),
             (MethodName::Rgm, None) => Method::new(Normalised::new(self.build_rgm()?, FRAME)),
             (MethodName::Rgm, Some(refine)) => Method::new(Normalised::new(
                 Checked {

@@ -249,15 +249,21 @@ fn errors(found: &RigidTransform, truth: &RigidTransform, size: f64) -> (f64, f6
     (angle, rgm_geom::length(&off))
 }
 
-/// `rgm register`'s default, and RGM alone (refined), as the command line builds them.
-fn both_methods() -> [Method; 2] {
-    let rgm = MethodOptions {
-        method: rgm_model::MethodName::Rgm,
-        ..MethodOptions::default()
+/// `rgm register`'s default, RGM alone and FGR alone (each refined), as the command line builds
+/// them.
+fn refined_methods() -> [Method; 3] {
+    let alone = |method| {
+        MethodOptions {
+            method,
+            ..MethodOptions::default()
+        }
+        .build()
+        .unwrap()
     };
     [
         MethodOptions::default().build().unwrap(),
-        rgm.build().unwrap(),
+        alone(rgm_model::MethodName::Rgm),
+        alone(rgm_model::MethodName::Fgr),
     ]
 }
 
@@ -272,7 +278,7 @@ fn a_far_outlier_in_each_cloud_leaves_the_transform_right() {
         source.points[17] = Point3::new(far, -far, 0.5 * far);
         let mut target = pair.target.clone();
         target.points[800] = Point3::new(-far, 0.3 * far, far);
-        for mut method in both_methods() {
+        for mut method in refined_methods() {
             let found = method.register(&source, &target).unwrap();
             let (angle, off) = errors(&found.result.t_target_source, &pair.t_target_source, 1.0);
             assert!(
@@ -309,7 +315,7 @@ fn a_pair_at_1e200_or_1e_minus_200_gets_the_right_transform_and_no_nan() {
             pair.t_target_source.rotation,
             pair.t_target_source.translation * k,
         );
-        for mut method in both_methods() {
+        for mut method in refined_methods() {
             let found = method
                 .register(&scaled(&pair.source), &scaled(&pair.target))
                 .unwrap();
@@ -352,4 +358,22 @@ fn clouds_that_do_not_overlap_are_reported_as_not_registered() {
     assert!(why.contains("overlaps too little"), "{why}");
     let best = found.candidates[found.chosen.unwrap()].score.unwrap();
     assert!(best < SCORING.min_overlap, "{best}");
+}
+
+#[test]
+fn fgr_alone_doubts_a_result_where_the_clouds_do_not_coincide() {
+    // Issue 44, D1: `--method fgr` (refined) was not checked. Half of a shape registered onto
+    // the other half, the two sharing no point: whatever FGR finds lays one half on the wrong
+    // part of the other, which the check tells.
+    let pair = clean_pair();
+    let (low, high): (Vec<_>, Vec<_>) = pair.source.points.iter().partition(|p| p.x < 0.0);
+    let [mut default, _, mut fgr] = refined_methods();
+    assert_eq!(fgr.name(), "fgr+icp");
+    for method in [&mut default, &mut fgr] {
+        let found = method
+            .register(&PointCloud::new(low.clone()), &PointCloud::new(high.clone()))
+            .unwrap();
+        let why = found.doubt.expect("not registered");
+        assert!(why.contains("coincide") || why.contains("overlaps too little"), "{why}");
+    }
 }
