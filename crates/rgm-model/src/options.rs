@@ -7,7 +7,7 @@
 //! | name | composition |
 //! |---|---|
 //! | `icp` | [`IcpConfig`] (its own refinement) |
-//! | `fgr`, `fgr+icp` | [`FgrConfig`], [`Refined`]`<FgrConfig>` |
+//! | `fgr`, `fgr+icp` | `Normalised<FgrConfig>`, `Normalised<Checked<Refined<FgrConfig>, REFINED_CHECKS>>` |
 //! | `rgm`, `rgm+icp` | [`Normalised`]`<RgmRegistrar>`, `Normalised<Checked<Refined<RgmRegistrar>, REFINED_CHECKS>>` |
 //! | `auto` | `Normalised<Thinned<Cascade { first: FgrConfig, rest: [Normalised<RgmRegistrar>] }>>` |
 //! | `auto+icp` | `Normalised<Checked<AtResolution<Thinned<Cascade { first: Refined<FgrConfig>, rest: [Refined<Normalised<RgmRegistrar>>] }>, AtSpacing>, REFINED_CHECKS>>` |
