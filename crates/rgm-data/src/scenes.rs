@@ -133,7 +133,7 @@ impl ScenePair {
         let (mut source, mut warnings) = read_point_cloud_warned(&self.source)?;
         let (target, more) = read_point_cloud_warned(&self.target)?;
         warnings.extend(more);
-        let mut t_target_source = self.t_target_source.clone();
+        let mut t_target_source = self.t_target_source;
         if let Some(turn) = turn {
             let c = source.centroid().coords;
             let rotation = turn.rotation();

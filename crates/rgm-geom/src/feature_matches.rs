@@ -17,6 +17,7 @@ use crate::fpfh::{features, FpfhConfig};
 use crate::icp::check_clouds;
 use crate::normals::NormalsConfig;
 use crate::refine::{median_spacing, refine_at_resolution, ResolutionConfig};
+use crate::registrar::MethodId;
 use crate::registration::{score, Fit};
 use crate::{kabsch, GeomError, PointCloud, Prepared, Result, RigidTransform};
 
@@ -55,6 +56,17 @@ impl Default for MatchingConfig {
             mutual: false,
             spacing_sample: 2000,
             refinement: ResolutionConfig::default(),
+        }
+    }
+}
+
+impl MatchingConfig {
+    /// The name of an estimator on these matches: `base+icp`, its last step being
+    /// point-to-plane ICP ([`MatchingConfig::refinement`]), unless that has no stage.
+    pub fn method_id(&self, base: &'static str) -> MethodId {
+        MethodId {
+            base,
+            refiner: (!self.refinement.spacings.is_empty()).then_some(crate::refine::NAME),
         }
     }
 }

@@ -283,10 +283,7 @@ impl<E: From<GeomError>> Registrar<E> for RansacConfig {
     /// `ransac+icp`: its last step is point-to-plane ICP ([`MatchingConfig::refinement`]), so a
     /// composite of it and candidates refined by [`crate::refine`] is named as refined too.
     fn id(&self) -> MethodId {
-        MethodId {
-            base: NAME,
-            refiner: (!self.matching.refinement.spacings.is_empty()).then_some(crate::refine::NAME),
-        }
+        self.matching.method_id(NAME)
     }
 
     fn register_prepared(
@@ -304,15 +301,7 @@ impl<E: From<GeomError>> Registrar<E> for RansacConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testing::uniform_cube;
-    use nalgebra::Vector3;
-
-    fn pose() -> RigidTransform {
-        RigidTransform::new(
-            crate::euler::rotation_xyz_intrinsic(0.7, -2.1, 2.9),
-            Vector3::new(0.4, -1.3, 2.0),
-        )
-    }
+    use crate::testing::{far_pose as pose, uniform_cube};
 
     fn assert_near(found: &RigidTransform, truth: &RigidTransform, degrees: f64, distance: f64) {
         let angle = found.inverse().compose(truth).rotation_angle_deg();

@@ -234,10 +234,7 @@ impl Compatibility {
 impl<E: From<GeomError>> Registrar<E> for Sc2Config {
     /// `sc2+icp`: its last step is point-to-plane ICP ([`MatchingConfig::refinement`]).
     fn id(&self) -> MethodId {
-        MethodId {
-            base: NAME,
-            refiner: (!self.matching.refinement.spacings.is_empty()).then_some(crate::refine::NAME),
-        }
+        self.matching.method_id(NAME)
     }
 
     fn register_prepared(
@@ -255,16 +252,9 @@ impl<E: From<GeomError>> Registrar<E> for Sc2Config {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testing::uniform_cube;
-    use nalgebra::{Point3, Vector3};
+    use crate::testing::{far_pose as pose, uniform_cube};
+    use nalgebra::Point3;
     use rand::{rngs::StdRng, SeedableRng};
-
-    fn pose() -> RigidTransform {
-        RigidTransform::new(
-            crate::euler::rotation_xyz_intrinsic(0.7, -2.1, 2.9),
-            Vector3::new(0.4, -1.3, 2.0),
-        )
-    }
 
     /// 30 right matches among 970 wrong ones (97 % outliers, too many for RANSAC's triples:
     /// 1 draw in 37,000 is three right ones): the right ones are the seeds' consensus.

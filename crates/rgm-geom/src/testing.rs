@@ -36,6 +36,15 @@ pub const DENSITY: Density = Density {
     voxel: 0.035,
 };
 
+/// A pose far from the identity (a large turn about no axis in particular, a shift of 2.4), for
+/// the global estimators' tests.
+pub fn far_pose() -> crate::RigidTransform {
+    crate::RigidTransform::new(
+        crate::euler::rotation_xyz_intrinsic(0.7, -2.1, 2.9),
+        nalgebra::Vector3::new(0.4, -1.3, 2.0),
+    )
+}
+
 /// `n` points uniform in the cube [−1, 1)³.
 pub fn uniform_cube(n: usize, rng: &mut StdRng) -> Vec<Point3<f64>> {
     (0..n)
