@@ -1,14 +1,17 @@
 //! rgm-geom's hot paths at RGM's sizes (N = 717 partial, 1,024 full; K = 20): the kNN graph,
-//! weighted Kabsch, and the classical baselines ICP and FPFH + FGR on a 717-point pair.
+//! weighted Kabsch, and the classical baselines ICP and FPFH + FGR on a 717-point pair; and the
+//! scene stage's global estimators (RANSAC, SC²) on a 20,000-point room pair.
 //!
 //! Run: `cargo bench -p rgm-benches --bench geom -- --warm-up-time 1 --measurement-time 3`
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use rand::{rngs::StdRng, SeedableRng};
-use rgm_benches::{unit_ball_points, SIZES};
+use rgm_benches::{room_points, unit_ball_points, SIZES};
 use rgm_geom::fpfh::{features, FpfhConfig};
 use rgm_geom::normals::NormalsConfig;
-use rgm_geom::{fgr, icp, kabsch, knn_graph, refine, KnnIndex, Point3, PointCloud, RigidTransform};
+use rgm_geom::{
+    fgr, icp, kabsch, knn_graph, ransac, refine, sc2, KnnIndex, Point3, PointCloud, RigidTransform,
+};
 
 const K: usize = 20;
 
@@ -143,5 +146,23 @@ fn registration(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, knn, knn_kiddo, kabsch_717, registration);
+/// The global estimators of the scene stage on a room pair (two samplings of one room corner,
+/// 20,000 points each, the source moved by a 45°-class pose): thinning, features, matching,
+/// the estimate and the refinement on the thinned pair.
+fn scene(c: &mut Criterion) {
+    let pose = RigidTransform::random(&mut StdRng::seed_from_u64(5), 45.0, 1.0);
+    let source = PointCloud::new(room_points(20_000, 1)).transformed(&pose.inverse());
+    let target = PointCloud::new(room_points(20_000, 2));
+    let mut group = c.benchmark_group("scene_20k");
+    group.sample_size(10);
+    group.bench_function("ransac", |b| {
+        b.iter(|| ransac::register(&source, &target, &ransac::RansacConfig::default()).unwrap())
+    });
+    group.bench_function("sc2", |b| {
+        b.iter(|| sc2::register(&source, &target, &sc2::Sc2Config::default()).unwrap())
+    });
+    group.finish();
+}
+
+criterion_group!(benches, knn, knn_kiddo, kabsch_717, registration, scene);
 criterion_main!(benches);
