@@ -141,28 +141,31 @@ impl Compatibility {
             };
             [column(0), column(1), column(2)] // 3 × (C,)
         };
-        let (a, b) = (columns(from), columns(to));
+        let ([ax, ay, az], [bx, by, bz]) = (columns(from), columns(to));
         let tolerance = tolerance as f32;
         let mut bits = vec![0u64; n * words];
-        bits.par_chunks_mut(words).enumerate().for_each(|(i, row)| {
-            let (ai, bi) = ([a[0][i], a[1][i], a[2][i]], [b[0][i], b[1][i], b[2][i]]);
-            for (w, word) in row.iter_mut().enumerate() {
-                let block = w * 64..(w * 64 + 64).min(n);
-                let mut gaps = [f32::INFINITY; 64];
-                for (g, j) in gaps.iter_mut().zip(block.clone()) {
-                    let length = |c: &[Vec<f32>; 3], p: [f32; 3]| {
-                        let (x, y, z) = (c[0][j] - p[0], c[1][j] - p[1], c[2][j] - p[2]);
-                        (x * x + y * y + z * z).sqrt()
-                    };
-                    *g = (length(&a, ai) - length(&b, bi)).abs();
+        bits.par_chunks_mut(words).enumerate().for_each_init(
+            || vec![0f32; n], // (C,) this row's length differences
+            |gaps, (i, row)| {
+                // Slices of one length, so that the loop runs without bounds checks.
+                let (ax, ay, az, bx, by, bz) =
+                    (&ax[..n], &ay[..n], &az[..n], &bx[..n], &by[..n], &bz[..n]);
+                let gaps = &mut gaps[..n];
+                for j in 0..n {
+                    let (x, y, z) = (ax[j] - ax[i], ay[j] - ay[i], az[j] - az[i]);
+                    let (u, v, w) = (bx[j] - bx[i], by[j] - by[i], bz[j] - bz[i]);
+                    gaps[j] =
+                        ((x * x + y * y + z * z).sqrt() - (u * u + v * v + w * w).sqrt()).abs();
                 }
-                *word = gaps
-                    .iter()
-                    .enumerate()
-                    .fold(0, |acc, (k, &g)| acc | ((g < tolerance) as u64) << k);
-            }
-            row[i / 64] &= !(1 << (i % 64));
-        });
+                for (word, block) in row.iter_mut().zip(gaps.chunks(64)) {
+                    *word = block
+                        .iter()
+                        .enumerate()
+                        .fold(0, |acc, (k, &g)| acc | ((g < tolerance) as u64) << k);
+                }
+                row[i / 64] &= !(1 << (i % 64));
+            },
+        );
         Self { words, bits }
     }
 
