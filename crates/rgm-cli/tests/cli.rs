@@ -780,12 +780,10 @@ fn scene_pairs_of_a_gt_log_are_scored_by_the_3dmatch_criterion() {
         "--turns",
         "0",
         "150@1,1,1",
-        "--method",
-        "auto",
-        "--refine",
         "--json",
         json.to_str().unwrap(),
     ]));
+    // The method is `rgm register`'s default unless named.
     let row = text.lines().find(|l| l.starts_with("| auto+icp")).unwrap();
     let cells: Vec<&str> = row.split('|').map(str::trim).collect();
     // Both right under both turns, none wrong and trusted.

@@ -29,7 +29,8 @@ pub struct Args {
     /// fragment k is the file `cloud_bin_k` or `k`, of any format rgm reads), e.g.
     /// ../shared/data/scenes/redkitchen. Scored by the 3DMatch criterion (rotation error < 15°,
     /// translation error < 0.3 m) and median errors; also counted: results the method trusted
-    /// (`registered`) that fail it. --every and --limit select among each folder's pairs.
+    /// (`registered`) that fail it. --every and --limit select among each folder's pairs. The
+    /// method defaults to `rgm register`'s (auto, refined), not the paper's.
     #[arg(long, value_name = "DIR", num_args = 1.., conflicts_with = "scans")]
     scenes: Vec<PathBuf>,
     /// With --scenes: register each pair once per turn instead, its source first turned about
@@ -48,7 +49,13 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(json) = &args.json {
         crate::check_writable(json)?;
     }
-    let method = args.method.build(crate::Defaults::Paper)?;
+    // The paper's protocol is ModelNet40's; on scenes the default is `rgm register`'s.
+    let defaults = if args.scenes.is_empty() {
+        crate::Defaults::Paper
+    } else {
+        crate::Defaults::Register
+    };
+    let method = args.method.build(defaults)?;
     if !args.data.scans.is_empty() {
         return run_scans(&args, &method);
     }
