@@ -188,14 +188,20 @@ impl<'a> Judge<'a> {
         }
     }
 
-    /// `transform`'s [`overlap_score`] on the judged pair.
+    /// `transform`'s [`overlap_score`] on the judged pair, made once per registration
+    /// ([`Prepared::pair_score`]): a composite nested in another judges its result on the same
+    /// pair as the outer one does.
     pub fn score(&self, transform: &RigidTransform) -> f64 {
-        overlap_score(
-            self.source.indexed(),
-            self.target.indexed(),
-            transform,
-            self.scoring.overlap_distance,
-        )
+        let distance = self.scoring.overlap_distance;
+        self.source
+            .pair_score(self.target, transform, distance, || {
+                overlap_score(
+                    self.source.indexed(),
+                    self.target.indexed(),
+                    transform,
+                    distance,
+                )
+            })
     }
 
     /// Whether `accept` takes the best of `tally` (or of what came before), its turned share

@@ -7,22 +7,34 @@
 
 use std::borrow::Cow;
 use std::ops::Deref;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 
 use crate::normals::{estimate_normals, NormalsConfig};
-use crate::{KnnIndex, PointCloud, Vector3};
+use crate::{KnnIndex, PointCloud, RigidTransform, Vector3};
+
+/// The next [`Prepared`]'s id: ids are never reused, so a score kept under one cannot be read
+/// back for another cloud that took the first one's place in memory.
+static NEXT_ID: AtomicU64 = AtomicU64::new(0);
+
+/// What a pair score is kept under: the other cloud's id, the transform's 12 entries and a
+/// length (each as bits: only the same arithmetic's inputs find it).
+type ScoreKey = (u64, [u64; 12], u64);
 
 /// Unit normals of a cloud's points, shared by the stages that ask for them. // (N,)
 pub type Normals = Arc<Vec<Vector3<f64>>>;
 
-/// A cloud and what is made of it lazily: its [`KnnIndex`] and its normals per
-/// [`NormalsConfig`].
+/// A cloud and what is made of it lazily: its [`KnnIndex`], its normals per
+/// [`NormalsConfig`], and scores of it onto other prepared clouds ([`Prepared::pair_score`]).
 #[derive(Debug)]
 pub struct Prepared<'a> {
     cloud: Cow<'a, PointCloud>,
     index: OnceLock<KnnIndex>,
     /// The normals made so far, one entry per configuration asked for.
     normals: Mutex<Vec<(NormalsConfig, Normals)>>,
+    id: u64,
+    /// The pair scores made so far.
+    scores: Mutex<Vec<(ScoreKey, f64)>>,
 }
 
 impl<'a> Prepared<'a> {
@@ -32,6 +44,8 @@ impl<'a> Prepared<'a> {
             cloud: cloud.into(),
             index: OnceLock::new(),
             normals: Mutex::new(Vec::new()),
+            id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
+            scores: Mutex::new(Vec::new()),
         }
     }
 
@@ -72,6 +86,43 @@ impl<'a> Prepared<'a> {
         }
         normals.push((*config, estimated.clone()));
         estimated
+    }
+}
+
+impl Prepared<'_> {
+    /// The score `make` gives this cloud moved by `transform` onto `target` at `length`, made on
+    /// the first ask and kept: the composites nested in a registration (a cascade inside a
+    /// thinning inside another cascade) judge the same result on the same pair, and on a dense
+    /// pair each judgement is a nearest-neighbour search of every point both ways. `make` must be
+    /// one function of those three for every caller (the overlap score of
+    /// [`crate::best_of::Judge`]).
+    pub fn pair_score(
+        &self,
+        target: &Prepared,
+        transform: &RigidTransform,
+        length: f64,
+        make: impl FnOnce() -> f64,
+    ) -> f64 {
+        let mut entries = [0u64; 12];
+        let values = transform
+            .rotation
+            .iter()
+            .chain(transform.translation.iter());
+        for (entry, value) in entries.iter_mut().zip(values) {
+            *entry = value.to_bits();
+        }
+        let key = (target.id, entries, length.to_bits());
+        let kept = |scores: &[(ScoreKey, f64)]| scores.iter().find(|(k, _)| *k == key).map(|s| s.1);
+        if let Some(score) = kept(&self.scores.lock().expect("no panic holds the lock")) {
+            return score;
+        }
+        // Made outside the lock, for the reason `index` builds outside its cell's.
+        let score = make();
+        let mut scores = self.scores.lock().expect("no panic holds the lock");
+        if kept(&scores).is_none() {
+            scores.push((key, score));
+        }
+        score
     }
 }
 
@@ -133,5 +184,31 @@ mod tests {
         };
         assert!(!Arc::ptr_eq(&normals, &prepared.normals(&wide)));
         assert_eq!(prepared.normals.lock().unwrap().len(), 2);
+    }
+
+    #[test]
+    fn a_pair_score_is_made_once_per_target_transform_and_length() {
+        let cloud = airplane();
+        let (source, target, other) = (
+            Prepared::new(&cloud),
+            Prepared::new(&cloud),
+            Prepared::new(&cloud),
+        );
+        let shift = RigidTransform::new(crate::Matrix3::identity(), Vector3::new(0.1, 0.0, 0.0));
+        let made = std::cell::Cell::new(0);
+        let score = |target: &Prepared, t: &RigidTransform, length: f64| {
+            source.pair_score(target, t, length, || {
+                made.set(made.get() + 1);
+                length + t.translation.x
+            })
+        };
+        assert_eq!(score(&target, &shift, 0.5), 0.6);
+        assert_eq!(score(&target, &shift, 0.5), 0.6);
+        assert_eq!(made.get(), 1);
+        // Another target (a cloud of the same points), transform or length is another score.
+        score(&other, &shift, 0.5);
+        score(&target, &RigidTransform::identity(), 0.5);
+        score(&target, &shift, 0.25);
+        assert_eq!(made.get(), 4);
     }
 }
