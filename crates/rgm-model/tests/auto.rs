@@ -371,9 +371,15 @@ fn fgr_alone_doubts_a_result_where_the_clouds_do_not_coincide() {
     assert_eq!(fgr.name(), "fgr+icp");
     for method in [&mut default, &mut fgr] {
         let found = method
-            .register(&PointCloud::new(low.clone()), &PointCloud::new(high.clone()))
+            .register(
+                &PointCloud::new(low.clone()),
+                &PointCloud::new(high.clone()),
+            )
             .unwrap();
         let why = found.doubt.expect("not registered");
-        assert!(why.contains("coincide") || why.contains("overlaps too little"), "{why}");
+        assert!(
+            why.contains("coincide") || why.contains("overlaps too little"),
+            "{why}"
+        );
     }
 }
