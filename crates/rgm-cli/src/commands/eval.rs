@@ -8,6 +8,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::Result;
 use rayon::prelude::*;
+use rgm_data::scenes::{MAX_ROTATION_ERROR_DEG, MAX_TRANSLATION_ERROR};
 use rgm_data::{SceneFolder, Turn};
 use rgm_model::evaluate::{
     evaluate_pair, evaluate_scan_pair, evaluate_scene_pair, scan_table_header, scan_table_row,
@@ -158,6 +159,7 @@ fn run_scenes(args: &Args, method: &Method) -> Result<()> {
         .collect();
     let total: usize = runs.iter().map(Vec::len).sum();
     let bar = progress(total, &method.name());
+    let succeeded = AtomicUsize::new(0);
     let pool = args.workers.pool()?;
     let mut results: Vec<(String, Vec<SceneRecord>)> = Vec::new();
     for (name, runs) in names.into_iter().zip(runs) {
@@ -170,7 +172,16 @@ fn run_scenes(args: &Args, method: &Method) -> Result<()> {
                         for warning in warnings {
                             bar.suspend(|| eprintln!("rgm: {warning}"));
                         }
+                        let right = succeeded
+                            .fetch_add(record.succeeds() as usize, Ordering::Relaxed)
+                            + record.succeeds() as usize;
                         bar.inc(1);
+                        bar.set_message(format!(
+                            "{right} of {} within {}° / {} m",
+                            bar.position(),
+                            MAX_ROTATION_ERROR_DEG,
+                            MAX_TRANSLATION_ERROR
+                        ));
                         Ok(record)
                     },
                 )
