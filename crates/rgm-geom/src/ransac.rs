@@ -356,32 +356,10 @@ mod tests {
         );
     }
 
-    /// A dense scene: a floor, two walls, a box on the floor and a slanted board, sampled at
-    /// random (the source) and again, moved (the target).
-    fn room(n: usize, seed: u64) -> PointCloud {
-        let mut rng = StdRng::seed_from_u64(seed);
-        let points = (0..n)
-            .map(|_| {
-                let (u, v): (f64, f64) = (rng.gen(), rng.gen());
-                match rng.gen_range(0..5) {
-                    0 => Point3::new(4.0 * u, 3.0 * v, 0.0),
-                    1 => Point3::new(4.0 * u, 0.0, 2.5 * v),
-                    2 => Point3::new(0.0, 3.0 * u, 2.5 * v),
-                    3 => Point3::new(1.5 + 0.6 * u, 1.0 + 0.4 * v, 0.5),
-                    _ => Point3::new(3.0 + 0.5 * u, 2.0 + 0.8 * v, 0.3 + 0.6 * u),
-                }
-            })
-            .collect();
-        PointCloud::new(points)
-    }
-
-    /// The scene registered at its own scale and at 1,024 times it: the same pose (the
-    /// translation scaled), since every length follows the point spacing. A power of two
-    /// scales every coordinate exactly, so the two runs draw and match alike (the refinement's
-    /// sums round apart a little).
+    /// A room registered at its own scale and at 1,024 times it
+    /// ([`crate::testing::assert_registers_a_room_at_any_scale`]).
     #[test]
     fn a_dense_scene_is_registered_at_any_scale() {
-        let truth = pose();
         let config = RansacConfig {
             matching: MatchingConfig {
                 max_points: 1500,
@@ -390,19 +368,8 @@ mod tests {
             draws: 10_000,
             ..RansacConfig::default()
         };
-        let source = room(6000, 1);
-        let target = room(6000, 2).transformed(&truth);
-        let found = register(&source, &target, &config).unwrap();
-        assert_near(&found.t_target_source, &truth, 0.3, 0.01);
-        let scale = |c: &PointCloud| PointCloud::new(c.points.iter().map(|p| p * 1024.0).collect());
-        let big = register(&scale(&source), &scale(&target), &config).unwrap();
-        let big_truth = RigidTransform::new(truth.rotation, truth.translation * 1024.0);
-        assert_near(&big.t_target_source, &big_truth, 0.3, 10.24);
-        let angle = big
-            .t_target_source
-            .inverse()
-            .compose(&found.t_target_source)
-            .rotation_angle_deg();
-        assert!(angle < 1e-3, "{angle}° between the scales");
+        crate::testing::assert_registers_a_room_at_any_scale(|s, t| {
+            register(s, t, &config).unwrap()
+        });
     }
 }

@@ -290,6 +290,22 @@ mod tests {
         assert!((t.translation - truth.translation).norm() < 1e-6);
     }
 
+    /// A room registered at its own scale and at 1,024 times it
+    /// ([`crate::testing::assert_registers_a_room_at_any_scale`]).
+    #[test]
+    fn a_dense_scene_is_registered_at_any_scale() {
+        let config = Sc2Config {
+            matching: MatchingConfig {
+                max_points: 1500,
+                ..MatchingConfig::default()
+            },
+            ..Sc2Config::default()
+        };
+        crate::testing::assert_registers_a_room_at_any_scale(|s, t| {
+            register(s, t, &config).unwrap()
+        });
+    }
+
     #[test]
     fn bad_settings_are_refused() {
         let cloud = PointCloud::new(uniform_cube(50, &mut StdRng::seed_from_u64(1)));
