@@ -830,7 +830,11 @@ fn a_lidar_pair_is_not_slid_along_the_road() {
         std::fs::copy(lidar.join(name), dir.join(name)).unwrap();
     }
     let relative = std::fs::read_to_string(lidar.join("relative.txt")).unwrap();
-    std::fs::write(dir.join("gt.log"), format!("251370668 251371071 2\n{relative}")).unwrap();
+    std::fs::write(
+        dir.join("gt.log"),
+        format!("251370668 251371071 2\n{relative}"),
+    )
+    .unwrap();
     let json = dir.join("out.json");
     stdout(&rgm(&[
         "eval",
@@ -843,6 +847,9 @@ fn a_lidar_pair_is_not_slid_along_the_road() {
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let pair = &records["folders"][0]["pairs"][0];
     assert!(pair["rotation_error_deg"].as_f64().unwrap() < 1.0, "{pair}");
-    assert!(pair["translation_error_m"].as_f64().unwrap() < 0.05, "{pair}");
+    assert!(
+        pair["translation_error_m"].as_f64().unwrap() < 0.05,
+        "{pair}"
+    );
     assert_eq!(pair["registered"], true);
 }
