@@ -301,12 +301,17 @@ fn random_motion(
     let along = direction();
     let angle = rng.gen_range(0.0..=max_angle_deg).to_radians();
     let shift = rng.gen_range(0.0..=max_shift);
-    // Rodrigues: R = I + sin θ K + (1 − cos θ) K², K the cross-product matrix of the axis.
-    let k = axis.cross_matrix();
-    let rotation = Matrix3::identity() + k * angle.sin() + k * k * (1.0 - angle.cos());
+    let rotation = axis_angle(&axis, angle);
     // p ↦ R (p − c) + c + shift·along
     let translation = centre.coords - rotation * centre.coords + along * shift;
     RigidTransform::new(rotation, translation)
+}
+
+/// The rotation by `radians` about the unit vector `axis` (Rodrigues: R = I + sin θ K +
+/// (1 − cos θ) K², K the cross-product matrix of the axis).
+pub(crate) fn axis_angle(axis: &Vector3<f64>, radians: f64) -> Matrix3<f64> {
+    let k = axis.cross_matrix();
+    Matrix3::identity() + k * radians.sin() + k * k * (1.0 - radians.cos())
 }
 
 /// The protocol's constants; [`Default`] gives the benchmark's.

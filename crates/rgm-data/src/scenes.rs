@@ -162,11 +162,9 @@ impl LoadedScenePair {
 }
 
 impl Turn {
-    /// The rotation: Rodrigues' formula about the unit axis.
+    /// The rotation, about the axis made a unit vector.
     pub fn rotation(&self) -> Matrix3<f64> {
-        let k = self.axis.normalize().cross_matrix();
-        let a = self.degrees.to_radians();
-        Matrix3::identity() + k * a.sin() + k * k * (1.0 - a.cos())
+        crate::scans::axis_angle(&self.axis.normalize(), self.degrees.to_radians())
     }
 }
 
@@ -369,6 +367,15 @@ mod tests {
         (dir, truth)
     }
 
+    /// The largest distance between the points of `a` and `b` of one index.
+    fn worst_gap(a: &PointCloud, b: &PointCloud) -> f64 {
+        a.points
+            .iter()
+            .zip(&b.points)
+            .map(|(p, q)| (p - q).norm())
+            .fold(0.0, f64::max)
+    }
+
     #[test]
     fn a_folder_gives_its_pairs_with_the_truth_mapping_j_onto_i() {
         let (dir, truth) = corner_folder("scenes-open");
@@ -381,13 +388,10 @@ mod tests {
         );
         let loaded = pair.load(None).unwrap();
         // The truth brings the source onto the target (the files keep about 7 digits).
-        let moved = loaded.source.transformed(&loaded.t_target_source);
-        let worst = moved
-            .points
-            .iter()
-            .zip(&loaded.target.points)
-            .map(|(a, b)| (a - b).norm())
-            .fold(0.0, f64::max);
+        let worst = worst_gap(
+            &loaded.source.transformed(&loaded.t_target_source),
+            &loaded.target,
+        );
         assert!(worst < 1e-5, "{worst}");
         assert!(loaded.errors(&truth).0 < 1e-4);
         let (r, t) = loaded.errors(&RigidTransform::identity());
@@ -405,13 +409,10 @@ mod tests {
         // Turned about its centroid: the centroid stays, the points move.
         let shift = (turned.source.centroid() - plain.source.centroid()).norm();
         assert!(shift < 1e-9, "{shift}");
-        let moved = turned.source.transformed(&turned.t_target_source);
-        let worst = moved
-            .points
-            .iter()
-            .zip(&plain.target.points)
-            .map(|(a, b)| (a - b).norm())
-            .fold(0.0, f64::max);
+        let worst = worst_gap(
+            &turned.source.transformed(&turned.t_target_source),
+            &plain.target,
+        );
         assert!(worst < 1e-5, "{worst}");
         // The plain truth is now 135° off.
         let (r, _) = turned.errors(&plain.t_target_source);

@@ -10,6 +10,8 @@
 //! 4. The estimator's transform, refined point-to-plane on the thinned pair
 //!    ([`MatchingConfig::refinement`]) and scored there at the inlier distance.
 
+use std::time::Instant;
+
 use nalgebra::{Point3, Vector3};
 
 use crate::fgr::{mutual_matches, nearest_matches};
@@ -17,7 +19,7 @@ use crate::fpfh::{features, FpfhConfig};
 use crate::icp::check_clouds;
 use crate::normals::NormalsConfig;
 use crate::refine::{median_spacing, refine_at_resolution, ResolutionConfig};
-use crate::registrar::MethodId;
+use crate::registrar::{MethodId, Registration};
 use crate::registration::{score, Fit};
 use crate::{kabsch, GeomError, PointCloud, Prepared, Result, RigidTransform};
 
@@ -61,6 +63,16 @@ impl Default for MatchingConfig {
 }
 
 impl MatchingConfig {
+    /// An estimator's [`Registration`] of what `estimate` fits: timed, with no correspondences
+    /// of its own (the caller's scoring finds them).
+    pub(crate) fn registration<E: From<GeomError>>(
+        estimate: impl FnOnce() -> Result<Fit>,
+    ) -> std::result::Result<Registration, E> {
+        let start = Instant::now();
+        let result = estimate()?;
+        Ok(Registration::single(result, Vec::new(), start))
+    }
+
     /// The name of an estimator on these matches: `base+icp`, its last step being
     /// point-to-plane ICP ([`MatchingConfig::refinement`]), unless that has no stage.
     pub fn method_id(&self, base: &'static str) -> MethodId {

@@ -19,7 +19,6 @@
 use nalgebra::Point3;
 use rand::{rngs::StdRng, Rng, SeedableRng};
 use rayon::prelude::*;
-use std::time::Instant;
 
 use crate::feature_matches::{inliers_of, refitted, register_matched, Matched, MatchingConfig};
 use crate::fgr::Progress;
@@ -292,9 +291,7 @@ impl<E: From<GeomError>> Registrar<E> for RansacConfig {
         target: &Prepared,
         _: &mut dyn FnMut(Progress),
     ) -> std::result::Result<Registration, E> {
-        let start = Instant::now();
-        let result = register_prepared(source, target, self)?;
-        Ok(Registration::single(result, Vec::new(), start))
+        MatchingConfig::registration(|| register_prepared(source, target, self))
     }
 }
 

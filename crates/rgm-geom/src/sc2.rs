@@ -16,9 +16,10 @@
 //!    ([`crate::feature_matches`]).
 
 use rayon::prelude::*;
-use std::time::Instant;
 
-use crate::feature_matches::{inliers_of, refitted, register_matched, Matched, MatchingConfig};
+use crate::feature_matches::{
+    inliers_of, refitted, register_matched, Consensus, Matched, MatchingConfig,
+};
 use crate::fgr::Progress;
 use crate::registrar::{MethodId, Registrar, Registration};
 use crate::registration::Fit;
@@ -84,7 +85,7 @@ pub fn register_prepared(source: &Prepared, target: &Prepared, config: &Sc2Confi
             config.compatibility * matched.distance,
         );
         let hypotheses = graph.hypotheses(&matched.from, &matched.to, squared, config);
-        let judged: Vec<(f64, crate::feature_matches::Consensus)> = hypotheses
+        let judged: Vec<(f64, Consensus)> = hypotheses
             .par_iter()
             .take(config.judged)
             .map(|(_, t)| {
@@ -246,9 +247,7 @@ impl<E: From<GeomError>> Registrar<E> for Sc2Config {
         target: &Prepared,
         _: &mut dyn FnMut(Progress),
     ) -> std::result::Result<Registration, E> {
-        let start = Instant::now();
-        let result = register_prepared(source, target, self)?;
-        Ok(Registration::single(result, Vec::new(), start))
+        MatchingConfig::registration(|| register_prepared(source, target, self))
     }
 }
 

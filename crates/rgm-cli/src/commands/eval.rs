@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::Result;
+use indicatif::ProgressBar;
 use rayon::prelude::*;
 use rgm_data::scenes::{MAX_ROTATION_ERROR_DEG, MAX_TRANSLATION_ERROR};
 use rgm_data::{SceneFolder, Turn};
@@ -102,27 +103,11 @@ pub fn run(args: Args) -> Result<()> {
 /// `rgm eval --scans`: one table row per folder, and one for all when there are several.
 fn run_scans(args: &Args, method: &Method) -> Result<()> {
     let folders = args.data.scan_pairs()?;
-    let total: usize = folders.iter().map(|(_, pairs)| pairs.len()).sum();
-    let bar = progress(total, &method.name());
-    let pool = args.workers.pool()?;
-    let mut results: Vec<(String, Vec<ScanRecord>)> = Vec::new();
-    for (name, pairs) in folders {
-        let records: Vec<ScanRecord> = pool.install(|| {
-            pairs
-                .par_iter()
-                .map_init(
-                    || method.clone(),
-                    |method, pair| {
-                        let record = evaluate_scan_pair(method, pair);
-                        bar.inc(1);
-                        record
-                    },
-                )
-                .collect()
-        });
-        results.push((name, records));
-    }
-    bar.finish_and_clear();
+    let results = evaluate_folders(folders, method, &args.workers, |method, pair, bar| {
+        let record = evaluate_scan_pair(method, pair);
+        bar.inc(1);
+        Ok(record)
+    })?;
     let table = Table {
         header: scan_table_header(),
         row: scan_table_row,
@@ -147,49 +132,35 @@ fn run_scenes(args: &Args, method: &Method) -> Result<()> {
     } else {
         args.turns.iter().map(Some).collect()
     };
-    let runs: Vec<Vec<_>> = folders
-        .iter()
-        .map(|folder| {
+    let runs: Vec<(String, Vec<_>)> = names
+        .into_iter()
+        .zip(&folders)
+        .map(|(name, folder)| {
             let pairs = args.data.select(folder.pairs.iter().collect());
-            pairs
+            let runs = pairs
                 .into_iter()
                 .flat_map(|pair| turns.iter().map(move |&turn| (pair, turn)))
-                .collect()
+                .collect();
+            (name, runs)
         })
         .collect();
-    let total: usize = runs.iter().map(Vec::len).sum();
-    let bar = progress(total, &method.name());
     let succeeded = AtomicUsize::new(0);
-    let pool = args.workers.pool()?;
-    let mut results: Vec<(String, Vec<SceneRecord>)> = Vec::new();
-    for (name, runs) in names.into_iter().zip(runs) {
-        let records: Vec<SceneRecord> = pool.install(|| {
-            runs.par_iter()
-                .map_init(
-                    || method.clone(),
-                    |method, &(pair, turn)| -> Result<SceneRecord> {
-                        let (record, warnings) = evaluate_scene_pair(method, pair, turn)?;
-                        for warning in warnings {
-                            bar.suspend(|| eprintln!("rgm: {warning}"));
-                        }
-                        let right = succeeded
-                            .fetch_add(record.succeeds() as usize, Ordering::Relaxed)
-                            + record.succeeds() as usize;
-                        bar.inc(1);
-                        bar.set_message(format!(
-                            "{right} of {} within {}° / {} m",
-                            bar.position(),
-                            MAX_ROTATION_ERROR_DEG,
-                            MAX_TRANSLATION_ERROR
-                        ));
-                        Ok(record)
-                    },
-                )
-                .collect::<Result<_>>()
-        })?;
-        results.push((name, records));
-    }
-    bar.finish_and_clear();
+    let results = evaluate_folders(runs, method, &args.workers, |method, &(pair, turn), bar| {
+        let (record, warnings) = evaluate_scene_pair(method, pair, turn)?;
+        for warning in warnings {
+            bar.suspend(|| eprintln!("rgm: {warning}"));
+        }
+        let right = succeeded.fetch_add(record.succeeds() as usize, Ordering::Relaxed)
+            + record.succeeds() as usize;
+        bar.inc(1);
+        bar.set_message(format!(
+            "{right} of {} within {}° / {} m",
+            bar.position(),
+            MAX_ROTATION_ERROR_DEG,
+            MAX_TRANSLATION_ERROR
+        ));
+        Ok(record)
+    })?;
     let table = Table {
         header: scene_table_header(),
         row: scene_table_row,
@@ -197,6 +168,34 @@ fn run_scenes(args: &Args, method: &Method) -> Result<()> {
         kind: "scenes",
     };
     table.report(&method.name(), &results, args.json.as_deref())
+}
+
+/// Each folder's items evaluated side by side on the workers' pool, each worker with its own
+/// clone of `method`, under one progress bar that `evaluate` advances.
+fn evaluate_folders<P: Sync, R: Send>(
+    folders: Vec<(String, Vec<P>)>,
+    method: &Method,
+    workers: &WorkerArgs,
+    evaluate: impl Fn(&mut Method, &P, &ProgressBar) -> Result<R> + Sync,
+) -> Result<Vec<(String, Vec<R>)>> {
+    let total: usize = folders.iter().map(|(_, items)| items.len()).sum();
+    let bar = progress(total, &method.name());
+    let pool = workers.pool()?;
+    let mut results = Vec::with_capacity(folders.len());
+    for (name, items) in folders {
+        let records = pool.install(|| {
+            items
+                .par_iter()
+                .map_init(
+                    || method.clone(),
+                    |method, item| evaluate(method, item, &bar),
+                )
+                .collect::<Result<Vec<R>>>()
+        })?;
+        results.push((name, records));
+    }
+    bar.finish_and_clear();
+    Ok(results)
 }
 
 /// How the records of real-data pairs are shown: the table's header and rows, which records
