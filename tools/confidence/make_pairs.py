@@ -1,7 +1,7 @@
 """Issue 44 D1's reproducers, and the dev pairs beside them, for calibrating the confidence
 (docs/confidence.md). Needs numpy and open3d.
 
-    python tools/confidence/make_pairs.py OUT
+    python tools/confidence/make_pairs.py OUT [--holdout]
 
 writes OUT/hostile/*.ply and OUT/hostile.json: 15 ball crops holding 15 % of the merged bunny
 (200,000 of its scans' points in the world frame), each at a random pose, against the merged
@@ -11,9 +11,16 @@ parts that share 10 % of the points, jittered as the benchmark jitters. And OUT/
 the validation pairs `rgm pairs --split validation --every 10` wrote to OUT/mnval, the Stanford
 pairs `rgm pairs --scans` wrote to OUT/stan, and the 12 redkitchen pairs. Each entry: kind,
 source, target, T (T_target_source; null when the clouds do not overlap).
+
+With --holdout, pairs the confidence was not chosen on, made the same way by another seed: the
+crops are of the merged dragon, the non-overlapping pairs of other scans, the 10 % pairs of
+other test shapes (a few may repeat by chance), and the natural pairs are the ModelNet40 test
+pairs `rgm pairs --split test --every 20` wrote to OUT/mntest (no Stanford or room pairs: the
+data has no others).
 """
 import gzip, json, pathlib, sys, numpy as np, open3d as o3d
-rng = np.random.default_rng(20261128)
+holdout = "--holdout" in sys.argv[2:]
+rng = np.random.default_rng(20261129 if holdout else 20261128)
 root = pathlib.Path(__file__).resolve().parents[3] / "shared/data"
 base = pathlib.Path(sys.argv[1])
 out = base / "hostile"; out.mkdir(parents=True, exist_ok=True)
@@ -59,9 +66,11 @@ def moved(pts, R, t):  # source = R pts + t, so T_target_source = inverse
 
 pairs = []
 bunny = scans("bunny", "bun.conf")
-merged = np.concatenate(list(bunny.values()))
+dragon = scans("dragon_stand", "dragonStandRight.conf")
+whole = "dragon" if holdout else "bunny"
+merged = np.concatenate(list((dragon if holdout else bunny).values()))
 sel = rng.choice(len(merged), 200_000, replace=False); merged = merged[sel]
-tgt = write("bunny_merged.ply", merged)
+tgt = write(f"{whole}_merged.ply", merged)
 ext = np.linalg.norm(merged - merged.mean(0), axis=1).max()
 for k in range(15):
     c = merged[rng.integers(len(merged))]
@@ -70,11 +79,14 @@ for k in range(15):
     src_pts, T = moved(crop, rand_rot(), rng.uniform(-0.5, 0.5, 3)*ext)
     pairs.append(dict(kind="part", source=write(f"crop{k}.ply", src_pts), target=tgt, T=T.tolist()))
 # non-overlapping real scans: bunny vs dragon, and the two halves of one scan
-dragon = scans("dragon_stand", "dragonStandRight.conf")
-for k, (b, d) in enumerate([("bun000", "dragonStandRight_0"), ("bun090", "dragonStandRight_96"), ("top2", "dragonStandRight_192")]):
+apart = [("bun045", "dragonStandRight_24"), ("bun315", "dragonStandRight_120"), ("chin", "dragonStandRight_216")] if holdout \
+    else [("bun000", "dragonStandRight_0"), ("bun090", "dragonStandRight_96"), ("top2", "dragonStandRight_192")]
+halves = ["bun045", "bun315", "dragonStandRight_144", "dragonStandRight_288"] if holdout \
+    else ["bun000", "bun180", "bun270", "dragonStandRight_48"]
+for k, (b, d) in enumerate(apart):
     s, T = moved(bunny[b], rand_rot(45), rng.uniform(-0.03, 0.03, 3))
     pairs.append(dict(kind="none", source=write(f"none_bd{k}.ply", s), target=write(f"none_d{k}.ply", dragon[d]), T=None))
-for k, name in enumerate(["bun000", "bun180", "bun270", "dragonStandRight_48"]):
+for k, name in enumerate(halves):
     p = bunny.get(name, dragon.get(name))
     a = rng.normal(size=3); a /= np.linalg.norm(a)
     proj = (p - p.mean(0)) @ a
@@ -94,14 +106,15 @@ for k, f in enumerate(rng.choice(len(shapes), 40, replace=False)):
 json.dump(pairs, open(base / "hostile.json", "w"), indent=0)
 
 natural = []
-for folder, kind in [("mnval", "mn"), ("stan/bunny", "stan"), ("stan/dragon_stand", "stan")]:
+folders = [("mntest", "mn")] if holdout else [("mnval", "mn"), ("stan/bunny", "stan"), ("stan/dragon_stand", "stan")]
+for folder, kind in folders:
     for p in json.load(open(base / folder / "pairs.json"))["pairs"]:
         natural.append(dict(kind=kind, source=str(base / folder / p["source"]),
                             target=str(base / folder / p["target"]), T=p["t_target_source"]))
 kitchen = root / "scenes/redkitchen"
 fragment = lambda k: str(next(p for p in [kitchen / f"cloud_bin_{k}.ply.gz", kitchen / f"cloud_bin_{k}.pcd"] if p.exists()))
 lines = (kitchen / "gt.log").read_text().split("\n")
-for b in range(0, len(lines) - 4, 5):
+for b in range(0, len(lines) - 4, 5) if not holdout else []:
     h = lines[b].split()
     if len(h) == 3:
         T = [[float(v) for v in lines[b + r].split()] for r in range(1, 5)]

@@ -38,8 +38,9 @@ fn written_pairs(dir: &Path, count: usize) -> PathBuf {
         data.to_str().unwrap(),
         "--limit",
         &count.to_string(),
-        // Full clouds: ICP from the identity finds an overlap on each (on a partial pair it may
-        // find none, and the pair is rightly not registered).
+        // Full clouds: FGR registers each (ICP from the identity slides into a wrong pose on
+        // some, and on a partial pair it may find no overlap: those pairs are rightly not
+        // registered).
         "--setting",
         "clean",
         "--out",
@@ -131,7 +132,8 @@ fn a_rerun_registers_only_the_pairs_without_a_line_and_never_writes_one_twice() 
             "--pairs",
             list.to_str().unwrap(),
             "--method",
-            "icp",
+            "fgr",
+            "--no-refine",
             "--output",
             output.to_str().unwrap(),
         ])
@@ -399,7 +401,8 @@ fn a_second_run_on_a_locked_output_is_refused_and_changes_nothing() {
         "--pairs",
         list.to_str().unwrap(),
         "--method",
-        "icp",
+        "fgr",
+        "--no-refine",
         "--output",
         output.to_str().unwrap(),
     ];

@@ -26,10 +26,13 @@ fn data_dir() -> String {
         .into_owned()
 }
 
-/// Two small clouds as `.xyz` files in `dir`: a grid and the same grid moved by 0.01.
+/// Two small clouds as `.xyz` files in `dir`: a grid and the same grid moved by 0.01. Its rows
+/// are spaced unevenly along x and y (0.3 times the squares), so that no turn maps it onto
+/// itself: an even grid's pose is ambiguous, and it is rightly not registered.
 fn clouds(dir: &Path) -> (String, String) {
+    let uneven = |k: usize| 0.3 * (k * k) as f64;
     let grid: Vec<[f64; 3]> = (0..125)
-        .map(|i| [(i % 5) as f64, (i / 5 % 5) as f64, (i / 25) as f64 * 1.3])
+        .map(|i| [uneven(i % 5), uneven(i / 5 % 5), (i / 25) as f64 * 1.3])
         .collect();
     let write = |name: &str, shift: f64| {
         let path = dir.join(name);

@@ -13,7 +13,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use crate::coincidence::CoincidesAtSpacing;
+use crate::coincidence::{Coincides, CoincidesAtSpacing};
 use crate::fgr::Progress;
 use crate::prepared::indexed_pair;
 use crate::registrar::{elapsed_ms, Candidate, DynRegistrar, MethodId, Registrar, Registration};
@@ -32,6 +32,11 @@ pub struct Scoring {
     pub min_overlap: f64,
     /// The distance at which the chosen result is scored and its correspondences found.
     pub result_distance: f64,
+    /// How a candidate's result must coincide with the other cloud where it overlaps it: one
+    /// that does not ranks below every one that does, whatever their overlap, and ends no
+    /// cascade. `None`: candidates are ranked by overlap alone (results not yet refined, which
+    /// coincide less).
+    pub coincides: Option<Coincides>,
 }
 
 /// When a cascade's result is good enough to end it ([`Cascade::accept`]).
@@ -204,6 +209,14 @@ impl<'a> Judge<'a> {
             })
     }
 
+    /// Whether `transform` passes the scoring's [`Scoring::coincides`] on the judged pair
+    /// (always, when it has none).
+    pub fn coincides(&self, transform: &RigidTransform) -> bool {
+        self.scoring.coincides.is_none_or(|check| {
+            check.holds(self.source.indexed(), self.target.indexed(), transform)
+        })
+    }
+
     /// Whether `accept` takes the best of `tally` (or of what came before), its turned share
     /// measured on the clouds the candidates ran on (`source`, `target`).
     fn takes(
@@ -214,7 +227,7 @@ impl<'a> Judge<'a> {
         target: &Prepared,
     ) -> bool {
         tally.best.as_ref().is_some_and(|best| {
-            best.score >= accept.score && {
+            best.coincides && best.score >= accept.score && {
                 let (source, target) = indexed_pair(source, target);
                 let distance = self.scoring.overlap_distance;
                 accept.takes(best.score, source, target, &best.transform, distance)
@@ -250,6 +263,8 @@ pub trait Composite<E>: Registrar<E> {
 /// (`None` when it came before them).
 struct Winner {
     score: f64,
+    /// Whether it passes the judge's [`Scoring::coincides`].
+    coincides: bool,
     transform: RigidTransform,
     iterations: usize,
     index: Option<usize>,
@@ -267,6 +282,7 @@ impl Tally {
             candidates: Vec::new(),
             best: judge.before.map(|(score, transform)| Winner {
                 score,
+                coincides: judge.coincides(&transform),
                 transform,
                 iterations: 0,
                 index: None,
@@ -297,10 +313,16 @@ impl Tally {
                 Ok(registration) => {
                     let transform = registration.result.t_target_source;
                     let score = judge.score(&transform);
-                    // Ties go to the earlier candidate.
-                    if self.best.as_ref().is_none_or(|b| score > b.score) {
+                    let coincides = judge.coincides(&transform);
+                    // A result that coincides beats one that does not; ties go to the earlier
+                    // candidate.
+                    let beats = |b: &Winner| {
+                        coincides > b.coincides || coincides == b.coincides && score > b.score
+                    };
+                    if self.best.as_ref().is_none_or(beats) {
                         self.best = Some(Winner {
                             score,
+                            coincides,
                             transform,
                             iterations: registration.result.iterations,
                             index: Some(self.candidates.len()),
@@ -526,7 +548,7 @@ impl<E: From<GeomError> + ToString + Send> Registrar<E> for Cascade<E> {
 mod tests {
     use super::*;
     use crate::testing::{Fixed, SCORING};
-    use crate::{Point3, Vector3};
+    use crate::{Matrix3, Point3, Vector3};
 
     #[test]
     fn transforms_agree_within_a_degree_and_a_fiftieth() {
@@ -648,6 +670,58 @@ mod tests {
         assert_eq!((found.candidates.len(), found.chosen), (1, Some(0)));
         let found = run(&near, &wrong, whole_at(SCORING.overlap_distance));
         assert_eq!(found.candidates.len(), 2);
+    }
+
+    #[test]
+    fn a_result_that_coincides_beats_one_that_only_lies_near_and_is_not_accepted() {
+        // Issue 44, D1: 201 points 0.01 apart on a line. Lifted 0.015 off it, the line lies
+        // within the overlap distance everywhere (score 2) but coincides nowhere; slid 0.5
+        // along itself it overlaps three quarters (score 1.5) and coincides.
+        let line = PointCloud::new(
+            (0..=200)
+                .map(|i| Point3::new(0.01 * i as f64, 0.0, 0.0))
+                .collect(),
+        );
+        let mut lifted = Fixed::new("lifted", 0.0);
+        lifted.transform = RigidTransform::new(Matrix3::identity(), Vector3::new(0.0, 0.015, 0.0));
+        let slid = Fixed::new("slid", 0.5);
+        let coinciding = Scoring {
+            coincides: Some(crate::coincidence::Coincides {
+                near: 0.005,
+                far: 0.08,
+                least: 0.35,
+            }),
+            ..SCORING
+        };
+        for (scoring, chosen) in [(SCORING, "lifted"), (coinciding, "slid")] {
+            let mut best_of = BestOf::<GeomError> {
+                base: "both",
+                candidates: vec![Box::new(lifted.clone()), Box::new(slid.clone())],
+                scoring,
+            };
+            let found = best_of.register(&line, &line).unwrap();
+            let scores: Vec<f64> = found.candidates.iter().map(|c| c.score.unwrap()).collect();
+            assert!(
+                (scores[0] - 2.0).abs() < 1e-9 && (scores[1] - 1.5).abs() < 0.02,
+                "{scores:?}"
+            );
+            assert_eq!(found.candidates[found.chosen.unwrap()].method, chosen);
+            // A cascade takes the lifted line at once unless it must coincide.
+            let mut cascade = Cascade::<GeomError> {
+                base: "both",
+                first: Box::new(lifted.clone()),
+                rest: vec![Box::new(slid.clone())],
+                accept: Acceptance {
+                    score: 1.0,
+                    turned_share: f64::INFINITY,
+                    whole: (SCORING.overlap_distance, f64::INFINITY),
+                    coincides: None,
+                },
+                scoring,
+            };
+            let found = cascade.register(&line, &line).unwrap();
+            assert_eq!(found.candidates[found.chosen.unwrap()].method, chosen);
+        }
     }
 
     #[test]

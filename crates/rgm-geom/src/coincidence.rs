@@ -16,6 +16,7 @@ use std::time::Instant;
 use crate::best_of::turned_poses;
 use crate::cloud::median;
 use crate::fgr::Progress;
+use crate::frame::{FrameRule, Normalisation};
 use crate::prepared::indexed_pair;
 use crate::registrar::{elapsed_ms, MethodId, Registrar, Registration};
 use crate::thinning::Density;
@@ -127,6 +128,16 @@ pub struct Coincides {
 }
 
 impl Coincides {
+    /// Whether the clouds coincide under `transform`: its doubt's opposite, unformatted.
+    pub fn holds(
+        &self,
+        source: (&PointCloud, &KnnIndex),
+        target: (&PointCloud, &KnnIndex),
+        transform: &RigidTransform,
+    ) -> bool {
+        self.share_at(source, target, transform, 1.0) >= self.least
+    }
+
     /// [`coincidence`] of `transform` at its lengths scaled by `unit`.
     fn share_at(
         &self,
@@ -342,6 +353,72 @@ impl<C: Check> Check for Unambiguous<C> {
     }
 }
 
+/// `check` measured in the unit-sphere frame `rule` gives the pair ([`Normalisation::of_pair`]),
+/// the far outliers left out, while the method it checks runs in the caller's frame: for a
+/// method whose start the frame would move (ICP from a given pose), checked with lengths tuned
+/// in that frame. A pair in the frame already is measured as it is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InFrame<C> {
+    pub check: C,
+    pub rule: FrameRule,
+}
+
+impl<C: Check> InFrame<C> {
+    /// `measure` on the pair moved into its frame, given the frame.
+    fn measured<T>(
+        &self,
+        source: (&PointCloud, &KnnIndex),
+        target: (&PointCloud, &KnnIndex),
+        measure: impl FnOnce((&PointCloud, &KnnIndex), (&PointCloud, &KnnIndex), &Normalisation) -> T,
+    ) -> T {
+        let frame = Normalisation::of_pair(source.0, target.0, &self.rule);
+        if frame.is_identity() {
+            return measure(source, target, &frame);
+        }
+        let rule = &self.rule;
+        let near = |cloud: &PointCloud| cloud.select(&rule.near(cloud));
+        let indexed = |cloud: PointCloud| {
+            let index = KnnIndex::new(&cloud.points);
+            (cloud, index)
+        };
+        let ((fs, fsi), (ft, fti)) = rayon::join(
+            || indexed(frame.source(&near(source.0))), // (N', 3)
+            || indexed(frame.target(&near(target.0))), // (M', 3)
+        );
+        measure((&fs, &fsi), (&ft, &fti), &frame)
+    }
+}
+
+impl<C: Check> Check for InFrame<C> {
+    fn doubt_of(
+        &self,
+        source: (&PointCloud, &KnnIndex),
+        target: (&PointCloud, &KnnIndex),
+        transform: &RigidTransform,
+    ) -> Option<String> {
+        self.measured(source, target, |fs, ft, frame| {
+            self.check.doubt_of(fs, ft, &frame.redo(transform))
+        })
+    }
+
+    /// `found` with its result's and candidates' transforms moved into the frame.
+    fn doubt(
+        &self,
+        source: (&PointCloud, &KnnIndex),
+        target: (&PointCloud, &KnnIndex),
+        found: &Registration,
+    ) -> Option<String> {
+        self.measured(source, target, |fs, ft, frame| {
+            let mut in_frame = found.clone();
+            in_frame.result.t_target_source = frame.redo(&found.result.t_target_source);
+            for candidate in &mut in_frame.candidates {
+                candidate.t_target_source = frame.redo(&candidate.t_target_source);
+            }
+            self.check.doubt(fs, ft, &in_frame)
+        })
+    }
+}
+
 /// `inner`, its result doubted when `check` doubts it (a result `inner` doubts already keeps its
 /// own reason). Named as `inner`.
 #[derive(Clone, Debug, PartialEq)]
@@ -511,6 +588,62 @@ mod tests {
         assert!(check.takes((s, &si), (s, &si), &same));
         assert!(!check.takes((l, &li), (l, &li), &same));
         assert_eq!(check.doubt_of((l, &li), (l, &li), &same), None);
+    }
+
+    /// Issue 44, D1 (`--method icp`): the airplane jittered by 0.01 coincides with itself in
+    /// the unit frame; at 200 times the size, 1,000 units off the origin, it coincides by lengths
+    /// in units nowhere, and measured in its frame as it does at 1. A shifted copy is doubted
+    /// at either size.
+    #[test]
+    fn in_frame_measures_a_pair_of_any_size_as_in_the_unit_frame() {
+        let plane = airplane();
+        let mut rng = <rand::rngs::StdRng as rand::SeedableRng>::seed_from_u64(44);
+        let jittered = PointCloud::new(
+            plane
+                .points
+                .iter()
+                .map(|p| {
+                    let jitter: [f64; 3] =
+                        std::array::from_fn(|_| rand::Rng::gen_range(&mut rng, -0.01..0.01));
+                    p + Vector3::from(jitter)
+                })
+                .collect(),
+        );
+        let check = Coincides {
+            near: 0.02,
+            far: 0.08,
+            least: 0.35,
+        };
+        let in_frame = InFrame {
+            check,
+            rule: crate::testing::FRAME,
+        };
+        let shift = Vector3::new(0.05, 0.0, 0.0);
+        for (size, offset) in [(1.0, 0.0), (200.0, 1000.0)] {
+            let place = |cloud: &PointCloud| {
+                PointCloud::new(
+                    cloud
+                        .points
+                        .iter()
+                        .map(|p| Point3::from(p.coords * size).map(|v| v + offset))
+                        .collect(),
+                )
+            };
+            let (source, target) = (place(&jittered), place(&plane));
+            let (s, si) = indexed(&source);
+            let (t, ti) = indexed(&target);
+            let same = RigidTransform::identity();
+            let shifted = RigidTransform::new(Matrix3::identity(), shift * size);
+            assert_eq!(
+                in_frame.doubt_of((s, &si), (t, &ti), &same),
+                None,
+                "size {size}"
+            );
+            assert!(in_frame.doubt_of((s, &si), (t, &ti), &shifted).is_some());
+            if size > 1.0 {
+                assert!(check.doubt_of((s, &si), (t, &ti), &same).is_some());
+            }
+        }
     }
 
     /// Issue 44, D1: a box's surface fits itself as well turned half about an axis, so its

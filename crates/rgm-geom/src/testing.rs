@@ -20,6 +20,7 @@ pub const SCORING: Scoring = Scoring {
     overlap_distance: 0.02,
     min_overlap: 0.1,
     result_distance: 0.02,
+    coincides: None,
 };
 
 /// The frame rule the default composes its methods with (rgm-model's options): ModelNet40's

@@ -6,7 +6,7 @@
 //!
 //! | name | composition |
 //! |---|---|
-//! | `icp` | [`IcpConfig`] (its own refinement) |
+//! | `icp` | `Checked<IcpConfig, InFrame<REFINED_CHECKS>>` (its own refinement, checked in the unit-sphere frame) |
 //! | `fgr`, `fgr+icp` | `Normalised<FgrConfig>`, `Normalised<Checked<Refined<FgrConfig>, REFINED_CHECKS>>` |
 //! | `rgm`, `rgm+icp` | [`Normalised`]`<RgmRegistrar>`, `Normalised<Checked<Refined<RgmRegistrar>, REFINED_CHECKS>>` |
 //! | `auto` | `Normalised<Thinned<Cascade { first: FgrConfig, rest: [Normalised<RgmRegistrar>] }>>` |
@@ -21,8 +21,8 @@
 //! the pair's spacing.)
 //!
 //! [`Checked`] doubts a refined result whose overlap is not one where the clouds coincide, or
-//! that a rival pose fits nearly as well ([`REFINED_CHECKS`]); the unrefined methods,
-//! calibrated on no data, are not checked.
+//! that a rival pose fits nearly as well ([`REFINED_CHECKS`]); so is ICP's, which is refined
+//! by its nature. The unrefined methods, calibrated on no data, are not checked.
 //!
 //! `Refined<R>` refines with [`RefineConfig`] (`+icp`); any other [`rgm_geom::refiner::Refiner`]
 //! composes the same way (`Refined::new(FgrConfig::default(), IcpConfig::default())` is
@@ -39,7 +39,7 @@ use std::path::PathBuf;
 use std::str::FromStr;
 
 use rgm_geom::best_of::{Acceptance, BestOf, Cascade, Scoring};
-use rgm_geom::coincidence::{Checked, Coincides, CoincidesAtSpacing, Unambiguous};
+use rgm_geom::coincidence::{Checked, Coincides, CoincidesAtSpacing, InFrame, Unambiguous};
 use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::frame::FrameRule;
 use rgm_geom::icp::{self, IcpConfig};
@@ -169,16 +169,20 @@ pub const SCORING: Scoring = Scoring {
     overlap_distance: 0.02,
     min_overlap: 0.1,
     result_distance: 0.02,
+    coincides: None,
 };
 
 /// How close the candidates' transforms on a dense pair's first thinning must be for the next
 /// thinning to be skipped: (degrees, distance in unit-sphere units).
 pub const AGREEMENT: (f64, f64) = (1.0, 0.02);
 
-/// [`SCORING`], the chosen result scored at `refine`'s finest distance when it is refined.
+/// [`SCORING`], when the candidates are refined: the chosen result scored at `refine`'s finest
+/// distance, and a candidate that does not coincide with the other cloud ([`COINCIDES`])
+/// ranked below those that do.
 pub fn scoring(refine: Option<&RefineConfig>) -> Scoring {
     Scoring {
         result_distance: refine.map_or(SCORING.result_distance, RefineConfig::finest_distance),
+        coincides: refine.map(|_| COINCIDES),
         ..SCORING
     }
 }
@@ -351,7 +355,15 @@ impl MethodOptions {
         self.check()?;
         let refine = self.refine.then(RefineConfig::default);
         Ok(match (self.method, refine) {
-            (MethodName::Icp, _) => Method::new(IcpConfig::default()),
+            // ICP runs in the caller's frame, from the identity there; its result is checked
+            // in the unit-sphere frame, where the checks' lengths are set.
+            (MethodName::Icp, _) => Method::new(Checked {
+                inner: IcpConfig::default(),
+                check: InFrame {
+                    check: REFINED_CHECKS,
+                    rule: FRAME,
+                },
+            }),
             // FGR's lengths are set for unit-sphere shapes: the pair is moved into that frame
             // first, as the network's is, and its refined result checked there.
             (MethodName::Fgr, None) => Method::new(Normalised::new(FgrConfig::default(), FRAME)),

@@ -383,3 +383,34 @@ fn fgr_alone_doubts_a_result_where_the_clouds_do_not_coincide() {
         );
     }
 }
+
+#[test]
+fn icp_doubts_the_wrong_pose_it_slides_into_and_trusts_a_right_one() {
+    // Issue 44, D1: `--method icp` was not checked. A shape turned a few degrees is within
+    // ICP's reach from the identity; turned a quarter it is not, and ICP settles on a wrong pose
+    // where the clouds lie near each other without coinciding.
+    let target = clean_pair().target;
+    let centre = target.centroid().coords;
+    let turned = |degrees: f64| {
+        let rotation = rgm_geom::euler::rotation_xyz_intrinsic(0.0, 0.0, degrees.to_radians());
+        RigidTransform::new(rotation, centre - rotation * centre)
+    };
+    let mut icp = MethodOptions {
+        method: rgm_model::MethodName::Icp,
+        ..MethodOptions::default()
+    }
+    .build()
+    .unwrap();
+    for (degrees, right) in [(5.0, true), (90.0, false)] {
+        let pose = turned(degrees);
+        let found = icp.register(&target.transformed(&pose), &target).unwrap();
+        let (rotation, _) = errors(&found.result.t_target_source, &pose.inverse(), 1.0);
+        assert_eq!(rotation < 1.0, right, "{degrees}°: {rotation}° off");
+        assert_eq!(
+            found.doubt.is_none(),
+            right,
+            "{degrees}°: {:?}",
+            found.doubt
+        );
+    }
+}
