@@ -148,6 +148,9 @@ pub struct ScanRecord {
     pub rotation_error_deg: f64,
     /// Translation error at the source's centroid, a share of the object's diagonal.
     pub translation_error: f64,
+    /// Whether the method trusts its result (it reports no doubt; a tool that reports none,
+    /// scored by `rgm score`, trusts every result).
+    pub registered: bool,
     /// The method's own time, in milliseconds.
     pub time_ms: f64,
     /// Why the method failed, if it did.
@@ -155,10 +158,11 @@ pub struct ScanRecord {
 }
 
 impl ScanRecord {
-    /// The record of `transform` (found in `time_ms`) on `pair`.
+    /// The record of `transform` (found in `time_ms`, trusted or not: `registered`) on `pair`.
     pub fn score(
         pair: &ScanPair,
         transform: &RigidTransform,
+        registered: bool,
         time_ms: f64,
         failure: Option<String>,
     ) -> Self {
@@ -170,6 +174,7 @@ impl ScanRecord {
             transform: transform.to_rows(),
             rotation_error_deg,
             translation_error,
+            registered,
             time_ms,
             failure,
         }
@@ -187,10 +192,17 @@ impl ScanRecord {
 pub fn evaluate_scan_pair(method: &mut Method, pair: &ScanPair) -> ScanRecord {
     let start = Instant::now();
     match method.register(&pair.source, &pair.target) {
-        Ok(reg) => ScanRecord::score(pair, &reg.result.t_target_source, reg.time_ms, None),
+        Ok(reg) => ScanRecord::score(
+            pair,
+            &reg.result.t_target_source,
+            reg.doubt.is_none(),
+            reg.time_ms,
+            None,
+        ),
         Err(err) => ScanRecord::score(
             pair,
             &RigidTransform::identity(),
+            false,
             start.elapsed().as_secs_f64() * 1e3,
             Some(err.to_string()),
         ),
@@ -200,19 +212,21 @@ pub fn evaluate_scan_pair(method: &mut Method, pair: &ScanPair) -> ScanRecord {
 /// The success thresholds of the real-scan benchmark: (degrees, share of the diagonal).
 pub const SCAN_SUCCESS: [(f64, f64); 2] = [(2.0, 0.01), (1.0, 0.005)];
 
-/// The real-scan table's header: pairs, successes at [`SCAN_SUCCESS`], median errors, time.
+/// The real-scan table's header: pairs, successes at [`SCAN_SUCCESS`], the results the method
+/// trusted that miss the looser of them, median errors, time.
 pub fn scan_table_header() -> String {
     format!(
-        "| {:<12} | {:<14} | {:>5} | {:>10} | {:>10} | {:>9} | {:>10} | {:>9} |\n|{}|",
+        "| {:<12} | {:<14} | {:>5} | {:>10} | {:>10} | {:>14} | {:>9} | {:>10} | {:>9} |\n|{}|",
         "method",
         "scans",
         "pairs",
         "2° / 1 %",
         "1° / 0.5 %",
+        "wrong, trusted",
         "median R°",
         "median t %",
         "ms/pair",
-        ["-"; 8].map(|_| "---").join("|")
+        ["-"; 9].map(|_| "---").join("|")
     )
 }
 
@@ -228,14 +242,20 @@ pub fn scan_table_row(method: &str, scans: &str, records: &[ScanRecord]) -> Opti
             .count();
         format!("{k} / {}", records.len())
     });
+    let (degrees, share) = SCAN_SUCCESS[0];
+    let wrong_trusted = records
+        .iter()
+        .filter(|r| r.registered && !r.succeeds(degrees, share))
+        .count();
     let time_ms = records.iter().map(|r| r.time_ms).sum::<f64>() / records.len() as f64;
     Some(format!(
-        "| {:<12} | {:<14} | {:>5} | {:>10} | {:>10} | {:>9.3} | {:>10.3} | {:>9.1} |",
+        "| {:<12} | {:<14} | {:>5} | {:>10} | {:>10} | {:>14} | {:>9.3} | {:>10.3} | {:>9.1} |",
         method,
         scans,
         records.len(),
         successes[0],
         successes[1],
+        format!("{wrong_trusted} / {}", records.len()),
         median(records.iter().map(|r| r.rotation_error_deg)),
         100.0 * median(records.iter().map(|r| r.translation_error)),
         time_ms
@@ -515,27 +535,30 @@ mod tests {
     }
 
     #[test]
-    fn a_scan_row_counts_successes_and_takes_medians() {
-        let record = |rotation_error_deg: f64, translation_error: f64| ScanRecord {
+    fn a_scan_row_counts_successes_and_trusted_failures_and_takes_medians() {
+        let record = |rotation_error_deg: f64, translation_error: f64, registered| ScanRecord {
             index: 0,
             source: "a.ply".into(),
             target: "b.ply".into(),
             transform: RigidTransform::identity().to_rows(),
             rotation_error_deg,
             translation_error,
+            registered,
             time_ms: 100.0,
             failure: None,
         };
-        // Successes at 2° / 1 %: the first three; at 1° / 0.5 %: the first two.
+        // Successes at 2° / 1 %: the first three; at 1° / 0.5 %: the first two. Wrong and
+        // trusted: the fourth (the fifth is wrong and doubted).
         let records = [
-            record(0.2, 0.001),
-            record(0.9, 0.004),
-            record(1.5, 0.002),
-            record(0.5, 0.02),
+            record(0.2, 0.001, true),
+            record(0.9, 0.004, true),
+            record(1.5, 0.002, false),
+            record(0.5, 0.02, true),
+            record(30.0, 0.2, false),
         ];
         assert_eq!(
             scan_table_row("auto+icp", "bunny", &records).unwrap(),
-            "| auto+icp     | bunny          |     4 |      3 / 4 |      2 / 4 |     0.700 |      0.300 |     100.0 |"
+            "| auto+icp     | bunny          |     5 |      3 / 5 |      2 / 5 |          1 / 5 |     0.900 |      0.400 |     100.0 |"
         );
         assert_eq!(scan_table_row("x", "y", &[]), None);
         assert_eq!(scan_table_header().lines().count(), 2);
