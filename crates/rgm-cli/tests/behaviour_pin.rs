@@ -1,7 +1,8 @@
 //! The behaviour pin: `rgm register --json` on ModelNet40 test pairs of the benchmark protocol
 //! (`rgm pairs`), with every method, must give the transforms recorded in
 //! `tests/golden/register_transforms.json`, to 1e-9 per matrix entry (bit-identical is
-//! expected: the same arithmetic in the same order gives the same bits).
+//! expected: the same arithmetic in the same order gives the same bits), and trust them or not
+//! (`registered`) as recorded.
 //!
 //! It guards redesigns that must not change results. A change that is meant to change results
 //! regenerates the file with `scripts/regen-behaviour-pin.sh` (which sets `RGM_PIN_BLESS=1`) and
@@ -67,9 +68,17 @@ fn rgm(args: &[&str]) -> String {
     String::from_utf8(out.stdout).expect("utf-8 output")
 }
 
-/// One pinned registration: its key (`setting/index/variant`), the method name the command
-/// reported and the 4×4 transform.
-type Pinned = BTreeMap<String, (String, [[f64; 4]; 4])>;
+/// What one registration is pinned by: the method name the command reported, whether it
+/// trusted the result, and the 4×4 transform.
+#[derive(Clone, Debug, PartialEq)]
+struct Entry {
+    method: String,
+    registered: bool,
+    transform: [[f64; 4]; 4],
+}
+
+/// The pinned registrations by key (`setting/index/variant`).
+type Pinned = BTreeMap<String, Entry>;
 
 /// Writes the pairs of every setting into `dir` and registers them with every variant.
 fn register_all(data: &Path, dir: &Path) -> Pinned {
@@ -109,12 +118,22 @@ fn register_all(data: &Path, dir: &Path) -> Pinned {
                 args.extend_from_slice(options);
                 let value: serde_json::Value = serde_json::from_str(&rgm(&args)).unwrap();
                 let key = format!("{setting}/{}/{variant}", pair["index"]);
-                let method = value["method"].as_str().unwrap().to_string();
-                pinned.insert(key, (method, transform(&value["transform"])));
+                pinned.insert(key, entry(&value));
             }
         }
     }
     pinned
+}
+
+/// The pinned parts of `rgm register --json`'s output, or of a golden file's entry.
+fn entry(value: &serde_json::Value) -> Entry {
+    Entry {
+        method: value["method"].as_str().expect("a method").to_string(),
+        registered: value["registered"]
+            .as_bool()
+            .expect("registered: true or false"),
+        transform: transform(&value["transform"]),
+    }
 }
 
 fn transform(rows: &serde_json::Value) -> [[f64; 4]; 4] {
@@ -139,10 +158,7 @@ fn read_golden(path: &Path) -> Pinned {
         .as_object()
         .expect("a \"registrations\" object")
         .iter()
-        .map(|(key, entry)| {
-            let method = entry["method"].as_str().unwrap().to_string();
-            (key.clone(), (method, transform(&entry["transform"])))
-        })
+        .map(|(key, value)| (key.clone(), entry(value)))
         .collect()
 }
 
@@ -156,12 +172,17 @@ fn write_golden(path: &Path, pinned: &Pinned) {
     // One registration per line, so that a regeneration's diff names the registrations it moved.
     let lines: Vec<String> = pinned
         .iter()
-        .map(|(key, (method, t))| {
-            let entry = serde_json::json!({ "method": method, "transform": t });
+        .map(|(key, found)| {
+            let entry = serde_json::json!({
+                "method": found.method,
+                "registered": found.registered,
+                "transform": found.transform,
+            });
             format!("    {}: {entry}", serde_json::Value::from(key.as_str()))
         })
         .collect();
-    let about = "rgm register --json transforms on ModelNet40 test pairs (setting/index/variant); \
+    let about = "rgm register --json transforms, and whether each is trusted, on ModelNet40 test \
+                 pairs (setting/index/variant); \
                  crates/rgm-cli/tests/behaviour_pin.rs checks them, \
                  scripts/regen-behaviour-pin.sh regenerates them";
     let text = format!(
@@ -174,18 +195,25 @@ fn write_golden(path: &Path, pinned: &Pinned) {
     std::fs::write(path, text).unwrap();
 }
 
-/// Every difference between `found` and `golden`, one line each: a method name or a transform
-/// entry further than [`TOLERANCE`] apart, or a registration only one of them has.
+/// Every difference between `found` and `golden`, one line each: a method name, a
+/// `registered`, or a transform entry further than [`TOLERANCE`] apart, or a registration only
+/// one of them has.
 fn differences(found: &Pinned, golden: &Pinned) -> Vec<String> {
     let mut out = Vec::new();
-    for (key, (method, t)) in found {
-        let Some((want_method, want)) = golden.get(key) else {
+    for (key, found) in found {
+        let Some(pinned) = golden.get(key) else {
             out.push(format!("{key}: not in the golden file"));
             continue;
         };
+        let (method, want_method) = (&found.method, &pinned.method);
         if method != want_method {
             out.push(format!("{key}: method {method}, pinned {want_method}"));
         }
+        if found.registered != pinned.registered {
+            let (registered, want) = (found.registered, pinned.registered);
+            out.push(format!("{key}: registered {registered}, pinned {want}"));
+        }
+        let (t, want) = (&found.transform, &pinned.transform);
         let worst = (0..16)
             .map(|k| (t[k / 4][k % 4] - want[k / 4][k % 4]).abs())
             .fold(0.0, f64::max);
@@ -242,17 +270,26 @@ fn a_changed_value_fails_the_pin() {
         [0.0, 0.0, 1.0, 0.0],
         [0.0, 0.0, 0.0, 1.0],
     ];
-    let golden = Pinned::from([("partial/0/rgm".to_string(), ("rgm".to_string(), t))]);
+    let pinned = |method: &str, registered, transform| {
+        let entry = Entry {
+            method: method.to_string(),
+            registered,
+            transform,
+        };
+        Pinned::from([("partial/0/rgm".to_string(), entry)])
+    };
+    let golden = pinned("rgm", true, t);
     assert!(differences(&golden, &golden).is_empty());
     let mut moved = t;
     moved[0][3] += 2e-9;
-    let found = Pinned::from([("partial/0/rgm".to_string(), ("rgm".to_string(), moved))]);
-    assert_eq!(differences(&found, &golden).len(), 1);
+    assert_eq!(differences(&pinned("rgm", true, moved), &golden).len(), 1);
     moved[0][3] = t[0][3] + 5e-10;
-    let found = Pinned::from([("partial/0/rgm".to_string(), ("rgm".to_string(), moved))]);
-    assert!(differences(&found, &golden).is_empty());
-    let renamed = Pinned::from([("partial/0/rgm".to_string(), ("rgm+icp".to_string(), t))]);
-    assert_eq!(differences(&renamed, &golden).len(), 1);
+    assert!(differences(&pinned("rgm", true, moved), &golden).is_empty());
+    assert_eq!(differences(&pinned("rgm+icp", true, t), &golden).len(), 1);
+    assert_eq!(
+        differences(&pinned("rgm", false, t), &golden),
+        ["partial/0/rgm: registered false, pinned true"]
+    );
     assert_eq!(
         differences(&Pinned::new(), &golden),
         ["partial/0/rgm: pinned but not run"]
