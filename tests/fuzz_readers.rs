@@ -115,20 +115,12 @@ fn the_memory_bound_catches_an_allocation_from_a_count() {
     assert!(caught.is_err());
 }
 
-/// A fresh folder for one test's files.
-fn scratch(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("rgm-fuzz-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
 /// Issue 27, case 7: a 40 GB sparse `.ply` aborted rgm (an allocation of its size). A sparse
 /// file larger than any memory, of every format, is refused from its size, before a byte is
 /// read or allocated.
 #[test]
 fn sparse_files_larger_than_memory_are_refused_from_their_size() {
-    let dir = scratch("sparse");
+    let dir = rgm_tests::Scratch::new("fuzz-sparse");
     for format in FORMATS {
         let path = dir.join(format!("huge.{}", format.extensions()[0]));
         let mut file = std::fs::File::create(&path).unwrap();
@@ -154,7 +146,6 @@ fn sparse_files_larger_than_memory_are_refused_from_their_size() {
             "{err}"
         );
     }
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// Issue 27, case 7: a garbage `.npy` was read whole before its magic string was checked. Its
@@ -162,7 +153,7 @@ fn sparse_files_larger_than_memory_are_refused_from_their_size() {
 /// reading nothing else.
 #[test]
 fn a_garbage_npy_is_refused_for_its_magic_string_unread() {
-    let dir = scratch("garbage-npy");
+    let dir = rgm_tests::Scratch::new("fuzz-garbage-npy");
     let path = dir.join("garbage.npy");
     std::fs::File::create(&path)
         .unwrap()
@@ -172,13 +163,12 @@ fn a_garbage_npy_is_refused_for_its_magic_string_unread() {
     let err = read.unwrap_err().to_string();
     assert!(peak < 1 << 20, "{peak} bytes");
     assert!(err.contains("missing the magic string"), "{err}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// FIFOs, folders and devices are refused without being opened (a FIFO would block).
 #[test]
 fn fifos_and_devices_are_refused_unopened() {
-    let dir = scratch("fifo");
+    let dir = rgm_tests::Scratch::new("fuzz-fifo");
     let fifo = dir.join("pipe.ply");
     assert!(std::process::Command::new("mkfifo")
         .arg(&fifo)
@@ -192,5 +182,4 @@ fn fifos_and_devices_are_refused_unopened() {
         let err = rgm_data::read_point_cloud(path).unwrap_err().to_string();
         assert!(err.contains(", not a file"), "{err}");
     }
-    std::fs::remove_dir_all(&dir).unwrap();
 }

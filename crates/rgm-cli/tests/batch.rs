@@ -7,6 +7,8 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use rgm_tests::Scratch;
+
 fn rgm(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_rgm"))
         .args(args)
@@ -16,14 +18,6 @@ fn rgm(args: &[&str]) -> Output {
 
 fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-/// A fresh folder for one test's files.
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("rgm-batch-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
 }
 
 /// The first `count` partial test pairs written by `rgm pairs` into `dir/pairs`; their
@@ -76,7 +70,7 @@ fn by_pair(lines: &[serde_json::Value]) -> HashMap<(String, String), serde_json:
 
 #[test]
 fn every_line_is_what_rgm_register_json_prints_for_its_pair() {
-    let dir = scratch("same");
+    let dir = Scratch::new("batch-same");
     let list = written_pairs(&dir, 3);
     let output = dir.join("out.jsonl");
     let out = rgm(&[
@@ -123,7 +117,7 @@ fn every_line_is_what_rgm_register_json_prints_for_its_pair() {
 
 #[test]
 fn a_rerun_registers_only_the_pairs_without_a_line_and_never_writes_one_twice() {
-    let dir = scratch("resume");
+    let dir = Scratch::new("batch-resume");
     let list = written_pairs(&dir, 6);
     let output = dir.join("out.jsonl");
     let run = || {
@@ -189,7 +183,7 @@ fn a_rerun_registers_only_the_pairs_without_a_line_and_never_writes_one_twice() 
 
 #[test]
 fn a_killed_run_finishes_on_a_rerun_without_redoing_its_pairs() {
-    let dir = scratch("killed");
+    let dir = Scratch::new("batch-killed");
     let list = written_pairs(&dir, 8);
     let output = dir.join("out.jsonl");
     let args = [
@@ -241,7 +235,7 @@ fn a_killed_run_finishes_on_a_rerun_without_redoing_its_pairs() {
 
 #[test]
 fn a_pair_that_fails_is_a_line_naming_why_and_the_status_says_so() {
-    let dir = scratch("fails");
+    let dir = Scratch::new("batch-fails");
     let list = written_pairs(&dir, 2);
     let csv = dir.join("list.csv");
     std::fs::write(
@@ -288,7 +282,7 @@ fn a_pair_that_fails_is_a_line_naming_why_and_the_status_says_so() {
 
 #[test]
 fn errors_in_the_list_name_the_file_the_line_and_the_value() {
-    let dir = scratch("list");
+    let dir = Scratch::new("batch-list");
     let cases = [
         (
             "header.csv",
@@ -393,7 +387,7 @@ fn errors_in_the_list_name_the_file_the_line_and_the_value() {
 
 #[test]
 fn a_second_run_on_a_locked_output_is_refused_and_changes_nothing() {
-    let dir = scratch("locked");
+    let dir = Scratch::new("batch-locked");
     let list = written_pairs(&dir, 2);
     let output = dir.join("out.jsonl");
     let args = [
@@ -432,7 +426,7 @@ fn a_second_run_on_a_locked_output_is_refused_and_changes_nothing() {
 
 #[test]
 fn a_resume_with_other_settings_is_refused_naming_the_setting() {
-    let dir = scratch("settings");
+    let dir = Scratch::new("batch-settings");
     let list = written_pairs(&dir, 1);
     let output = dir.join("out.jsonl");
     let weights = Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -239,9 +239,7 @@ fn register_transforms_match_the_pinned_values() {
         );
         return;
     }
-    let dir = std::env::temp_dir().join(format!("rgm-behaviour-pin-{}", std::process::id()));
-    let found = register_all(&data, &dir);
-    std::fs::remove_dir_all(&dir).unwrap();
+    let found = register_all(&data, &rgm_tests::Scratch::new("behaviour-pin"));
     if std::env::var_os("RGM_PIN_BLESS").is_some() {
         write_golden(&golden_path(), &found);
         println!(

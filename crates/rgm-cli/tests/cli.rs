@@ -6,6 +6,7 @@ use std::process::{Command, Output};
 use rgm_data::{read_point_cloud, write_point_cloud};
 use rgm_geom::euler::rotation_xyz_intrinsic;
 use rgm_geom::{Matrix4, RigidTransform, Vector3};
+use rgm_tests::Scratch;
 
 fn rgm(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_rgm"))
@@ -21,13 +22,6 @@ fn stdout(out: &Output) -> String {
         String::from_utf8_lossy(&out.stderr)
     );
     String::from_utf8(out.stdout.clone()).expect("utf-8 output")
-}
-
-/// A fresh folder for one test's files.
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("rgm-cli-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
 }
 
 fn data_dir() -> PathBuf {
@@ -52,7 +46,7 @@ fn parse_transform(value: &serde_json::Value) -> RigidTransform {
 
 #[test]
 fn register_recovers_a_known_pose_as_json() {
-    let dir = scratch("register");
+    let dir = Scratch::new("cli-register");
     let source = read_point_cloud(airplane()).unwrap();
     let target = source.transformed(&known_pose());
     let (src, tgt, aligned) = (
@@ -101,7 +95,7 @@ fn register_recovers_a_known_pose_as_json() {
 
 #[test]
 fn register_prints_a_matrix_by_default() {
-    let dir = scratch("text");
+    let dir = Scratch::new("cli-text");
     let cloud = read_point_cloud(airplane()).unwrap();
     let path = dir.join("same.ply");
     write_point_cloud(&path, &cloud).unwrap();
@@ -128,7 +122,7 @@ fn register_prints_a_matrix_by_default() {
 
 #[test]
 fn bad_input_names_the_file_and_the_line() {
-    let dir = scratch("bad");
+    let dir = Scratch::new("cli-bad");
     let bad = dir.join("bad.xyz");
     std::fs::write(&bad, "0 0 0\n1 2 nope\n").unwrap();
     let out = rgm(&["register", bad.to_str().unwrap(), bad.to_str().unwrap()]);
@@ -182,7 +176,7 @@ fn eval_on_the_validation_split_says_so_and_differs_from_test() {
 
 #[test]
 fn rgm_passes_are_an_option() {
-    let dir = scratch("passes");
+    let dir = Scratch::new("cli-passes");
     let (src, tgt) = known_pair(&dir);
     let (src, tgt) = (src.to_str().unwrap(), tgt.to_str().unwrap());
     for passes in ["1", "3"] {
@@ -208,7 +202,7 @@ fn rgm_passes_are_an_option() {
 fn every_nth_pair_is_the_same_pair_as_in_the_whole_run() {
     let data = data_dir();
     let written = |name: &str, extra: &[&str]| -> Vec<serde_json::Value> {
-        let dir = scratch(name);
+        let dir = Scratch::new(&format!("cli-{name}"));
         let mut args = vec![
             "pairs",
             "--setting",
@@ -240,7 +234,7 @@ fn every_nth_pair_is_the_same_pair_as_in_the_whole_run() {
 
 #[test]
 fn pairs_then_score_reproduces_eval() {
-    let dir = scratch("pairs");
+    let dir = Scratch::new("cli-pairs");
     let data = data_dir();
     stdout(&rgm(&[
         "pairs",
@@ -342,7 +336,7 @@ fn known_pair(dir: &Path) -> (PathBuf, PathBuf) {
 
 #[test]
 fn register_runs_rgm_with_the_built_in_model() {
-    let dir = scratch("builtin");
+    let dir = Scratch::new("cli-builtin");
     let (src, tgt) = known_pair(&dir);
     let (src, tgt) = (src.to_str().unwrap(), tgt.to_str().unwrap());
     let plain: serde_json::Value = serde_json::from_str(&stdout(&rgm(&[
@@ -385,7 +379,7 @@ fn register_runs_rgm_with_the_built_in_model() {
 
 #[test]
 fn register_by_default_runs_fgr_first_and_rgm_when_asked_and_names_the_winner() {
-    let dir = scratch("auto");
+    let dir = Scratch::new("cli-auto");
     let (src, tgt) = known_pair(&dir);
     let (src, tgt) = (src.to_str().unwrap(), tgt.to_str().unwrap());
     let names = |out: &serde_json::Value| -> Vec<String> {
@@ -442,7 +436,7 @@ fn register_by_default_runs_fgr_first_and_rgm_when_asked_and_names_the_winner() 
 
 #[test]
 fn rgm_options_with_another_method_are_refused() {
-    let dir = scratch("options");
+    let dir = Scratch::new("cli-options");
     let (src, tgt) = known_pair(&dir);
     let (src, tgt) = (src.to_str().unwrap(), tgt.to_str().unwrap());
     for (args, says) in [
@@ -469,7 +463,7 @@ fn rgm_options_with_another_method_are_refused() {
 
 #[test]
 fn fgr_refined_with_icp_is_named_and_recovers_the_pose() {
-    let dir = scratch("fgr-icp");
+    let dir = Scratch::new("cli-fgr-icp");
     let (src, tgt) = known_pair(&dir);
     let (src, tgt) = (src.to_str().unwrap(), tgt.to_str().unwrap());
     let out: serde_json::Value = serde_json::from_str(&stdout(&rgm(&[
@@ -569,7 +563,7 @@ fn cube_scans(dir: &Path) {
 
 #[test]
 fn scan_pairs_are_written_scored_and_evaluated() {
-    let dir = scratch("scans");
+    let dir = Scratch::new("cli-scans");
     let scans = dir.join("cube");
     std::fs::create_dir_all(&scans).unwrap();
     cube_scans(&scans);
@@ -643,7 +637,7 @@ fn scan_pairs_are_written_scored_and_evaluated() {
 
 #[test]
 fn scan_folders_go_by_their_own_names_and_never_share_one() {
-    let dir = scratch("scan-names");
+    let dir = Scratch::new("cli-scan-names");
     for site in ["site1", "site2"] {
         let scans = dir.join(site).join("cube");
         std::fs::create_dir_all(&scans).unwrap();
@@ -680,7 +674,7 @@ fn scan_folders_go_by_their_own_names_and_never_share_one() {
 #[test]
 fn scans_without_an_overlapping_pair_say_so() {
     // Issue 44, D14: `rgm eval --scans` printed an empty table and succeeded.
-    let dir = scratch("scan-apart");
+    let dir = Scratch::new("cli-scan-apart");
     let scans = dir.join("apart");
     std::fs::create_dir_all(&scans).unwrap();
     let grid = |x0: f64| {
@@ -721,7 +715,7 @@ fn scans_without_an_overlapping_pair_say_so() {
 #[test]
 fn threads_past_four_per_core_are_cut_with_a_warning() {
     // Issue 44, D10: --threads 65535 started 65,535 threads: no result in 150 s.
-    let dir = scratch("threads");
+    let dir = Scratch::new("cli-threads");
     let (src, tgt) = known_pair(&dir);
     let cores = std::thread::available_parallelism().unwrap().get();
     let out = rgm(&[
@@ -751,7 +745,8 @@ fn scene_pairs_of_a_gt_log_are_scored_by_the_3dmatch_criterion() {
     // Two pairs of the redkitchen fragments (../shared/data/scenes): 6 → 5, and 21 → 5, where
     // 27 % of the source overlaps the target and RANSAC found a room slid along its floor.
     let kitchen = data_dir().join("../scenes/redkitchen");
-    let dir = scratch("scenes").join("kitchen");
+    let scratch = Scratch::new("cli-scenes");
+    let dir = scratch.join("kitchen");
     std::fs::create_dir_all(&dir).unwrap();
     for k in [5, 6, 21] {
         let name = format!("cloud_bin_{k}.ply.gz");
@@ -824,7 +819,8 @@ fn a_lidar_pair_is_not_slid_along_the_road() {
     // (a metre on a 50 m sweep), the object cascade's result slid 0.17 m along the road won
     // over the scene stage's right one; the scene stage's judge now looks closer.
     let lidar = data_dir().join("../scenes/lidar");
-    let dir = scratch("lidar").join("lidar");
+    let scratch = Scratch::new("cli-lidar");
+    let dir = scratch.join("lidar");
     std::fs::create_dir_all(&dir).unwrap();
     for name in ["251370668.pcd", "251371071.pcd"] {
         std::fs::copy(lidar.join(name), dir.join(name)).unwrap();

@@ -5,18 +5,13 @@ use std::os::unix::process::ExitStatusExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 
+use rgm_tests::Scratch;
+
 fn rgm(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_rgm"))
         .args(args)
         .output()
         .expect("the rgm binary runs")
-}
-
-/// A fresh folder for one test's files.
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("rgm-hostile-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
 }
 
 fn data_dir() -> String {
@@ -61,7 +56,7 @@ fn with_closed_stdout(args: &[&str]) -> Output {
 /// Issue 14, case 5: `rgm register a b | head -1` and `rgm eval … | true` panicked (exit 101).
 #[test]
 fn a_closed_stdout_ends_rgm_quietly() {
-    let dir = scratch("pipe");
+    let dir = Scratch::new("hostile-pipe");
     let (a, b) = clouds(&dir);
     let register = with_closed_stdout(&["register", &a, &b, "--method", "icp"]);
     let data = data_dir();
@@ -71,14 +66,13 @@ fn a_closed_stdout_ends_rgm_quietly() {
         assert_eq!(out.status.signal(), Some(13), "SIGPIPE: {stderr}");
         assert!(stderr.is_empty(), "{stderr}");
     }
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// Issue 14, case 9: an output that cannot be written was found only after the work (an
 /// evaluation printed its table, then failed); `render --out x.jpg` wrote PNG bytes.
 #[test]
 fn outputs_are_checked_before_the_work() {
-    let dir = scratch("out");
+    let dir = Scratch::new("hostile-out");
     let (a, b) = clouds(&dir);
     let data = data_dir();
     let nowhere = dir.join("missing/folder/pairs.json");
@@ -140,7 +134,6 @@ fn outputs_are_checked_before_the_work() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(png.exists());
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// Issue 14, case 9: `eval --limit 0` printed an internal message ("needs at least 1 points").
@@ -163,7 +156,7 @@ fn a_limit_of_zero_pairs_is_refused_by_name() {
 /// Issue 14, case 2: a `.ply` name for `/dev/zero` was read until memory ran out.
 #[test]
 fn an_endless_device_is_refused() {
-    let dir = scratch("zero");
+    let dir = Scratch::new("hostile-zero");
     let link = dir.join("zero.ply");
     std::os::unix::fs::symlink("/dev/zero", &link).unwrap();
     let link = link.to_str().unwrap();
@@ -173,7 +166,6 @@ fn an_endless_device_is_refused() {
         err.trim_end(),
         format!("rgm: error: {link}: is a device, FIFO or socket, not a file")
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// An airplane of the test split and its copy at the pose (20°, 10°, 30°), t (0.2, −0.1, 0.3),
@@ -205,7 +197,7 @@ fn json(out: &Output) -> serde_json::Value {
 /// fitness 0.999.
 #[test]
 fn a_far_outlier_in_each_cloud_is_registered_right() {
-    let dir = scratch("outlier");
+    let dir = Scratch::new("hostile-outlier");
     let (src, tgt, truth) = airplane_pair(&dir, Some(1e5));
     let out = rgm(&["register", &src, &tgt, "--json"]);
     assert!(
@@ -220,14 +212,13 @@ fn a_far_outlier_in_each_cloud_is_registered_right() {
     let error = rgm_geom::RigidTransform::new(truth.rotation.transpose() * r, Default::default());
     assert!(error.rotation_angle_deg() < 2.0, "{value}");
     assert!(value["fitness"].as_f64().unwrap() < 1.0, "{value}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// Issue 27: clouds without overlap got a transform reported as right; now `registered: false`
 /// with the reason, a failure status, and no `--out` written.
 #[test]
 fn clouds_without_overlap_are_not_registered() {
-    let dir = scratch("no-overlap");
+    let dir = Scratch::new("hostile-no-overlap");
     let (src, _, _) = airplane_pair(&dir, None);
     // A 10 × 10 × 10 grid 0.2 apart: nowhere within 0.02 of the airplane's surface but by chance.
     let grid: String = (0..1000)
@@ -262,14 +253,13 @@ fn clouds_without_overlap_are_not_registered() {
         "{err}"
     );
     assert!(!moved.exists());
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// Issue 27, cases 10 and 12: `--gamma nan` was accepted (saved as `null`: the run could never
 /// be resumed); `--until-epoch 0` reported best weights that did not exist.
 #[test]
 fn training_options_out_of_range_are_refused_by_name() {
-    let dir = scratch("train");
+    let dir = Scratch::new("hostile-train");
     let run = dir.join("run");
     let run = run.to_str().unwrap();
     let data = data_dir();
@@ -299,7 +289,6 @@ fn training_options_out_of_range_are_refused_by_name() {
         assert!(err.contains(expected), "{extra:?}: {err}");
         assert!(!Path::new(run).join("config.json").exists(), "{extra:?}");
     }
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// Issue 27, case 13: scoring zero pairs said "needs at least 1 point", a 5-row transform
@@ -307,7 +296,7 @@ fn training_options_out_of_range_are_refused_by_name() {
 /// a method without correspondences: `tests/render.rs`).
 #[test]
 fn scores_of_the_wrong_shape_say_what_is_wrong() {
-    let dir = scratch("score");
+    let dir = Scratch::new("hostile-score");
     airplane_pair(&dir, None);
     let identity = "[[1,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]";
     let manifest =
@@ -356,7 +345,6 @@ fn scores_of_the_wrong_shape_say_what_is_wrong() {
         err.contains("pair 0 has time_ms -1e300; a time is a number of milliseconds from 0 up"),
         "{err}"
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// Waits for `child`, killing it (and failing) if it has not ended after a minute: a guard
@@ -399,7 +387,7 @@ fn through_fifo(dir: &Path, name: &str, args: &[&str]) -> (Output, String) {
 /// got an empty file, and the real write then waited for a second reader); so did `eval --json`.
 #[test]
 fn a_fifo_output_gets_its_content_once() {
-    let dir = scratch("fifo");
+    let dir = Scratch::new("hostile-fifo");
     let (a, b) = clouds(&dir);
     let (_, moved) = through_fifo(
         &dir,
@@ -414,14 +402,13 @@ fn a_fifo_output_gets_its_content_once() {
     let (_, json) = through_fifo(&dir, "eval.json", &eval);
     let value: serde_json::Value = serde_json::from_str(&json).unwrap();
     assert_eq!(value["pairs"].as_array().unwrap().len(), 1);
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// Issue 27, case 8: `--out` a dangling symbolic link, and the run fails: the link was deleted
 /// and an empty file left at its target. On success the link became a regular file.
 #[test]
 fn a_symbolic_link_out_stays_a_link() {
-    let dir = scratch("link");
+    let dir = Scratch::new("hostile-link");
     let (a, b) = clouds(&dir);
     let link = dir.join("link.xyz");
     std::os::unix::fs::symlink("moved.xyz", &link).unwrap();
@@ -455,14 +442,13 @@ fn a_symbolic_link_out_stays_a_link() {
     assert!(is_link(&link));
     let moved = std::fs::read_to_string(dir.join("moved.xyz")).unwrap();
     assert_eq!(moved.lines().count(), 125);
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// Issue 27, case 5: under `ulimit -v 400000` RGM spun at 100 % CPU for good (OpenBLAS retrying
 /// its allocations); the estimate checked only the system's free memory.
 #[test]
 fn a_memory_limit_is_respected_with_the_estimate() {
-    let dir = scratch("ulimit");
+    let dir = Scratch::new("hostile-ulimit");
     let (src, tgt, _) = airplane_pair(&dir, None);
     let child = Command::new("sh")
         .args(["-c", "ulimit -v 400000 && exec \"$0\" \"$@\""])
@@ -480,14 +466,13 @@ fn a_memory_limit_is_respected_with_the_estimate() {
             && err.contains("this process may take (free memory, ulimit -v, cgroup limit)"),
         "{err}"
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// `--json /dev/stdout` with stdout redirected to a file: written into that file, not through a
 /// temporary file renamed over it (the redirection would keep writing to the replaced one).
 #[test]
 fn json_to_dev_stdout_reaches_a_redirected_stdout() {
-    let dir = scratch("stdout");
+    let dir = Scratch::new("hostile-stdout");
     let log = dir.join("log.txt");
     let status = Command::new(env!("CARGO_BIN_EXE_rgm"))
         .args([
@@ -512,5 +497,4 @@ fn json_to_dev_stdout_reaches_a_redirected_stdout() {
     );
     let said = text.find("wrote per-pair results to /dev/stdout").unwrap();
     assert!(table < json && json < said, "{text}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -6,6 +6,7 @@ use std::process::{Command, Output};
 use rgm_data::{read_point_cloud, write_point_cloud};
 use rgm_geom::euler::rotation_xyz_intrinsic;
 use rgm_geom::{RigidTransform, Vector3};
+use rgm_tests::Scratch;
 
 use rgm_viz::{registration_figure, PANEL_SIZE as PANEL, WHITE};
 
@@ -14,12 +15,6 @@ fn rgm(args: &[&str]) -> Output {
         .args(args)
         .output()
         .expect("the rgm binary runs")
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("rgm-render-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
 }
 
 /// A test shape as source and the same shape moved by a known pose as target.
@@ -86,7 +81,7 @@ fn render(src: &str, tgt: &str, transform: &Path, out: &Path) -> (usize, usize, 
 
 #[test]
 fn the_true_transform_puts_the_source_on_the_target() {
-    let dir = scratch("true");
+    let dir = Scratch::new("render-true");
     let (src, tgt, pose) = clouds(&dir);
     let (right, wrong) = (dir.join("right.txt"), dir.join("identity.txt"));
     write_transform(&right, &pose);
@@ -108,12 +103,11 @@ fn the_true_transform_puts_the_source_on_the_target() {
     let (on, off) = (drawn_after(&aligned, width), drawn_after(&apart, width));
     assert!(on > 2000, "{on}");
     assert!(5 * on < 4 * off, "{on} pixels aligned vs {off} apart");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
 fn renders_what_register_json_found() {
-    let dir = scratch("json");
+    let dir = Scratch::new("render-json");
     let (src, tgt, pose) = clouds(&dir);
     let out = rgm(&["register", &src, &tgt, "--method", "fgr", "--json"]);
     assert!(
@@ -130,12 +124,11 @@ fn renders_what_register_json_found() {
     // FGR's transform on a clean pair is the true one up to ~1e-4: the same footprint.
     let (a, b) = (drawn_after(&found, width), drawn_after(&truth, width));
     assert!(a.abs_diff(b) * 50 < b, "{a} vs {b} pixels");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
 fn a_transform_file_with_missing_numbers_is_refused_clearly() {
-    let dir = scratch("bad");
+    let dir = Scratch::new("render-bad");
     let (src, tgt, _) = clouds(&dir);
     let bad = dir.join("bad.txt");
     std::fs::write(&bad, "1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0\n").unwrap();
@@ -151,13 +144,12 @@ fn a_transform_file_with_missing_numbers_is_refused_clearly() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("15 numbers"), "{err}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// `rgm render` of the known pair with `method`, asking for the correspondence matrix against
 /// the true pose: the scratch folder (clouds.png, matrix.png) and the command's output.
-fn render_matrix(name: &str, method: &str) -> (PathBuf, Output) {
-    let dir = scratch(name);
+fn render_matrix(name: &str, method: &str) -> (Scratch, Output) {
+    let dir = Scratch::new(&format!("render-{name}"));
     let (src, tgt, pose) = clouds(&dir);
     let truth = dir.join("truth.txt");
     write_transform(&truth, &pose);
@@ -195,7 +187,6 @@ fn the_matrix_of_a_classical_method_is_its_inliers() {
         .unwrap_or_else(|| panic!("{said}"));
     assert!(correct > 90.0, "{said}");
     assert!(dir.join("matrix.png").exists());
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -216,7 +207,6 @@ fn the_matrix_of_the_built_in_model_is_drawn_in_blocks() {
         let centre = b * 10 + 5;
         assert_ne!(pixels[centre * width + centre], WHITE, "diagonal block {b}");
     }
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// The JSON data of the page at `path`.
@@ -229,7 +219,7 @@ fn page_data(path: &Path) -> serde_json::Value {
 
 #[test]
 fn render_html_writes_the_page_of_a_given_transform_without_a_png() {
-    let dir = scratch("html-given");
+    let dir = Scratch::new("render-html-given");
     let (src, tgt, pose) = clouds(&dir);
     let transform = dir.join("t.txt");
     write_transform(&transform, &pose);
@@ -262,7 +252,7 @@ fn render_html_writes_the_page_of_a_given_transform_without_a_png() {
 
 #[test]
 fn register_html_thins_to_the_budget_and_lists_the_candidates() {
-    let dir = scratch("html-register");
+    let dir = Scratch::new("render-html-register");
     let (src, tgt, _) = clouds(&dir);
     let page = dir.join("page.html");
     let out = rgm(&[
@@ -296,7 +286,7 @@ fn register_html_thins_to_the_budget_and_lists_the_candidates() {
 
 #[test]
 fn html_options_are_checked_before_any_work() {
-    let dir = scratch("html-bad");
+    let dir = Scratch::new("render-html-bad");
     let (src, tgt, _) = clouds(&dir);
     let txt = dir.join("page.txt");
     let out = rgm(&["register", &src, &tgt, "--html", txt.to_str().unwrap()]);
