@@ -14,8 +14,8 @@ use crate::{PointCloud, RigidTransform};
 /// within [`FrameRule::within`] of the origin, the larger cloud's extent (its largest distance
 /// from its centroid) in [`FrameRule::extent`]. Any other pair is centred (each cloud on its
 /// centroid) and scaled by one common factor so that the farthest point of either cloud lies on
-/// the unit sphere ([`Normalisation::centred`]): the same pair at half or twice the size reaches
-/// the methods as the same clouds, centred.
+/// the unit sphere ([`Normalisation::centred`]): the same pair at any two sizes outside the
+/// frame's window reaches the methods as the same clouds, centred.
 ///
 /// All of it is measured on each cloud's [`FrameRule::near`] points: a far outlier (a stray
 /// return of a scanner) neither decides the frame nor shrinks the pair to a dot in it, and the

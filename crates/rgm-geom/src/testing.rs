@@ -28,7 +28,7 @@ pub const SCORING: Scoring = Scoring {
 pub const FRAME: FrameRule = FrameRule {
     far_outlier: 12.0,
     within: 2.0,
-    extent: (0.7, 1.7),
+    extent: (0.3, 1.7),
 };
 
 /// ModelNet40's density: 1,024 points in the unit sphere.

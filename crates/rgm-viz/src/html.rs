@@ -392,7 +392,7 @@ mod tests {
     const FRAME: FrameRule = FrameRule {
         far_outlier: 12.0,
         within: 2.0,
-        extent: (0.7, 1.7),
+        extent: (0.3, 1.7),
     };
 
     /// Standard base64 back to bytes (what the page's `atob` does).
