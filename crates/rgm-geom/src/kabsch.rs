@@ -18,6 +18,10 @@ use crate::{GeomError, Result, RigidTransform};
 /// the points are taken as collinear.
 const RANK_TOLERANCE: f64 = 1e-10;
 
+/// The fewest pairs of positive weight that fix a pose: two leave a rotation about their line
+/// free.
+pub const MIN_POINTS: usize = 3;
+
 /// The transform `t_target_source` that best maps `source[i]` onto `target[i]` in the weighted
 /// least-squares sense. Weights must be finite and ≥ 0; points with zero weight are ignored.
 pub fn kabsch(
@@ -57,10 +61,10 @@ pub fn kabsch(
             why: "all weights are zero".into(),
         });
     }
-    if positive < 3 {
+    if positive < MIN_POINTS {
         return Err(GeomError::TooFewPoints {
             op: OP,
-            needed: 3,
+            needed: MIN_POINTS,
             got: positive,
         });
     }

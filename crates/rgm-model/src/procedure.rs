@@ -3,6 +3,8 @@
 //! network's soft correspondences, inlier selection, linear assignment and a weighted Kabsch
 //! that moves the chain's cloud; then cycle consistency between the two chains' last hard
 //! correspondences, and ONE weighted Kabsch of the original clouds with what survives.
+//! Where fewer than three pairs survive, which fix no pose, the forward chain's own pairs are
+//! used (the reference's Kabsch of two pairs is degenerate: its pose is arbitrary).
 //!
 //! Around it, what real inputs need: large clouds are subsampled for matching (the transform
 //! found applies to the full clouds). The network expects the unit-sphere frame of its training
@@ -25,7 +27,7 @@ use crate::options::TRAINING_DENSITY;
 use ndarray::Array2;
 use rand::{rngs::StdRng, SeedableRng};
 use rgm_geom::fgr::Progress;
-use rgm_geom::kabsch::kabsch;
+use rgm_geom::kabsch::{self, kabsch};
 use rgm_geom::registrar::{MethodId, Registrar, Registration};
 use rgm_geom::{Fit, Point3, PointCloud, Prepared, RigidTransform};
 use rgm_match::{hard_match, Correspondences, MatchConfig};
@@ -405,7 +407,15 @@ impl RgmRegistrar {
                 let start = Instant::now();
                 let kept = forward.cycle_consistent(&reverse)?;
                 add_since(&mut self.times.matching, start);
-                kept
+                // Chains that agree on fewer pairs than fix a pose leave the forward chain's
+                // own: the reference's Kabsch of two pairs is degenerate, its pose arbitrary.
+                if kept.pairs().len() < kabsch::MIN_POINTS
+                    && forward.pairs().len() >= kabsch::MIN_POINTS
+                {
+                    forward
+                } else {
+                    kept
+                }
             }
             None => forward,
         };

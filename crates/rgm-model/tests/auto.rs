@@ -416,3 +416,27 @@ fn icp_doubts_the_wrong_pose_it_slides_into_and_trusts_a_right_one() {
         );
     }
 }
+
+#[test]
+fn the_network_alone_registers_a_pair_whose_chains_agree_on_two_pairs() {
+    // Partial test pair 1520: the forward and reverse chains of the built-in model end with
+    // only two pairs in common, which fix no pose. `rgm --no-refine` failed there ("kabsch:
+    // needs at least 3 points, got 2"); the forward chain's own pairs now give the pose.
+    let data =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/modelnet40_npy1024");
+    let dataset = ModelNet40::open(&data).unwrap();
+    let shapes = dataset.split(Split::Test, false);
+    let pair = PairGenerator::new(Setting::Partial)
+        .test_pair(&shapes, 1520)
+        .unwrap();
+    let mut rgm = MethodOptions {
+        method: rgm_model::MethodName::Rgm,
+        refine: false,
+        ..MethodOptions::default()
+    }
+    .build()
+    .unwrap();
+    let found = rgm.register(&pair.source, &pair.target).unwrap();
+    let (rotation, _) = errors(&found.result.t_target_source, &pair.t_target_source, 1.0);
+    assert!(rotation < 10.0, "{rotation}°");
+}
