@@ -1,4 +1,4 @@
-//! Inputs shared by the benches: seeded random data at the paper's sizes.
+//! Inputs shared by the benches (and rgm-geom's tests): seeded random data at the paper's sizes.
 
 use nalgebra::Point3;
 use rand::{rngs::StdRng, Rng, SeedableRng};

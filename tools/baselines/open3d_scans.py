@@ -47,8 +47,9 @@ def fpfh(pcd, voxel):
     return down, feature
 
 
-def register(src, tgt, args):
-    voxel = args.voxel_share * max(size(src), size(tgt))
+def ransac_icp(src, tgt, voxel, icp_distances):
+    """Open3D's tutorial pipeline at voxel `voxel`: FPFH + RANSAC on the downsampled pair, then
+    point-to-plane ICP on the full clouds at each of `icp_distances` in turn."""
     src_down, src_fpfh = fpfh(src, voxel)
     tgt_down, tgt_fpfh = fpfh(tgt, voxel)
     distance = 1.5 * voxel
@@ -66,10 +67,14 @@ def register(src, tgt, args):
     )
     tgt.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2 * voxel, max_nn=30))
     transform = ransac.transformation
-    stages = [0.4 * voxel] + ([0.4 * voxel / 5] if args.second_stage else [])
-    for d in stages:
+    for d in icp_distances:
         transform = reg.registration_icp(src, tgt, d, transform, reg.TransformationEstimationPointToPlane()).transformation
     return transform
+
+
+def register(src, tgt, args):
+    voxel = args.voxel_share * max(size(src), size(tgt))
+    return ransac_icp(src, tgt, voxel, [0.4 * voxel] + ([0.4 * voxel / 5] if args.second_stage else []))
 
 
 def main():

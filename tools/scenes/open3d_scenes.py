@@ -18,6 +18,7 @@ import math
 import os
 import pathlib
 import statistics
+import sys
 import tempfile
 import time
 
@@ -26,8 +27,9 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 import open3d as o3d  # noqa: E402
 
-reg = o3d.pipelines.registration
 root = pathlib.Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(root / "tools/baselines"))
+from open3d_scans import ransac_icp  # noqa: E402
 data = root.parent / "shared/data/scenes/redkitchen"
 
 
@@ -45,26 +47,8 @@ def read(k):
     raise SystemExit(f"no fragment {k} in {data}")
 
 
-def fpfh(pcd, voxel):
-    down = pcd.voxel_down_sample(voxel)
-    down.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2 * voxel, max_nn=30))
-    feature = reg.compute_fpfh_feature(down, o3d.geometry.KDTreeSearchParamHybrid(radius=5 * voxel, max_nn=100))
-    return down, feature
-
-
 def register(src, tgt, voxel):
-    src_down, src_fpfh = fpfh(src, voxel)
-    tgt_down, tgt_fpfh = fpfh(tgt, voxel)
-    distance = 1.5 * voxel
-    ransac = reg.registration_ransac_based_on_feature_matching(
-        src_down, tgt_down, src_fpfh, tgt_fpfh, False, distance,
-        reg.TransformationEstimationPointToPoint(False), 3,
-        [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(distance)],
-        reg.RANSACConvergenceCriteria(100000, 0.999),
-    )
-    tgt.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2 * voxel, max_nn=30))
-    return reg.registration_icp(src, tgt, 0.4 * voxel, ransac.transformation,
-                                reg.TransformationEstimationPointToPlane()).transformation
+    return np.asarray(ransac_icp(src, tgt, voxel, [0.4 * voxel]))
 
 
 def main():

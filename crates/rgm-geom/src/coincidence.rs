@@ -16,7 +16,7 @@ use std::time::Instant;
 use crate::best_of::turned_poses;
 use crate::cloud::median;
 use crate::fgr::Progress;
-use crate::frame::{FrameRule, Normalisation};
+use crate::frame::{FrameRule, NearPair, Normalisation};
 use crate::prepared::indexed_pair;
 use crate::registrar::{elapsed_ms, MethodId, Registrar, Registration};
 use crate::thinning::Density;
@@ -371,21 +371,13 @@ impl<C: Check> InFrame<C> {
         target: (&PointCloud, &KnnIndex),
         measure: impl FnOnce((&PointCloud, &KnnIndex), (&PointCloud, &KnnIndex), &Normalisation) -> T,
     ) -> T {
-        let frame = Normalisation::of_pair(source.0, target.0, &self.rule);
-        if frame.is_identity() {
-            return measure(source, target, &frame);
+        let near = NearPair::of(source.0, target.0, &self.rule);
+        if near.frame.is_identity() {
+            return measure(source, target, &near.frame);
         }
-        let rule = &self.rule;
-        let near = |cloud: &PointCloud| cloud.select(&rule.near(cloud));
-        let indexed = |cloud: PointCloud| {
-            let index = KnnIndex::new(&cloud.points);
-            (cloud, index)
-        };
-        let ((fs, fsi), (ft, fti)) = rayon::join(
-            || indexed(frame.source(&near(source.0))), // (N', 3)
-            || indexed(frame.target(&near(target.0))), // (M', 3)
-        );
-        measure((&fs, &fsi), (&ft, &fti), &frame)
+        let (fs, ft) = near.moved(); // (N', 3), (M', 3)
+        let (fsi, fti) = rayon::join(|| KnnIndex::new(&fs.points), || KnnIndex::new(&ft.points));
+        measure((&fs, &fsi), (&ft, &fti), &near.frame)
     }
 }
 

@@ -58,6 +58,41 @@ fn radius(cloud: &PointCloud, centre: &Point3<f64>) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// A pair's points that are not far outliers, and the frame `rule` gives the pair by them: what
+/// every user of the frame starts from.
+pub struct NearPair {
+    pub frame: Normalisation,
+    /// Each cloud's near points ([`FrameRule::near`]): their indices in the cloud, and the
+    /// points (as given, not yet moved). // (N',) and (N', 3)
+    pub source: (Vec<usize>, PointCloud),
+    pub target: (Vec<usize>, PointCloud), // (M',) and (M', 3)
+}
+
+impl NearPair {
+    /// The near points of `source` and `target` (each cloud's side by side) and their frame.
+    pub fn of(source: &PointCloud, target: &PointCloud, rule: &FrameRule) -> Self {
+        let near_of = |cloud: &PointCloud| {
+            let kept = rule.near(cloud);
+            let selected = cloud.select(&kept);
+            (kept, selected)
+        };
+        let (source, target) = rayon::join(|| near_of(source), || near_of(target));
+        Self {
+            frame: Normalisation::of_near_pair(&source.1, &target.1, rule),
+            source,
+            target,
+        }
+    }
+
+    /// Both clouds' near points moved into the frame (side by side).
+    pub fn moved(&self) -> (PointCloud, PointCloud) {
+        rayon::join(
+            || self.frame.source(&self.source.1),
+            || self.frame.target(&self.target.1),
+        )
+    }
+}
+
 impl Normalisation {
     /// No change.
     pub fn identity() -> Self {
@@ -70,16 +105,12 @@ impl Normalisation {
 
     /// The normalisation of the pair (`source`, `target`) by `rule`, as described on the type.
     pub fn of_pair(source: &PointCloud, target: &PointCloud, rule: &FrameRule) -> Self {
-        let (source, target) = rayon::join(
-            || source.select(&rule.near(source)),
-            || target.select(&rule.near(target)),
-        );
-        Self::of_near_pair(&source, &target, rule)
+        NearPair::of(source, target, rule).frame
     }
 
     /// [`Normalisation::of_pair`] of clouds whose far outliers ([`FrameRule::near`]) are left
     /// out already.
-    pub(crate) fn of_near_pair(source: &PointCloud, target: &PointCloud, rule: &FrameRule) -> Self {
+    fn of_near_pair(source: &PointCloud, target: &PointCloud, rule: &FrameRule) -> Self {
         // (centroid, extent from it, reach from the origin) of one cloud; the two side by side.
         let measure = |cloud: &PointCloud| {
             let centre = cloud.centroid();

@@ -15,7 +15,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use crate::fgr::{self, FgrConfig, Progress};
-use crate::frame::{FrameRule, Normalisation};
+use crate::frame::{FrameRule, NearPair, Normalisation};
 use crate::icp::{self, IcpConfig};
 use crate::refine::RefineConfig;
 use crate::refiner::{AtSpacing, Refiner};
@@ -335,19 +335,9 @@ impl<R> Normalised<R> {
         run: impl FnOnce(&Prepared, &Prepared, &Normalisation) -> Result<Registration, E>,
     ) -> Result<Registration, E> {
         let start = Instant::now();
-        // Each cloud's own steps side by side: its far outliers left out, then moved.
-        let near_of = |cloud: &PointCloud| {
-            let kept = rule.near(cloud);
-            let selected = cloud.select(&kept);
-            (kept, selected)
-        };
-        let ((source_near, source_kept), (target_near, target_kept)) =
-            rayon::join(|| near_of(source), || near_of(target));
-        let frame = Normalisation::of_near_pair(&source_kept, &target_kept, rule);
-        let (fs, ft) = rayon::join(
-            || frame.source(&source_kept), // (N', 3)
-            || frame.target(&target_kept), // (M', 3)
-        );
+        let near = NearPair::of(source, target, rule);
+        let (fs, ft) = near.moved(); // (N', 3), (M', 3)
+        let (frame, source_near, target_near) = (near.frame, near.source.0, near.target.0);
         let mut found = run(&Prepared::new(&fs), &Prepared::new(&ft), &frame)?;
         let result = &mut found.result;
         result.t_target_source = frame.undo(&result.t_target_source);

@@ -46,23 +46,10 @@ pub fn far_pose() -> crate::RigidTransform {
     )
 }
 
-/// A dense scene, in metres: a floor, two walls, a box on the floor and a slanted board,
-/// sampled at `n` random points, reproducible from `seed`.
+/// A dense scene, in metres ([`rgm_benches::room_points`]): a floor, two walls, a box on the
+/// floor and a slanted board, sampled at `n` random points, reproducible from `seed`.
 pub fn room(n: usize, seed: u64) -> PointCloud {
-    let mut rng = StdRng::seed_from_u64(seed);
-    let points = (0..n)
-        .map(|_| {
-            let (u, v): (f64, f64) = (rng.gen(), rng.gen());
-            match rng.gen_range(0..5) {
-                0 => Point3::new(4.0 * u, 3.0 * v, 0.0),
-                1 => Point3::new(4.0 * u, 0.0, 2.5 * v),
-                2 => Point3::new(0.0, 3.0 * u, 2.5 * v),
-                3 => Point3::new(1.5 + 0.6 * u, 1.0 + 0.4 * v, 0.5),
-                _ => Point3::new(3.0 + 0.5 * u, 2.0 + 0.8 * v, 0.3 + 0.6 * u),
-            }
-        })
-        .collect();
-    PointCloud::new(points)
+    PointCloud::new(rgm_benches::room_points(n, seed))
 }
 
 /// `register` (a global estimator on a scene pair) on two samplings of [`room`], one moved by
