@@ -1,9 +1,29 @@
 //! What the `rgm` command (`src/main.rs`) shares with the project's runner (`cargo xtask`): its
 //! progress bars, one look for every long task.
 
+use std::io::Write;
 use std::sync::OnceLock;
 
+use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
+
+/// `println!` that returns the error instead of panicking: standard output on a full disk or
+/// `/dev/full` fails the command with a message (rc 1), not a backtrace.
+#[macro_export]
+macro_rules! outln {
+    ($($arg:tt)*) => {
+        $crate::write_line(format_args!($($arg)*))
+    };
+}
+
+/// One line on standard output, written through at once (see [`outln!`]).
+pub fn write_line(line: std::fmt::Arguments) -> anyhow::Result<()> {
+    let mut out = std::io::stdout().lock();
+    out.write_fmt(line)
+        .and_then(|()| out.write_all(b"\n"))
+        .and_then(|()| out.flush())
+        .context("writing standard output")
+}
 
 /// A progress bar on stderr for `len` steps of `what` (hidden when stderr is not a terminal).
 pub fn progress(len: usize, what: &str) -> ProgressBar {

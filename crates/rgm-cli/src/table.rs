@@ -12,15 +12,7 @@ pub fn report(
     json: Option<&std::path::Path>,
 ) -> anyhow::Result<Summary> {
     let summary = Summary::from_records(records)?;
-    println!("{}", table_header());
-    println!("{}", table_row(method, setting, &summary));
-    if summary.failures > 0 {
-        println!(
-            "({} of {} pairs failed and were scored as the identity)",
-            summary.failures,
-            records.len()
-        );
-    }
+    // The file first: output that cannot be printed (a full disk) loses no result.
     if let Some(path) = json {
         let value = serde_json::json!({
             "method": method,
@@ -28,7 +20,18 @@ pub fn report(
             "pairs": records,
         });
         crate::write_text(path, &serde_json::to_string_pretty(&value)?)?;
-        println!("wrote per-pair results to {}", path.display());
+    }
+    rgm_cli::outln!("{}", table_header())?;
+    rgm_cli::outln!("{}", table_row(method, setting, &summary))?;
+    if summary.failures > 0 {
+        rgm_cli::outln!(
+            "({} of {} pairs failed and were scored as the identity)",
+            summary.failures,
+            records.len()
+        )?;
+    }
+    if let Some(path) = json {
+        rgm_cli::outln!("wrote per-pair results to {}", path.display())?;
     }
     Ok(summary)
 }

@@ -490,11 +490,156 @@ fn json_to_dev_stdout_reaches_a_redirected_stdout() {
         .unwrap();
     assert!(status.success());
     let text = std::fs::read_to_string(&log).unwrap();
-    // The table first, then the JSON, then the line that says so: nothing overwritten.
-    let (table, json) = (
-        text.find("| method").unwrap(),
+    // The JSON first (issue 59, E5: the file before what may fail to print), then the table,
+    // then the line that says so: nothing overwritten.
+    let (json, table) = (
         text.find("\"pairs\"").unwrap(),
+        text.find("| method").unwrap(),
     );
     let said = text.find("wrote per-pair results to /dev/stdout").unwrap();
-    assert!(table < json && json < said, "{text}");
+    assert!(json < table && table < said, "{text}");
+}
+
+/// Runs rgm with its standard output `/dev/full` (every write fails: a full disk).
+fn onto_a_full_disk(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_rgm"))
+        .args(args)
+        .stdout(
+            std::fs::OpenOptions::new()
+                .write(true)
+                .open("/dev/full")
+                .unwrap(),
+        )
+        .output()
+        .unwrap()
+}
+
+/// Issue 59, E5: `println!` panicked (rc 101, a backtrace) when stdout could not be written, and
+/// `rgm eval --json FILE` printed its table before writing FILE, so the whole evaluation was
+/// lost. Now rc 1 with a message, and FILE written first.
+#[test]
+fn a_stdout_that_cannot_be_written_fails_cleanly_and_keeps_the_files() {
+    let dir = Scratch::new("hostile-full");
+    let (a, b) = clouds(&dir);
+    let register = onto_a_full_disk(&["register", &a, &b, "--method", "fgr", "--no-refine"]);
+    let json = dir.join("eval.json");
+    let data = data_dir();
+    let eval = onto_a_full_disk(&[
+        "eval",
+        "--method",
+        "icp",
+        "--limit",
+        "2",
+        "--data",
+        &data,
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    for out in [register, eval] {
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{stderr}");
+        assert!(
+            stderr.contains("writing standard output") && !stderr.contains("panicked"),
+            "{stderr}"
+        );
+    }
+    let written: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(written["pairs"].as_array().unwrap().len(), 2);
+}
+
+/// Issue 59, E8: one unreadable fragment among a scene's pairs ended `rgm eval --scenes` after
+/// the other pairs were registered (no table, no `--json`, rc 1). It is now a failed row.
+#[test]
+fn an_unreadable_fragment_is_a_failed_row_not_the_end_of_the_run() {
+    let dir = Scratch::new("hostile-scene");
+    let (a, b) = clouds(&dir);
+    let scene = dir.join("scene");
+    std::fs::create_dir_all(&scene).unwrap();
+    std::fs::rename(&a, scene.join("cloud_bin_0.xyz")).unwrap();
+    std::fs::rename(&b, scene.join("cloud_bin_1.xyz")).unwrap();
+    std::fs::write(scene.join("cloud_bin_2.xyz"), "1 2 three\n").unwrap();
+    // Both pairs map onto fragment 0; fragment 1 is fragment 0 moved by 0.01 along x.
+    let block = |j: usize, x: f64| format!("0\t{j}\t3\n1 0 0 {x}\n0 1 0 0\n0 0 1 0\n0 0 0 1\n");
+    std::fs::write(scene.join("gt.log"), block(1, -0.01) + &block(2, 0.0)).unwrap();
+    let json = dir.join("out.json");
+    let out = rgm(&[
+        "eval",
+        "--scenes",
+        scene.to_str().unwrap(),
+        "--method",
+        "icp",
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let text = String::from_utf8_lossy(&out.stdout);
+    let row = text.lines().find(|l| l.starts_with("| icp")).unwrap();
+    let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+    assert_eq!(&cells[2..5], ["scene", "2", "1 / 2"], "{row}");
+    let records: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let pairs = records["folders"][0]["pairs"].as_array().unwrap();
+    assert_eq!(pairs[0]["failure"], serde_json::Value::Null, "{}", pairs[0]);
+    let failure = pairs[1]["failure"].as_str().unwrap();
+    assert!(
+        failure.starts_with("reading the pair:") && failure.contains("cloud_bin_2.xyz"),
+        "{failure}"
+    );
+    assert_eq!(pairs[1]["registered"], false);
+    assert!(text.contains("(1 of 2 pairs failed"), "{text}");
+}
+
+/// A PCD `binary_compressed` file of `points` xyz points whose LZF data is one literal byte and
+/// then back references of the longest kind (264 bytes from 3): 4 MB for 30 million points.
+fn lzf_bomb(points: usize) -> Vec<u8> {
+    let size = points * 12;
+    let mut lzf = vec![0u8, 0x42]; // one literal byte
+    let mut left = size - 1;
+    while left > 0 {
+        let run = left.min(264);
+        assert!(run >= 2, "a back reference copies at least 2 bytes");
+        if run - 2 < 7 {
+            lzf.extend([((run - 2) << 5) as u8, 0]);
+        } else {
+            lzf.extend([0xe0, (run - 2 - 7) as u8, 0]);
+        }
+        left -= run;
+    }
+    let mut pcd = format!(
+        "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {points}\nHEIGHT 1\n\
+         VIEWPOINT 0 0 0 1 0 0 0\nPOINTS {points}\nDATA binary_compressed\n"
+    )
+    .into_bytes();
+    pcd.extend((lzf.len() as u32).to_le_bytes());
+    pcd.extend((size as u32).to_le_bytes());
+    pcd.extend(lzf);
+    pcd
+}
+
+/// Issue 59, E1: a small PCD declaring more points than memory holds passed the LZF check (88×)
+/// and was allocated at once: SIGABRT (rc 134). It is now refused, by size, before allocating.
+#[test]
+fn a_compressed_pcd_too_large_for_memory_is_refused_before_it_is_allocated() {
+    let dir = Scratch::new("hostile-lzf");
+    let (a, _) = clouds(&dir);
+    let bomb = dir.join("bomb.pcd");
+    std::fs::write(&bomb, lzf_bomb(30_000_000)).unwrap();
+    // 30 million points take 720 MB, and their decompressed data 360 MB more.
+    let child = Command::new("sh")
+        .args(["-c", "ulimit -v 800000 && exec \"$0\" \"$@\""])
+        .arg(env!("CARGO_BIN_EXE_rgm"))
+        .args(["register", bomb.to_str().unwrap(), &a, "--method", "icp"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let out = wait_or_kill(child);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("bomb.pcd: 30000000 points (and 0.4 GB of data to decode) need 1.1 GB"),
+        "{err}"
+    );
 }

@@ -26,6 +26,22 @@ pub enum DataError {
         bytes: u64,
         available: Option<u64>,
     },
+    /// A file that declares more points than the memory this process may allocate holds
+    /// (`None`: the allocation failed): refused before anything is allocated for them.
+    #[error(
+        "{}: {points} points (and {:.1} GB of data to decode) need {:.1} GB, more than the {} this process may allocate",
+        path.display(),
+        *decoded as f64 / 1e9,
+        *needs as f64 / 1e9,
+        available.map_or("memory".to_string(), |a| format!("{:.1} GB of memory", a as f64 / 1e9))
+    )]
+    PointsTooLarge {
+        path: PathBuf,
+        points: u64,
+        decoded: u64,
+        needs: u64,
+        available: Option<u64>,
+    },
     /// A text file whose points could take more memory than the process may allocate.
     #[error(
         "{}: {:.1} GB of text, whose points may take {:.1} GB, more than the {:.1} GB of memory this process may allocate",

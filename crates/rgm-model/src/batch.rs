@@ -277,9 +277,11 @@ impl Output {
             )));
         }
         let file = lock(&path)?;
-        let text = std::fs::read_to_string(&path).map_err(BatchError::io("reading", &path))?;
+        // Bytes, not text: a line cut inside a character by a kill or a full disk is dropped
+        // like any cut-off line, wherever it was cut.
+        let bytes = std::fs::read(&path).map_err(BatchError::io("reading", &path))?;
         let header = json!({HEADER_KEY: FORMAT, "settings": settings}).to_string() + "\n";
-        if text.is_empty() {
+        if bytes.is_empty() {
             (&file)
                 .write_all(header.as_bytes())
                 .map_err(BatchError::io("writing", &path))?;
@@ -289,8 +291,13 @@ impl Output {
                 done: HashMap::new(),
             });
         }
-        let (first, rest) = text.split_at(text.find('\n').map_or(text.len(), |n| n + 1));
-        check_header(&path, first, settings)?;
+        let (first, rest) = bytes.split_at(
+            bytes
+                .iter()
+                .position(|&b| b == b'\n')
+                .map_or(bytes.len(), |n| n + 1),
+        );
+        check_header(&path, &String::from_utf8_lossy(first), settings)?;
         let (done, kept, rewrite) = earlier_lines(&path, rest, progress)?;
         let file = match rewrite {
             true => replace(&path, &(header + &kept))?,
@@ -435,19 +442,30 @@ fn check_header(path: &Path, first: &str, settings: &Map<String, Value>) -> Resu
 }
 
 /// The outcome of each pair an earlier run finished, from the lines after the header
-/// (`text`), the lines to keep, and whether the file must be rewritten without others: a
+/// (`bytes`), the lines to keep, and whether the file must be rewritten without others: a
 /// cut-off last line, a failed pair's line, a repeated pair's. A line that is not one of ours
 /// is an error.
 fn earlier_lines(
     path: &Path,
-    text: &str,
+    bytes: &[u8],
     progress: &dyn Progress,
 ) -> Result<(HashMap<Key, Outcome>, String, bool), BatchError> {
     let mut done = HashMap::new();
-    let (complete, cut) = match text.rfind('\n') {
-        Some(end) => text.split_at(end + 1),
-        None => ("", text),
+    let (complete, cut) = match bytes.iter().rposition(|&b| b == b'\n') {
+        Some(end) => bytes.split_at(end + 1),
+        None => (&[][..], bytes),
     };
+    let complete = std::str::from_utf8(complete).map_err(|e| {
+        let line = 2 + complete[..e.valid_up_to()]
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count();
+        BatchError::Output(format!(
+            "{}:{line}: not text (a byte that is not UTF-8), so not a line of rgm's batches \
+             (give another output file)",
+            path.display()
+        ))
+    })?;
     let mut rewrite = !cut.is_empty();
     if rewrite {
         progress.note(&format!(
@@ -822,6 +840,41 @@ mod tests {
         ));
         drop(output);
         other.try_lock().unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_last_line_cut_inside_a_character_is_dropped_and_the_run_resumes() {
+        let dir = std::env::temp_dir().join(format!("rgm-batch-utf8-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("out.jsonl");
+        let settings = settings(
+            &MethodOptions::default(),
+            &MethodOptions::default().build().unwrap(),
+        )
+        .unwrap();
+        let header = json!({HEADER_KEY: FORMAT, "settings": settings}).to_string();
+        let done = r#"{"source":"é.ply","target":"b","registered":true}"#;
+        // "ü" is two bytes; the line ends after the first.
+        let mut bytes = format!("{header}\n{done}\n{{\"source\":\"").into_bytes();
+        bytes.push("ü".as_bytes()[0]);
+        std::fs::write(&path, &bytes).unwrap();
+        let output = Output::open(&path, &settings, &()).unwrap();
+        assert_eq!(output.done().len(), 1);
+        drop(output);
+        assert_eq!(
+            std::fs::read_to_string(&path).unwrap(),
+            format!("{header}\n{done}\n")
+        );
+        // A byte that is not UTF-8 inside a finished line is not one of rgm's lines.
+        let mut bytes = format!("{header}\n{done}\n").into_bytes();
+        bytes.extend_from_slice(b"{\"source\":\"\xff\"}\n");
+        std::fs::write(&path, &bytes).unwrap();
+        let error = Output::open(&path, &settings, &())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(error.contains("out.jsonl:3: not text"), "{error}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -306,44 +306,50 @@ impl SceneRecord {
 }
 
 /// Reads `pair` (its source turned by `turn`), runs `method` on it and scores it; a method
-/// error is a failure scored as the identity. An unreadable fragment is an error.
+/// error is a failure scored as the identity. A pair that cannot be read is a failed row with
+/// no result (infinite errors, `null` in JSON), so that one bad fragment costs its own pairs,
+/// not the run.
 pub fn evaluate_scene_pair(
     method: &mut Method,
     pair: &ScenePair,
     turn: Option<&Turn>,
-) -> rgm_data::Result<(SceneRecord, Vec<rgm_data::Warning>)> {
-    let loaded = pair.load(turn)?;
-    let start = Instant::now();
-    let (found, registered, time_ms, failure) =
-        match method.register(&loaded.source, &loaded.target) {
-            Ok(reg) => (
-                reg.result.t_target_source,
-                reg.doubt.is_none(),
-                reg.time_ms,
-                None,
-            ),
-            Err(err) => (
-                RigidTransform::identity(),
-                false,
-                start.elapsed().as_secs_f64() * 1e3,
-                Some(err.to_string()),
-            ),
-        };
-    let (rotation_error_deg, translation_error_m) = loaded.errors(&found);
+) -> (SceneRecord, Vec<rgm_data::Warning>) {
     let (source, target) = pair.names();
-    let record = SceneRecord {
+    let mut record = SceneRecord {
         index: pair.index,
         source,
         target,
         turn: turn.map(|t| t.to_string()),
-        transform: found.to_rows(),
-        rotation_error_deg,
-        translation_error_m,
-        registered,
-        time_ms,
-        failure,
+        transform: RigidTransform::identity().to_rows(),
+        rotation_error_deg: f64::INFINITY,
+        translation_error_m: f64::INFINITY,
+        registered: false,
+        time_ms: 0.0,
+        failure: None,
     };
-    Ok((record, loaded.warnings))
+    let loaded = match pair.load(turn) {
+        Ok(loaded) => loaded,
+        Err(err) => {
+            record.failure = Some(format!("reading the pair: {err}"));
+            return (record, Vec::new());
+        }
+    };
+    let start = Instant::now();
+    let found = match method.register(&loaded.source, &loaded.target) {
+        Ok(reg) => {
+            record.registered = reg.doubt.is_none();
+            record.time_ms = reg.time_ms;
+            reg.result.t_target_source
+        }
+        Err(err) => {
+            record.time_ms = start.elapsed().as_secs_f64() * 1e3;
+            record.failure = Some(err.to_string());
+            RigidTransform::identity()
+        }
+    };
+    (record.rotation_error_deg, record.translation_error_m) = loaded.errors(&found);
+    record.transform = found.to_rows();
+    (record, loaded.warnings)
 }
 
 /// The scene table's header: pairs, successes by the 3DMatch criterion, the results the

@@ -296,8 +296,11 @@ impl Page<'_> {
                 "target": base64(&frame.f32_bytes(&line_target)),
             },
         });
-        // Nothing in the data may end its <script> element early.
-        let data = data.to_string().replace("</", "<\\/");
+        // No `<` in the data: the HTML parser would read `</script` as the end of its element
+        // and `<!--` followed by `<script` as the start of its double-escaped state, which
+        // swallows the viewer's script. JSON has `<` only inside strings, where `\u003c` is
+        // the same character.
+        let data = data.to_string().replace('<', "\\u003c");
         let (head, rest) = TEMPLATE
             .split_once("/*DATA*/")
             .expect("the template marks its data");
@@ -711,6 +714,24 @@ mod tests {
         let refined = ResultNotes::of_registration("rgm+icp", &registration);
         assert!(refined.correspondences.is_empty());
         assert!(refined.correspondences_note.contains("inliers"));
+    }
+
+    #[test]
+    fn a_title_that_opens_a_comment_and_a_script_leaves_the_viewer_whole() {
+        let cloud = helix(10);
+        let mut page = page(&cloud, &cloud, RigidTransform::identity());
+        page.title = "scan <!--<script> 1.ply".to_string();
+        let html = page.to_html().unwrap();
+        assert_eq!(data_of(&html)["title"], page.title);
+        // The data element holds no `<` at all, so no parser state can start inside it.
+        let start = html.find(r#"<script id="rgm-data""#).unwrap();
+        let data = &html[start..][html[start..].find('>').unwrap() + 1..];
+        let data = &data[..data.find("</script>").unwrap()];
+        assert!(!data.contains('<'), "{data}");
+        assert_eq!(
+            html.matches("<script").count(),
+            TEMPLATE.matches("<script").count()
+        );
     }
 
     #[test]

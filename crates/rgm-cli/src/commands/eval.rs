@@ -146,7 +146,7 @@ fn run_scenes(args: &Args, method: &Method) -> Result<()> {
         .collect();
     let succeeded = AtomicUsize::new(0);
     let results = evaluate_folders(runs, method, &args.workers, |method, &(pair, turn), bar| {
-        let (record, warnings) = evaluate_scene_pair(method, pair, turn)?;
+        let (record, warnings) = evaluate_scene_pair(method, pair, turn);
         for warning in warnings {
             bar.suspend(|| eprintln!("rgm: {warning}"));
         }
@@ -216,16 +216,25 @@ impl<R: Clone + serde::Serialize> Table<R> {
         results: &[(String, Vec<R>)],
         json: Option<&Path>,
     ) -> Result<()> {
-        println!("{}", self.header);
+        // The file first: output that cannot be printed (a full disk) loses no result.
+        if let Some(path) = json {
+            let folders: Vec<serde_json::Value> = results
+                .iter()
+                .map(|(name, records)| serde_json::json!({self.kind: name, "pairs": records}))
+                .collect();
+            let value = serde_json::json!({"method": method, "folders": folders});
+            crate::write_text(path, &serde_json::to_string_pretty(&value)?)?;
+        }
+        rgm_cli::outln!("{}", self.header)?;
         for (name, records) in results {
             if let Some(row) = (self.row)(method, name, records) {
-                println!("{row}");
+                rgm_cli::outln!("{row}")?;
             }
         }
         if results.len() > 1 {
             let all: Vec<R> = results.iter().flat_map(|(_, r)| r.clone()).collect();
             if let Some(row) = (self.row)(method, "all", &all) {
-                println!("{row}");
+                rgm_cli::outln!("{row}")?;
             }
         }
         let total: usize = results.iter().map(|(_, r)| r.len()).sum();
@@ -234,16 +243,12 @@ impl<R: Clone + serde::Serialize> Table<R> {
             .map(|(_, r)| r.iter().filter(|r| (self.failed)(r)).count())
             .sum();
         if failures > 0 {
-            println!("({failures} of {total} pairs failed and were scored as the identity)");
+            rgm_cli::outln!(
+                "({failures} of {total} pairs failed and were scored as the identity)"
+            )?;
         }
         if let Some(path) = json {
-            let folders: Vec<serde_json::Value> = results
-                .iter()
-                .map(|(name, records)| serde_json::json!({self.kind: name, "pairs": records}))
-                .collect();
-            let value = serde_json::json!({"method": method, "folders": folders});
-            crate::write_text(path, &serde_json::to_string_pretty(&value)?)?;
-            println!("wrote per-pair results to {}", path.display());
+            rgm_cli::outln!("wrote per-pair results to {}", path.display())?;
         }
         Ok(())
     }

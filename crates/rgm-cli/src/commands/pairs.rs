@@ -61,7 +61,7 @@ pub fn run(args: Args) -> Result<()> {
     });
     let path = args.out.join("pairs.json");
     crate::write_text(&path, &serde_json::to_string(&manifest)?)?;
-    println!("wrote {} pairs to {}", indices.len(), args.out.display());
+    rgm_cli::outln!("wrote {} pairs to {}", indices.len(), args.out.display())?;
     Ok(())
 }
 
@@ -90,7 +90,7 @@ fn run_scans(args: &Args) -> Result<()> {
         let manifest = serde_json::json!({"scans": name, "pairs": entries});
         let path = out.join("pairs.json");
         crate::write_text(&path, &serde_json::to_string(&manifest)?)?;
-        println!("wrote {} pairs to {}", pairs.len(), out.display());
+        rgm_cli::outln!("wrote {} pairs to {}", pairs.len(), out.display())?;
     }
     Ok(())
 }

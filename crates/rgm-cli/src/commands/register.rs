@@ -69,21 +69,24 @@ pub fn run(args: Args) -> Result<()> {
     if args.json {
         let value =
             rgm_model::batch::result_json(&method, &registration, (source.len(), target.len()));
-        println!("{value}");
+        rgm_cli::outln!("{value}")?;
         return not_registered(doubt);
     }
     not_registered(doubt)?;
-    println!(
+    rgm_cli::outln!(
         "# transform target ← source ({}), y = R x + t",
         method.name()
-    );
+    )?;
     for row in rows {
-        println!(
+        rgm_cli::outln!(
             "{:>12.8} {:>12.8} {:>12.8} {:>12.8}",
-            row[0], row[1], row[2], row[3]
-        );
+            row[0],
+            row[1],
+            row[2],
+            row[3]
+        )?;
     }
-    println!(
+    rgm_cli::outln!(
         "# fitness {:.4}, inlier RMSE {:.6}, correspondences {}, iterations {}{}{}, time {:.1} ms",
         result.fitness,
         result.inlier_rmse,
@@ -96,7 +99,7 @@ pub fn run(args: Args) -> Result<()> {
             " (not converged)"
         },
         registration.time_ms
-    );
+    )?;
     for (k, c) in registration.candidates.iter().enumerate() {
         let mark = if Some(k) == registration.chosen {
             " (chosen)"
@@ -105,14 +108,14 @@ pub fn run(args: Args) -> Result<()> {
         };
         match (c.score, &c.failure) {
             (Some(score), _) => {
-                println!("# candidate {}: overlap score {score:.4}{mark}", c.method)
+                rgm_cli::outln!("# candidate {}: overlap score {score:.4}{mark}", c.method)?
             }
-            (None, Some(why)) => println!("# candidate {}: failed: {why}", c.method),
-            (None, None) => println!("# candidate {}: no score", c.method),
+            (None, Some(why)) => rgm_cli::outln!("# candidate {}: failed: {why}", c.method)?,
+            (None, None) => rgm_cli::outln!("# candidate {}: no score", c.method)?,
         }
     }
     if let Some(out) = &args.out {
-        println!("# wrote the moved source to {}", out.display());
+        rgm_cli::outln!("# wrote the moved source to {}", out.display())?;
     }
     Ok(())
 }

@@ -104,7 +104,7 @@ pub fn run(args: Args) -> Result<()> {
     };
     if let Some(out) = &args.out {
         registration_figure(&source, &target, &transform)?.write_png(out)?;
-        println!("wrote {}", out.display());
+        rgm_cli::outln!("wrote {}", out.display())?;
     }
     args.page.write(
         (&source, &target),
@@ -117,12 +117,12 @@ pub fn run(args: Args) -> Result<()> {
         let correct = Correspondence::rebuild(&moved.points, &target.points);
         let pairs = &found.correspondences;
         correspondence_figure(&correct, pairs, MATRIX_BLOCKS)?.write_png(path)?;
-        println!(
+        rgm_cli::outln!(
             "wrote {}: {} correspondences, {:.1} % correct",
             path.display(),
             pairs.len(),
             100.0 * correct_fraction(&correct, pairs)
-        );
+        )?;
     }
     Ok(())
 }

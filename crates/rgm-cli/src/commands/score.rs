@@ -247,14 +247,17 @@ fn score_scans(args: &Args, found: &Transforms, manifest: &Manifest, scans: &str
         // A tool scored here reports no doubt: each of its results is taken as trusted.
         records.push(ScanRecord::score(&pair, &transform, true, f.time_ms, None));
     }
-    println!("{}", scan_table_header());
-    if let Some(row) = scan_table_row(&found.method, scans, &records) {
-        println!("{row}");
-    }
+    // The file first: output that cannot be printed (a full disk) loses no result.
     if let Some(path) = &args.json {
         let value = serde_json::json!({"method": found.method, "scans": scans, "pairs": records});
         crate::write_text(path, &serde_json::to_string_pretty(&value)?)?;
-        println!("wrote per-pair results to {}", path.display());
+    }
+    rgm_cli::outln!("{}", scan_table_header())?;
+    if let Some(row) = scan_table_row(&found.method, scans, &records) {
+        rgm_cli::outln!("{row}")?;
+    }
+    if let Some(path) = &args.json {
+        rgm_cli::outln!("wrote per-pair results to {}", path.display())?;
     }
     Ok(())
 }

@@ -5,11 +5,15 @@
 //! eastings near 500,000, northings in millions) keep every digit the file holds.
 //!
 //! Written with point format 0 and, per axis, the offset at the middle of the cloud and the
-//! smallest power-of-ten scale (1e-9 or more) that spans it in 32-bit integers: a coordinate
-//! moves by at most half that scale, 1.25e-9 of the cloud's extent (or 5e-10).
+//! smallest power-of-ten scale that spans it in 32-bit integers, from the extent alone (a cloud
+//! a nanometre across keeps its shape): a coordinate moves by at most half that scale, 1.25e-9
+//! of the axis's extent.
 //!
 //! The crate allocates some buffers from sizes in the file; those sizes are checked against the
-//! file's length first ([`check_sizes`]), so a small file cannot ask for gigabytes.
+//! file's length first ([`check_sizes`]), so a small file cannot ask for gigabytes. The points
+//! a file declares are checked against the memory this process may take
+//! ([`super::room_for_points`]), not against a ratio to its length: LASzip stores a stack of
+//! identical points in a fraction of a bit each.
 
 use std::io::{Cursor, Write};
 use std::path::Path;
@@ -22,11 +26,6 @@ use crate::Result;
 /// Bytes of records read at a time (the crate's buffer): a record of a forged length (up to
 /// 64 KiB) must not make the batch large.
 const BATCH_BYTES: u64 = 1 << 17;
-
-/// The most points a LAZ file may declare per byte it holds. LASzip's best ratios on real data
-/// are near 10:1 of a 20-byte record, a few bytes a point; 16 points a byte is beyond any real
-/// file and bounds what a forged count makes rgm decode.
-const LAZ_POINTS_PER_BYTE: u64 = 16;
 
 /// ASPRS LAS.
 pub struct Las;
@@ -126,15 +125,8 @@ fn check_sizes(bytes: &[u8]) -> std::result::Result<(), String> {
             }
         }
     }
-    for count in counts {
-        if compressed {
-            if count > LAZ_POINTS_PER_BYTE.saturating_mul(len) {
-                return Err(format!(
-                    "{count} points cannot be in {len} bytes of LAZ (at most \
-                     {LAZ_POINTS_PER_BYTE} a byte)"
-                ));
-            }
-        } else if count.saturating_mul(record) > len.saturating_sub(offset_to_points) {
+    for count in counts.into_iter().filter(|_| !compressed) {
+        if count.saturating_mul(record) > len.saturating_sub(offset_to_points) {
             return Err(format!(
                 "{count} points of {record} bytes need more than the {} bytes after byte \
                  {offset_to_points}",
@@ -193,7 +185,7 @@ fn read_points(bytes: &[u8], path: &Path, name: &'static str) -> Result<Vec<Poin
     let declared = reader.header().number_of_points();
     let record = reader.header().point_format().len() as u64;
     let batch = (BATCH_BYTES / record.max(1)).max(1);
-    let mut points = Vec::new();
+    let mut points = super::room_for_points(path, declared, 0)?;
     loop {
         let batch = reader
             .read_points(batch)
@@ -212,32 +204,55 @@ fn read_points(bytes: &[u8], path: &Path, name: &'static str) -> Result<Vec<Poin
     Ok(points)
 }
 
-/// Per axis, the offset (the middle of the cloud) and the smallest power-of-ten scale from 1e-9
-/// whose 32-bit integers span the cloud.
+/// Per axis, the offset (the middle of the cloud) and the smallest power-of-ten scale whose
+/// 32-bit integers span the cloud (an axis of no extent takes the largest axis's scale, 1 when
+/// every point is the same).
 fn transforms(cloud: &PointCloud) -> las::Vector<las::Transform> {
-    let axis = |a: usize| {
+    let middle_and_half = |a: usize| {
         let (lo, hi) = cloud
             .points
             .iter()
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
                 (lo.min(p[a]), hi.max(p[a]))
             });
-        let (offset, half) = if lo <= hi {
+        if lo <= hi {
             ((lo + hi) / 2.0, (hi - lo) / 2.0)
         } else {
             (0.0, 0.0)
-        };
-        let mut scale = 1e-9;
-        while half / scale > 2e9 {
-            scale *= 10.0;
         }
-        las::Transform { scale, offset }
+    };
+    let axes = [0, 1, 2].map(middle_and_half);
+    let widest = axes.iter().map(|&(_, half)| half).fold(0.0, f64::max);
+    let transform = |(offset, half): (f64, f64)| las::Transform {
+        scale: spanning_scale(if half > 0.0 { half } else { widest }),
+        offset,
     };
     las::Vector {
-        x: axis(0),
-        y: axis(1),
-        z: axis(2),
+        x: transform(axes[0]),
+        y: transform(axes[1]),
+        z: transform(axes[2]),
     }
+}
+
+/// The smallest power of ten `s` with `half / s ≤ 2e9` (32-bit integers then span ±`half`),
+/// exactly as its decimal spelling reads; 1 for no extent.
+fn spanning_scale(half: f64) -> f64 {
+    if !(half > 0.0 && half.is_finite()) {
+        return 1.0;
+    }
+    let power = |k: i32| {
+        format!("1e{k}")
+            .parse::<f64>()
+            .expect("a decimal power of ten")
+    };
+    let mut k = (half / 2e9).log10().floor() as i32;
+    while half / power(k) > 2e9 {
+        k += 1;
+    }
+    while half / power(k - 1) <= 2e9 {
+        k -= 1;
+    }
+    power(k)
 }
 
 /// Writes LAS 1.2 point format 0 (compressed by LASzip when `laz`).

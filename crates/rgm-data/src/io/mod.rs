@@ -188,6 +188,31 @@ pub fn read_point_cloud_warned(path: impl AsRef<Path>) -> Result<(PointCloud, Ve
     Ok((checked_cloud(points, path)?, warnings))
 }
 
+/// An empty list with room for the `count` points a file at `path` declares, or its refusal
+/// when they (and `decoded` more bytes the reader must hold, as PCD's decompressed data) need
+/// more memory than this process may allocate: a small file may declare billions of points,
+/// and Rust aborts on an allocation that fails. Every reader sizes its points here.
+pub fn room_for_points(path: &Path, count: u64, decoded: u64) -> Result<Vec<Point3<f64>>> {
+    let point = std::mem::size_of::<Point3<f64>>() as u64;
+    let needs = count.saturating_mul(point).saturating_add(decoded);
+    let too_large = |available| DataError::PointsTooLarge {
+        path: path.to_path_buf(),
+        points: count,
+        decoded,
+        needs,
+        available,
+    };
+    if let Some(available) = crate::memory::available().filter(|&a| needs > a) {
+        return Err(too_large(Some(available)));
+    }
+    let mut points = Vec::new();
+    usize::try_from(count)
+        .ok()
+        .and_then(|n| points.try_reserve_exact(n).ok())
+        .ok_or_else(|| too_large(None))?;
+    Ok(points)
+}
+
 /// Bytes of memory a byte of a text file may take to read: itself, and 24 bytes of point for
 /// each 6 bytes of the shortest line holding one (`0 0 0`).
 const TEXT_COST: u64 = 5;

@@ -14,7 +14,7 @@ use std::path::Path;
 
 use rgm_geom::{Point3, PointCloud};
 
-use super::{format_error, line_error, lzf, PointFormat, Warning};
+use super::{format_error, line_error, lzf, room_for_points, PointFormat, Warning};
 use crate::Result;
 
 const FORMAT: &str = "PCD";
@@ -315,16 +315,19 @@ pub fn parse(bytes: &[u8], path: &Path, warnings: &mut Vec<Warning>) -> Result<V
                 .iter()
                 .map(|&(i, _)| fields[..i].iter().map(Field::bytes).sum())
                 .collect();
-            body.chunks_exact(point_bytes.max(1))
-                .take(header.points)
-                .map(|p| {
-                    let value = |a: usize| {
-                        let field = &fields[axes[a].0];
-                        field.decode(&p[offsets[a]..offsets[a] + field.size])
-                    };
-                    Point3::new(value(0), value(1), value(2))
-                })
-                .collect()
+            let mut points = room_for_points(path, header.points as u64, 0)?;
+            points.extend(
+                body.chunks_exact(point_bytes.max(1))
+                    .take(header.points)
+                    .map(|p| {
+                        let value = |a: usize| {
+                            let field = &fields[axes[a].0];
+                            field.decode(&p[offsets[a]..offsets[a] + field.size])
+                        };
+                        Point3::new(value(0), value(1), value(2))
+                    }),
+            );
+            points
         }
         Data::BinaryCompressed => {
             let word = |at: usize| {
@@ -346,6 +349,8 @@ pub fn parse(bytes: &[u8], path: &Path, warnings: &mut Vec<Warning>) -> Result<V
                     header.points
                 )));
             }
+            // Sized before decompressing: LZF may expand 88 times, and the points take more.
+            let mut points = room_for_points(path, header.points as u64, size as u64)?;
             let data =
                 lzf::decompress(data, size).map_err(|why| data_error(format!("LZF: {why}")))?;
             // Field after field: all the points' values of the first field, then the second's.
@@ -353,16 +358,15 @@ pub fn parse(bytes: &[u8], path: &Path, warnings: &mut Vec<Warning>) -> Result<V
                 .iter()
                 .map(|&(i, _)| header.points * fields[..i].iter().map(Field::bytes).sum::<usize>())
                 .collect();
-            (0..header.points)
-                .map(|p| {
-                    let value = |a: usize| {
-                        let field = &fields[axes[a].0];
-                        let at = starts[a] + p * field.bytes();
-                        field.decode(&data[at..at + field.size])
-                    };
-                    Point3::new(value(0), value(1), value(2))
-                })
-                .collect()
+            points.extend((0..header.points).map(|p| {
+                let value = |a: usize| {
+                    let field = &fields[axes[a].0];
+                    let at = starts[a] + p * field.bytes();
+                    field.decode(&data[at..at + field.size])
+                };
+                Point3::new(value(0), value(1), value(2))
+            }));
+            points
         }
     };
     let before = points.len();

@@ -486,7 +486,7 @@ fn read_vertices(
             read_row(element, r, &mut values, &mut row, path)?;
         }
     }
-    let mut points = Vec::with_capacity(vertex.count);
+    let mut points = super::room_for_points(path, vertex.count as u64, 0)?;
     for r in 0..vertex.count {
         read_row(vertex, r, &mut values, &mut row, path)?;
         points.push(Point3::new(row[axes[0]], row[axes[1]], row[axes[2]]));
