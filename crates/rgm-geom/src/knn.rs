@@ -27,6 +27,14 @@ enum Node {
         start: u32,
         end: u32,
     },
+    /// A range of points that all lie at one place (duplicates: a LiDAR sweep's missing
+    /// returns stored as 0,0,0), of any size, sorted by index: a query offers their indices in
+    /// order and stops at the first one turned away, so k copies cost O(k) at most, not a visit
+    /// of every cell tied with the best distance.
+    Same {
+        start: u32,
+        end: u32,
+    },
     Split {
         axis: u8,
         value: f64,
@@ -214,6 +222,19 @@ impl KnnIndex {
             Node::Leaf { start, end } => {
                 for (p, i) in &self.points[start as usize..end as usize] {
                     found.offer((*i as usize, squared_distance(p, q)));
+                    #[cfg(test)]
+                    OFFERS.with(|n| n.set(n.get() + 1));
+                }
+            }
+            Node::Same { start, end } => {
+                let same = &self.points[start as usize..end as usize];
+                let d2 = squared_distance(&same[0].0, q);
+                for (_, i) in same {
+                    #[cfg(test)]
+                    OFFERS.with(|n| n.set(n.get() + 1));
+                    if !found.offer((*i as usize, d2)) {
+                        break;
+                    }
                 }
             }
             Node::Split {
@@ -313,7 +334,9 @@ impl Neighbourhoods {
 /// What a tree search collects: it is offered (index, squared distance) candidates and says
 /// whether a cell at a squared distance could still hold a better one.
 trait Found {
-    fn offer(&mut self, candidate: (usize, f64));
+    /// Takes `candidate` if it is among the best so far; false when it is turned away, and so
+    /// would be every candidate at the same distance with a larger index.
+    fn offer(&mut self, candidate: (usize, f64)) -> bool;
     fn may_improve(&self, cell_d2: f64) -> bool;
 }
 
@@ -322,10 +345,12 @@ struct Nearest((usize, f64));
 
 impl Found for Nearest {
     #[inline]
-    fn offer(&mut self, candidate: (usize, f64)) {
-        if is_before(candidate, self.0) {
+    fn offer(&mut self, candidate: (usize, f64)) -> bool {
+        let better = is_before(candidate, self.0);
+        if better {
             self.0 = candidate;
         }
+        better
     }
     #[inline]
     fn may_improve(&self, cell_d2: f64) -> bool {
@@ -374,15 +399,16 @@ impl<'a> Best<'a> {
 
 impl Found for Best<'_> {
     #[inline]
-    fn offer(&mut self, candidate: (usize, f64)) {
+    fn offer(&mut self, candidate: (usize, f64)) -> bool {
         if !(candidate.1 < self.r2 && is_before(candidate, self.bound)) {
-            return;
+            return false;
         }
         self.buf.push(candidate);
         if self.buf.len() == 2 * self.k {
             self.cut();
             self.bound = self.buf[self.k - 1];
         }
+        true
     }
     #[inline]
     fn may_improve(&self, cell_d2: f64) -> bool {
@@ -399,10 +425,12 @@ struct Within<'a> {
 
 impl Found for Within<'_> {
     #[inline]
-    fn offer(&mut self, candidate: (usize, f64)) {
-        if candidate.1 < self.r2 {
+    fn offer(&mut self, candidate: (usize, f64)) -> bool {
+        let near = candidate.1 < self.r2;
+        if near {
             self.out.push(candidate);
         }
+        near
     }
     #[inline]
     fn may_improve(&self, cell_d2: f64) -> bool {
@@ -449,6 +477,14 @@ fn build(
     let axis = (0..3)
         .max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b])))
         .unwrap_or(0);
+    if hi[axis] - lo[axis] == 0.0 {
+        points.sort_unstable_by_key(|&(_, i)| i);
+        nodes.push(Node::Same {
+            start: offset as u32,
+            end: (offset + points.len()) as u32,
+        });
+        return id;
+    }
     let mid = points.len() / 2;
     points.select_nth_unstable_by(mid, |a, b| a.0[axis].total_cmp(&b.0[axis]));
     let value = points[mid].0[axis];
@@ -507,6 +543,12 @@ fn append_shifted(nodes: &mut Vec<Node>, subtree: Vec<Node>) -> u32 {
         leaf => leaf,
     }));
     base
+}
+
+#[cfg(test)]
+thread_local! {
+    /// The candidates this thread's searches offered: what a search costs, for the tests.
+    static OFFERS: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
 }
 
 /// `|p − q|²`, summed x, y, z in that order (every query reports bit-identical distances).
@@ -643,6 +685,57 @@ mod tests {
         let graph = knn_graph(&points, 5).unwrap();
         // Point 7's own row starts with itself, then the lowest other indices at distance 0.
         assert_eq!(&graph[7 * 5..8 * 5], &[7, 0, 1, 2, 3]);
+    }
+
+    /// The candidates `search` offers.
+    fn offers(search: impl FnOnce()) -> usize {
+        OFFERS.with(|n| n.set(0));
+        search();
+        OFFERS.with(|n| n.get())
+    }
+
+    /// Issue 59, E2: a query at a place shared by k points visited every one of them (each
+    /// cell tied with the best distance may still hold a lower index): a LiDAR sweep with 50k
+    /// zero returns went from 2.3 s to 58 s. The answers stay those of brute force.
+    #[test]
+    fn copies_of_one_point_cost_a_query_what_it_returns_not_their_number() {
+        let mut points = random_cloud(3000, 12);
+        // 30 % of the points at the origin, their indices spread through the cloud.
+        for i in (0..points.len()).step_by(3) {
+            points[i] = Point3::origin();
+        }
+        points.extend(vec![Point3::new(0.25, 0.25, 0.25); 20_000]);
+        let index = KnnIndex::new(&points);
+        for q in [
+            Point3::origin(),
+            Point3::new(0.25, 0.25, 0.25),
+            Point3::new(0.1, -0.2, 0.3),
+        ] {
+            let all = brute_force(&points, &q);
+            for k in [1, 10, 30] {
+                let mut got = Vec::new();
+                let cost = offers(|| got = index.k_nearest(&q, k));
+                assert_eq!(got, all[..k].to_vec());
+                // Before: at least the copies there (1,000 at the origin, 20,000 at the other).
+                assert!(cost < 1000, "{cost} offers for k = {k} at {q}");
+            }
+            assert_eq!(index.nearest(&q), all[0]);
+            let hybrid: Vec<_> = all.iter().copied().filter(|n| n.1 < 0.1).take(30).collect();
+            assert_eq!(index.hybrid(&q, 0.1, 30), hybrid);
+            let inside: Vec<_> = all.iter().copied().filter(|n| n.1 < 0.05).collect();
+            assert_eq!(index.within_radius(&q, 0.05), inside);
+        }
+        // Nothing but copies: one node, a query's cost its k.
+        let same = KnnIndex::new(&vec![Point3::new(1.0, 2.0, 3.0); 100_000]);
+        let q = Point3::new(1.0, 2.0, 3.0);
+        let cost = offers(|| {
+            assert_eq!(
+                same.k_nearest(&q, 5),
+                (0..5).map(|i| (i, 0.0)).collect::<Vec<_>>()
+            );
+        });
+        assert!(cost <= 11, "{cost}");
+        assert_eq!(offers(|| assert_eq!(same.nearest(&q), (0, 0.0))), 2);
     }
 
     #[test]
