@@ -280,3 +280,32 @@ fn readme_and_the_unknown_extension_error_name_every_extension() {
     }
     assert!(err.ends_with(".las or .laz)"), "{err}");
 }
+
+/// Issue 59, E10: an all-NaN PCD "held no point" without saying why, and a LAS header of
+/// version 2.0 was read on as 1.x, its bytes shown as a huge point count.
+#[test]
+fn an_all_nan_pcd_and_a_las_of_another_version_say_what_they_are() {
+    let nan = scratch("all_nan.pcd");
+    std::fs::write(
+        &nan,
+        "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\nHEIGHT 1\n\
+         POINTS 2\nDATA ascii\nnan nan nan\nnan 1 2\n",
+    )
+    .unwrap();
+    let err = read_point_cloud(&nan).unwrap_err().to_string();
+    assert!(
+        err.contains("every one of its 2 points has a NaN coordinate"),
+        "{err}"
+    );
+    let las = scratch("version.las");
+    write_point_cloud(&las, &PointCloud::new(open3d_points())).unwrap();
+    let mut bytes = std::fs::read(&las).unwrap();
+    bytes[24] = 2;
+    bytes[25] = 0;
+    std::fs::write(&las, bytes).unwrap();
+    let err = read_point_cloud(&las).unwrap_err().to_string();
+    assert!(
+        err.contains("LAS version 2.0 is not one rgm reads"),
+        "{err}"
+    );
+}

@@ -398,8 +398,13 @@ pub fn conclude<E: From<GeomError>>(
     let (transform, value) = (winner.t_target_source, winner.score.unwrap_or(0.0));
     let doubt = (value < min_overlap).then(|| {
         let method = &winner.method;
+        // As many decimals as show the score below the bound (0.0996 is not "0.100 < 0.1").
+        let shown = (3..17)
+            .map(|digits| format!("{value:.digits$}"))
+            .find(|text| text.parse::<f64>().is_ok_and(|v| v < min_overlap))
+            .unwrap_or_else(|| value.to_string());
         format!(
-            "the best candidate, {method}, overlaps too little (score {value:.3} < {min_overlap}): \
+            "the best candidate, {method}, overlaps too little (score {shown} < {min_overlap}): \
              the clouds may not overlap, or every method failed on them"
         )
     });

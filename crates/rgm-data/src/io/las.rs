@@ -91,6 +91,13 @@ fn check_sizes(bytes: &[u8]) -> std::result::Result<(), String> {
         *bytes.get(24).ok_or_else(short)?,
         *bytes.get(25).ok_or_else(short)?,
     );
+    if version.0 != 1 || version.1 > 4 {
+        // Read on, a header of another layout gives counts of its other fields.
+        return Err(format!(
+            "LAS version {}.{} is not one rgm reads (versions 1.0 to 1.4)",
+            version.0, version.1
+        ));
+    }
     let offset_to_points = le::<4>(bytes, 96).ok_or_else(short)?;
     let format = le::<1>(bytes, 104).ok_or_else(short)?;
     let compressed = format & 0x80 != 0;

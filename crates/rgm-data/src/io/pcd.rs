@@ -371,6 +371,14 @@ pub fn parse(bytes: &[u8], path: &Path, warnings: &mut Vec<Warning>) -> Result<V
     };
     let before = points.len();
     points.retain(|p| !(p.x.is_nan() || p.y.is_nan() || p.z.is_nan()));
+    if points.is_empty() && before > 0 {
+        // Said here: "the file holds no point" alone would hide why.
+        let why = format!(
+            "every one of its {before} points has a NaN coordinate (PCL's invalid points): no \
+             point to register"
+        );
+        return Err(format_error(path, FORMAT, why));
+    }
     if points.len() < before {
         warnings.push(Warning {
             path: path.to_path_buf(),
