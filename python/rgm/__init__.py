@@ -304,7 +304,7 @@ class Registrar:
     def __reduce__(self):
         # Unpickled through the cache of rgm.register: a process pool's worker loads the
         # network once, however many tasks carry the Registrar.
-        return (_registrar, self._settings)
+        return (_cached_registrar, self._settings)
 
     def __repr__(self) -> str:
         names = ("method", "refine", "weights", "preset", "test_statistics", "match_points", "passes", "accept")
@@ -312,10 +312,29 @@ class Registrar:
         return f"rgm.Registrar({given})"
 
 
+def _file_identity(path: Optional[str]):
+    """What tells one weights file from another at the same path: its resolved path, device,
+    inode, size and modification time (``None`` for the built-in model, or a missing file,
+    which Registrar then reports)."""
+    if path is None:
+        return None
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return (os.path.realpath(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+
+
 @functools.lru_cache(maxsize=8)
-def _registrar(*settings) -> Registrar:
-    """The Registrar of ``settings``, built once per distinct settings."""
+def _registrar(settings, weights_identity) -> Registrar:
+    """The Registrar of ``settings``, built once per distinct settings and weights file: a
+    file rewritten at the same path is loaded again, not served from the cache."""
     return Registrar(*settings)
+
+
+def _cached_registrar(*settings) -> Registrar:
+    """The cached Registrar of ``settings`` (the third is the weights path)."""
+    return _registrar(settings, _file_identity(settings[2]))
 
 
 def register(
@@ -383,7 +402,7 @@ def register(
         >>> result = rgm.register(source, target)
         >>> aligned = source @ result.rotation.T + result.translation
     """
-    registrar = _registrar(
+    registrar = _cached_registrar(
         method,
         _flag("refine", refine),
         None if weights is None else os.fspath(weights),

@@ -10,7 +10,7 @@
 //! pool of this process ([`pool`]), so a process forked from one that registered (a process
 //! pool's workers under Linux's default start method) registers too.
 
-use std::collections::HashSet;
+use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -381,7 +381,7 @@ impl Registrar {
         let method = &self.copies.prototype;
         let settings = batch::settings(&self.options, method).map_err(batch_error)?;
         let output = Arc::new(batch::Output::open(&output, &settings, &()).map_err(batch_error)?);
-        let done: HashSet<batch::Key> = output.done().keys().cloned().collect();
+        let done = output.done().clone();
         let pulled = Pulled::new(pairs, Some(done));
         let (failed, skipped) = (pulled.error.clone(), pulled.skipped.clone());
         let copies = self.copies.clone();
@@ -438,13 +438,15 @@ fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
 struct Pulled {
     pairs: Py<PyIterator>,
     next: usize,
-    skip: Option<HashSet<batch::Key>>,
+    /// The pairs with a line already, and what they were (a pair of other clouds at the same
+    /// place of the list runs again).
+    skip: Option<HashMap<batch::Key, batch::Done>>,
     skipped: Arc<std::sync::atomic::AtomicUsize>,
     error: Arc<Mutex<Option<PyErr>>>,
 }
 
 impl Pulled {
-    fn new(pairs: Bound<'_, PyIterator>, skip: Option<HashSet<batch::Key>>) -> Self {
+    fn new(pairs: Bound<'_, PyIterator>, skip: Option<HashMap<batch::Key, batch::Done>>) -> Self {
         Self {
             pairs: pairs.unbind(),
             next: 0,
@@ -476,20 +478,18 @@ impl Iterator for Pulled {
                 format!("pairs[{index}].source"),
                 format!("pairs[{index}].target"),
             );
-            if self.skip.as_ref().is_some_and(|skip| skip.contains(&key)) {
-                self.skipped.fetch_add(1, Ordering::Relaxed);
-                continue;
-            }
             let clouds = pair
                 .extract::<(PyReadonlyArray2<'_, f64>, PyReadonlyArray2<'_, f64>)>()
                 .and_then(|(s, t)| Ok((cloud(&s, "source")?, cloud(&t, "target")?)));
             match clouds {
                 Ok((source, target)) => {
-                    return Some(batch::Job {
-                        index,
-                        key,
-                        clouds: batch::Clouds::Given { source, target },
-                    })
+                    let clouds = batch::Clouds::Given { source, target };
+                    let line = self.skip.as_ref().and_then(|skip| skip.get(&key));
+                    if line.is_some_and(|line| line.is_of(&batch::inputs(&clouds))) {
+                        self.skipped.fetch_add(1, Ordering::Relaxed);
+                        continue;
+                    }
+                    return Some(batch::Job { index, key, clouds });
                 }
                 Err(error) => {
                     *lock(&self.error) = Some(error);

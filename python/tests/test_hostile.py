@@ -203,3 +203,40 @@ def test_options_are_what_they_say(airplane):
     native = rgm.register(airplane, target, method="icp")
     swapped = rgm.register(airplane.astype(">f8"), target.astype(">f8"), method="icp")
     np.testing.assert_array_equal(swapped.transformation, native.transformation)
+
+
+def _weights_scaled(source: pathlib.Path, target: pathlib.Path, factor: float) -> None:
+    """`source`'s safetensors weights (BF16 or F32), every tensor times `factor` (a power of
+    two, exact in both), written to `target`."""
+    raw = source.read_bytes()
+    size = int.from_bytes(raw[:8], "little")
+    header = json.loads(raw[8 : 8 + size])
+    data = bytearray(raw[8 + size :])
+    for name, entry in header.items():
+        if name == "__metadata__":
+            continue
+        start, end = entry["data_offsets"]
+        chunk = bytes(data[start:end])
+        if entry["dtype"] == "BF16":
+            values = (np.frombuffer(chunk, dtype="<u2").astype("<u4") << 16).view("<f4")
+            scaled = ((values * np.float32(factor)).view("<u4") >> 16).astype("<u2")
+            data[start:end] = scaled.tobytes()
+        elif entry["dtype"] == "F32":
+            data[start:end] = (np.frombuffer(chunk, dtype="<f4") * np.float32(factor)).tobytes()
+    target.write_bytes(raw[: 8 + size] + bytes(data))
+
+
+def test_weights_rewritten_at_the_same_path_are_loaded_again(airplane, tmp_path):
+    # Issue 59, E9: the network was cached by the path string, so after the file at PATH was
+    # rewritten, register(weights=PATH) gave the old weights' results, silently.
+    builtin = pathlib.Path(__file__).resolve().parents[2] / "crates/rgm-model/weights/partial-fast.safetensors"
+    path = tmp_path / "model.safetensors"
+    path.write_bytes(builtin.read_bytes())
+    source = moved(airplane, KNOWN)
+    first = rgm.register(source, airplane, method="rgm", refine=False, weights=path)
+    _weights_scaled(builtin, tmp_path / "next.safetensors", 0.5)
+    os.replace(tmp_path / "next.safetensors", path)
+    again = rgm.register(source, airplane, method="rgm", refine=False, weights=path)
+    fresh = rgm.Registrar(method="rgm", refine=False, weights=path).register(source, airplane)
+    assert not np.allclose(again.transformation, first.transformation)
+    np.testing.assert_array_equal(again.transformation, fresh.transformation)

@@ -111,6 +111,10 @@ fn every_line_is_what_rgm_register_json_prints_for_its_pair() {
         let object = line.as_object_mut().unwrap();
         assert_eq!(object.remove("source").unwrap(), source.as_str());
         assert_eq!(object.remove("target").unwrap(), target.as_str());
+        // The files the line stands for (what a resume checks), resolved.
+        let inputs = object.remove("inputs").unwrap();
+        let resolved = std::fs::canonicalize(folder.join(&source)).unwrap();
+        assert_eq!(inputs["source"]["path"], resolved.to_str().unwrap());
         assert_eq!(line, alone, "{source} → {target}");
     }
 }

@@ -643,3 +643,64 @@ fn a_compressed_pcd_too_large_for_memory_is_refused_before_it_is_allocated() {
         "{err}"
     );
 }
+
+/// Issue 59, E11: resuming `--output` with another list whose files are named alike (day1/ and
+/// day2/, both `a.xyz,b.xyz`) took day 1's line for day 2's pair. A line records its files;
+/// a pair of other files runs again, and its line replaces the old one.
+#[test]
+fn a_resume_with_other_files_of_the_same_names_registers_them_again() {
+    let dir = Scratch::new("hostile-days");
+    let (day1, day2) = (dir.join("day1"), dir.join("day2"));
+    for day in [&day1, &day2] {
+        std::fs::create_dir_all(day).unwrap();
+        std::fs::write(day.join("list.csv"), "source,target\na.xyz,b.xyz\n").unwrap();
+    }
+    let (a, b) = clouds(&day1);
+    // Day 2's clouds are day 1's the other way round: the transform moves by −0.01, not +0.01.
+    std::fs::copy(&a, day2.join("b.xyz")).unwrap();
+    std::fs::copy(&b, day2.join("a.xyz")).unwrap();
+    let output = dir.join("out.jsonl");
+    let run = |day: &Path| {
+        rgm(&[
+            "register",
+            "--pairs",
+            day.join("list.csv").to_str().unwrap(),
+            "--method",
+            "fgr",
+            "--no-refine",
+            "--output",
+            output.to_str().unwrap(),
+        ])
+    };
+    let shift = || -> Vec<f64> {
+        let text = std::fs::read_to_string(&output).unwrap();
+        text.lines()
+            .skip(1)
+            .map(|l| {
+                serde_json::from_str::<serde_json::Value>(l).unwrap()["transform"][0][3]
+                    .as_f64()
+                    .unwrap()
+            })
+            .collect()
+    };
+    let out = run(&day1);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let first = shift();
+    assert!(first.len() == 1 && first[0] > 0.005, "{first:?}");
+    let second = run(&day2);
+    let said = String::from_utf8_lossy(&second.stderr);
+    assert!(second.status.success(), "{said}");
+    assert!(
+        said.contains("1 pairs of") && said.contains("run again"),
+        "{said}"
+    );
+    let again = shift();
+    assert!(again.len() == 1 && again[0] < -0.005, "{again:?}");
+    // Day 2 again: finished, nothing runs.
+    let third = run(&day2);
+    assert!(String::from_utf8_lossy(&third.stderr).contains("registering 0"));
+}

@@ -10,6 +10,14 @@
 //! cut-off last line (a killed run), the lines of pairs that failed (they are tried again) and
 //! repeated pairs, by rewriting the file whole (temporary file and rename) before it appends,
 //! so the file never holds a pair twice. Lines are appended one `write` each, as pairs finish.
+//!
+//! A pair is named by its files as the caller spells them, and each line also records what its
+//! inputs were (`"inputs"`, [`inputs`]: each file's resolved path, size and modification time,
+//! or each cloud's point count and CRC-32): a resume counts a pair as finished only when its
+//! inputs are still those, so another day's `scan.npy`, or other arrays at the same place of a
+//! Python list, run again rather than take an old line's transform. Their new line replaces
+//! the old one (the CLI drops the old ones before it starts, [`Output::forget`]; a later
+//! line of a pair supersedes an earlier one when a file is read).
 
 use std::collections::{HashMap, HashSet};
 use std::fs::File;
@@ -105,6 +113,59 @@ impl std::ops::AddAssign for Tally {
         self.not_registered += other.not_registered;
         self.failed += other.failed;
     }
+}
+
+/// A pair an earlier run finished: how, and the inputs its line records (`Value::Null` for a
+/// line written before lines recorded them: taken as the same inputs).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Done {
+    pub outcome: Outcome,
+    pub inputs: Value,
+}
+
+impl Done {
+    /// Whether the line stands for a pair of these `inputs`.
+    pub fn is_of(&self, inputs: &Value) -> bool {
+        self.inputs.is_null() || &self.inputs == inputs
+    }
+}
+
+/// What identifies a pair's inputs, as its line records them: for files, each one's resolved
+/// path, size and modification time (nanoseconds since the epoch; `null` for a file that
+/// cannot be read, which then fails); for clouds in memory, each one's point count and the
+/// CRC-32 of its coordinates.
+pub fn inputs(clouds: &Clouds) -> Value {
+    match clouds {
+        Clouds::Files { source, target } => {
+            json!({"source": file_identity(source), "target": file_identity(target)})
+        }
+        Clouds::Given { source, target } => {
+            json!({"source": cloud_identity(source), "target": cloud_identity(target)})
+        }
+    }
+}
+
+fn file_identity(path: &Path) -> Value {
+    let Ok(meta) = std::fs::metadata(path) else {
+        return Value::Null;
+    };
+    let modified = meta
+        .modified()
+        .ok()
+        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+        .map(|t| t.as_nanos().to_string());
+    let resolved = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
+    json!({"path": resolved.to_string_lossy(), "bytes": meta.len(), "modified_ns": modified})
+}
+
+fn cloud_identity(cloud: &PointCloud) -> Value {
+    let mut crc = flate2::Crc::new();
+    for p in &cloud.points {
+        for c in [p.x, p.y, p.z] {
+            crc.update(&c.to_le_bytes());
+        }
+    }
+    json!({"points": cloud.len(), "crc32": crc.sum()})
 }
 
 /// A pair's name in the output: its source and target as the caller spells them.
@@ -253,7 +314,7 @@ pub struct Output {
     path: PathBuf,
     /// Open for appending, locked until dropped.
     file: Mutex<File>,
-    done: HashMap<Key, Outcome>,
+    done: HashMap<Key, Done>,
 }
 
 impl Output {
@@ -311,8 +372,37 @@ impl Output {
     }
 
     /// The outcome of each pair an earlier run finished.
-    pub fn done(&self) -> &HashMap<Key, Outcome> {
+    pub fn done(&self) -> &HashMap<Key, Done> {
         &self.done
+    }
+
+    /// Rewrites the file without the lines of `stale` (pairs whose inputs changed since: they
+    /// run again), so that it never holds two lines of one pair.
+    pub fn forget(&mut self, stale: &HashSet<Key>) -> Result<(), BatchError> {
+        if stale.is_empty() {
+            return Ok(());
+        }
+        let bytes = std::fs::read(&self.path).map_err(BatchError::io("reading", &self.path))?;
+        let text = String::from_utf8_lossy(&bytes);
+        let mut kept = String::with_capacity(text.len());
+        for (i, line) in text.lines().enumerate() {
+            let value: Value = serde_json::from_str(line).unwrap_or(Value::Null);
+            let key = (value["source"].as_str(), value["target"].as_str());
+            let named = match key {
+                (Some(s), Some(t)) => stale.contains(&(s.to_string(), t.to_string())),
+                _ => false,
+            };
+            if i == 0 || !named {
+                kept.push_str(line);
+                kept.push('\n');
+            }
+        }
+        let file = replace(&self.path, &kept)?;
+        *self.file.lock().unwrap_or_else(|p| p.into_inner()) = file;
+        for key in stale {
+            self.done.remove(key);
+        }
+        Ok(())
     }
 
     pub fn path(&self) -> &Path {
@@ -441,15 +531,16 @@ fn check_header(path: &Path, first: &str, settings: &Map<String, Value>) -> Resu
     Ok(())
 }
 
-/// The outcome of each pair an earlier run finished, from the lines after the header
+/// What became of each pair an earlier run finished, from the lines after the header
 /// (`bytes`), the lines to keep, and whether the file must be rewritten without others: a
-/// cut-off last line, a failed pair's line, a repeated pair's. A line that is not one of ours
-/// is an error.
+/// cut-off last line, a failed pair's line, a pair's earlier line where a later one supersedes
+/// it (the last line of a pair says what became of it). A line that is not one of ours is an
+/// error.
 fn earlier_lines(
     path: &Path,
     bytes: &[u8],
     progress: &dyn Progress,
-) -> Result<(HashMap<Key, Outcome>, String, bool), BatchError> {
+) -> Result<(HashMap<Key, Done>, String, bool), BatchError> {
     let mut done = HashMap::new();
     let (complete, cut) = match bytes.iter().rposition(|&b| b == b'\n') {
         Some(end) => bytes.split_at(end + 1),
@@ -473,7 +564,8 @@ fn earlier_lines(
             path.display()
         ));
     }
-    let mut kept = String::with_capacity(complete.len());
+    // Each pair's last line, by its place among the lines.
+    let mut last: HashMap<Key, (usize, &str)> = HashMap::new();
     for (i, line) in complete.lines().enumerate() {
         let at = || format!("{}:{}", path.display(), i + 2);
         if line.trim().is_empty() {
@@ -497,8 +589,10 @@ fn earlier_lines(
             )));
         };
         let key = (source.to_string(), target.to_string());
-        if value.get("error").is_some() || done.contains_key(&key) {
+        if value.get("error").is_some() {
             rewrite = true;
+            done.remove(&key);
+            last.remove(&key);
             continue;
         }
         let outcome = if value["registered"] == true {
@@ -506,7 +600,14 @@ fn earlier_lines(
         } else {
             Outcome::NotRegistered
         };
-        done.insert(key, outcome);
+        let inputs = value.get("inputs").cloned().unwrap_or(Value::Null);
+        rewrite |= done.insert(key.clone(), Done { outcome, inputs }).is_some();
+        last.insert(key, (i, line));
+    }
+    let mut lines: Vec<(usize, &str)> = last.into_values().collect();
+    lines.sort_unstable_by_key(|&(i, _)| i);
+    let mut kept = String::with_capacity(complete.len());
+    for (_, line) in lines {
         kept.push_str(line);
         kept.push('\n');
     }
@@ -549,6 +650,7 @@ where
                     };
                     line["source"] = job.key.0.clone().into();
                     line["target"] = job.key.1.clone().into();
+                    line["inputs"] = inputs(&job.clouds);
                     let mut out = out.lock().unwrap_or_else(|p| p.into_inner());
                     out.write_all(format!("{line}\n").as_bytes())
                         .and_then(|()| out.flush())
@@ -642,24 +744,27 @@ pub fn read_list(path: &Path, progress: &dyn Progress) -> Result<Vec<Listed>, Ba
     Ok(pairs)
 }
 
-/// The pairs of `listed` an earlier run has not finished (`done`), and the finished ones'
-/// tally.
+/// The pairs of `listed` an earlier run has not finished (`done`) with the files they have
+/// now, the finished ones' tally, and the pairs whose line is of other files (`stale`: their
+/// files changed, or another list names other files alike; they run again).
 pub fn remaining<'a>(
     listed: &'a [Listed],
-    done: &HashMap<Key, Outcome>,
-) -> (Vec<&'a Listed>, Tally) {
-    let listed_keys: HashSet<&Key> = listed.iter().map(|p| &p.key).collect();
+    done: &HashMap<Key, Done>,
+) -> (Vec<&'a Listed>, Tally, HashSet<Key>) {
     let mut earlier = Tally::default();
-    for (key, &outcome) in done {
-        if listed_keys.contains(key) {
-            earlier.add(outcome);
+    let mut todo = Vec::new();
+    let mut stale = HashSet::new();
+    for pair in listed {
+        match done.get(&pair.key) {
+            Some(line) if line.is_of(&inputs(&pair.job(0).clouds)) => earlier.add(line.outcome),
+            Some(_) => {
+                stale.insert(pair.key.clone());
+                todo.push(pair);
+            }
+            None => todo.push(pair),
         }
     }
-    let todo = listed
-        .iter()
-        .filter(|p| !done.contains_key(&p.key))
-        .collect();
-    (todo, earlier)
+    (todo, earlier, stale)
 }
 
 /// (source, target, place) of each row of a CSV list.
@@ -826,7 +931,10 @@ mod tests {
             format!("{header}\n{done}\n")
         );
         let key = ("a".to_string(), "b".to_string());
-        assert_eq!(output.done().get(&key), Some(&Outcome::Registered));
+        assert_eq!(
+            output.done().get(&key).map(|d| d.outcome),
+            Some(Outcome::Registered)
+        );
         assert_eq!(output.done().len(), 1);
         // The file now at the path is the one this run holds.
         let other = File::open(&path).unwrap();
@@ -875,6 +983,39 @@ mod tests {
             .unwrap()
             .to_string();
         assert!(error.contains("out.jsonl:3: not text"), "{error}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_later_line_of_a_pair_supersedes_an_earlier_one() {
+        let dir = std::env::temp_dir().join(format!("rgm-batch-last-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("out.jsonl");
+        let settings = settings(
+            &MethodOptions::default(),
+            &MethodOptions::default().build().unwrap(),
+        )
+        .unwrap();
+        let header = json!({HEADER_KEY: FORMAT, "settings": settings}).to_string();
+        let old = r#"{"source":"a","target":"b","registered":true,"inputs":1}"#;
+        let other = r#"{"source":"c","target":"d","registered":true}"#;
+        let new = r#"{"source":"a","target":"b","registered":false,"inputs":2}"#;
+        std::fs::write(&path, format!("{header}\n{old}\n{other}\n{new}\n")).unwrap();
+        let output = Output::open(&path, &settings, &()).unwrap();
+        let key = ("a".to_string(), "b".to_string());
+        let done = &output.done()[&key];
+        assert_eq!(
+            (done.outcome, &done.inputs),
+            (Outcome::NotRegistered, &json!(2))
+        );
+        // A line without inputs (an older file's) stands for any; one with them, for those.
+        assert!(output.done()[&("c".to_string(), "d".to_string())].is_of(&json!(5)));
+        assert!(done.is_of(&json!(2)) && !done.is_of(&json!(1)));
+        drop(output);
+        assert_eq!(
+            std::fs::read_to_string(&path).unwrap(),
+            format!("{header}\n{other}\n{new}\n")
+        );
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -62,7 +62,7 @@ pub fn run(args: &BatchArgs, method: &MethodArgs) -> Result<()> {
     let method = options.build()?;
     let bar = rgm_cli::TaskBar::new(method.name());
     let listed = batch::read_list(list, &bar)?;
-    let output = match &args.output {
+    let mut output = match &args.output {
         Some(path) => Some(Output::open(
             path,
             &batch::settings(&options, &method)?,
@@ -75,7 +75,18 @@ pub fn run(args: &BatchArgs, method: &MethodArgs) -> Result<()> {
         .map(Output::done)
         .cloned()
         .unwrap_or_default();
-    let (todo, earlier) = batch::remaining(&listed, &done);
+    let (todo, earlier, stale) = batch::remaining(&listed, &done);
+    if let Some(output) = &mut output {
+        if !stale.is_empty() {
+            eprintln!(
+                "rgm: {} pairs of {} have a line of other files (changed since, or another list's \
+                 files of the same names); they run again and their lines are replaced",
+                stale.len(),
+                output.path().display()
+            );
+        }
+        output.forget(&stale)?;
+    }
     if let (Some(output), false) = (&output, done.is_empty()) {
         eprintln!(
             "rgm: {} of the {} pairs have their line in {} already; registering {}",
