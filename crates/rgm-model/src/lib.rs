@@ -1,5 +1,5 @@
 //! rgm-model — RGM put together from the layers below: the network ([`network`]), its
-//! test-time procedure as a [`rgm_geom::Registrar`] ([`procedure`], spec §4), training
+//! test-time procedure as a [`rgm_registration::Registrar`] ([`procedure`], spec §4), training
 //! ([`train`]) and checkpoints ([`weights`]). [`options`] composes every method users can name
 //! (ICP, FGR, RGM, and `rgm register`'s default, FGR and RGM as a cascade) from the
 //! registrars and wrappers of rgm-geom and this crate, into one [`method::Method`];
@@ -29,4 +29,4 @@ pub use evaluate::{PairRecord, ScanRecord, SceneRecord, Summary};
 pub use method::Method;
 pub use options::{MethodName, MethodOptions};
 pub use procedure::{ProcedureConfig, RgmRegistrar, StageTimes};
-pub use rgm_geom::registrar::{Candidate, Registrar, Registration};
+pub use rgm_registration::registrar::{Candidate, Registrar, Registration};

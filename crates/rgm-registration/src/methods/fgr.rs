@@ -2,7 +2,7 @@
 //! `registration_fgr_based_on_feature_matching` with `FastGlobalRegistrationOption`.
 //!
 //! Open3D's steps, followed one by one:
-//! 1. Features: PCA normals and FPFH of each cloud ([`crate::fpfh::features`]).
+//! 1. Features: PCA normals and FPFH of each cloud ([`rgm_geom::fpfh::features`]).
 //! 2. Initial matching: mutual nearest neighbours in the 33-D feature space (exact, brute force;
 //!    ties to the lowest index), ordered by source index.
 //! 3. Tuple test: `100 × matches` times draw three matches at random; keep the triple when each
@@ -40,13 +40,19 @@ use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Mutex, OnceLock};
 
-use crate::euler::rotation_xyz_extrinsic;
-use crate::fpfh::{features, Fpfh, FpfhConfig, FPFH_LEN};
-use crate::icp::check_clouds;
-use crate::lockstep;
-use crate::normals::NormalsConfig;
-use crate::registration::{score, Fit};
-use crate::{GeomError, PointCloud, Prepared, Result, RigidTransform};
+use crate::fit::{score, Fit};
+use crate::methods::icp::check_clouds;
+use crate::registrar::MethodId;
+use crate::registrar::Progress;
+use crate::registrar::Registrar;
+use crate::registrar::Registration;
+use crate::Prepared;
+use rgm_geom::euler::rotation_xyz_extrinsic;
+use rgm_geom::fpfh::{features, Fpfh, FpfhConfig, FPFH_LEN};
+use rgm_geom::lockstep;
+use rgm_geom::normals::NormalsConfig;
+use rgm_geom::{GeomError, PointCloud, Result, RigidTransform};
+use std::time::Instant;
 
 /// Open3D returns the identity below this many matches.
 const MIN_MATCHES: usize = 10;
@@ -106,16 +112,6 @@ impl Default for FgrConfig {
 
 /// The method's name ([`crate::registrar::MethodId`]).
 pub const NAME: &str = "fgr";
-
-/// Where [`register_with_progress`] is: a step and the fraction of the work done.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Progress {
-    /// `downsampling`, `features`, `matching`, `optimising` or `scoring` (on the full clouds,
-    /// after a downsampling), then `done`.
-    pub step: &'static str,
-    /// From 0 to 1.
-    pub done: f64,
-}
 
 /// Registers `source` onto `target`: features, matching, tuple test, optimisation.
 pub fn register(source: &PointCloud, target: &PointCloud, config: &FgrConfig) -> Result<Fit> {
@@ -764,11 +760,32 @@ fn rotation_block(p: &[Vector3<f64>], q: &[Vector3<f64>], mu: f64) -> Matrix3<f6
     )
 }
 
+/// Fast Global Registration on FPFH features ([`crate::methods::fgr`]).
+impl<E: From<GeomError>> Registrar<E> for FgrConfig {
+    fn id(&self) -> MethodId {
+        MethodId::plain(NAME)
+    }
+
+    fn register_prepared(
+        &mut self,
+        source: &Prepared,
+        target: &Prepared,
+        progress: &mut dyn FnMut(Progress),
+    ) -> std::result::Result<Registration, E> {
+        let start = Instant::now();
+        let result = register_prepared(source, target, self, progress)?;
+        let distance = self.maximum_correspondence_distance;
+        Ok(Registration::scored_within(
+            result, source, target, distance, start,
+        ))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testing::box_surface;
-    use crate::KnnIndex;
+    use rgm_geom::testing::box_surface;
+    use rgm_geom::KnnIndex;
 
     fn feature(values: &[(usize, f64)]) -> Fpfh {
         let mut f = [0.0; 33];
@@ -1021,7 +1038,7 @@ mod tests {
     #[test]
     fn optimisation_steps_match_open3d() {
         let target = PointCloud::new(
-            crate::testing::airplane()
+            rgm_geom::testing::airplane()
                 .points
                 .iter()
                 .map(|p| Point3::from(0.5 * p.coords))
