@@ -23,6 +23,8 @@ import os
 import re
 import sys
 
+sys.setrecursionlimit(10000)
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 # The layering, bottom first: a crate may use only crates of a lower number (docs/architecture.md).
@@ -263,31 +265,51 @@ def crate_graph(modules):
     return {name: mod.edges for name, mod in modules.items()}
 
 
-def find_cycle(graph):
-    """One circle of the graph as a list of modules (first repeated last), or None."""
-    colour = {}
-    stack = []
+def components(graph):
+    """The strongly connected components of more than one module (Tarjan), each sorted."""
+    index, low, stack, on, out = {}, {}, [], set(), []
 
     def visit(v):
-        colour[v] = 1
+        index[v] = low[v] = len(index)
         stack.append(v)
+        on.add(v)
         for w in sorted(graph.get(v, {})):
-            if colour.get(w) == 1:
-                return stack[stack.index(w):] + [w]
-            if w not in colour:
-                found = visit(w)
-                if found:
-                    return found
-        stack.pop()
-        colour[v] = 2
-        return None
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            part = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                part.append(w)
+                if w == v:
+                    break
+            if len(part) > 1:
+                out.append(sorted(part))
 
     for v in sorted(graph):
-        if v not in colour:
-            found = visit(v)
-            if found:
-                return found
-    return None
+        if v not in index:
+            visit(v)
+    return out
+
+
+def cycle_in(graph, part):
+    """One circle through the first module of a component, as a list (first repeated last)."""
+    start, inside = part[0], set(part)
+    paths = {start: [start]}
+    queue = [start]
+    while queue:
+        v = queue.pop(0)
+        for w in sorted(graph.get(v, {})):
+            if w == start:
+                return paths[v] + [start]
+            if w in inside and w not in paths:
+                paths[w] = paths[v] + [w]
+                queue.append(w)
+    return part + [start]
 
 
 def toml_sections(path):
@@ -370,8 +392,8 @@ def main():
                     rel = os.path.relpath(modules[mod].file, ROOT)
                     targets = ", ".join(sorted(graph[mod]))
                     print(f"  {mod} [{rel}] -> {targets or '-'}")
-            cycle = find_cycle(graph)
-            if cycle:
+            for part in components(graph):
+                cycle = cycle_in(graph, part)
                 steps = " -> ".join(
                     f"{a} ({os.path.relpath(modules[a].file, ROOT)}:{graph[a][b]})"
                     for a, b in zip(cycle, cycle[1:]))

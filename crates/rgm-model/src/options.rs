@@ -54,14 +54,14 @@ use rgm_registration::methods::sc2::Sc2Config;
 use rgm_registration::methods::triplets::TripletConfig;
 use rgm_registration::refiner::AtSpacing;
 use rgm_registration::registrar::{DynRegistrar, Registrar};
-use rgm_registration::thinning::{Density, Thinning};
+use rgm_registration::thinning::Thinning;
 
 use rgm_nn::Precision;
 
 use crate::error::MethodError;
 use crate::method::Method;
 use crate::network::{Config, TestStatistics};
-use crate::procedure::{self, RgmRegistrar};
+use crate::procedure::{self, RgmRegistrar, TRAINING_DENSITY};
 
 /// The name of FGR and RGM as a cascade ([`MethodName::Auto`]).
 pub const AUTO: &str = "auto";
@@ -157,15 +157,6 @@ pub const FRAME: FrameRule = FrameRule {
     far_outlier: 12.0,
     within: 2.0,
     extent: (0.3, 1.7),
-};
-
-/// The density the network and the default's settings were tuned at: ModelNet40's 1,024 points
-/// per shape in the unit sphere (717 after the partial crop). A denser pair is thinned to it,
-/// first averaged over voxels of 0.035 (the training clouds' median nearest-neighbour distance is
-/// 0.011–0.042).
-pub const TRAINING_DENSITY: Density = Density {
-    points: 1024,
-    voxel: 0.035,
 };
 
 /// How the default's composites judge their candidates (unit-sphere units): a point within
