@@ -1,4 +1,4 @@
-//! rgm-geom's hot paths at RGM's sizes (N = 717 partial, 1,024 full; K = 20): the kNN graph,
+//! rgm-geom's and rgm-registration's hot paths at RGM's sizes (N = 717 partial, 1,024 full; K = 20): the kNN graph,
 //! weighted Kabsch, and the classical baselines ICP and FPFH + FGR on a 717-point pair; and the
 //! scene stage's global estimators (RANSAC, SC²) on a 20,000-point room pair.
 //!
