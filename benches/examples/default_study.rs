@@ -51,10 +51,8 @@ use rgm_model::options::FRAME;
 use rgm_model::{MethodOptions, Registrar};
 use rgm_registration::check::turned_share;
 use rgm_registration::fit::score;
-use rgm_registration::methods::fgr;
-use rgm_registration::methods::fgr::FgrConfig;
-use rgm_registration::methods::refine;
-use rgm_registration::methods::refine::RefineConfig;
+use rgm_registration::methods::fgr::{self, FgrConfig};
+use rgm_registration::methods::refine::{self, RefineConfig};
 
 fn arg(args: &[String], name: &str) -> Option<String> {
     args.iter()

@@ -14,10 +14,8 @@ use rgm_data::scenes::LoadedScenePair;
 use rgm_data::SceneFolder;
 use rgm_geom::Result;
 use rgm_registration::methods::feature_matches::MatchingConfig;
-use rgm_registration::methods::ransac;
-use rgm_registration::methods::ransac::RansacConfig;
-use rgm_registration::methods::sc2;
-use rgm_registration::methods::sc2::Sc2Config;
+use rgm_registration::methods::ransac::{self, RansacConfig};
+use rgm_registration::methods::sc2::{self, Sc2Config};
 use rgm_registration::Fit;
 
 fn main() {

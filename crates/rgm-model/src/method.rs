@@ -4,8 +4,7 @@
 
 use std::fmt;
 
-use rgm_registration::registrar::Progress;
-use rgm_registration::registrar::{DynRegistrar, MethodId, Registrar, Registration};
+use rgm_registration::registrar::{DynRegistrar, MethodId, Progress, Registrar, Registration};
 use rgm_registration::Prepared;
 
 use crate::error::MethodError;

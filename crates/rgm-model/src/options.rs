@@ -39,16 +39,14 @@ use std::path::PathBuf;
 use std::str::FromStr;
 
 use rgm_geom::frame::FrameRule;
-use rgm_registration::check::{Acceptance, Scoring};
-use rgm_registration::check::{Coincides, CoincidesAtSpacing, InFrame, Unambiguous};
-use rgm_registration::compose::Checked;
-use rgm_registration::compose::Thinned;
-use rgm_registration::compose::{AtResolution, Normalised, OnFirstUse, Refined, UpTo};
-use rgm_registration::compose::{BestOf, Cascade};
-use rgm_registration::methods::fgr;
-use rgm_registration::methods::fgr::FgrConfig;
-use rgm_registration::methods::icp;
-use rgm_registration::methods::icp::IcpConfig;
+use rgm_registration::check::{
+    Acceptance, Coincides, CoincidesAtSpacing, InFrame, Scoring, Unambiguous,
+};
+use rgm_registration::compose::{
+    AtResolution, BestOf, Cascade, Checked, Normalised, OnFirstUse, Refined, Thinned, UpTo,
+};
+use rgm_registration::methods::fgr::{self, FgrConfig};
+use rgm_registration::methods::icp::{self, IcpConfig};
 use rgm_registration::methods::refine::{RefineConfig, ResolutionConfig};
 use rgm_registration::methods::sc2::Sc2Config;
 use rgm_registration::methods::triplets::TripletConfig;

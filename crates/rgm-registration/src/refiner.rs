@@ -7,14 +7,13 @@
 
 use std::time::Instant;
 
+use rgm_geom::{Result, RigidTransform};
+
 use crate::fit::{score, Fit};
-use crate::methods::icp;
-use crate::methods::icp::IcpConfig;
-use crate::methods::refine;
-use crate::methods::refine::{RefineConfig, ResolutionConfig};
+use crate::methods::icp::{self, IcpConfig};
+use crate::methods::refine::{self, RefineConfig, ResolutionConfig};
 use crate::registrar::Registration;
 use crate::Prepared;
-use rgm_geom::{Result, RigidTransform};
 
 /// A local method: from a transform near the truth to a better one.
 pub trait Refiner: Send + Sync {

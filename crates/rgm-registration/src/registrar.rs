@@ -1,21 +1,20 @@
 //! One shape for every registration method: a [`Registrar`] maps a source cloud onto a target
-//! cloud, and the wrappers here compose registrars without knowing what they wrap —
-//! [`Refined`] (its transform improved by a [`Refiner`]), [`Normalised`] (the pair centred and
-//! scaled into the unit-sphere frame, for a registrar or a refiner), [`AtResolution`] (a last
-//! refinement of a dense pair only, at its own point spacing) and [`OnFirstUse`] (a method made
-//! only when a pair needs it). The composites of [`crate::compose`] run several methods and
-//! keep the best by a score that needs no ground truth.
+//! cloud and returns a [`Registration`]. The methods of [`crate::methods`] implement it, and the
+//! wrappers and composites of [`crate::compose`] compose registrars without knowing what they
+//! wrap ([`crate::compose::Refined`], [`crate::compose::Normalised`], [`crate::compose::BestOf`],
+//! ...).
 //!
 //! The trait is generic over its error so that methods above this crate (the RGM network)
 //! compose with the classical ones here: every registrar of this crate works with any error
-//! type that a [`GeomError`] converts into.
+//! type that a [`rgm_geom::GeomError`] converts into.
 
 use std::fmt;
 use std::time::Instant;
 
+use rgm_geom::{PointCloud, RigidTransform};
+
 use crate::fit::{score, Fit};
 use crate::Prepared;
-use rgm_geom::{PointCloud, RigidTransform};
 
 /// What users call a method: its base name and the refiner its transform went through, spelled
 /// `base` or `base+refiner` (`fgr+icp`) in the command line, the tables, the Python package

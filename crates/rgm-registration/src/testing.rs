@@ -4,16 +4,15 @@ use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use nalgebra::{Matrix3, Vector3};
-
-use crate::check::Scoring;
-use crate::fit::Fit;
-use crate::registrar::Progress;
-use crate::registrar::{MethodId, Registrar, Registration};
-use crate::thinning::Density;
-use crate::Prepared;
 use rgm_geom::frame::FrameRule;
 use rgm_geom::testing::room;
 use rgm_geom::{GeomError, PointCloud, RigidTransform};
+
+use crate::check::Scoring;
+use crate::fit::Fit;
+use crate::registrar::{MethodId, Progress, Registrar, Registration};
+use crate::thinning::Density;
+use crate::Prepared;
 
 /// The scoring the default composes its methods with (rgm-model's options): distances in
 /// unit-sphere units.

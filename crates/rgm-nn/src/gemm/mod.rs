@@ -476,8 +476,7 @@ fn for_each_in_memory_order(v: ArrayView2<'_, f32>, mut f: impl FnMut(usize, usi
 mod tests {
     use super::*;
     use crate::bf16::round_to_bf16;
-    use ndarray::Array2;
-    use ndarray::ArrayView1;
+    use ndarray::{Array2, ArrayView1};
     use rand::{rngs::StdRng, Rng, SeedableRng};
 
     /// A (rows, cols) matrix uniform in [-1, 1) (far from bf16's flushed denormals).

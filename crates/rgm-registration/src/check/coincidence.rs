@@ -11,12 +11,13 @@
 //! puts a [`Check`] on any registrar. The tuned lengths and shares are configuration, set where
 //! methods are composed.
 
-use crate::check::turned_poses;
-use crate::registrar::Registration;
-use crate::thinning::Density;
 use rgm_geom::cloud::median;
 use rgm_geom::frame::{FrameRule, NearPair, Normalisation};
 use rgm_geom::{KnnIndex, PointCloud, RigidTransform};
+
+use crate::check::turned_poses;
+use crate::registrar::Registration;
+use crate::thinning::Density;
 
 /// At most this many points of each cloud are measured: the shares settle long before a dense
 /// scan's 300,000 points.

@@ -6,22 +6,21 @@
 //! fail wildly on many partial ones), so the better of two is right more often than either.
 //! The composites here run candidate methods and judge them so: [`BestOf`] side by side,
 //! [`Cascade`] the cheap one first and the rest only when its result is in doubt
-//! ([`Acceptance`]); [`crate::compose::Thinned`] runs either on several thinnings of a dense
-//! pair. How they score ([`Scoring`]) is the caller's configuration.
+//! ([`crate::check::Acceptance`]); [`crate::compose::Thinned`] runs either on several thinnings of a dense
+//! pair. How they score ([`crate::check::Scoring`]) is the caller's configuration.
 
 use std::time::Instant;
 
 use rayon::prelude::*;
+use rgm_geom::{GeomError, RigidTransform};
 
-use crate::check::Acceptance;
-use crate::check::Judge;
-use crate::check::Scoring;
+use crate::check::{Acceptance, Judge, Scoring};
 use crate::fit::{score, Fit};
 use crate::prepared::indexed_pair;
-use crate::registrar::Progress;
-use crate::registrar::{elapsed_ms, Candidate, DynRegistrar, MethodId, Registrar, Registration};
+use crate::registrar::{
+    elapsed_ms, Candidate, DynRegistrar, MethodId, Progress, Registrar, Registration,
+};
 use crate::Prepared;
-use rgm_geom::{GeomError, RigidTransform};
 /// What a composite's candidates found on one pair, judged by a [`Judge`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct Outcome {
@@ -352,12 +351,9 @@ impl<E: From<GeomError> + ToString + Send> Registrar<E> for Cascade<E> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::check::agree;
-    use crate::check::overlap_score;
-    use crate::check::turned_share;
+    use crate::check::{agree, overlap_score, turned_share};
     use crate::testing::{Fixed, SCORING};
-    use rgm_geom::{KnnIndex, PointCloud};
-    use rgm_geom::{Matrix3, Point3, Vector3};
+    use rgm_geom::{KnnIndex, Matrix3, Point3, PointCloud, Vector3};
 
     #[test]
     fn transforms_agree_within_a_degree_and_a_fiftieth() {

@@ -1,20 +1,14 @@
 //! [`Thinned`], a composite run on several thinnings of a dense pair, judged on the pair as given.
 
-use crate::check::agree;
-use crate::check::Judge;
-use crate::compose::conclude;
-use crate::compose::Composite;
-use crate::prepared::Prepared;
-use crate::registrar::MethodId;
-use crate::registrar::Progress;
-use crate::registrar::Registrar;
-use crate::registrar::Registration;
-use crate::thinning::thinned;
-use crate::thinning::Density;
-use crate::thinning::Thinning;
-use rgm_geom::GeomError;
-use rgm_geom::RigidTransform;
 use std::time::Instant;
+
+use rgm_geom::{GeomError, RigidTransform};
+
+use crate::check::{agree, Judge};
+use crate::compose::{conclude, Composite};
+use crate::prepared::Prepared;
+use crate::registrar::{MethodId, Progress, Registrar, Registration};
+use crate::thinning::{thinned, Density, Thinning};
 
 /// A composite on a pair denser than `density` thinned each of `thinnings` ways in turn, its
 /// candidates judged on the pair as given: a dense pair can be thinned many ways, none of them

@@ -4,28 +4,20 @@
 //! dense pair only, at its own point spacing), [`UpTo`] (a method of its own for tiny clouds) and
 //! [`OnFirstUse`] (a method made only when a pair needs it).
 
-use crate::check::Check;
-use crate::fit::Fit;
-use crate::methods::refine::RefineConfig;
-use crate::prepared::indexed_pair;
-use crate::prepared::Prepared;
-use crate::refiner::AtSpacing;
-use crate::refiner::Refiner;
-use crate::registrar::elapsed_ms;
-use crate::registrar::MethodId;
-use crate::registrar::Progress;
-use crate::registrar::Registrar;
-use crate::registrar::Registration;
-use crate::thinning::Density;
-use rgm_geom::frame::FrameRule;
-use rgm_geom::frame::NearPair;
-use rgm_geom::frame::Normalisation;
-use rgm_geom::GeomError;
-use rgm_geom::PointCloud;
-use rgm_geom::RigidTransform;
 use std::fmt;
 use std::sync::Arc;
 use std::time::Instant;
+
+use rgm_geom::frame::{FrameRule, NearPair, Normalisation};
+use rgm_geom::{GeomError, PointCloud, RigidTransform};
+
+use crate::check::Check;
+use crate::fit::Fit;
+use crate::methods::refine::RefineConfig;
+use crate::prepared::{indexed_pair, Prepared};
+use crate::refiner::{AtSpacing, Refiner};
+use crate::registrar::{elapsed_ms, MethodId, Progress, Registrar, Registration};
+use crate::thinning::Density;
 
 /// `inner`, then `refiner` from its transform, on the clouds `inner` was given: named
 /// `inner`'s name `+` the refiner's. The result is the refiner's (scored as it scores); the

@@ -13,6 +13,9 @@
 use std::time::Instant;
 
 use nalgebra::{Point3, Vector3};
+use rgm_geom::fpfh::{features, FpfhConfig};
+use rgm_geom::normals::NormalsConfig;
+use rgm_geom::{kabsch, GeomError, PointCloud, Result, RigidTransform};
 
 use crate::fit::{score, Fit};
 use crate::methods::fgr::{mutual_matches, nearest_matches};
@@ -20,9 +23,6 @@ use crate::methods::icp::check_clouds;
 use crate::methods::refine::{median_spacing, refine_at_resolution, ResolutionConfig};
 use crate::registrar::{MethodId, Registration};
 use crate::Prepared;
-use rgm_geom::fpfh::{features, FpfhConfig};
-use rgm_geom::normals::NormalsConfig;
-use rgm_geom::{kabsch, GeomError, PointCloud, Result, RigidTransform};
 
 /// Steps 1–4 of the module. Lengths are in point spacings of the thinned pair. The defaults are
 /// Open3D's tutorial lengths (normals at 2 voxels, FPFH at 5, inliers within 1.5) with its

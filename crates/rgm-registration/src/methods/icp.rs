@@ -8,16 +8,14 @@
 //! RMSE changed by less than their relative thresholds. The reported fitness and RMSE are those
 //! of the final transform.
 
+use std::time::Instant;
+
 use nalgebra::Point3;
+use rgm_geom::{kabsch, GeomError, KnnIndex, PointCloud, Result, RigidTransform};
 
 use crate::fit::{score, Fit};
-use crate::registrar::MethodId;
-use crate::registrar::Progress;
-use crate::registrar::Registrar;
-use crate::registrar::Registration;
+use crate::registrar::{MethodId, Progress, Registrar, Registration};
 use crate::Prepared;
-use rgm_geom::{kabsch, GeomError, KnnIndex, PointCloud, Result, RigidTransform};
-use std::time::Instant;
 
 /// The method's name ([`crate::registrar::MethodId`]).
 pub const NAME: &str = "icp";

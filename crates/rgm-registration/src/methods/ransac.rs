@@ -19,15 +19,14 @@
 use nalgebra::Point3;
 use rand::{rngs::StdRng, Rng, SeedableRng};
 use rayon::prelude::*;
+use rgm_geom::{kabsch, GeomError, PointCloud, Result, RigidTransform};
 
 use crate::fit::Fit;
 use crate::methods::feature_matches::{
     inliers_of, refitted, register_matched, Matched, MatchingConfig,
 };
-use crate::registrar::Progress;
-use crate::registrar::{MethodId, Registrar, Registration};
+use crate::registrar::{MethodId, Progress, Registrar, Registration};
 use crate::Prepared;
-use rgm_geom::{kabsch, GeomError, PointCloud, Result, RigidTransform};
 
 pub use crate::methods::feature_matches::Consensus;
 

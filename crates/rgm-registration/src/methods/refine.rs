@@ -28,13 +28,12 @@ use std::cell::RefCell;
 
 use nalgebra::{Matrix6, Point3, Rotation3, Vector3, Vector6};
 use rayon::prelude::*;
-
-use crate::fit::{nearest_each, score, Fit};
-use crate::methods::icp;
-use crate::methods::icp::{check_clouds, IcpConfig};
-use crate::Prepared;
 use rgm_geom::normals::{normal_at, NormalsConfig};
 use rgm_geom::{GeomError, KnnIndex, PointCloud, Result, RigidTransform};
+
+use crate::fit::{nearest_each, score, Fit};
+use crate::methods::icp::{self, check_clouds, IcpConfig};
+use crate::Prepared;
 
 /// What a method refined by [`refine`] is called after its `+` (`fgr+icp`): it is ICP, point to
 /// plane and then point to point.

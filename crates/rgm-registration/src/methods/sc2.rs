@@ -16,15 +16,14 @@
 //!    ([`crate::methods::feature_matches`]).
 
 use rayon::prelude::*;
+use rgm_geom::{kabsch, GeomError, PointCloud, Result, RigidTransform};
 
 use crate::fit::Fit;
 use crate::methods::feature_matches::{
     inliers_of, refitted, register_matched, Consensus, Matched, MatchingConfig,
 };
-use crate::registrar::Progress;
-use crate::registrar::{MethodId, Registrar, Registration};
+use crate::registrar::{MethodId, Progress, Registrar, Registration};
 use crate::Prepared;
-use rgm_geom::{kabsch, GeomError, PointCloud, Result, RigidTransform};
 
 /// The method's name ([`crate::registrar::MethodId`]).
 pub const NAME: &str = "sc2";

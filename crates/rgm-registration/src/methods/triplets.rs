@@ -9,10 +9,11 @@
 
 use std::time::Instant;
 
+use rgm_geom::{kabsch, GeomError, PointCloud, Result, RigidTransform};
+
 use crate::fit::{score, Fit};
 use crate::registrar::{MethodId, Registrar, Registration};
 use crate::Prepared;
-use rgm_geom::{kabsch, GeomError, PointCloud, Result, RigidTransform};
 
 /// The method's name ([`crate::registrar::MethodId`]).
 pub const NAME: &str = "triplets";
