@@ -18,12 +18,12 @@ use crate::Prepared;
 
 /// What users call a method: its base name and the refiner its transform went through, spelled
 /// `base` or `base+refiner` (`fgr+icp`) in the command line, the tables, the Python package
-/// and JSON. The wrappers compose it: [`Refined`] names its refiner.
+/// and JSON. The wrappers compose it: [`crate::compose::Refined`] names its refiner.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct MethodId {
     /// The method without refinement (`icp`, `fgr`, `rgm`, `auto`).
     pub base: &'static str,
-    /// The [`Refiner::name`] of its refinement, if it is refined.
+    /// The [`crate::refiner::Refiner::name`] of its refinement, if it is refined.
     pub refiner: Option<&'static str>,
 }
 

@@ -16,7 +16,7 @@ pub struct Scoring {
     /// Within it a moved point counts as overlapping the other cloud ([`overlap_score`]).
     pub overlap_distance: f64,
     /// The least [`overlap_score`] of a credible result: below it the pair is reported as not
-    /// registered ([`Registration::doubt`]) rather than with a transform nothing supports.
+    /// registered ([`crate::Registration::doubt`]) rather than with a transform nothing supports.
     pub min_overlap: f64,
     /// The distance at which the chosen result is scored and its correspondences found.
     pub result_distance: f64,
@@ -27,7 +27,7 @@ pub struct Scoring {
     pub coincides: Option<Coincides>,
 }
 
-/// When a cascade's result is good enough to end it ([`Cascade::accept`]).
+/// When a cascade's result is good enough to end it ([`crate::compose::Cascade::accept`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Acceptance {
     /// The least [`overlap_score`] taken.

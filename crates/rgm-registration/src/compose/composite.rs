@@ -237,7 +237,7 @@ fn register_composite<E: From<GeomError>>(
     conclude(&judge, outcome.candidates, outcome.best, start)
 }
 
-/// Every candidate on the pair, side by side, the best by [`overlap_score`] returned (ties to
+/// Every candidate on the pair, side by side, the best by [`crate::check::overlap_score`] returned (ties to
 /// the earlier candidate), judged by `scoring`: wrap it in [`crate::compose::Normalised`] for
 /// pairs of any size when its lengths are set for unit-sphere shapes. Its correspondences are
 /// the source points within [`Scoring::result_distance`] of the target.
@@ -289,7 +289,7 @@ impl<E: From<GeomError> + ToString + Send> Registrar<E> for BestOf<E> {
 }
 
 /// `first` alone, and `rest` (side by side) only when `accept` does not take the best result
-/// so far; the best of all that ran by [`overlap_score`] returned, as [`BestOf`] returns it.
+/// so far; the best of all that ran by [`crate::check::overlap_score`] returned, as [`BestOf`] returns it.
 /// The cheap method goes first: the others cost their time only on the pairs it leaves in
 /// doubt.
 #[derive(Debug)]
