@@ -9,8 +9,8 @@
 //!
 //! Layering rule: rgm-model builds on rgm-geom, rgm-registration, rgm-nn, rgm-match and
 //! rgm-data, and nothing builds on it but the `rgm` command, xtask, the cross-crate tests and
-//! the Python package (`python/`). It owns no geometry, registration
-//! method or tensor op of its own: it keeps the network and composes the named methods.
+//! the Python package (`python/`). It owns no geometry, registration method or tensor op of its
+//! own: it keeps the network and composes the named methods.
 
 pub mod batch;
 mod by_name;
