@@ -30,7 +30,7 @@ fn fgr_registers_clean_test_pairs() {
     let data = modelnet();
     let shapes = data.split(Split::Test, false);
     let generator = PairGenerator::new(Setting::Clean);
-    let mut method = Method::new(rgm_geom::fgr::FgrConfig::default());
+    let mut method = Method::new(rgm_registration::methods::fgr::FgrConfig::default());
     for i in 0..4 {
         let pair = generator.test_pair(&shapes, i).unwrap();
         let record = evaluate_pair(&mut method, i, &pair).unwrap();
@@ -51,7 +51,7 @@ fn a_failed_registration_is_scored_as_the_identity() {
         .test_pair(&shapes, 0)
         .unwrap();
     // ICP whose correspondence distance admits no pair fails; evaluation goes on.
-    let mut method = Method::new(rgm_geom::icp::IcpConfig {
+    let mut method = Method::new(rgm_registration::methods::icp::IcpConfig {
         max_correspondence_distance: -1.0,
         ..Default::default()
     });

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The whole-overlap rule of the cascade (`rgm_geom::best_of::Acceptance::whole`) read off dumps of
+"""The whole-overlap rule of the cascade (`rgm_registration::check::Acceptance::whole`) read off dumps of
 `default_study --study cascade --dump FILE` (one per setting).
 
 Usage: python3 tools/cascade_whole.py SETTING=FILE [SETTING=FILE ...]

@@ -105,7 +105,7 @@ def main():
                   f"{100 * r['recall']:.2f} % | {refined} |")
         if any("recall_refined" in r and "refined_with" not in r for r in val):
             print("\n¹ Point-to-point ICP (pairs closer than 0.1, 30 iterations), rgm's refinement until "
-                  "2026-11-23; the others: trimmed point-to-plane ICP, coarse to fine (`rgm_geom::refine`, "
+                  "2026-11-23; the others: trimmed point-to-plane ICP, coarse to fine (`rgm_registration::methods::refine`, "
                   "what `--refine` does).")
         print("\n`first`: the first validation shapes of the split, which is ordered by category (300 of "
               "the full split are five categories, airplane to bookshelf); `spread`: shapes spread evenly "

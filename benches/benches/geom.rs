@@ -1,4 +1,4 @@
-//! rgm-geom's hot paths at RGM's sizes (N = 717 partial, 1,024 full; K = 20): the kNN graph,
+//! rgm-geom's and rgm-registration's hot paths at RGM's sizes (N = 717 partial, 1,024 full; K = 20): the kNN graph,
 //! weighted Kabsch, and the classical baselines ICP and FPFH + FGR on a 717-point pair; and the
 //! scene stage's global estimators (RANSAC, SC²) on a 20,000-point room pair.
 //!
@@ -6,12 +6,12 @@
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use rand::{rngs::StdRng, SeedableRng};
-use rgm_benches::{room_points, unit_ball_points, SIZES};
+use rgm_benches::{unit_ball_points, SIZES};
 use rgm_geom::fpfh::{features, FpfhConfig};
 use rgm_geom::normals::NormalsConfig;
-use rgm_geom::{
-    fgr, icp, kabsch, knn_graph, ransac, refine, sc2, KnnIndex, Point3, PointCloud, RigidTransform,
-};
+use rgm_geom::testing::room_points;
+use rgm_geom::{kabsch, knn_graph, KnnIndex, Point3, PointCloud, RigidTransform};
+use rgm_registration::methods::{fgr, icp, ransac, refine, sc2};
 
 const K: usize = 20;
 

@@ -16,7 +16,7 @@
 //! `--study cascade` runs `rgm register`'s default with both candidates on each pair and, from
 //! their overlap scores, outcomes and times, prints what a cascade would give: FGR first, the
 //! network only when FGR's score (0 to 2; a partial pair registered right scores about 1) is
-//! below a threshold or its turned share (`rgm_geom::best_of::turned_share`) above a limit (then
+//! below a threshold or its turned share (`rgm_registration::check::turned_share`) above a limit (then
 //! the better of the two, as the default picks). Run it on one thread (`RAYON_NUM_THREADS=1`)
 //! so that each candidate's time is its own. `--dump FILE` writes each pair's scores, outcomes,
 //! times and turned share to FILE, one line per pair.
@@ -44,15 +44,15 @@
 use std::time::Instant;
 
 use rgm_data::{ModelNet40, PairGenerator, Setting, Split};
-use rgm_geom::best_of::turned_share;
-use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::frame::Normalisation;
 use rgm_geom::metrics::PairMetrics;
-use rgm_geom::refine::{self, RefineConfig};
-use rgm_geom::registration::score;
 use rgm_geom::{KnnIndex, PointCloud, RigidTransform};
 use rgm_model::options::FRAME;
 use rgm_model::{MethodOptions, Registrar};
+use rgm_registration::check::turned_share;
+use rgm_registration::fit::score;
+use rgm_registration::methods::fgr::{self, FgrConfig};
+use rgm_registration::methods::refine::{self, RefineConfig};
 
 fn arg(args: &[String], name: &str) -> Option<String> {
     args.iter()
@@ -60,7 +60,7 @@ fn arg(args: &[String], name: &str) -> Option<String> {
         .and_then(|i| args.get(i + 1).cloned())
 }
 
-/// The refinements compared: `rgm_geom::refine`'s point-to-plane stages alone, then with
+/// The refinements compared: `rgm_registration::methods::refine`'s point-to-plane stages alone, then with
 /// point-to-point stages at these distances (`RefineConfig::point_distances`).
 const REFINEMENTS: [(&str, &[f64]); 4] = [
     ("plane", &[]),
@@ -596,7 +596,7 @@ impl Variant {
             "one" => false,
             _ => return Err(format!("variant {spec:?}: chains are both or one").into()),
         };
-        let acceptance = rgm_geom::best_of::Acceptance {
+        let acceptance = rgm_registration::check::Acceptance {
             score: accept,
             ..rgm_model::options::ACCEPT
         };

@@ -12,10 +12,11 @@ use std::time::Instant;
 
 use rgm_data::scenes::LoadedScenePair;
 use rgm_data::SceneFolder;
-use rgm_geom::feature_matches::MatchingConfig;
-use rgm_geom::ransac::{self, RansacConfig};
-use rgm_geom::sc2::{self, Sc2Config};
-use rgm_geom::{Fit, Result};
+use rgm_geom::Result;
+use rgm_registration::methods::feature_matches::MatchingConfig;
+use rgm_registration::methods::ransac::{self, RansacConfig};
+use rgm_registration::methods::sc2::{self, Sc2Config};
+use rgm_registration::Fit;
 
 fn main() {
     let folders: Vec<String> = std::env::args().skip(1).collect();

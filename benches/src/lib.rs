@@ -1,4 +1,5 @@
-//! Inputs shared by the benches (and rgm-geom's tests): seeded random data at the paper's sizes.
+//! Inputs shared by the benches: seeded random data at the paper's sizes (the seeded room the
+//! geometry benches and rgm-registration's tests share is `rgm_geom::testing::room_points`).
 
 use nalgebra::Point3;
 use rand::{rngs::StdRng, Rng, SeedableRng};
@@ -21,23 +22,4 @@ pub fn unit_ball_points(n: usize, seed: u64) -> Vec<Point3<f64>> {
         }
     }
     out
-}
-
-/// `n` points sampled at random on a room corner (metres): a 4 × 3 m floor, two walls 2.5 m
-/// high, a box on the floor and a slanted board, reproducible from `seed`. Two samplings of
-/// it, one moved, make a scene pair that shares every surface but no point.
-pub fn room_points(n: usize, seed: u64) -> Vec<Point3<f64>> {
-    let mut rng = StdRng::seed_from_u64(seed);
-    (0..n)
-        .map(|_| {
-            let (u, v): (f64, f64) = (rng.gen(), rng.gen());
-            match rng.gen_range(0..5) {
-                0 => Point3::new(4.0 * u, 3.0 * v, 0.0),
-                1 => Point3::new(4.0 * u, 0.0, 2.5 * v),
-                2 => Point3::new(0.0, 3.0 * u, 2.5 * v),
-                3 => Point3::new(1.5 + 0.6 * u, 1.0 + 0.4 * v, 0.5),
-                _ => Point3::new(3.0 + 0.5 * u, 2.0 + 0.8 * v, 0.3 + 0.6 * u),
-            }
-        })
-        .collect()
 }

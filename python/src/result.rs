@@ -9,9 +9,9 @@ use pyo3::exceptions::PyOSError;
 use pyo3::prelude::*;
 use pyo3::types::{PyList, PySlice, PyTuple};
 use pyo3::IntoPyObjectExt;
-use rgm_geom::registrar::Candidate as GeomCandidate;
 use rgm_model::options::FRAME;
 use rgm_model::Registration;
+use rgm_registration::registrar::Candidate as GeomCandidate;
 use rgm_viz::html::{
     inline_frame, InlierDistance, Page, ResultNotes, DEFAULT_POINT_BUDGET, INLINE_POINT_BUDGET,
 };
@@ -254,7 +254,7 @@ impl RegistrationResult {
             )
             .collect::<PyResult<Vec<_>>>()?;
         let registration = Registration {
-            result: rgm_geom::Fit {
+            result: rgm_registration::Fit {
                 t_target_source,
                 iterations: self.iterations,
                 converged: self.converged,

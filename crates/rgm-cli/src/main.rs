@@ -15,10 +15,10 @@ pub use rgm_cli::progress;
 use rgm_data::{
     ModelNet40, PairGenerator, ScanFolder, ScanPair, ScanPairConfig, Setting, Shape, Split,
 };
-use rgm_geom::refine::RefineConfig;
 use rgm_model::network::TestStatistics;
 use rgm_model::{Method, MethodName, MethodOptions, Registrar};
 use rgm_nn::Precision;
+use rgm_registration::methods::refine::RefineConfig;
 
 /// Robust point-cloud registration (RGM, CVPR 2021) and classical baselines.
 #[derive(Parser, Debug)]
@@ -151,7 +151,7 @@ fn refine_help() -> String {
          auto measure them in the unit-sphere frame, FGR alone in the clouds' own units, like \
          its own radii, which suit unit-sized shapes); with auto on clouds denser than 1,024 \
          points, then point-to-plane on the clouds as given at a few point spacings and at 3 \
-         noise σ (rgm_geom::refine::refine_at_resolution). On by default in `rgm register` and \
+         noise σ (rgm_registration::methods::refine::refine_at_resolution). On by default in `rgm register` and \
          `rgm render`; `rgm eval` follows the paper's protocol and refines only when asked",
         then(&refine.distances),
         then(&refine.point_distances)

@@ -171,7 +171,8 @@ fn an_endless_device_is_refused() {
 /// An airplane of the test split and its copy at the pose (20°, 10°, 30°), t (0.2, −0.1, 0.3),
 /// one point of each replaced by `far` (none when `None`), as `.npy` files in `dir`.
 fn airplane_pair(dir: &Path, far: Option<f64>) -> (String, String, rgm_geom::RigidTransform) {
-    use rgm_geom::{euler::rotation_xyz_intrinsic, Point3, RigidTransform, Vector3};
+    use rgm_geom::euler::rotation_xyz_intrinsic;
+    use rgm_geom::{Point3, RigidTransform, Vector3};
     let path = Path::new(&data_dir()).join("airplane/test/airplane_0627.npy");
     let source = rgm_data::read_point_cloud(path).unwrap();
     let r = rotation_xyz_intrinsic(20f64.to_radians(), 10f64.to_radians(), 30f64.to_radians());

@@ -84,12 +84,12 @@ pub enum DataError {
     #[error("{}: the file holds no point", path.display())]
     Empty { path: PathBuf },
     /// The file name does not say which format it is.
-    #[error(
-        "{}: unknown point-cloud extension (expected {})",
-        path.display(),
-        crate::io::extension_list()
-    )]
-    UnknownExtension { path: PathBuf },
+    #[error("{}: unknown point-cloud extension (expected {expected})", path.display())]
+    UnknownExtension {
+        path: PathBuf,
+        /// The extensions known, as `.ply, .off, ... or .laz` (`io::extension_list`).
+        expected: String,
+    },
     /// A dataset folder or file does not have the expected layout or contents.
     #[error("{}: {why}", path.display())]
     Dataset { path: PathBuf, why: String },

@@ -1,6 +1,7 @@
 //! Point clouds.
 
 use nalgebra::{Point3, Vector3};
+use std::borrow::Cow;
 
 use crate::RigidTransform;
 
@@ -162,7 +163,7 @@ impl PointCloud {
 }
 
 /// The median of `values` (the upper one of an even count); NaN for none.
-pub(crate) fn median(mut values: Vec<f64>) -> f64 {
+pub fn median(mut values: Vec<f64>) -> f64 {
     if values.is_empty() {
         return f64::NAN;
     }
@@ -233,6 +234,19 @@ fn nearer_to_any(nearest: &mut [f64], [xs, ys, zs]: &[Vec<f64>; 3], [px, py, pz]
         step(&mut nearest[i], xs[i], ys[i], zs[i], &mut rest);
     }
     largest.iter().fold(rest, |m, &d| if d > m { d } else { m })
+}
+
+// A cloud borrowed or owned, as a `Cow` (what rgm-registration's `Prepared::new` takes).
+impl<'a> From<&'a PointCloud> for Cow<'a, PointCloud> {
+    fn from(cloud: &'a PointCloud) -> Self {
+        Cow::Borrowed(cloud)
+    }
+}
+
+impl From<PointCloud> for Cow<'_, PointCloud> {
+    fn from(cloud: PointCloud) -> Self {
+        Cow::Owned(cloud)
+    }
 }
 
 #[cfg(test)]

@@ -1,84 +1,11 @@
-//! Shapes shared by the tests of several modules.
+//! Seeded shapes and scenes for the tests of several crates (rgm-geom's own, rgm-registration's)
+//! and the benches: compiled for rgm-geom's tests and, with the `testing` feature, for theirs
+//! (as a dev-dependency). Nothing here is part of the geometry.
 
-use std::sync::{Arc, Mutex};
-use std::time::Instant;
-
-use nalgebra::{Matrix3, Point3, Vector3};
+use nalgebra::Point3;
 use rand::{rngs::StdRng, Rng, SeedableRng};
 
-use crate::best_of::Scoring;
-use crate::fgr::Progress;
-use crate::frame::FrameRule;
-use crate::registrar::{MethodId, Registrar, Registration};
-use crate::registration::Fit;
-use crate::thinning::Density;
-use crate::{GeomError, PointCloud, Prepared, RigidTransform};
-
-/// The scoring the default composes its methods with (rgm-model's options): distances in
-/// unit-sphere units.
-pub const SCORING: Scoring = Scoring {
-    overlap_distance: 0.02,
-    min_overlap: 0.1,
-    result_distance: 0.02,
-    coincides: None,
-};
-
-/// The frame rule the default composes its methods with (rgm-model's options): ModelNet40's
-/// pairs are in the unit-sphere frame already.
-pub const FRAME: FrameRule = FrameRule {
-    far_outlier: 12.0,
-    within: 2.0,
-    extent: (0.3, 1.7),
-};
-
-/// ModelNet40's density: 1,024 points in the unit sphere.
-pub const DENSITY: Density = Density {
-    points: 1024,
-    voxel: 0.035,
-};
-
-/// A pose far from the identity (a large turn about no axis in particular, a shift of 2.4), for
-/// the global estimators' tests.
-pub fn far_pose() -> crate::RigidTransform {
-    crate::RigidTransform::new(
-        crate::euler::rotation_xyz_intrinsic(0.7, -2.1, 2.9),
-        nalgebra::Vector3::new(0.4, -1.3, 2.0),
-    )
-}
-
-/// A dense scene, in metres ([`rgm_benches::room_points`]): a floor, two walls, a box on the
-/// floor and a slanted board, sampled at `n` random points, reproducible from `seed`.
-pub fn room(n: usize, seed: u64) -> PointCloud {
-    PointCloud::new(rgm_benches::room_points(n, seed))
-}
-
-/// `register` (a global estimator on a scene pair) on two samplings of [`room`], one moved by
-/// [`far_pose`], at their own scale and at 1,024 times it: within 0.3° and 1 cm (scaled) of the
-/// pose at both, and the same rotation at both, since every length follows the point spacing. A
-/// power of two scales every coordinate exactly, so the two runs match alike (the refinement's
-/// sums round apart a little).
-pub fn assert_registers_a_room_at_any_scale(register: impl Fn(&PointCloud, &PointCloud) -> Fit) {
-    let truth = far_pose();
-    let assert_near = |found: &RigidTransform, truth: &RigidTransform, distance: f64| {
-        let angle = found.inverse().compose(truth).rotation_angle_deg();
-        let shift = (found.translation - truth.translation).norm();
-        assert!(angle < 0.3 && shift < distance, "{angle}° {shift} off");
-    };
-    let source = room(6000, 1);
-    let target = room(6000, 2).transformed(&truth);
-    let found = register(&source, &target);
-    assert_near(&found.t_target_source, &truth, 0.01);
-    let scale = |c: &PointCloud| PointCloud::new(c.points.iter().map(|p| p * 1024.0).collect());
-    let big = register(&scale(&source), &scale(&target));
-    let big_truth = RigidTransform::new(truth.rotation, truth.translation * 1024.0);
-    assert_near(&big.t_target_source, &big_truth, 10.24);
-    let angle = big
-        .t_target_source
-        .inverse()
-        .compose(&found.t_target_source)
-        .rotation_angle_deg();
-    assert!(angle < 1e-3, "{angle}° between the scales");
-}
+use crate::PointCloud;
 
 /// `n` points uniform in the cube [−1, 1)³.
 pub fn uniform_cube(n: usize, rng: &mut StdRng) -> Vec<Point3<f64>> {
@@ -142,55 +69,27 @@ pub fn airplane() -> PointCloud {
     PointCloud::from_f32_rows(&rows)
 }
 
-/// A method that answers every pair with one transform (a shift along x), and records the
-/// sizes of the pairs it was given.
-#[derive(Clone)]
-pub struct Fixed {
-    pub name: &'static str,
-    pub transform: RigidTransform,
-    seen: Arc<Mutex<Vec<(usize, usize)>>>,
+/// `n` points sampled at random on a room corner (metres): a 4 × 3 m floor, two walls 2.5 m
+/// high, a box on the floor and a slanted board, reproducible from `seed`. Two samplings of
+/// it, one moved, make a scene pair that shares every surface but no point.
+pub fn room_points(n: usize, seed: u64) -> Vec<Point3<f64>> {
+    let mut rng = StdRng::seed_from_u64(seed);
+    (0..n)
+        .map(|_| {
+            let (u, v): (f64, f64) = (rng.gen(), rng.gen());
+            match rng.gen_range(0..5) {
+                0 => Point3::new(4.0 * u, 3.0 * v, 0.0),
+                1 => Point3::new(4.0 * u, 0.0, 2.5 * v),
+                2 => Point3::new(0.0, 3.0 * u, 2.5 * v),
+                3 => Point3::new(1.5 + 0.6 * u, 1.0 + 0.4 * v, 0.5),
+                _ => Point3::new(3.0 + 0.5 * u, 2.0 + 0.8 * v, 0.3 + 0.6 * u),
+            }
+        })
+        .collect()
 }
 
-impl Fixed {
-    pub fn new(name: &'static str, shift: f64) -> Self {
-        Self {
-            name,
-            transform: RigidTransform::new(Matrix3::identity(), Vector3::new(shift, 0.0, 0.0)),
-            seen: Default::default(),
-        }
-    }
-
-    /// How many pairs it registered.
-    pub fn calls(&self) -> usize {
-        self.seen.lock().unwrap().len()
-    }
-
-    /// The (source, target) sizes of the pairs it registered, in order.
-    pub fn seen(&self) -> Vec<(usize, usize)> {
-        self.seen.lock().unwrap().clone()
-    }
-}
-
-impl Registrar<GeomError> for Fixed {
-    fn id(&self) -> MethodId {
-        MethodId::plain(self.name)
-    }
-
-    fn register_prepared(
-        &mut self,
-        source: &Prepared,
-        target: &Prepared,
-        _: &mut dyn FnMut(Progress),
-    ) -> Result<Registration, GeomError> {
-        self.seen.lock().unwrap().push((source.len(), target.len()));
-        let result = Fit {
-            t_target_source: self.transform,
-            iterations: 0,
-            converged: true,
-            inlier_count: 0,
-            fitness: 0.0,
-            inlier_rmse: 0.0,
-        };
-        Ok(Registration::single(result, Vec::new(), Instant::now()))
-    }
+/// A dense scene, in metres ([`room_points`]): a floor, two walls, a box on the
+/// floor and a slanted board, sampled at `n` random points, reproducible from `seed`.
+pub fn room(n: usize, seed: u64) -> PointCloud {
+    PointCloud::new(room_points(n, seed))
 }

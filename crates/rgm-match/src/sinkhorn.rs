@@ -26,7 +26,7 @@
 use crate::error::{check_shape, MatchError, Result};
 use ndarray::linalg::{general_mat_mul, general_mat_vec_mul};
 use ndarray::{s, Array1, Array2, ArrayView1, ArrayView2, ArrayViewMut1, ArrayViewMut2, Axis, Zip};
-use rgm_nn::exp::{exp_shifted_sum, sum};
+use rgm_nn::lanes::{exp_shifted_sum, sum};
 use rgm_nn::Scalar;
 
 /// Which computation [`sinkhorn_forward`] uses.
@@ -265,7 +265,7 @@ fn log_row_step<T: Scalar>(
                 .and(&row)
                 .for_each(|x, &v| *x = v + T::zero()),
         }
-        let max = rgm_nn::exp::max(terms, slack_log);
+        let max = rgm_nn::lanes::max(terms, slack_log);
         let sum = (slack_log - max).exp() + exp_shifted_sum(terms, max);
         *a = -(max + sum.ln());
     }

@@ -27,8 +27,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 
 use rayon::prelude::*;
-use rgm_geom::registrar::Registrar as _;
 use rgm_geom::PointCloud;
+use rgm_registration::registrar::Registrar as _;
 use serde_json::{json, Map, Value};
 
 use crate::progress::Progress;

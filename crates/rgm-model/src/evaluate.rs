@@ -7,12 +7,13 @@ use std::time::Instant;
 use rgm_data::scenes::{MAX_ROTATION_ERROR_DEG, MAX_TRANSLATION_ERROR};
 use rgm_data::{Pair, ScanPair, ScenePair, Turn};
 use rgm_geom::metrics::{MetricsSummary, PairMetrics};
-use rgm_geom::{Prepared, RigidTransform};
+use rgm_geom::RigidTransform;
+use rgm_registration::Prepared;
 use serde::Serialize;
 
-use rgm_geom::refiner::Refiner;
-use rgm_geom::registrar::Normalised;
-use rgm_geom::Registrar;
+use rgm_registration::compose::Normalised;
+use rgm_registration::refiner::Refiner;
+use rgm_registration::Registrar;
 
 use crate::options::FRAME;
 use crate::Method;

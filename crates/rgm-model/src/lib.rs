@@ -1,15 +1,16 @@
 //! rgm-model — RGM put together from the layers below: the network ([`network`]), its
-//! test-time procedure as a [`rgm_geom::Registrar`] ([`procedure`], spec §4), training
+//! test-time procedure as a [`rgm_registration::Registrar`] ([`procedure`], spec §4), training
 //! ([`train`]) and checkpoints ([`weights`]). [`options`] composes every method users can name
 //! (ICP, FGR, RGM, and `rgm register`'s default, FGR and RGM as a cascade) from the
-//! registrars and wrappers of rgm-geom and this crate, into one [`method::Method`];
+//! registrars and wrappers of rgm-registration and this crate, into one [`method::Method`];
 //! [`evaluate`] runs a method over the benchmark's test pairs and scores it, resumably for long
 //! runs (per-pair record files); [`batch`] registers lists of pairs into a resumable JSON Lines
 //! file, for the `rgm` command and the Python package alike.
 //!
-//! Layering rule: rgm-model builds on rgm-geom, rgm-nn, rgm-match and rgm-data, and nothing
-//! builds on it but the `rgm` command, xtask and the Python package (`python/`). It owns no
-//! geometry or tensor op of its own.
+//! Layering rule: rgm-model builds on rgm-geom, rgm-registration, rgm-nn, rgm-match and
+//! rgm-data, and nothing builds on it but the `rgm` command, xtask, the cross-crate tests and
+//! the Python package (`python/`). It owns no geometry, registration method or tensor op of its
+//! own: it keeps the network and composes the named methods.
 
 pub mod batch;
 mod by_name;
@@ -29,4 +30,4 @@ pub use evaluate::{PairRecord, ScanRecord, SceneRecord, Summary};
 pub use method::Method;
 pub use options::{MethodName, MethodOptions};
 pub use procedure::{ProcedureConfig, RgmRegistrar, StageTimes};
-pub use rgm_geom::registrar::{Candidate, Registrar, Registration};
+pub use rgm_registration::registrar::{Candidate, Registrar, Registration};

@@ -4,9 +4,8 @@
 
 use std::fmt;
 
-use rgm_geom::fgr::Progress;
-use rgm_geom::registrar::{DynRegistrar, MethodId, Registrar, Registration};
-use rgm_geom::Prepared;
+use rgm_registration::registrar::{DynRegistrar, MethodId, Progress, Registrar, Registration};
+use rgm_registration::Prepared;
 
 use crate::error::MethodError;
 
@@ -32,7 +31,7 @@ impl Method {
         self.id().to_string()
     }
 
-    /// Whether the method's transform is refined ([`rgm_geom::refiner`]).
+    /// Whether the method's transform is refined ([`rgm_registration::refiner`]).
     pub fn is_refined(&self) -> bool {
         self.id().refiner.is_some()
     }

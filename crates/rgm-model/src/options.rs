@@ -14,17 +14,17 @@
 //!
 //! (`BestOf[first, rest]` in place of the `Cascade` when `accept` takes nothing; inside the
 //! `Normalised`, `UpTo { points: 32, small: TripletConfig, .. }` sends a pair of a few points to
-//! [`rgm_geom::triplets`]; with `+icp`, a pair denser than the training clouds (a scan, a room)
+//! [`rgm_registration::methods::triplets`]; with `+icp`, a pair denser than the training clouds (a scan, a room)
 //! goes through `Cascade { first: the Thinned composite, rest: [Sc2Config] }` judged by
 //! [`SCENE_ACCEPT`]: second-order compatibility on the pair's own FPFH matches,
-//! [`rgm_geom::sc2`], where the object cascade's result does not coincide with the target at
+//! [`rgm_registration::methods::sc2`], where the object cascade's result does not coincide with the target at
 //! the pair's spacing.)
 //!
 //! [`Checked`] doubts a refined result whose overlap is not one where the clouds coincide, or
 //! that a rival pose fits nearly as well ([`REFINED_CHECKS`]); so is ICP's, which is refined
 //! by its nature. The unrefined methods, calibrated on no data, are not checked.
 //!
-//! `Refined<R>` refines with [`RefineConfig`] (`+icp`); any other [`rgm_geom::refiner::Refiner`]
+//! `Refined<R>` refines with [`RefineConfig`] (`+icp`); any other [`rgm_registration::refiner::Refiner`]
 //! composes the same way (`Refined::new(FgrConfig::default(), IcpConfig::default())` is
 //! `fgr+p2p`).
 //!
@@ -32,32 +32,34 @@
 //! runs both methods in that frame, on two thinnings of a dense pair, as a cascade: FGR first,
 //! and the network only when FGR's result overlaps less than [`MethodOptions::accept`] or, short
 //! of a whole overlap, fits as well turned about one of the source's axes
-//! ([`rgm_geom::best_of::Acceptance`]); the network then runs one chain of passes, without the
+//! ([`rgm_registration::check::Acceptance`]); the network then runs one chain of passes, without the
 //! second chain of cycle consistency, since the overlap score judges its result.
 
 use std::path::PathBuf;
 use std::str::FromStr;
 
-use rgm_geom::best_of::{Acceptance, BestOf, Cascade, Scoring};
-use rgm_geom::coincidence::{Checked, Coincides, CoincidesAtSpacing, InFrame, Unambiguous};
-use rgm_geom::fgr::{self, FgrConfig};
 use rgm_geom::frame::FrameRule;
-use rgm_geom::icp::{self, IcpConfig};
-use rgm_geom::refine::{RefineConfig, ResolutionConfig};
-use rgm_geom::refiner::AtSpacing;
-use rgm_geom::registrar::{
-    AtResolution, DynRegistrar, Normalised, OnFirstUse, Refined, Registrar, UpTo,
+use rgm_registration::check::{
+    Acceptance, Coincides, CoincidesAtSpacing, InFrame, Scoring, Unambiguous,
 };
-use rgm_geom::sc2::Sc2Config;
-use rgm_geom::thinning::{Density, Thinned, Thinning};
-use rgm_geom::triplets::TripletConfig;
+use rgm_registration::compose::{
+    AtResolution, BestOf, Cascade, Checked, Normalised, OnFirstUse, Refined, Thinned, UpTo,
+};
+use rgm_registration::methods::fgr::{self, FgrConfig};
+use rgm_registration::methods::icp::{self, IcpConfig};
+use rgm_registration::methods::refine::{RefineConfig, ResolutionConfig};
+use rgm_registration::methods::sc2::Sc2Config;
+use rgm_registration::methods::triplets::TripletConfig;
+use rgm_registration::refiner::AtSpacing;
+use rgm_registration::registrar::{DynRegistrar, Registrar};
+use rgm_registration::thinning::Thinning;
 
 use rgm_nn::Precision;
 
 use crate::error::MethodError;
 use crate::method::Method;
 use crate::network::{Config, TestStatistics};
-use crate::procedure::{self, RgmRegistrar};
+use crate::procedure::{self, RgmRegistrar, TRAINING_DENSITY};
 
 /// The name of FGR and RGM as a cascade ([`MethodName::Auto`]).
 pub const AUTO: &str = "auto";
@@ -72,7 +74,7 @@ pub enum MethodName {
     /// The RGM network: the built-in model or given weights.
     Rgm,
     /// FGR, and RGM where FGR's result may be wrong, each refined, and the better by a score
-    /// without ground truth ([`rgm_geom::best_of`]).
+    /// without ground truth ([`rgm_registration::compose`]).
     #[default]
     Auto,
 }
@@ -155,15 +157,6 @@ pub const FRAME: FrameRule = FrameRule {
     extent: (0.3, 1.7),
 };
 
-/// The density the network and the default's settings were tuned at: ModelNet40's 1,024 points
-/// per shape in the unit sphere (717 after the partial crop). A denser pair is thinned to it,
-/// first averaged over voxels of 0.035 (the training clouds' median nearest-neighbour distance is
-/// 0.011–0.042).
-pub const TRAINING_DENSITY: Density = Density {
-    points: 1024,
-    voxel: 0.035,
-};
-
 /// How the default's composites judge their candidates (unit-sphere units): a point within
 /// 0.02 of the other cloud overlaps it, and a best result overlapping less than 0.1 (fewer than
 /// one point in twenty of each cloud on the other) is reported as not registered; chosen on
@@ -192,7 +185,7 @@ pub fn scoring(refine: Option<&RefineConfig>) -> Scoring {
 }
 
 /// When `rgm register`'s default takes its cheap candidate (FGR) without running the network
-/// ([`Cascade::accept`](rgm_geom::best_of::Cascade::accept)): the cheapest on validation pairs that kept the recall and the share off
+/// ([`Cascade::accept`](rgm_registration::compose::Cascade::accept)): the cheapest on validation pairs that kept the recall and the share off
 /// by more than 45° of running both within 0.1 points
 /// (`docs/training/default-study/cascade-1980-validation.md`).
 pub const ACCEPT: Acceptance = Acceptance {
@@ -324,12 +317,12 @@ pub struct MethodOptions {
     /// RGM's matrix products: f32 (the default), or bf16 where the processor has AMX or
     /// AVX-512 BF16 ([`Precision`]).
     pub precision: Precision,
-    /// Refine the transform of RGM or FGR (both, for `auto`) with [`rgm_geom::refine`]
+    /// Refine the transform of RGM or FGR (both, for `auto`) with [`rgm_registration::methods::refine`]
     /// ([`Method::refined`]); on by default, as in `rgm register` (the paper's protocol, and
     /// `rgm eval`, turn it off). ICP is its own refinement and ignores it.
     pub refine: bool,
     /// `auto` takes FGR's result without running the network when it scores at least this
-    /// ([`rgm_geom::best_of::overlap_score`], 0 to 2) and overlaps wholly or does not fit as
+    /// ([`rgm_registration::check::overlap_score`], 0 to 2) and overlaps wholly or does not fit as
     /// well turned ([`ACCEPT`]); `f64::INFINITY` runs both on every pair.
     pub accept: f64,
 }

@@ -8,11 +8,11 @@ use std::path::{Path, PathBuf};
 
 use ndarray::Array2;
 use rgm_data::{ModelNet40, PairGenerator, Setting, Split};
-use rgm_geom::registrar::Normalised;
 use rgm_geom::{Matrix3, PointCloud, RigidTransform, Vector3};
 use rgm_model::network::{Config, Mode, Rgm, RgmCache};
 use rgm_model::options::FRAME;
 use rgm_model::{ProcedureConfig, Registrar, RgmRegistrar};
+use rgm_registration::compose::Normalised;
 use serde::Deserialize;
 
 fn shared() -> PathBuf {

@@ -5,13 +5,13 @@
 use std::path::PathBuf;
 
 use rgm_data::{ModelNet40, PairGenerator, Setting, Split};
-use rgm_geom::refine::RefineConfig;
 use rgm_geom::{GeomError, PairMetrics, Point3, PointCloud, RigidTransform};
 use rgm_model::network::{Config, Rgm};
 use rgm_model::options::SCORING;
 use rgm_model::{
     Method, MethodError, MethodOptions, ProcedureConfig, Registrar, Registration, RgmRegistrar,
 };
+use rgm_registration::methods::refine::RefineConfig;
 
 /// The tiny network of `tests/fixtures` (random weights: its transforms are poor).
 fn tiny_rgm() -> RgmRegistrar {
@@ -56,7 +56,7 @@ fn metrics_against_truth(found: &Registration, pair: &rgm_data::Pair) -> PairMet
 
 /// `auto+icp` with `rgm`, both candidates on every pair.
 fn auto_with(rgm: RgmRegistrar) -> Method {
-    let never = rgm_geom::best_of::Acceptance::NEVER;
+    let never = rgm_registration::check::Acceptance::NEVER;
     rgm_model::options::auto(rgm, Some(RefineConfig::default()), never)
 }
 

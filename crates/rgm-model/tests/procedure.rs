@@ -9,8 +9,6 @@ use std::path::PathBuf;
 
 use ndarray::Array2;
 use rgm_geom::frame::Normalisation;
-use rgm_geom::refine::{refine, RefineConfig};
-use rgm_geom::registrar::{Normalised, Refined};
 use rgm_geom::{Point3, PointCloud, RigidTransform, Vector3};
 use rgm_match::{hard_match, MatchConfig};
 use rgm_model::evaluate::evaluate_pair;
@@ -19,6 +17,8 @@ use rgm_model::network::{
 };
 use rgm_model::options::FRAME;
 use rgm_model::{Method, MethodError, ProcedureConfig, Registrar, RgmRegistrar};
+use rgm_registration::compose::{Normalised, Refined};
+use rgm_registration::methods::refine::{refine, RefineConfig};
 
 /// RGM as `rgm register --method rgm --no-refine` runs it: in the network's frame.
 fn normalised(network: Rgm<f32>, config: ProcedureConfig) -> Normalised<RgmRegistrar> {

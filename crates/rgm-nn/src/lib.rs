@@ -58,6 +58,7 @@ pub mod gemm;
 pub mod gradcheck;
 pub mod init;
 pub mod io;
+pub mod lanes;
 pub mod ops;
 pub mod optim;
 pub mod param;

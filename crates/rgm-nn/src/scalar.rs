@@ -1,9 +1,8 @@
-//! The element types the ops run in: f32 for compute, f64 for the gradient checks.
+//! The element types the ops run in: f32 for compute, f64 for the gradient checks (the trait and
+//! what its products take; `gemm::scalars` implements it for both, on gemm's kernels).
 
-use crate::gemm::Then;
 use crate::Compute;
-use ndarray::linalg::general_mat_mul;
-use ndarray::{ArrayView2, ArrayViewMut2, LinalgScalar, ScalarOperand};
+use ndarray::{ArrayView1, ArrayView2, ArrayViewMut2, LinalgScalar, ScalarOperand};
 use num_traits::{Float, NumAssign};
 
 /// A float element type of the ops (implemented for f32 and f64).
@@ -46,67 +45,15 @@ pub trait Scalar:
     fn exp_in_place(xs: &mut [Self]);
 }
 
-impl Scalar for f32 {
-    fn from_f64(v: f64) -> Self {
-        v as f32
-    }
-    fn to_f64(self) -> f64 {
-        self as f64
-    }
-    /// AVX-512 or BLAS, or bf16 on AMX when `compute` asks for
-    /// [`crate::Precision::Bf16`].
-    fn mat_mul(
-        alpha: Self,
-        a: ArrayView2<'_, Self>,
-        b: ArrayView2<'_, Self>,
-        beta: Self,
-        c: ArrayViewMut2<'_, Self>,
-        compute: Compute,
-    ) {
-        crate::gemm::mat_mul_f32(alpha, a, b, beta, c, compute);
-    }
-    fn mat_mul_then(
-        a: ArrayView2<'_, Self>,
-        b: ArrayView2<'_, Self>,
-        then: Then<'_, Self>,
-        c: ArrayViewMut2<'_, Self>,
-        compute: Compute,
-    ) {
-        crate::gemm::mat_mul_then_f32(a, b, then, c, compute);
-    }
-    fn exp_in_place(xs: &mut [Self]) {
-        crate::exp::exp_f32_in_place(xs);
-    }
-}
-
-impl Scalar for f64 {
-    fn from_f64(v: f64) -> Self {
-        v
-    }
-    fn to_f64(self) -> f64 {
-        self
-    }
-    /// Always BLAS: f64 runs the gradient checks, whatever `compute` says.
-    fn mat_mul(
-        alpha: Self,
-        a: ArrayView2<'_, Self>,
-        b: ArrayView2<'_, Self>,
-        beta: Self,
-        mut c: ArrayViewMut2<'_, Self>,
-        _compute: Compute,
-    ) {
-        general_mat_mul(alpha, &a, &b, beta, &mut c);
-    }
-    fn mat_mul_then(
-        a: ArrayView2<'_, Self>,
-        b: ArrayView2<'_, Self>,
-        then: Then<'_, Self>,
-        c: ArrayViewMut2<'_, Self>,
-        compute: Compute,
-    ) {
-        crate::gemm::then_by_passes(a, b, then, c, compute);
-    }
-    fn exp_in_place(xs: &mut [Self]) {
-        xs.iter_mut().for_each(|x| *x = x.exp());
-    }
+/// How [`crate::gemm::mat_mul_then`] finishes the product `a · b` (M, N).
+#[derive(Clone, Copy, Debug)]
+pub enum Then<'a, T> {
+    /// A layer: `bias` (N, if any) added to every row, then `max(·, 0)` if `relu`.
+    Layer {
+        bias: Option<ArrayView1<'a, T>>,
+        relu: bool,
+    },
+    /// ReLU's backward through the product: the entries kept where `y` (M, N), a ReLU's
+    /// output, is positive and zero elsewhere (zero gradient at 0, as PyTorch).
+    ReluGrad(ArrayView2<'a, T>),
 }

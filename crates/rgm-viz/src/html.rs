@@ -13,10 +13,11 @@
 //! page says so.
 
 use rgm_geom::frame::{FrameRule, Normalisation};
-use rgm_geom::refine::RefineConfig;
-use rgm_geom::registrar::Candidate;
-use rgm_geom::registration::score;
-use rgm_geom::{KnnIndex, PointCloud, Registration, RigidTransform, Vector3};
+use rgm_geom::{KnnIndex, PointCloud, RigidTransform, Vector3};
+use rgm_registration::fit::score;
+use rgm_registration::methods::refine::RefineConfig;
+use rgm_registration::registrar::Candidate;
+use rgm_registration::Registration;
 use serde_json::json;
 
 use crate::{RenderError, Result};
@@ -88,7 +89,7 @@ pub struct ResultNotes {
 }
 
 impl ResultNotes {
-    /// The notes of `registration` by method `method` (as [`rgm_geom::MethodId`] spells it).
+    /// The notes of `registration` by method `method` (as [`rgm_registration::MethodId`] spells it).
     /// Its correspondences are drawn only when they are RGM's hard matches (`rgm`, unrefined):
     /// a refined result's correspondences are its inliers, which the colouring shows already.
     pub fn of_registration(method: &str, registration: &Registration) -> Self {
@@ -691,7 +692,7 @@ mod tests {
 
     #[test]
     fn only_rgms_own_matches_are_drawn() {
-        let result = rgm_geom::Fit::scored(
+        let result = rgm_registration::Fit::scored(
             RigidTransform::identity(),
             2,
             true,

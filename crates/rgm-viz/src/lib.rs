@@ -8,8 +8,9 @@
 //!   (WebGL, rgm's own small renderer), with the source coloured by its distance to the target
 //!   and the result's candidates.
 //!
-//! Layering rule: builds on rgm-geom (clouds, transforms, kNN, the [`rgm_geom::Registration`] a
-//! page describes) and rgm-data (correspondences) only, so anyone holding clouds and a transform
+//! Layering rule: builds on rgm-geom (clouds, transforms, kNN, the unit-sphere frame),
+//! rgm-registration (the [`rgm_registration::Registration`] a page describes, the scores and
+//! refinement it shows) and rgm-data (correspondences) only, so anyone holding clouds and a transform
 //! can draw them, without BLAS or the network; the `rgm render` and `rgm register` commands and
 //! the Python package (`to_html`) are its users.
 

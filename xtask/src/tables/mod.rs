@@ -21,13 +21,14 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 use rgm_cli::TaskBar;
 use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
-use rgm_geom::refine::RefineConfig;
-use rgm_geom::refiner::Refiner;
-use rgm_geom::registrar::{MethodId, Normalised};
 use rgm_model::evaluate::{Resumable, TestPairs};
 use rgm_model::options::FRAME;
 use rgm_model::weights::{weights_dir, Manifest, ModelEntry, Variant, WeightsFile};
 use rgm_model::{Method, MethodName, MethodOptions, PairRecord, Registrar};
+use rgm_registration::compose::Normalised;
+use rgm_registration::methods::refine::RefineConfig;
+use rgm_registration::refiner::Refiner;
+use rgm_registration::registrar::MethodId;
 use rgm_viz::{correct_fraction, correspondence_figure, registration_figure};
 
 use crate::project_root;
@@ -337,13 +338,13 @@ fn model_inputs(entry: &ModelEntry) -> Result<String> {
 fn default_row() -> String {
     MethodId {
         base: rgm_model::options::AUTO,
-        refiner: Some(rgm_geom::refine::NAME),
+        refiner: Some(rgm_registration::methods::refine::NAME),
     }
     .to_string()
 }
 
 /// The methods of the tables of `set`: ICP and FGR (identity initialisation, Open3D's
-/// settings; spec §6), on partial pairs also FGR refined by `rgm_geom::refine` (the classical
+/// settings; spec §6), on partial pairs also FGR refined by `rgm_registration::methods::refine` (the classical
 /// pipeline RGM competes with there; on clean and noisy pairs FGR alone registers nearly every
 /// pair, docs/results.md),
 /// `rgm register`'s default (`auto+icp`: RGM with the built-in model and FGR, both refined, the
@@ -396,7 +397,10 @@ fn check_only(manifest: &Manifest, only: &[String]) -> Result<()> {
     let classical = [
         (MethodName::Icp, None),
         (MethodName::Fgr, None),
-        (MethodName::Fgr, Some(rgm_geom::refine::NAME)),
+        (
+            MethodName::Fgr,
+            Some(rgm_registration::methods::refine::NAME),
+        ),
     ]
     .map(|(name, refiner)| {
         MethodId {

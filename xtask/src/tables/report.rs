@@ -3,10 +3,10 @@
 
 use std::path::Path;
 
-use rgm_geom::refine::RefineConfig;
 use rgm_model::evaluate::{table_header, table_row};
 use rgm_model::weights::ModelEntry;
 use rgm_model::Summary;
+use rgm_registration::methods::refine::RefineConfig;
 
 use rgm_model::weights::Variant;
 
@@ -259,11 +259,11 @@ anisotropic (Euler angles in degrees, per axis). CCD follows the authors' code (
 Euclidean distances, means), not the paper's formula. Recall: MAE(R) < 1° and MAE(t) < 0.1.
 - **Methods**: ICP point-to-point from the identity; FGR on FPFH features; both with Open3D's \
 settings (see baselines.md for the agreement with Open3D). `+icp` rows: the method's transform \
-refined as `rgm register` refines it (`rgm_geom::refine`: {refinement}); the paper reports no refined rows. A \
+refined as `rgm register` refines it (`rgm_registration::methods::refine`: {refinement}); the paper reports no refined rows. A \
 trained model's `+icp` row refines the transforms of its own row (what `rgm eval --refine` \
 gives, without running the network twice; its time adds the refinement's). \
 `auto+icp`: `rgm register`'s default, RGM with the built-in model and FGR, both refined so, and \
-per pair the result with the larger two-way overlap (`rgm_geom::best_of`). The paper's learned \
+per pair the result with the larger two-way overlap (`rgm_registration::compose`). The paper's learned \
 peers (RPM-Net, IDAM, DeepGMR) are not reproduced here.
 ",
         refinement = refinement()
@@ -395,7 +395,7 @@ mod tests {
     #[test]
     fn the_notes_describe_the_refinement_it_runs_with() {
         assert!(data_notes().contains(
-            "(`rgm_geom::refine`: trimmed point-to-plane ICP on the full clouds, pairs closer \
+            "(`rgm_registration::methods::refine`: trimmed point-to-plane ICP on the full clouds, pairs closer \
              than 0.2, 0.1, then 0.05, 10 iterations each, the closest 80 % of them fitted, then \
              point-to-point ICP at 0.05 and 0.03); the paper reports no refined rows."
         ));

@@ -92,6 +92,7 @@ pub fn format_of(path: &Path) -> Result<&'static dyn PointFormat> {
         .find(|f| f.extensions().contains(&ext.as_str()))
         .ok_or_else(|| DataError::UnknownExtension {
             path: path.to_path_buf(),
+            expected: extension_list(),
         })
 }
 

@@ -21,8 +21,8 @@ use flate2::write::GzEncoder;
 use flate2::Compression;
 use rayon::prelude::*;
 use rgm_data::{Pair, PairGenerator, Shape};
-use rgm_geom::refiner::Refiner;
 use rgm_geom::{Matrix4, RigidTransform};
+use rgm_registration::refiner::Refiner;
 use serde::{Deserialize, Serialize};
 
 use super::{evaluate_pair, PairRecord};
@@ -398,7 +398,7 @@ mod tests {
 
     use super::*;
     use crate::{MethodName, MethodOptions};
-    use rgm_geom::refine::RefineConfig;
+    use rgm_registration::methods::refine::RefineConfig;
 
     /// Counts what a [`Progress`] is told.
     #[derive(Default)]

@@ -10,9 +10,10 @@ use rgm_match::{
     AffinityConfig, InstNorm, InstNormCache, InstNormConfig, SinkhornCache, SinkhornConfig,
     Var1Config,
 };
-use rgm_nn::gemm::{mat_mul, mat_mul_then, Then};
+use rgm_nn::gemm::{mat_mul, mat_mul_then};
 use rgm_nn::init::Init;
 use rgm_nn::param::{join_name, ParamView, ParamViewMut};
+use rgm_nn::scalar::Then;
 use rgm_nn::{
     l1_normalize_columns_backward, l1_normalize_columns_forward, matmul_backward, matmul_forward,
     relu_backward, softmax_rows_backward, softmax_rows_forward, Compute, L1NormalizeCache, Linear,

@@ -6,11 +6,11 @@ use rand::SeedableRng;
 use rayon::prelude::*;
 use rgm_data::{Pair, PairGenerator, Shape};
 use rgm_geom::metrics::PairMetrics;
-use rgm_geom::refine::{refine, RefineConfig};
-use rgm_geom::registrar::Normalised;
 use rgm_geom::RigidTransform;
 use rgm_match::bce_forward;
 use rgm_nn::Scalar;
+use rgm_registration::compose::Normalised;
+use rgm_registration::methods::refine::{refine, RefineConfig};
 use serde::{Deserialize, Serialize};
 
 use super::config::ValSample;
@@ -59,9 +59,9 @@ pub enum Refinement {
     /// Point-to-point ICP (0.1, 30 iterations): what logs without the field measured.
     #[default]
     PointToPointIcp,
-    /// [`rgm_geom::refine`]'s trimmed point-to-plane ICP stages alone, coarse to fine.
+    /// [`rgm_registration::methods::refine`]'s trimmed point-to-plane ICP stages alone, coarse to fine.
     TrimmedPointToPlane,
-    /// [`rgm_geom::refine`] with its defaults: the point-to-plane stages, then point-to-point
+    /// [`rgm_registration::methods::refine`] with its defaults: the point-to-plane stages, then point-to-point
     /// ICP stages (what validation measures).
     PlaneThenPoint,
 }

@@ -13,7 +13,7 @@
 //! The result is the f32 product up to the order of the additions: each entry of C is
 //! accumulated over K in order within a panel of [`KC`], panels added in order.
 
-use super::Then;
+use crate::scalar::Then;
 use ndarray::{ArrayView1, ArrayView2, ArrayViewMut2};
 use std::cell::RefCell;
 

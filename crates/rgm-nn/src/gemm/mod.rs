@@ -30,6 +30,7 @@
 #[cfg(target_arch = "x86_64")]
 mod f32_avx512;
 mod kernels;
+mod scalars;
 
 #[cfg(target_arch = "x86_64")]
 pub use f32_avx512::{f32_mat_mul, f32_mat_mul_then};
@@ -49,11 +50,10 @@ pub fn f32_avx512_available() -> bool {
 
 use crate::bf16::bf16_bits;
 use crate::compute::{Compute, Precision};
-use crate::Scalar;
+use crate::scalar::{Scalar, Then};
 use ndarray::linalg::general_mat_mul;
 use ndarray::{
-    s, ArrayBase, ArrayView1, ArrayView2, ArrayViewMut2, Axis, Data, DataMut, Ix2, ShapeBuilder,
-    Zip,
+    s, ArrayBase, ArrayView2, ArrayViewMut2, Axis, Data, DataMut, Ix2, ShapeBuilder, Zip,
 };
 use std::cell::RefCell;
 
@@ -74,19 +74,6 @@ pub fn mat_mul<T, S1, S2, S3>(
     S3: DataMut<Elem = T>,
 {
     T::mat_mul(alpha, a.view(), b.view(), beta, c.view_mut(), compute);
-}
-
-/// How [`mat_mul_then`] finishes the product `a · b` (M, N).
-#[derive(Clone, Copy, Debug)]
-pub enum Then<'a, T> {
-    /// A layer: `bias` (N, if any) added to every row, then `max(·, 0)` if `relu`.
-    Layer {
-        bias: Option<ArrayView1<'a, T>>,
-        relu: bool,
-    },
-    /// ReLU's backward through the product: the entries kept where `y` (M, N), a ReLU's
-    /// output, is positive and zero elsewhere (zero gradient at 0, as PyTorch).
-    ReluGrad(ArrayView2<'a, T>),
 }
 
 /// `c = a · b` finished as `then` says, in `compute`'s precision for f32; what `c` held is
@@ -489,7 +476,7 @@ fn for_each_in_memory_order(v: ArrayView2<'_, f32>, mut f: impl FnMut(usize, usi
 mod tests {
     use super::*;
     use crate::bf16::round_to_bf16;
-    use ndarray::Array2;
+    use ndarray::{Array2, ArrayView1};
     use rand::{rngs::StdRng, Rng, SeedableRng};
 
     /// A (rows, cols) matrix uniform in [-1, 1) (far from bf16's flushed denormals).

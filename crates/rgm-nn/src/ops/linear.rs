@@ -1,9 +1,10 @@
 //! Linear layer / 1×1 convolution on `(rows, C)` matrices, with or without bias.
 
 use crate::error::check_shape;
-use crate::gemm::{mat_mul, mat_mul_then, Then};
+use crate::gemm::{mat_mul, mat_mul_then};
 use crate::init::{self, Init};
 use crate::param::{join_name, ParamView, ParamViewMut};
+use crate::scalar::Then;
 use crate::{Compute, Param, Parameters, Result, Scalar};
 use ndarray::{Array1, Array2, ArrayView2, ArrayViewMut2, Ix1, Ix2};
 

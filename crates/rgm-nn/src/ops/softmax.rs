@@ -1,13 +1,13 @@
 //! Softmax along each row of a score matrix.
 
 use crate::error::{check_shape, check_shapes};
-use crate::exp::exp_shifted_sum;
+use crate::lanes::exp_shifted_sum;
 use crate::{Result, Scalar};
 use ndarray::{ArrayView1, ArrayView2, ArrayViewMut1, ArrayViewMut2, Zip};
 
 /// Replaces a row by its softmax, shifted by the row maximum so no exponent overflows.
 pub(crate) fn softmax_slice<T: Scalar>(xs: &mut [T]) {
-    let max = crate::exp::max(xs, T::neg_infinity());
+    let max = crate::lanes::max(xs, T::neg_infinity());
     let inv = T::one() / exp_shifted_sum(xs, max);
     xs.iter_mut().for_each(|x| *x *= inv);
 }
@@ -29,7 +29,7 @@ pub(crate) fn softmax_in_place<T: Scalar>(mut row: ArrayViewMut1<'_, T>) {
 /// more than the row), ndarray's dot otherwise.
 fn row_dot<T: Scalar>(dout: ArrayView1<'_, T>, out: ArrayView1<'_, T>) -> T {
     match (dout.as_slice(), out.as_slice()) {
-        (Some(d), Some(y)) => crate::exp::dot(d, y),
+        (Some(d), Some(y)) => crate::lanes::dot(d, y),
         _ => dout.dot(&out),
     }
 }

@@ -9,9 +9,11 @@
 
 use std::time::Instant;
 
+use rgm_geom::{kabsch, GeomError, PointCloud, Result, RigidTransform};
+
+use crate::fit::{score, Fit};
 use crate::registrar::{MethodId, Registrar, Registration};
-use crate::registration::{score, Fit};
-use crate::{kabsch, GeomError, PointCloud, Prepared, Result, RigidTransform};
+use crate::Prepared;
 
 /// The method's name ([`crate::registrar::MethodId`]).
 pub const NAME: &str = "triplets";
@@ -154,7 +156,7 @@ impl<E: From<GeomError>> Registrar<E> for TripletConfig {
         &mut self,
         source: &Prepared,
         target: &Prepared,
-        _: &mut dyn FnMut(crate::fgr::Progress),
+        _: &mut dyn FnMut(crate::registrar::Progress),
     ) -> std::result::Result<Registration, E> {
         let start = Instant::now();
         let (result, tolerance) = register_prepared(source, target, self)?;
@@ -167,8 +169,8 @@ impl<E: From<GeomError>> Registrar<E> for TripletConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{Point3, Vector3};
     use rand::{rngs::StdRng, Rng, SeedableRng};
+    use rgm_geom::{Point3, Vector3};
 
     /// Issue 44, D12: exact copies of 3 to 10 points at another pose are registered, in both
     /// directions, also when the target holds the points in another order.
@@ -188,7 +190,7 @@ mod tests {
                     .collect(),
             );
             let pose = RigidTransform::new(
-                crate::euler::rotation_xyz_intrinsic(
+                rgm_geom::euler::rotation_xyz_intrinsic(
                     rng.gen_range(-3.0..3.0),
                     rng.gen_range(-1.5..1.5),
                     rng.gen_range(-3.0..3.0),

@@ -8,10 +8,14 @@
 //! RMSE changed by less than their relative thresholds. The reported fitness and RMSE are those
 //! of the final transform.
 
-use nalgebra::Point3;
+use std::time::Instant;
 
-use crate::registration::{score, Fit};
-use crate::{kabsch, GeomError, KnnIndex, PointCloud, Prepared, Result, RigidTransform};
+use nalgebra::Point3;
+use rgm_geom::{kabsch, GeomError, KnnIndex, PointCloud, Result, RigidTransform};
+
+use crate::fit::{score, Fit};
+use crate::registrar::{MethodId, Progress, Registrar, Registration};
+use crate::Prepared;
 
 /// The method's name ([`crate::registrar::MethodId`]).
 pub const NAME: &str = "icp";
@@ -141,12 +145,33 @@ pub(crate) fn check_clouds(
     Ok(())
 }
 
+/// Point-to-point ICP ([`crate::methods::icp`]) from its configured initial transform.
+impl<E: From<GeomError>> Registrar<E> for IcpConfig {
+    fn id(&self) -> MethodId {
+        MethodId::plain(NAME)
+    }
+
+    fn register_prepared(
+        &mut self,
+        source: &Prepared,
+        target: &Prepared,
+        _: &mut dyn FnMut(Progress),
+    ) -> std::result::Result<Registration, E> {
+        let start = Instant::now();
+        let result = register_prepared(source, target, self)?;
+        let distance = self.max_correspondence_distance;
+        Ok(Registration::scored_within(
+            result, source, target, distance, start,
+        ))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::euler::rotation_xyz_intrinsic;
-    use crate::testing::box_surface;
     use nalgebra::Vector3;
+    use rgm_geom::euler::rotation_xyz_intrinsic;
+    use rgm_geom::testing::box_surface;
 
     #[test]
     fn recovers_a_small_offset_exactly_on_identical_points() {
@@ -223,8 +248,8 @@ mod tests {
     /// ```
     #[test]
     fn matches_open3d_registration_icp() {
-        let target = crate::testing::airplane();
-        let r = crate::euler::rotation_xyz_extrinsic(
+        let target = rgm_geom::testing::airplane();
+        let r = rgm_geom::euler::rotation_xyz_extrinsic(
             4f64.to_radians(),
             -3f64.to_radians(),
             5f64.to_radians(),

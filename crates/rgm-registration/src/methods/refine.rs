@@ -1,7 +1,7 @@
 //! Local refinement of a rough transform: trimmed point-to-plane ICP, coarse to fine.
 //!
 //! What a global method (FGR, the RGM network) hands over is usually within 5–20° of the truth
-//! on partial scans. Open3D-style point-to-point ICP ([`crate::icp`]) converges slowly from there
+//! on partial scans. Open3D-style point-to-point ICP ([`crate::methods::icp`]) converges slowly from there
 //! and is pulled off by the points outside the overlap. This refinement differs in three ways,
 //! each shown to help on ModelNet40 partial pairs (docs/training/README.md, "a refinement that
 //! suits partial scans"):
@@ -13,12 +13,12 @@
 //! - **coarse to fine**: stages with shrinking correspondence distances (0.2, 0.1, 0.05 for
 //!   shapes in the unit sphere), a few iterations each.
 //!
-//! It ends with point-to-point stages ([`crate::icp`], untrimmed, at 0.05 then 0.03): once the
+//! It ends with point-to-point stages ([`crate::methods::icp`], untrimmed, at 0.05 then 0.03): once the
 //! clouds lie on each other, the nearest points are mostly the same surface points, and fitting
 //! them point to point pins down the slide along the surface that point-to-plane leaves loose
 //! (measured in docs/training/README.md, "a refinement that suits partial scans").
 //!
-//! Normals of the target are estimated once by PCA ([`crate::normals`]).
+//! Normals of the target are estimated once by PCA ([`rgm_geom::normals`]).
 //!
 //! The file is long because its unit tests sit beside the code they check (as everywhere in
 //! rgm); the code itself is one job, kept in one place.
@@ -28,11 +28,12 @@ use std::cell::RefCell;
 
 use nalgebra::{Matrix6, Point3, Rotation3, Vector3, Vector6};
 use rayon::prelude::*;
+use rgm_geom::normals::{normal_at, NormalsConfig};
+use rgm_geom::{GeomError, KnnIndex, PointCloud, Result, RigidTransform};
 
-use crate::icp::{self, check_clouds, IcpConfig};
-use crate::normals::{normal_at, NormalsConfig};
-use crate::registration::{nearest_each, score, Fit};
-use crate::{GeomError, KnnIndex, PointCloud, Prepared, Result, RigidTransform};
+use crate::fit::{nearest_each, score, Fit};
+use crate::methods::icp::{self, check_clouds, IcpConfig};
+use crate::Prepared;
 
 /// What a method refined by [`refine`] is called after its `+` (`fgr+icp`): it is ICP, point to
 /// plane and then point to point.
@@ -511,10 +512,10 @@ fn point_to_plane_step(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::euler::rotation_xyz_intrinsic;
-    use crate::testing::{airplane, box_surface};
     use rand::{rngs::StdRng, SeedableRng};
     use rand_distr::{Distribution, Normal};
+    use rgm_geom::euler::rotation_xyz_intrinsic;
+    use rgm_geom::testing::{airplane, box_surface};
 
     /// The error of `found` against `truth`: (rotation °, translation).
     fn error(found: &RigidTransform, truth: &RigidTransform) -> (f64, f64) {

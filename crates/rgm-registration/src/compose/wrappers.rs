@@ -1,264 +1,23 @@
-//! One shape for every registration method: a [`Registrar`] maps a source cloud onto a target
-//! cloud, and the wrappers here compose registrars without knowing what they wrap —
-//! [`Refined`] (its transform improved by a [`Refiner`]), [`Normalised`] (the pair centred and
-//! scaled into the unit-sphere frame, for a registrar or a refiner), [`AtResolution`] (a last
-//! refinement of a dense pair only, at its own point spacing) and [`OnFirstUse`] (a method made
-//! only when a pair needs it). The composites of [`crate::best_of`] run several methods and
-//! keep the best by a score that needs no ground truth.
-//!
-//! The trait is generic over its error so that methods above this crate (the RGM network)
-//! compose with the classical ones here: every registrar of this crate works with any error
-//! type that a [`GeomError`] converts into.
+//! The wrappers that compose registrars without knowing what they wrap: [`Refined`] (its
+//! transform improved by a [`Refiner`]), [`Normalised`] (the pair centred and scaled into the
+//! unit-sphere frame, for a registrar or a refiner), [`AtResolution`] (a last refinement of a
+//! dense pair only, at its own point spacing), [`UpTo`] (a method of its own for tiny clouds) and
+//! [`OnFirstUse`] (a method made only when a pair needs it).
 
 use std::fmt;
 use std::sync::Arc;
 use std::time::Instant;
 
-use crate::fgr::{self, FgrConfig, Progress};
-use crate::frame::{FrameRule, NearPair, Normalisation};
-use crate::icp::{self, IcpConfig};
-use crate::refine::RefineConfig;
+use rgm_geom::frame::{FrameRule, NearPair, Normalisation};
+use rgm_geom::{GeomError, PointCloud, RigidTransform};
+
+use crate::check::Check;
+use crate::fit::Fit;
+use crate::methods::refine::RefineConfig;
+use crate::prepared::{indexed_pair, Prepared};
 use crate::refiner::{AtSpacing, Refiner};
-use crate::registration::{score, Fit};
+use crate::registrar::{elapsed_ms, MethodId, Progress, Registrar, Registration};
 use crate::thinning::Density;
-use crate::{GeomError, PointCloud, Prepared, RigidTransform};
-
-/// What users call a method: its base name and the refiner its transform went through, spelled
-/// `base` or `base+refiner` (`fgr+icp`) in the command line, the tables, the Python package
-/// and JSON. The wrappers compose it: [`Refined`] names its refiner.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct MethodId {
-    /// The method without refinement (`icp`, `fgr`, `rgm`, `auto`).
-    pub base: &'static str,
-    /// The [`Refiner::name`] of its refinement, if it is refined.
-    pub refiner: Option<&'static str>,
-}
-
-impl MethodId {
-    /// The method `base`, not refined.
-    pub const fn plain(base: &'static str) -> Self {
-        Self {
-            base,
-            refiner: None,
-        }
-    }
-}
-
-impl fmt::Display for MethodId {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self.refiner {
-            Some(refiner) => write!(f, "{}+{refiner}", self.base),
-            None => f.write_str(self.base),
-        }
-    }
-}
-
-/// One method's outcome inside a composite ([`crate::best_of::BestOf`]).
-#[derive(Clone, Debug, PartialEq)]
-pub struct Candidate {
-    /// The method that made it ([`MethodId`], with `/cells` when it ran on the
-    /// [`crate::thinning::Thinning::Cells`] version of a dense pair).
-    pub method: String,
-    /// Its transform, in the caller's frame.
-    pub t_target_source: RigidTransform,
-    /// Its score ([`crate::best_of::overlap_score`]); the highest wins. `None` when the method
-    /// failed.
-    pub score: Option<f64>,
-    /// Why the method failed, if it did.
-    pub failure: Option<String>,
-    /// Wall time of the method on the pair, in milliseconds.
-    pub time_ms: f64,
-}
-
-/// What a registrar found on one pair.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Registration {
-    /// The transform, its iterations and inlier statistics.
-    pub result: Fit,
-    /// The (source index, target index) pairs behind `result.inlier_count`: the method's own
-    /// matches (RGM's last hard correspondences), or the source points the transform brings
-    /// within the scoring distance of their nearest target point (Open3D's correspondence set).
-    pub correspondences: Vec<(usize, usize)>,
-    /// Wall time of the method alone (no file reading), in milliseconds.
-    pub time_ms: f64,
-    /// A composite's candidates, each with its score (empty for a single method), and the index
-    /// of the one returned.
-    pub candidates: Vec<Candidate>,
-    pub chosen: Option<usize>,
-    /// Why the result is not to be trusted, when it is not (the best candidate overlaps too
-    /// little, [`crate::best_of::Scoring::min_overlap`], or a check doubts it): the caller
-    /// reports the pair as not registered, with this reason.
-    pub doubt: Option<String>,
-}
-
-impl Registration {
-    /// A single method's registration of `result` on `source` and `target`, its correspondences
-    /// the source points that `result`'s transform brings within `max_distance` of `target`,
-    /// timed from `start`; doubted when fewer than 3 are (a result no overlap supports: ICP or
-    /// FGR that found nothing hands back the transform it started from).
-    pub fn scored_within(
-        result: Fit,
-        source: &PointCloud,
-        target: &Prepared,
-        max_distance: f64,
-        start: Instant,
-    ) -> Self {
-        let mut correspondences = Vec::new();
-        score(
-            &source.points,
-            target.index(),
-            &result.t_target_source,
-            max_distance,
-            Some(&mut correspondences),
-        );
-        let doubt = (correspondences.len() < MIN_CORRESPONDENCES).then(|| {
-            format!(
-                "{} source points lie within {max_distance} of the target under the result \
-                 (fewer than {MIN_CORRESPONDENCES}): the method found no overlap",
-                correspondences.len()
-            )
-        });
-        Self {
-            doubt,
-            ..Self::single(result, correspondences, start)
-        }
-    }
-
-    /// A single method's registration, timed from `start`.
-    pub fn single(result: Fit, correspondences: Vec<(usize, usize)>, start: Instant) -> Self {
-        Self {
-            result,
-            correspondences,
-            time_ms: elapsed_ms(start),
-            candidates: Vec::new(),
-            chosen: None,
-            doubt: None,
-        }
-    }
-}
-
-/// The fewest correspondences of a credible single method's result: fewer do not pin down a
-/// rigid transform.
-pub const MIN_CORRESPONDENCES: usize = 3;
-
-/// Milliseconds since `start`.
-pub fn elapsed_ms(start: Instant) -> f64 {
-    start.elapsed().as_secs_f64() * 1e3
-}
-
-/// A registration method: the transform that maps `source` onto `target`.
-pub trait Registrar<E> {
-    /// The method's name.
-    fn id(&self) -> MethodId;
-
-    /// Registers `source` onto `target`, telling `progress` where it is (methods that take
-    /// long on large clouds report; others say nothing). What a stage makes of the clouds (their
-    /// trees, normals) stays with them for the stages after it: a wrapper hands its inner method
-    /// the clouds it was given, or clouds it prepared itself when it changes them.
-    fn register_prepared(
-        &mut self,
-        source: &Prepared,
-        target: &Prepared,
-        progress: &mut dyn FnMut(Progress),
-    ) -> Result<Registration, E>;
-
-    /// Registers `source` onto `target`, telling `progress` where it is.
-    fn register_with_progress(
-        &mut self,
-        source: &PointCloud,
-        target: &PointCloud,
-        progress: &mut dyn FnMut(Progress),
-    ) -> Result<Registration, E> {
-        self.register_prepared(&Prepared::new(source), &Prepared::new(target), progress)
-    }
-
-    /// Registers `source` onto `target`.
-    fn register(&mut self, source: &PointCloud, target: &PointCloud) -> Result<Registration, E> {
-        self.register_with_progress(source, target, &mut |_| {})
-    }
-}
-
-/// A [`Registrar`] behind a pointer: cloneable and sendable to other threads, so that a
-/// composite can hold methods of different types and a caller can give each thread its own copy.
-pub trait DynRegistrar<E>: Registrar<E> + Send + Sync {
-    /// A copy of this registrar in a new box.
-    fn clone_box(&self) -> Box<dyn DynRegistrar<E>>;
-}
-
-impl<E, R: Registrar<E> + Clone + Send + Sync + 'static> DynRegistrar<E> for R {
-    fn clone_box(&self) -> Box<dyn DynRegistrar<E>> {
-        Box::new(self.clone())
-    }
-}
-
-impl<E: 'static> Clone for Box<dyn DynRegistrar<E>> {
-    fn clone(&self) -> Self {
-        (**self).clone_box()
-    }
-}
-
-impl<E> fmt::Debug for dyn DynRegistrar<E> {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "Registrar({})", self.id())
-    }
-}
-
-impl<E> Registrar<E> for Box<dyn DynRegistrar<E>> {
-    fn id(&self) -> MethodId {
-        (**self).id()
-    }
-
-    fn register_prepared(
-        &mut self,
-        source: &Prepared,
-        target: &Prepared,
-        progress: &mut dyn FnMut(Progress),
-    ) -> Result<Registration, E> {
-        (**self).register_prepared(source, target, progress)
-    }
-}
-
-/// Point-to-point ICP ([`crate::icp`]) from its configured initial transform.
-impl<E: From<GeomError>> Registrar<E> for IcpConfig {
-    fn id(&self) -> MethodId {
-        MethodId::plain(icp::NAME)
-    }
-
-    fn register_prepared(
-        &mut self,
-        source: &Prepared,
-        target: &Prepared,
-        _: &mut dyn FnMut(Progress),
-    ) -> Result<Registration, E> {
-        let start = Instant::now();
-        let result = icp::register_prepared(source, target, self)?;
-        let distance = self.max_correspondence_distance;
-        Ok(Registration::scored_within(
-            result, source, target, distance, start,
-        ))
-    }
-}
-
-/// Fast Global Registration on FPFH features ([`crate::fgr`]).
-impl<E: From<GeomError>> Registrar<E> for FgrConfig {
-    fn id(&self) -> MethodId {
-        MethodId::plain(fgr::NAME)
-    }
-
-    fn register_prepared(
-        &mut self,
-        source: &Prepared,
-        target: &Prepared,
-        progress: &mut dyn FnMut(Progress),
-    ) -> Result<Registration, E> {
-        let start = Instant::now();
-        let result = fgr::register_prepared(source, target, self, progress)?;
-        let distance = self.maximum_correspondence_distance;
-        Ok(Registration::scored_within(
-            result, source, target, distance, start,
-        ))
-    }
-}
 
 /// `inner`, then `refiner` from its transform, on the clouds `inner` was given: named
 /// `inner`'s name `+` the refiner's. The result is the refiner's (scored as it scores); the
@@ -384,7 +143,7 @@ impl<F: Refiner> Refiner for Normalised<F> {
         source: &Prepared,
         target: &Prepared,
         initial: &RigidTransform,
-    ) -> crate::Result<Registration> {
+    ) -> rgm_geom::Result<Registration> {
         Self::in_frame(&self.rule, source, target, |fs, ft, frame| {
             self.inner.refine(fs, ft, &frame.redo(initial))
         })
@@ -437,7 +196,7 @@ impl<E: From<GeomError>, R: Registrar<E>, F: Refiner> Registrar<E> for AtResolut
 }
 
 /// `small` on a pair of at most `points` points per cloud, `other` on any other pair: tiny
-/// clouds (a few markers) need a method of their own ([`crate::triplets`]), which cannot run on
+/// clouds (a few markers) need a method of their own ([`crate::methods::triplets`]), which cannot run on
 /// large ones. Named as `other`, the method a pair usually gets.
 #[derive(Clone, Debug, PartialEq)]
 pub struct UpTo<S, R> {
@@ -530,11 +289,45 @@ impl<E, R: Registrar<E>> Registrar<E> for OnFirstUse<R, E> {
     }
 }
 
+/// `inner`, its result doubted when `check` doubts it (a result `inner` doubts already keeps its
+/// own reason). Named as `inner`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Checked<R, C> {
+    pub inner: R,
+    pub check: C,
+}
+
+impl<E: From<GeomError>, R: Registrar<E>, C: Check> Registrar<E> for Checked<R, C> {
+    fn id(&self) -> MethodId {
+        self.inner.id()
+    }
+
+    fn register_prepared(
+        &mut self,
+        source: &Prepared,
+        target: &Prepared,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        let start = Instant::now();
+        let mut found = self.inner.register_prepared(source, target, progress)?;
+        if found.doubt.is_none() {
+            let (source, target) = indexed_pair(source, target);
+            found.doubt = self.check.doubt(source, target, &found);
+        }
+        found.time_ms = elapsed_ms(start);
+        Ok(found)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testing::{airplane, FRAME};
-    use crate::{Point3, Vector3};
+    use crate::methods::fgr::FgrConfig;
+    use crate::methods::icp::IcpConfig;
+    use crate::registrar::DynRegistrar;
+    use crate::testing::FRAME;
+    use rgm_geom::testing::airplane;
+    use rgm_geom::{Point3, Vector3};
 
     /// 200 points on a twisted curve, and the same points moved by 5° and 0.02.
     fn curve_pair() -> (PointCloud, PointCloud) {
@@ -547,7 +340,7 @@ mod tests {
                 .collect(),
         );
         let pose = RigidTransform::new(
-            crate::euler::rotation_xyz_intrinsic(0.0, 0.0, 5f64.to_radians()),
+            rgm_geom::euler::rotation_xyz_intrinsic(0.0, 0.0, 5f64.to_radians()),
             Vector3::new(0.02, 0.0, 0.0),
         );
         let target = source.transformed(&pose);
@@ -598,7 +391,7 @@ mod tests {
     fn a_single_method_that_finds_no_overlap_is_doubted() {
         let (source, target) = curve_pair();
         let far = target.transformed(&RigidTransform::new(
-            crate::Matrix3::identity(),
+            rgm_geom::Matrix3::identity(),
             Vector3::new(100.0, 0.0, 0.0),
         ));
         let found =
@@ -653,7 +446,7 @@ mod tests {
                 _: &Prepared,
                 _: &Prepared,
                 initial: &RigidTransform,
-            ) -> crate::Result<Registration> {
+            ) -> rgm_geom::Result<Registration> {
                 *self.started_from.lock().unwrap() = Some(*initial);
                 let result = Fit {
                     t_target_source: RigidTransform::identity(),
@@ -730,7 +523,7 @@ mod tests {
                 .collect(),
         );
         let pose = RigidTransform::new(
-            crate::euler::rotation_xyz_intrinsic(0.1, -0.05, 10f64.to_radians()),
+            rgm_geom::euler::rotation_xyz_intrinsic(0.1, -0.05, 10f64.to_radians()),
             Vector3::new(30.0, 0.0, -20.0),
         );
         let target = big.transformed(&pose);

@@ -2,7 +2,7 @@
 //! the right matches are too few for RANSAC's random triples to find (a room at low overlap):
 //! after SC²-PCR (Chen et al., CVPR 2022), deterministic.
 //!
-//! 1–3. The pair thinned, its FPFH features and their matches ([`crate::feature_matches`]).
+//! 1–3. The pair thinned, its FPFH features and their matches ([`crate::methods::feature_matches`]).
 //! 4. Compatibility: two matches are compatible when the distance between their source points
 //!    and the distance between their target points differ by less than
 //!    [`Sc2Config::compatibility`] inlier distances (a rigid motion keeps lengths). Right
@@ -13,17 +13,17 @@
 //!    two right matches share every other right match, two that agree by chance share few).
 //! 7. The [`Sc2Config::judged`] hypotheses most matches agree with, each refitted on its
 //!    inliers, judged by [`Matched::fitness`]; the best is refined
-//!    ([`crate::feature_matches`]).
+//!    ([`crate::methods::feature_matches`]).
 
 use rayon::prelude::*;
+use rgm_geom::{kabsch, GeomError, PointCloud, Result, RigidTransform};
 
-use crate::feature_matches::{
+use crate::fit::Fit;
+use crate::methods::feature_matches::{
     inliers_of, refitted, register_matched, Consensus, Matched, MatchingConfig,
 };
-use crate::fgr::Progress;
-use crate::registrar::{MethodId, Registrar, Registration};
-use crate::registration::Fit;
-use crate::{kabsch, GeomError, PointCloud, Prepared, Result, RigidTransform};
+use crate::registrar::{MethodId, Progress, Registrar, Registration};
+use crate::Prepared;
 
 /// The method's name ([`crate::registrar::MethodId`]).
 pub const NAME: &str = "sc2";
@@ -254,9 +254,10 @@ impl<E: From<GeomError>> Registrar<E> for Sc2Config {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testing::{far_pose as pose, uniform_cube};
+    use crate::testing::far_pose as pose;
     use nalgebra::Point3;
     use rand::{rngs::StdRng, SeedableRng};
+    use rgm_geom::testing::uniform_cube;
 
     /// 30 right matches among 970 wrong ones (97 % outliers, too many for RANSAC's triples:
     /// 1 draw in 37,000 is three right ones): the right ones are the seeds' consensus.

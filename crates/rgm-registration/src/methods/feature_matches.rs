@@ -1,27 +1,28 @@
-//! What the global estimators on scene-scale pairs ([`crate::ransac`], [`crate::sc2`]) share: the
+//! What the global estimators on scene-scale pairs ([`crate::methods::ransac`], [`crate::methods::sc2`]) share: the
 //! pair's FPFH matches at its own scale, and the last step from an estimate to a [`Fit`].
 //!
 //! 1. Thinning: both clouds voxel-averaged with one voxel, the finest that leaves at most
 //!    [`MatchingConfig::max_points`] in each (features of the two clouds compare only at one
 //!    density); the spacing is the thinned pair's median nearest-neighbour distance.
-//! 2. Features: PCA normals and FPFH ([`crate::fpfh::features`]) at radii in spacings.
+//! 2. Features: PCA normals and FPFH ([`rgm_geom::fpfh::features`]) at radii in spacings.
 //! 3. Matching: each source point's nearest target point in feature space
-//!    ([`crate::fgr::nearest_matches`]), or only the mutual ones ([`MatchingConfig::mutual`]).
+//!    ([`crate::methods::fgr::nearest_matches`]), or only the mutual ones ([`MatchingConfig::mutual`]).
 //! 4. The estimator's transform, refined point-to-plane on the thinned pair
 //!    ([`MatchingConfig::refinement`]) and scored there at the inlier distance.
 
 use std::time::Instant;
 
 use nalgebra::{Point3, Vector3};
+use rgm_geom::fpfh::{features, FpfhConfig};
+use rgm_geom::normals::NormalsConfig;
+use rgm_geom::{kabsch, GeomError, PointCloud, Result, RigidTransform};
 
-use crate::fgr::{mutual_matches, nearest_matches};
-use crate::fpfh::{features, FpfhConfig};
-use crate::icp::check_clouds;
-use crate::normals::NormalsConfig;
-use crate::refine::{median_spacing, refine_at_resolution, ResolutionConfig};
+use crate::fit::{score, Fit};
+use crate::methods::fgr::{mutual_matches, nearest_matches};
+use crate::methods::icp::check_clouds;
+use crate::methods::refine::{median_spacing, refine_at_resolution, ResolutionConfig};
 use crate::registrar::{MethodId, Registration};
-use crate::registration::{score, Fit};
-use crate::{kabsch, GeomError, PointCloud, Prepared, Result, RigidTransform};
+use crate::Prepared;
 
 /// Steps 1–4 of the module. Lengths are in point spacings of the thinned pair. The defaults are
 /// Open3D's tutorial lengths (normals at 2 voxels, FPFH at 5, inliers within 1.5) with its
@@ -78,7 +79,7 @@ impl MatchingConfig {
     pub fn method_id(&self, base: &'static str) -> MethodId {
         MethodId {
             base,
-            refiner: (!self.refinement.spacings.is_empty()).then_some(crate::refine::NAME),
+            refiner: (!self.refinement.spacings.is_empty()).then_some(crate::methods::refine::NAME),
         }
     }
 }

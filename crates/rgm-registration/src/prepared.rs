@@ -10,8 +10,8 @@ use std::ops::Deref;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 
-use crate::normals::{estimate_normals, NormalsConfig};
-use crate::{KnnIndex, PointCloud, RigidTransform, Vector3};
+use rgm_geom::normals::{estimate_normals, NormalsConfig};
+use rgm_geom::{KnnIndex, PointCloud, RigidTransform, Vector3};
 
 /// The next [`Prepared`]'s id: ids are never reused, so a score kept under one cannot be read
 /// back for another cloud that took the first one's place in memory.
@@ -95,7 +95,7 @@ impl Prepared<'_> {
     /// thinning inside another cascade) judge the same result on the same pair, and on a dense
     /// pair each judgement is a nearest-neighbour search of every point both ways. `make` must be
     /// one function of those three for every caller (the overlap score of
-    /// [`crate::best_of::Judge`]).
+    /// [`crate::check::Judge`]).
     pub fn pair_score(
         &self,
         target: &Prepared,
@@ -146,23 +146,10 @@ impl Deref for Prepared<'_> {
     }
 }
 
-// What `Prepared::new` takes: a cloud borrowed or owned.
-impl<'a> From<&'a PointCloud> for Cow<'a, PointCloud> {
-    fn from(cloud: &'a PointCloud) -> Self {
-        Cow::Borrowed(cloud)
-    }
-}
-
-impl From<PointCloud> for Cow<'_, PointCloud> {
-    fn from(cloud: PointCloud) -> Self {
-        Cow::Owned(cloud)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testing::airplane;
+    use rgm_geom::testing::airplane;
 
     #[test]
     fn the_tree_and_normals_are_made_once_and_are_what_the_bare_functions_make() {
@@ -194,7 +181,7 @@ mod tests {
             Prepared::new(&cloud),
             Prepared::new(&cloud),
         );
-        let shift = RigidTransform::new(crate::Matrix3::identity(), Vector3::new(0.1, 0.0, 0.0));
+        let shift = RigidTransform::new(rgm_geom::Matrix3::identity(), Vector3::new(0.1, 0.0, 0.0));
         let made = std::cell::Cell::new(0);
         let score = |target: &Prepared, t: &RigidTransform, length: f64| {
             source.pair_score(target, t, length, || {

@@ -1,5 +1,5 @@
-//! Local methods that improve a rough transform: what [`crate::registrar::Refined`] runs after
-//! a global method, and [`crate::registrar::AtResolution`] after a composite on a dense pair.
+//! Local methods that improve a rough transform: what [`crate::compose::Refined`] runs after
+//! a global method, and [`crate::compose::AtResolution`] after a composite on a dense pair.
 //!
 //! A refiner is a value of one trait, so that a new refinement is one type and one line where
 //! methods are composed (`Refined::new(FgrConfig::default(), MyRefiner)`), and its name is
@@ -7,11 +7,13 @@
 
 use std::time::Instant;
 
-use crate::icp::{self, IcpConfig};
-use crate::refine::{self, RefineConfig, ResolutionConfig};
+use rgm_geom::{Result, RigidTransform};
+
+use crate::fit::{score, Fit};
+use crate::methods::icp::{self, IcpConfig};
+use crate::methods::refine::{self, RefineConfig, ResolutionConfig};
 use crate::registrar::Registration;
-use crate::registration::{score, Fit};
-use crate::{Prepared, Result, RigidTransform};
+use crate::Prepared;
 
 /// A local method: from a transform near the truth to a better one.
 pub trait Refiner: Send + Sync {
@@ -151,8 +153,8 @@ impl Refiner for AtSpacing {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testing::airplane;
-    use crate::Vector3;
+    use rgm_geom::testing::airplane;
+    use rgm_geom::Vector3;
 
     /// Every refiner brings the airplane back from 6° and 0.03 off, in both directions, and
     /// its correspondences are the pairs behind its inlier count.
@@ -160,12 +162,12 @@ mod tests {
     fn every_refiner_recovers_a_small_offset_both_ways() {
         let shape = airplane();
         let pose = RigidTransform::new(
-            crate::euler::rotation_xyz_intrinsic(0.02, -0.01, 4f64.to_radians()),
+            rgm_geom::euler::rotation_xyz_intrinsic(0.02, -0.01, 4f64.to_radians()),
             Vector3::new(0.01, 0.0, -0.01),
         );
         let moved = shape.transformed(&pose);
         let off = RigidTransform::new(
-            crate::euler::rotation_xyz_intrinsic(0.0, 6f64.to_radians(), 0.0),
+            rgm_geom::euler::rotation_xyz_intrinsic(0.0, 6f64.to_radians(), 0.0),
             Vector3::new(0.03, 0.0, 0.0),
         );
         let refiners: [(&dyn Refiner, f64); 2] = [
@@ -200,7 +202,7 @@ mod tests {
         // 0.03: no stage runs, and the transform comes back unchanged.
         let shape = airplane();
         let start = RigidTransform::new(
-            crate::euler::rotation_xyz_intrinsic(0.0, 0.0, 0.1),
+            rgm_geom::euler::rotation_xyz_intrinsic(0.0, 0.0, 0.1),
             Vector3::new(0.0, 0.02, 0.0),
         );
         let refiner = AtSpacing {

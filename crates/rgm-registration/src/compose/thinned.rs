@@ -1,77 +1,19 @@
-//! Dense clouds thinned to the density a method was tuned at ([`Density`]), for methods whose
-//! settings were chosen at that density, and [`Thinned`], a composite run on several thinnings of
-//! a dense pair. The density is configuration: the caller that composes the methods knows what
-//! they were tuned on.
+//! [`Thinned`], a composite run on several thinnings of a dense pair, judged on the pair as given.
 
 use std::time::Instant;
 
-use crate::best_of::{agree, conclude, Composite, Judge};
-use crate::fgr::Progress;
-use crate::registrar::{MethodId, Registrar, Registration};
-use crate::{GeomError, PointCloud, Prepared, RigidTransform};
+use rgm_geom::{GeomError, RigidTransform};
 
-/// The density methods were tuned at: a cloud of more than `points` points is denser, and is
-/// thinned to `points`, averaged over voxels of `voxel` first ([`Thinning::Voxels`]; in the
-/// clouds' units, unit-sphere units inside [`crate::registrar::Normalised`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Density {
-    pub points: usize,
-    pub voxel: f64,
-}
-
-impl Density {
-    /// Whether a pair of clouds of `source` and `target` points is denser.
-    pub fn is_exceeded_by(&self, source: usize, target: usize) -> bool {
-        source.max(target) > self.points
-    }
-}
-
-/// How a cloud denser than a [`Density`] is thinned to its points; a cloud of no more points is
-/// used as it is.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Thinning {
-    /// Averaged over voxels of [`Density::voxel`] (merging duplicates and averaging their
-    /// noise), then thinned by farthest-point sampling (`docs/training/README.md`, the
-    /// robustness study of `default_study`).
-    Voxels,
-    /// Farthest-point seeds, each replaced by the mean of its Voronoi cell in the dense cloud
-    /// ([`PointCloud::cell_means`]): as good as [`Thinning::Voxels`] alone on validation pairs,
-    /// but wrong on different pairs (`docs/training/default-study/thinning-200-validation.md`).
-    Cells,
-}
-
-impl Thinning {
-    /// What a candidate's name carries after it when it ran on this thinning (`rgm/cells`);
-    /// empty for the first, [`Thinning::Voxels`].
-    pub fn suffix(self) -> &'static str {
-        match self {
-            Self::Voxels => "",
-            Self::Cells => "/cells",
-        }
-    }
-}
-
-/// `cloud` thinned `how` to `density`; `None` when it has no more points (it is used as it is).
-pub fn thinned(cloud: &PointCloud, how: Thinning, density: Density) -> Option<PointCloud> {
-    if cloud.len() <= density.points {
-        return None;
-    }
-    Some(match how {
-        Thinning::Voxels => {
-            let averaged = cloud.voxel_downsampled(density.voxel);
-            averaged.select(&averaged.farthest_point_indices(density.points))
-        }
-        Thinning::Cells => {
-            let seeds = cloud.select(&cloud.farthest_point_indices(density.points));
-            cloud.cell_means(&seeds.points)
-        }
-    })
-}
+use crate::check::{agree, Judge};
+use crate::compose::{conclude, Composite};
+use crate::prepared::Prepared;
+use crate::registrar::{MethodId, Progress, Registrar, Registration};
+use crate::thinning::{thinned, Density, Thinning};
 
 /// A composite on a pair denser than `density` thinned each of `thinnings` ways in turn, its
 /// candidates judged on the pair as given: a dense pair can be thinned many ways, none of them
 /// the sampling the methods were tuned on. The next thinning runs unless the composite's
-/// acceptance took a result ([`crate::best_of::Outcome::settled`]) or the candidates of this one
+/// acceptance took a result ([`crate::compose::Outcome::settled`]) or the candidates of this one
 /// agree within `agreement` ([`agree`]), which leaves nothing for the next to fix. A pair no
 /// denser runs once, as it is. The best of every thinning wins (ties to the earlier); a
 /// candidate's name carries its thinning ([`Thinning::suffix`]).
@@ -153,8 +95,10 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::best_of::{Acceptance, BestOf, Cascade};
-    use crate::testing::{box_surface, Fixed, DENSITY, SCORING};
+    use crate::check::Acceptance;
+    use crate::compose::{BestOf, Cascade};
+    use crate::testing::{Fixed, DENSITY, SCORING};
+    use rgm_geom::testing::box_surface;
 
     fn thinned_best_of(candidates: &[&Fixed]) -> Thinned<BestOf<GeomError>> {
         Thinned {

@@ -2,7 +2,7 @@
 //! Open3D's `registration_ransac_based_on_feature_matching` tutorial pipeline, with every length
 //! a multiple of the pair's own point spacing.
 //!
-//! 1–3. The pair thinned, its FPFH features and their matches ([`crate::feature_matches`]).
+//! 1–3. The pair thinned, its FPFH features and their matches ([`crate::methods::feature_matches`]).
 //! 4. Hypotheses: three matches drawn at random; kept only when each side of their triangle
 //!    agrees between the clouds within [`RansacConfig::edge_similarity`] (the correspondence
 //!    check, which rejects most wrong draws before any fit) and the Kabsch fit of the three
@@ -10,7 +10,7 @@
 //!    by the matches it brings within that distance. Draws run in fixed chunks, each from its
 //!    own seeded generator, so the result is the same on any number of threads.
 //! 5. Each chunk's best judged by [`Matched::fitness`]; the best of them refitted on its
-//!    inliers (Kabsch) until they stop changing, then refined ([`crate::feature_matches`]).
+//!    inliers (Kabsch) until they stop changing, then refined ([`crate::methods::feature_matches`]).
 //!
 //! FGR's graduated non-convexity follows the bulk of the matches; on a room most matches are
 //! wrong (floors and walls look alike everywhere) and the bulk can lie at a wrong pose, where a
@@ -19,14 +19,16 @@
 use nalgebra::Point3;
 use rand::{rngs::StdRng, Rng, SeedableRng};
 use rayon::prelude::*;
+use rgm_geom::{kabsch, GeomError, PointCloud, Result, RigidTransform};
 
-use crate::feature_matches::{inliers_of, refitted, register_matched, Matched, MatchingConfig};
-use crate::fgr::Progress;
-use crate::registrar::{MethodId, Registrar, Registration};
-use crate::registration::Fit;
-use crate::{kabsch, GeomError, PointCloud, Prepared, Result, RigidTransform};
+use crate::fit::Fit;
+use crate::methods::feature_matches::{
+    inliers_of, refitted, register_matched, Matched, MatchingConfig,
+};
+use crate::registrar::{MethodId, Progress, Registrar, Registration};
+use crate::Prepared;
 
-pub use crate::feature_matches::Consensus;
+pub use crate::methods::feature_matches::Consensus;
 
 /// The method's name ([`crate::registrar::MethodId`]).
 pub const NAME: &str = "ransac";
@@ -280,7 +282,7 @@ fn hypothesis(
 /// RANSAC on FPFH matches ([`register`]).
 impl<E: From<GeomError>> Registrar<E> for RansacConfig {
     /// `ransac+icp`: its last step is point-to-plane ICP ([`MatchingConfig::refinement`]), so a
-    /// composite of it and candidates refined by [`crate::refine`] is named as refined too.
+    /// composite of it and candidates refined by [`crate::methods::refine`] is named as refined too.
     fn id(&self) -> MethodId {
         self.matching.method_id(NAME)
     }
@@ -298,7 +300,8 @@ impl<E: From<GeomError>> Registrar<E> for RansacConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testing::{far_pose as pose, uniform_cube};
+    use crate::testing::far_pose as pose;
+    use rgm_geom::testing::uniform_cube;
 
     fn assert_near(found: &RigidTransform, truth: &RigidTransform, degrees: f64, distance: f64) {
         let angle = found.inverse().compose(truth).rotation_angle_deg();

@@ -6,236 +6,21 @@
 //! fail wildly on many partial ones), so the better of two is right more often than either.
 //! The composites here run candidate methods and judge them so: [`BestOf`] side by side,
 //! [`Cascade`] the cheap one first and the rest only when its result is in doubt
-//! ([`Acceptance`]); [`crate::thinning::Thinned`] runs either on several thinnings of a dense
-//! pair. How they score ([`Scoring`]) is the caller's configuration.
+//! ([`crate::check::Acceptance`]); [`crate::compose::Thinned`] runs either on several thinnings of a dense
+//! pair. How they score ([`crate::check::Scoring`]) is the caller's configuration.
 
 use std::time::Instant;
 
 use rayon::prelude::*;
+use rgm_geom::{GeomError, RigidTransform};
 
-use crate::coincidence::{Coincides, CoincidesAtSpacing};
-use crate::fgr::Progress;
+use crate::check::{Acceptance, Judge, Scoring};
+use crate::fit::{score, Fit};
 use crate::prepared::indexed_pair;
-use crate::registrar::{elapsed_ms, Candidate, DynRegistrar, MethodId, Registrar, Registration};
-use crate::registration::{score, Fit};
-use crate::{GeomError, KnnIndex, PointCloud, Prepared, RigidTransform};
-
-/// How a composite judges its candidates without ground truth and when it trusts the best:
-/// configuration, its values chosen where methods are composed (on the pairs they were tuned
-/// on). Lengths in the clouds' units.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Scoring {
-    /// Within it a moved point counts as overlapping the other cloud ([`overlap_score`]).
-    pub overlap_distance: f64,
-    /// The least [`overlap_score`] of a credible result: below it the pair is reported as not
-    /// registered ([`Registration::doubt`]) rather than with a transform nothing supports.
-    pub min_overlap: f64,
-    /// The distance at which the chosen result is scored and its correspondences found.
-    pub result_distance: f64,
-    /// How a candidate's result must coincide with the other cloud where it overlaps it: one
-    /// that does not ranks below every one that does, whatever their overlap, and ends no
-    /// cascade. `None`: candidates are ranked by overlap alone (results not yet refined, which
-    /// coincide less).
-    pub coincides: Option<Coincides>,
-}
-
-/// When a cascade's result is good enough to end it ([`Cascade::accept`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Acceptance {
-    /// The least [`overlap_score`] taken.
-    pub score: f64,
-    /// The largest [`turned_share`] taken: above it the shape overlaps itself turned about an
-    /// axis (a lamp, a box), the overlap cannot tell its pose, and the later candidates run.
-    /// Infinite: any, and neither it nor the whole overlap is measured.
-    pub turned_share: f64,
-    /// (distance, least overlap): a result whose [`overlap_score`] at that distance reaches the
-    /// overlap is taken whatever its turned share. Clouds that lie wholly on each other (full
-    /// scans of one object) leave a turned pose nothing to fit better, while noise, which
-    /// lowers the overlap at [`Scoring::overlap_distance`] far more than at a looser distance,
-    /// would otherwise make a right result look as doubtful as a symmetric shape's.
-    pub whole: (f64, f64),
-    /// A check the result must pass too (the coincidence of a dense pair at its point
-    /// spacing): a result that overlaps enough without coinciding is not taken, and the later
-    /// candidates run.
-    pub coincides: Option<CoincidesAtSpacing>,
-}
-
-impl Acceptance {
-    /// Nothing is good enough: every candidate runs.
-    pub const NEVER: Self = Self {
-        score: f64::INFINITY,
-        turned_share: 0.0,
-        whole: (0.0, f64::INFINITY),
-        coincides: None,
-    };
-
-    /// Whether `transform`, which scores `score` on the pair, ends the cascade; its
-    /// [`turned_share`] at `overlap_distance` is measured on `source` and `target` with their
-    /// trees, the pair as the candidates saw it (at most a few thousand points, whatever the
-    /// pair's density).
-    pub fn takes(
-        &self,
-        score: f64,
-        source: (&PointCloud, &KnnIndex),
-        target: (&PointCloud, &KnnIndex),
-        transform: &RigidTransform,
-        overlap_distance: f64,
-    ) -> bool {
-        let (distance, whole) = self.whole;
-        score >= self.score
-            && (self.turned_share == f64::INFINITY
-                || overlap_score(source, target, transform, distance) >= whole
-                || turned_share(source, target, transform, overlap_distance) <= self.turned_share)
-            && self
-                .coincides
-                .is_none_or(|check| check.takes(source, target, transform))
-    }
-}
-
-/// Share of the points of each cloud that the transform brings within `distance` of the other
-/// cloud, source → target plus target → source (0 to 2). Counting both ways rewards an overlap
-/// that both clouds agree on, where a one-way fitness is fooled by a small cloud lying anywhere
-/// on a large one.
-pub fn overlap_score(
-    source: (&PointCloud, &KnnIndex),
-    target: (&PointCloud, &KnnIndex),
-    transform: &RigidTransform,
-    distance: f64,
-) -> f64 {
-    let there = score(&source.0.points, target.1, transform, distance, None);
-    let back = score(
-        &target.0.points,
-        source.1,
-        &transform.inverse(),
-        distance,
-        None,
-    );
-    there.fitness + back.fitness
-}
-
-/// How little `transform`'s overlap tells the shape's pose: the best [`overlap_score`] of its
-/// [`turned_poses`], as a share of `transform`'s own. Near 1 or above, a pose turned about one of
-/// the source's axes fits as well, as for a symmetric shape. Overlaps counted within `distance`.
-pub fn turned_share(
-    source: (&PointCloud, &KnnIndex),
-    target: (&PointCloud, &KnnIndex),
-    transform: &RigidTransform,
-    distance: f64,
-) -> f64 {
-    let score = overlap_score(source, target, transform, distance);
-    if source.0.len() < 3 || score <= 0.0 {
-        return f64::INFINITY;
-    }
-    let best = turned_poses(source.0, transform)
-        .iter()
-        .map(|turned| overlap_score(source, target, turned, distance))
-        .fold(0.0, f64::max);
-    best / score
-}
-
-/// `transform` with the source first turned by a quarter, a half or three quarters about each
-/// of its principal axes (through its centroid): the nine poses a symmetric shape fits as well.
-pub fn turned_poses(source: &PointCloud, transform: &RigidTransform) -> Vec<RigidTransform> {
-    let centre = source.centroid();
-    let mut covariance = crate::Matrix3::zeros();
-    for p in &source.points {
-        let d = p - centre;
-        covariance += d * d.transpose();
-    }
-    let axes = covariance.symmetric_eigen().eigenvectors; // (3, 3), one axis a column
-    let mut poses = Vec::with_capacity(9);
-    for axis in axes.column_iter() {
-        let axis = nalgebra::Unit::new_normalize(axis.into_owned());
-        for quarters in 1..4 {
-            let turn = nalgebra::Rotation3::from_axis_angle(
-                &axis,
-                quarters as f64 * std::f64::consts::FRAC_PI_2,
-            )
-            .into_inner();
-            // About the centroid: p ↦ c + R (p − c).
-            let about = RigidTransform::new(turn, centre.coords - turn * centre.coords);
-            poses.push(transform.compose(&about));
-        }
-    }
-    poses
-}
-
-/// Two transforms `within` (degrees, distance) of each other: rotations less than its degrees
-/// apart, and moving the frame's origin to points less than its distance apart.
-pub fn agree(a: &RigidTransform, b: &RigidTransform, within: (f64, f64)) -> bool {
-    let (degrees, distance) = within;
-    a.inverse().compose(b).rotation_angle_deg() < degrees
-        && (a.translation - b.translation).norm() < distance
-}
-
-/// The pair a composite's candidates are judged on (the clouds as its caller gave them) and the
-/// best result an earlier stage found there. The candidates may run on a thinned version of the
-/// pair ([`crate::thinning::Thinned`]); they are scored on this one.
-pub struct Judge<'a> {
-    pub source: &'a Prepared<'a>,
-    pub target: &'a Prepared<'a>,
-    pub scoring: Scoring,
-    /// The best (score, transform) found before: a candidate wins only by beating it, and an
-    /// acceptance weighs it as a result of this stage.
-    pub before: Option<(f64, RigidTransform)>,
-}
-
-impl<'a> Judge<'a> {
-    /// A judge on `source` and `target` by `scoring`, with nothing found before; their trees
-    /// are built (side by side), as every score needs them.
-    pub fn new(source: &'a Prepared<'a>, target: &'a Prepared<'a>, scoring: Scoring) -> Self {
-        indexed_pair(source, target);
-        Self {
-            source,
-            target,
-            scoring,
-            before: None,
-        }
-    }
-
-    /// `transform`'s [`overlap_score`] on the judged pair, made once per registration
-    /// ([`Prepared::pair_score`]): a composite nested in another judges its result on the same
-    /// pair as the outer one does.
-    pub fn score(&self, transform: &RigidTransform) -> f64 {
-        let distance = self.scoring.overlap_distance;
-        self.source
-            .pair_score(self.target, transform, distance, || {
-                overlap_score(
-                    self.source.indexed(),
-                    self.target.indexed(),
-                    transform,
-                    distance,
-                )
-            })
-    }
-
-    /// Whether `transform` passes the scoring's [`Scoring::coincides`] on the judged pair
-    /// (always, when it has none).
-    pub fn coincides(&self, transform: &RigidTransform) -> bool {
-        self.scoring.coincides.is_none_or(|check| {
-            check.holds(self.source.indexed(), self.target.indexed(), transform)
-        })
-    }
-
-    /// Whether `accept` takes the best of `tally` (or of what came before), its turned share
-    /// measured on the clouds the candidates ran on (`source`, `target`).
-    fn takes(
-        &self,
-        accept: &Acceptance,
-        tally: &Tally,
-        source: &Prepared,
-        target: &Prepared,
-    ) -> bool {
-        tally.best.as_ref().is_some_and(|best| {
-            best.coincides && best.score >= accept.score && {
-                let (source, target) = indexed_pair(source, target);
-                let distance = self.scoring.overlap_distance;
-                accept.takes(best.score, source, target, &best.transform, distance)
-            }
-        })
-    }
-}
-
+use crate::registrar::{
+    elapsed_ms, Candidate, DynRegistrar, MethodId, Progress, Registrar, Registration,
+};
+use crate::Prepared;
 /// What a composite's candidates found on one pair, judged by a [`Judge`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct Outcome {
@@ -247,10 +32,9 @@ pub struct Outcome {
     /// Whether an acceptance took the best result: nothing after it needs to run.
     pub settled: bool,
 }
-
 /// A method made of candidate methods that runs them on the clouds it is given and judges their
 /// results with a [`Judge`], which may hold other clouds: the thinning around it
-/// ([`crate::thinning::Thinned`]) judges on the pair as given.
+/// ([`crate::compose::Thinned`]) judges on the pair as given.
 pub trait Composite<E>: Registrar<E> {
     /// The candidates run on `source` and `target`, judged by `judge`.
     fn run_judged(&mut self, source: &Prepared, target: &Prepared, judge: &Judge) -> Outcome;
@@ -359,6 +143,26 @@ impl Tally {
     }
 }
 
+impl Judge<'_> {
+    /// Whether `accept` takes the best of `tally` (or of what came before), its turned share
+    /// measured on the clouds the candidates ran on (`source`, `target`).
+    fn takes(
+        &self,
+        accept: &Acceptance,
+        tally: &Tally,
+        source: &Prepared,
+        target: &Prepared,
+    ) -> bool {
+        tally.best.as_ref().is_some_and(|best| {
+            best.coincides && best.score >= accept.score && {
+                let (source, target) = indexed_pair(source, target);
+                let distance = self.scoring.overlap_distance;
+                accept.takes(best.score, source, target, &best.transform, distance)
+            }
+        })
+    }
+}
+
 /// A composite's id: `base`, refined as every candidate is when they are all refined alike.
 fn composite_id<'c, E: 'c>(
     base: &'static str,
@@ -438,8 +242,8 @@ fn register_composite<E: From<GeomError>>(
     conclude(&judge, outcome.candidates, outcome.best, start)
 }
 
-/// Every candidate on the pair, side by side, the best by [`overlap_score`] returned (ties to
-/// the earlier candidate), judged by `scoring`: wrap it in [`crate::registrar::Normalised`] for
+/// Every candidate on the pair, side by side, the best by [`crate::check::overlap_score`] returned (ties to
+/// the earlier candidate), judged by `scoring`: wrap it in [`crate::compose::Normalised`] for
 /// pairs of any size when its lengths are set for unit-sphere shapes. Its correspondences are
 /// the source points within [`Scoring::result_distance`] of the target.
 #[derive(Debug)]
@@ -490,7 +294,7 @@ impl<E: From<GeomError> + ToString + Send> Registrar<E> for BestOf<E> {
 }
 
 /// `first` alone, and `rest` (side by side) only when `accept` does not take the best result
-/// so far; the best of all that ran by [`overlap_score`] returned, as [`BestOf`] returns it.
+/// so far; the best of all that ran by [`crate::check::overlap_score`] returned, as [`BestOf`] returns it.
 /// The cheap method goes first: the others cost their time only on the pairs it leaves in
 /// doubt.
 #[derive(Debug)]
@@ -552,14 +356,15 @@ impl<E: From<GeomError> + ToString + Send> Registrar<E> for Cascade<E> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::check::{agree, overlap_score, turned_share};
     use crate::testing::{Fixed, SCORING};
-    use crate::{Matrix3, Point3, Vector3};
+    use rgm_geom::{KnnIndex, Matrix3, Point3, PointCloud, Vector3};
 
     #[test]
     fn transforms_agree_within_a_degree_and_a_fiftieth() {
         let turn = |deg: f64, shift: f64| {
             RigidTransform::new(
-                crate::euler::rotation_xyz_intrinsic(0.0, 0.0, deg.to_radians()),
+                rgm_geom::euler::rotation_xyz_intrinsic(0.0, 0.0, deg.to_radians()),
                 Vector3::new(shift, 0.0, 0.0),
             )
         };
@@ -691,7 +496,7 @@ mod tests {
         lifted.transform = RigidTransform::new(Matrix3::identity(), Vector3::new(0.0, 0.015, 0.0));
         let slid = Fixed::new("slid", 0.5);
         let coinciding = Scoring {
-            coincides: Some(crate::coincidence::Coincides {
+            coincides: Some(crate::check::Coincides {
                 near: 0.005,
                 far: 0.08,
                 least: 0.35,
@@ -783,7 +588,8 @@ mod tests {
         // The part lies on the line (1.0), which it covers for 4 of 10 points (0.4).
         assert!((overlap_score((&part, &pi), (&line, &li), &identity, 0.02) - 1.4).abs() < 1e-12);
         // Shifted by 0.05 every point is 0.05 from the other cloud: beyond 0.02.
-        let shifted = RigidTransform::new(crate::Matrix3::identity(), Vector3::new(0.0, 0.05, 0.0));
+        let shifted =
+            RigidTransform::new(rgm_geom::Matrix3::identity(), Vector3::new(0.0, 0.05, 0.0));
         assert_eq!(
             overlap_score((&line, &li), (&line, &li), &shifted, 0.02),
             0.0

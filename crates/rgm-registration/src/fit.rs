@@ -3,7 +3,7 @@
 use nalgebra::Point3;
 use rayon::prelude::*;
 
-use crate::{KnnIndex, RigidTransform};
+use rgm_geom::{KnnIndex, RigidTransform};
 
 /// What one algorithm found on a pair: its transform, and how well the source fits the target
 /// under it (Open3D's `RegistrationResult`). A [`crate::Registration`] carries one, with the
@@ -127,11 +127,12 @@ impl Fit {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testing::airplane;
-    use crate::{fgr, icp, refine, PointCloud, Result};
+    use crate::methods::{fgr, icp, refine};
     use nalgebra::{Matrix3, Vector3};
     use rand::{rngs::StdRng, SeedableRng};
     use rand_distr::{Distribution, Normal};
+    use rgm_geom::testing::airplane;
+    use rgm_geom::{PointCloud, Result};
 
     /// The cloud moved by `pose`, with the protocol's jitter (σ 0.01 clipped at 0.05) and its
     /// point order reversed (no index correspondence survives).

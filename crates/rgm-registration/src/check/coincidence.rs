@@ -11,30 +11,27 @@
 //! puts a [`Check`] on any registrar. The tuned lengths and shares are configuration, set where
 //! methods are composed.
 
-use std::time::Instant;
+use rgm_geom::cloud::median;
+use rgm_geom::frame::{FrameRule, NearPair, Normalisation};
+use rgm_geom::{KnnIndex, PointCloud, RigidTransform};
 
-use crate::best_of::turned_poses;
-use crate::cloud::median;
-use crate::fgr::Progress;
-use crate::frame::{FrameRule, NearPair, Normalisation};
-use crate::prepared::indexed_pair;
-use crate::registrar::{elapsed_ms, MethodId, Registrar, Registration};
+use crate::check::turned_poses;
+use crate::registrar::Registration;
 use crate::thinning::Density;
-use crate::{GeomError, KnnIndex, PointCloud, Prepared, RigidTransform};
 
 /// At most this many points of each cloud are measured: the shares settle long before a dense
 /// scan's 300,000 points.
 const SAMPLE: usize = 4096;
 
 /// Points spread evenly over `points`: every one when there are at most [`SAMPLE`].
-fn sample(points: &[crate::Point3<f64>]) -> impl Iterator<Item = &crate::Point3<f64>> {
+fn sample(points: &[rgm_geom::Point3<f64>]) -> impl Iterator<Item = &rgm_geom::Point3<f64>> {
     points.iter().step_by(points.len().div_ceil(SAMPLE).max(1))
 }
 
 /// Of at most [`SAMPLE`] of `points` moved by `moved`: how many lie within `near` of `onto`,
 /// how many within `far`, and how many were measured.
 fn within(
-    points: &[crate::Point3<f64>],
+    points: &[rgm_geom::Point3<f64>],
     onto: &KnnIndex,
     moved: &RigidTransform,
     near: f64,
@@ -261,7 +258,7 @@ impl Check for CoincidesAtSpacing {
 }
 
 /// The share of the points of each cloud that `transform` brings within `distance` of the
-/// other, both ways (0 to 2, as [`crate::best_of::overlap_score`]), measured on at most
+/// other, both ways (0 to 2, as [`crate::check::overlap_score`]), measured on at most
 /// [`SAMPLE`] points of each cloud.
 pub fn sampled_overlap(
     source: (&PointCloud, &KnnIndex),
@@ -269,7 +266,7 @@ pub fn sampled_overlap(
     transform: &RigidTransform,
     distance: f64,
 ) -> f64 {
-    let share = |points: &[crate::Point3<f64>], onto: &KnnIndex, moved: &RigidTransform| {
+    let share = |points: &[rgm_geom::Point3<f64>], onto: &KnnIndex, moved: &RigidTransform| {
         let (_, within_distance, all) = within(points, onto, moved, distance, distance);
         within_distance as f64 / all.max(1) as f64
     };
@@ -411,40 +408,14 @@ impl<C: Check> Check for InFrame<C> {
     }
 }
 
-/// `inner`, its result doubted when `check` doubts it (a result `inner` doubts already keeps its
-/// own reason). Named as `inner`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Checked<R, C> {
-    pub inner: R,
-    pub check: C,
-}
-
-impl<E: From<GeomError>, R: Registrar<E>, C: Check> Registrar<E> for Checked<R, C> {
-    fn id(&self) -> MethodId {
-        self.inner.id()
-    }
-
-    fn register_prepared(
-        &mut self,
-        source: &Prepared,
-        target: &Prepared,
-        progress: &mut dyn FnMut(Progress),
-    ) -> Result<Registration, E> {
-        let start = Instant::now();
-        let mut found = self.inner.register_prepared(source, target, progress)?;
-        if found.doubt.is_none() {
-            let (source, target) = indexed_pair(source, target);
-            found.doubt = self.check.doubt(source, target, &found);
-        }
-        found.time_ms = elapsed_ms(start);
-        Ok(found)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testing::{airplane, Fixed, DENSITY};
+    use crate::compose::Checked;
+    use crate::registrar::Registrar;
+    use crate::testing::{Fixed, DENSITY};
+    use rgm_geom::testing::airplane;
+    use std::time::Instant;
 
     /// The default's spacing check (rgm-model's `options::COINCIDES_AT_SPACING`).
     const AT_SPACING: CoincidesAtSpacing = CoincidesAtSpacing {
@@ -456,7 +427,7 @@ mod tests {
         density: DENSITY,
         scan_lines: 5.0,
     };
-    use crate::{Matrix3, Point3, Vector3};
+    use rgm_geom::{Matrix3, Point3, Vector3};
 
     fn indexed(cloud: &PointCloud) -> (&PointCloud, KnnIndex) {
         (cloud, KnnIndex::new(&cloud.points))
@@ -470,10 +441,11 @@ mod tests {
         let (s, si) = indexed(&shape);
         let same = coincidence((s, &si), (s, &si), &RigidTransform::identity(), 0.02, 0.08);
         assert_eq!(same, 1.0);
-        let shift = RigidTransform::new(crate::Matrix3::identity(), Vector3::new(0.05, 0.0, 0.0));
+        let shift =
+            RigidTransform::new(rgm_geom::Matrix3::identity(), Vector3::new(0.05, 0.0, 0.0));
         let shifted = coincidence((s, &si), (s, &si), &shift, 0.02, 0.08);
         assert!(shifted < 0.3, "{shifted}");
-        let far = RigidTransform::new(crate::Matrix3::identity(), Vector3::new(5.0, 0.0, 0.0));
+        let far = RigidTransform::new(rgm_geom::Matrix3::identity(), Vector3::new(5.0, 0.0, 0.0));
         assert_eq!(coincidence((s, &si), (s, &si), &far, 0.02, 0.08), 0.0);
     }
 
@@ -485,14 +457,14 @@ mod tests {
         for unit in [1e-3, 1.0, 1e3] {
             let points: Vec<_> = (0..60)
                 .flat_map(|i| (0..60).map(move |j| (i, j)))
-                .map(|(i, j)| crate::Point3::new(i as f64 * unit, j as f64 * unit, 0.0))
+                .map(|(i, j)| rgm_geom::Point3::new(i as f64 * unit, j as f64 * unit, 0.0))
                 .collect();
             let plane = PointCloud::new(points);
             let (p, pi) = indexed(&plane);
             let check = AT_SPACING;
             let found = |t: Vector3<f64>| {
-                let transform = RigidTransform::new(crate::Matrix3::identity(), t * unit);
-                let unscored = crate::registration::Score {
+                let transform = RigidTransform::new(rgm_geom::Matrix3::identity(), t * unit);
+                let unscored = crate::fit::Score {
                     inlier_count: 0,
                     fitness: 0.0,
                     inlier_rmse: 0.0,
@@ -529,7 +501,7 @@ mod tests {
             .filter(|&i| (sheet.points[i].xy() - centre.xy()).norm() < 0.45)
             .collect();
         let pose = RigidTransform::new(
-            crate::euler::rotation_xyz_intrinsic(0.3, -0.2, 0.5),
+            rgm_geom::euler::rotation_xyz_intrinsic(0.3, -0.2, 0.5),
             Vector3::new(0.4, 0.1, -0.2),
         );
         let source = sheet.select(&part).transformed(&pose); // (N', 3), a sixth of the sheet
@@ -655,7 +627,7 @@ mod tests {
             },
         };
         let same = RigidTransform::identity();
-        let boxed = crate::testing::box_surface(20_000, 7); // dense: a turned copy lies on it
+        let boxed = rgm_geom::testing::box_surface(20_000, 7); // dense: a turned copy lies on it
         let (b, bi) = indexed(&boxed);
         let doubt = check
             .doubt_of((b, &bi), (b, &bi), &same)
@@ -670,12 +642,12 @@ mod tests {
 
         let turn = |deg: f64| {
             RigidTransform::new(
-                crate::euler::rotation_xyz_intrinsic(0.0, 0.0, deg.to_radians()),
+                rgm_geom::euler::rotation_xyz_intrinsic(0.0, 0.0, deg.to_radians()),
                 Vector3::zeros(),
             )
         };
         let found = |rival: RigidTransform, rival_score: f64| {
-            let unscored = crate::registration::Score {
+            let unscored = crate::fit::Score {
                 inlier_count: 0,
                 fitness: 0.0,
                 inlier_rmse: 0.0,

@@ -1,0 +1,17 @@
+//! How a result is judged without ground truth: the measures ([`overlap_score`],
+//! [`turned_share`], [`agree`]), the checks a result must pass ([`Check`]: [`Coincides`],
+//! [`CoincidesAtSpacing`], [`Unambiguous`], [`InFrame`]) and the [`Judge`] a composite scores its
+//! candidates with, by the caller's [`Scoring`] and [`Acceptance`].
+//!
+//! Bottom first: `overlap` (the measures), `coincidence` (the checks), `judge` (the judge and
+//! its configuration).
+
+mod coincidence;
+mod judge;
+mod overlap;
+
+pub use coincidence::{
+    coincidence, sampled_overlap, Check, Coincides, CoincidesAtSpacing, InFrame, Unambiguous,
+};
+pub use judge::{Acceptance, Judge, Scoring};
+pub use overlap::{agree, overlap_score, turned_poses, turned_share};
