@@ -12,7 +12,7 @@
 //! The crate allocates some buffers from sizes in the file; those sizes are checked against the
 //! file's length first ([`check_sizes`]), so a small file cannot ask for gigabytes. The points
 //! a file declares are checked against the memory this process may take
-//! ([`super::room_for_points`]), not against a ratio to its length: LASzip stores a stack of
+//! ([`super::check_points_fit`]), not against a ratio to its length: LASzip stores a stack of
 //! identical points in a fraction of a bit each.
 
 use std::io::{Cursor, Write};
@@ -192,7 +192,10 @@ fn read_points(bytes: &[u8], path: &Path, name: &'static str) -> Result<Vec<Poin
     let declared = reader.header().number_of_points();
     let record = reader.header().point_format().len() as u64;
     let batch = (BATCH_BYTES / record.max(1)).max(1);
-    let mut points = super::room_for_points(path, declared, 0)?;
+    // Checked, not reserved: LAZ's count is not bounded by the file's size, and a forged one
+    // is found out as the data ends.
+    super::check_points_fit(path, declared, 0)?;
+    let mut points = Vec::new();
     loop {
         let batch = reader
             .read_points(batch)

@@ -190,28 +190,44 @@ pub fn read_point_cloud_warned(path: impl AsRef<Path>) -> Result<(PointCloud, Ve
 }
 
 /// An empty list with room for the `count` points a file at `path` declares, or its refusal
-/// when they (and `decoded` more bytes the reader must hold, as PCD's decompressed data) need
-/// more memory than this process may allocate: a small file may declare billions of points,
-/// and Rust aborts on an allocation that fails. Every reader sizes its points here.
+/// ([`check_points_fit`]). For counts the file's size bounds; a count it does not bound (LAZ)
+/// is only checked, and the list grows as points are decoded.
 pub fn room_for_points(path: &Path, count: u64, decoded: u64) -> Result<Vec<Point3<f64>>> {
-    let point = std::mem::size_of::<Point3<f64>>() as u64;
-    let needs = count.saturating_mul(point).saturating_add(decoded);
-    let too_large = |available| DataError::PointsTooLarge {
-        path: path.to_path_buf(),
-        points: count,
-        decoded,
-        needs,
-        available,
-    };
-    if let Some(available) = crate::memory::available().filter(|&a| needs > a) {
-        return Err(too_large(Some(available)));
-    }
+    check_points_fit(path, count, decoded)?;
     let mut points = Vec::new();
     usize::try_from(count)
         .ok()
         .and_then(|n| points.try_reserve_exact(n).ok())
-        .ok_or_else(|| too_large(None))?;
+        .ok_or_else(|| points_too_large(path, count, decoded, None))?;
     Ok(points)
+}
+
+/// Refuses a file at `path` whose `count` points (and `decoded` more bytes the reader must
+/// hold, as PCD's decompressed data) need more memory than this process may allocate: a small
+/// file may declare billions of points, and Rust aborts on an allocation that fails. Every
+/// reader checks its points here before it allocates them.
+pub fn check_points_fit(path: &Path, count: u64, decoded: u64) -> Result<()> {
+    match crate::memory::available() {
+        Some(available) if points_bytes(count, decoded) > available => {
+            Err(points_too_large(path, count, decoded, Some(available)))
+        }
+        _ => Ok(()),
+    }
+}
+
+fn points_bytes(count: u64, decoded: u64) -> u64 {
+    let point = std::mem::size_of::<Point3<f64>>() as u64;
+    count.saturating_mul(point).saturating_add(decoded)
+}
+
+fn points_too_large(path: &Path, count: u64, decoded: u64, available: Option<u64>) -> DataError {
+    DataError::PointsTooLarge {
+        path: path.to_path_buf(),
+        points: count,
+        decoded,
+        needs: points_bytes(count, decoded),
+        available,
+    }
 }
 
 /// Bytes of memory a byte of a text file may take to read: itself, and 24 bytes of point for
