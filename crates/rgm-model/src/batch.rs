@@ -910,17 +910,23 @@ mod tests {
         assert_eq!(csv_fields(r#""a"b,c"#), Err("text after a quoted field"));
     }
 
-    #[test]
-    fn a_rewritten_output_stays_locked_and_keeps_its_finished_lines() {
-        let dir = std::env::temp_dir().join(format!("rgm-batch-lock-{}", std::process::id()));
+    /// A folder for a test's output file `out.jsonl`, the default method's settings and the
+    /// header they give.
+    fn scratch_output(name: &str) -> (PathBuf, PathBuf, Map<String, Value>, String) {
+        let dir = std::env::temp_dir().join(format!("rgm-batch-{name}-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("out.jsonl");
         let settings = settings(
             &MethodOptions::default(),
             &MethodOptions::default().build().unwrap(),
         )
         .unwrap();
         let header = json!({HEADER_KEY: FORMAT, "settings": settings}).to_string();
+        (dir.clone(), dir.join("out.jsonl"), settings, header)
+    }
+
+    #[test]
+    fn a_rewritten_output_stays_locked_and_keeps_its_finished_lines() {
+        let (dir, path, settings, header) = scratch_output("lock");
         let done = r#"{"source":"a","target":"b","registered":true}"#;
         let failed = r#"{"source":"c","target":"d","error":"no"}"#;
         // A failed pair's line and a cut-off last line: the file is rewritten without them.
@@ -953,15 +959,7 @@ mod tests {
 
     #[test]
     fn a_last_line_cut_inside_a_character_is_dropped_and_the_run_resumes() {
-        let dir = std::env::temp_dir().join(format!("rgm-batch-utf8-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("out.jsonl");
-        let settings = settings(
-            &MethodOptions::default(),
-            &MethodOptions::default().build().unwrap(),
-        )
-        .unwrap();
-        let header = json!({HEADER_KEY: FORMAT, "settings": settings}).to_string();
+        let (dir, path, settings, header) = scratch_output("utf8");
         let done = r#"{"source":"é.ply","target":"b","registered":true}"#;
         // "ü" is two bytes; the line ends after the first.
         let mut bytes = format!("{header}\n{done}\n{{\"source\":\"").into_bytes();
@@ -988,15 +986,7 @@ mod tests {
 
     #[test]
     fn a_later_line_of_a_pair_supersedes_an_earlier_one() {
-        let dir = std::env::temp_dir().join(format!("rgm-batch-last-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("out.jsonl");
-        let settings = settings(
-            &MethodOptions::default(),
-            &MethodOptions::default().build().unwrap(),
-        )
-        .unwrap();
-        let header = json!({HEADER_KEY: FORMAT, "settings": settings}).to_string();
+        let (dir, path, settings, header) = scratch_output("last");
         let old = r#"{"source":"a","target":"b","registered":true,"inputs":1}"#;
         let other = r#"{"source":"c","target":"d","registered":true}"#;
         let new = r#"{"source":"a","target":"b","registered":false,"inputs":2}"#;
