@@ -238,5 +238,7 @@ def test_weights_rewritten_at_the_same_path_are_loaded_again(airplane, tmp_path)
     os.replace(tmp_path / "next.safetensors", path)
     again = rgm.register(source, airplane, method="rgm", refine=False, weights=path, preset="fast")
     fresh = rgm.Registrar(method="rgm", refine=False, weights=path, preset="fast").register(source, airplane)
-    assert not np.allclose(again.transformation, first.transformation)
+    # The halved network still finds the pose, from other matches: its fitness tells them apart.
+    assert again.fitness != first.fitness
+    assert again.fitness == fresh.fitness
     np.testing.assert_array_equal(again.transformation, fresh.transformation)
