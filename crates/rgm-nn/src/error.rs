@@ -34,6 +34,18 @@ pub enum NnError {
         expected: Vec<usize>,
         got: Vec<usize>,
     },
+    /// A tensor in a weight file holds NaN or an infinity: the weights are broken (a training
+    /// run that diverged, a damaged file), whatever clouds they are run on.
+    #[error(
+        "{path}: tensor {name:?} holds a non-finite value ({value} at element {index}): these \
+         weights are broken (a diverged training run or a damaged file), not the clouds"
+    )]
+    NonFiniteWeight {
+        path: PathBuf,
+        name: String,
+        index: usize,
+        value: f64,
+    },
     /// A tensor in a weight file has an element type other than f32, f64 or bf16.
     #[error("{path}: tensor {name:?} has dtype {dtype}, expected F32, F64 or BF16")]
     TensorDtype {

@@ -389,12 +389,23 @@ pub fn load_params_from_bytes<T: Scalar>(
         }
         // Both in row order (trailing size-1 axes add none).
         match dst.as_slice_mut() {
-            Some(values) => decode_into(origin, name, &view, &metadata, values),
+            Some(values) => decode_into(origin, name, &view, &metadata, values)?,
             None => {
                 let t = to_array::<T>(origin, name, &view, &metadata)?;
                 dst.iter_mut().zip(t.iter()).for_each(|(d, &v)| *d = v);
-                Ok(())
             }
+        }
+        match dst.iter().position(|v| !v.is_finite()) {
+            Some(index) => Err(NnError::NonFiniteWeight {
+                path: origin.to_path_buf(),
+                name: name.to_string(),
+                index,
+                value: dst
+                    .iter()
+                    .nth(index)
+                    .map_or(f64::NAN, |&v| Scalar::to_f64(v)),
+            }),
+            None => Ok(()),
         }
     };
     try_visit_params(model, prefix, |name, p| fill(name, p.value))?;
@@ -428,6 +439,23 @@ mod tests {
         load_params(&path, &mut back).unwrap();
         assert_eq!(back.weight.value, ndarray::array![1.5f32, 2.5, 3.5]);
         assert_eq!(back.running_var, ndarray::array![0.25f32, 0.5, 4.0]);
+        std::fs::remove_file(&path).unwrap();
+    }
+
+    /// Issue 59, E10: NaN weights were blamed on the clouds (the network's output was found
+    /// non-finite); the file is refused when read, naming the tensor.
+    #[test]
+    fn a_weight_file_holding_nan_is_refused_naming_the_tensor() {
+        let path = temp("nan");
+        let mut bn = BatchNorm::<f32>::new(3);
+        bn.running_var = ndarray::array![0.25, f32::NAN, 4.0];
+        save_params(&path, &bn).unwrap();
+        let err = load_params(&path, &mut BatchNorm::<f32>::new(3)).unwrap_err();
+        let text = err.to_string();
+        assert!(
+            text.contains(r#"tensor "running_var" holds a non-finite value (NaN at element 1)"#),
+            "{text}"
+        );
         std::fs::remove_file(&path).unwrap();
     }
 
