@@ -705,3 +705,22 @@ fn a_resume_with_other_files_of_the_same_names_registers_them_again() {
     let third = run(&day2);
     assert!(String::from_utf8_lossy(&third.stderr).contains("registering 0"));
 }
+
+/// Issue 59, E10: a cloud of copies of one point was called "symmetric" (its turned poses fit
+/// as well), and 100,000 of them kept ICP busy for over a minute. It is refused by what it is.
+#[test]
+fn a_cloud_of_copies_of_one_point_is_refused_by_what_it_is() {
+    let dir = Scratch::new("hostile-one-place");
+    let (a, _) = clouds(&dir);
+    let same = dir.join("same.xyz");
+    std::fs::write(&same, "1 2 3\n".repeat(100_000)).unwrap();
+    for method in ["auto", "icp", "fgr", "rgm"] {
+        let out = rgm(&["register", same.to_str().unwrap(), &a, "--method", method]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{method}: {err}");
+        assert!(
+            err.contains("the source cloud's 100000 points all lie at one place"),
+            "{method}: {err}"
+        );
+    }
+}

@@ -45,6 +45,9 @@ pub enum MethodError {
     },
     /// The method's transform or score is not a finite number (a degenerate pair, or clouds
     /// at a scale the method cannot work at): reported as an error, never as a result.
+    /// A cloud of copies of one point: every rotation about it fits as well.
+    #[error("the {cloud} cloud's {points} points all lie at one place: a rigid pose has no rotation to find from it")]
+    OnePlace { cloud: &'static str, points: usize },
     #[error("{method} found no finite transform (found {found})")]
     NotFinite { method: String, found: String },
     /// Options that do not fit the method ([`crate::options::MethodOptions`]).

@@ -48,6 +48,16 @@ impl Registrar<MethodError> for Method {
         target: &Prepared,
         progress: &mut dyn FnMut(Progress),
     ) -> Result<Registration, MethodError> {
+        // Said as what it is, not as a symmetric shape's ambiguity (which the checks would find).
+        for (cloud, prepared) in [("source", source), ("target", target)] {
+            let points = &prepared.points;
+            if points.len() > 1 && points.iter().all(|p| p == &points[0]) {
+                return Err(MethodError::OnePlace {
+                    cloud,
+                    points: points.len(),
+                });
+            }
+        }
         let found = self.0.register_prepared(source, target, progress)?;
         let result = &found.result;
         let t = &result.t_target_source;
