@@ -450,7 +450,13 @@ fn a_resume_with_other_settings_is_refused_naming_the_setting() {
         rgm(&args)
     };
     let first = run(&["--match-points", "64", "--passes", "1"]);
-    assert!(first.status.success(), "{}", stderr(&first));
+    // The header is this test's subject, not the pair's verdict: 64 points unrefined may be
+    // doubted (unrefined results are checked since issue 59), and the line is written either way.
+    assert!(
+        first.status.success() || stderr(&first).contains("1 were not registered"),
+        "{}",
+        stderr(&first)
+    );
     let header: serde_json::Value = serde_json::from_str(
         std::fs::read_to_string(&output)
             .unwrap()

@@ -7,9 +7,9 @@
 //! | name | composition |
 //! |---|---|
 //! | `icp` | `Checked<IcpConfig, InFrame<REFINED_CHECKS>>` (its own refinement, checked in the unit-sphere frame) |
-//! | `fgr`, `fgr+icp` | `Normalised<FgrConfig>`, `Normalised<Checked<Refined<FgrConfig>, REFINED_CHECKS>>` |
-//! | `rgm`, `rgm+icp` | [`Normalised`]`<RgmRegistrar>`, `Normalised<Checked<Refined<RgmRegistrar>, REFINED_CHECKS>>` |
-//! | `auto` | `Normalised<Thinned<Cascade { first: FgrConfig, rest: [Normalised<RgmRegistrar>] }>>` |
+//! | `fgr`, `fgr+icp` | `Normalised<Checked<FgrConfig, REFINED_CHECKS>>`, `Normalised<Checked<Refined<FgrConfig>, REFINED_CHECKS>>` |
+//! | `rgm`, `rgm+icp` | [`Normalised`]`<Checked<RgmRegistrar, REFINED_CHECKS>>`, `Normalised<Checked<Refined<RgmRegistrar>, REFINED_CHECKS>>` |
+//! | `auto` | `Normalised<Checked<Thinned<Cascade { first: FgrConfig, rest: [Normalised<RgmRegistrar>] }>, REFINED_CHECKS>>` |
 //! | `auto+icp` | `Normalised<Checked<AtResolution<Thinned<Cascade { first: Refined<FgrConfig>, rest: [Refined<Normalised<RgmRegistrar>>] }>, AtSpacing>, REFINED_CHECKS>>` |
 //!
 //! (`BestOf[first, rest]` in place of the `Cascade` when `accept` takes nothing; inside the
@@ -20,9 +20,12 @@
 //! [`rgm_registration::methods::sc2`], where the object cascade's result does not coincide with the target at
 //! the pair's spacing.)
 //!
-//! [`Checked`] doubts a refined result whose overlap is not one where the clouds coincide, or
-//! that a rival pose fits nearly as well ([`REFINED_CHECKS`]); so is ICP's, which is refined
-//! by its nature. The unrefined methods, calibrated on no data, are not checked.
+//! [`Checked`] doubts a result whose overlap is not one where the clouds coincide, or that a
+//! rival pose fits nearly as well ([`REFINED_CHECKS`]): refined results, ICP's (refined by its
+//! nature) and, since issue 59, unrefined ones too (`--no-refine`, the paper's protocol). An
+//! unrefined result is a few degrees from its best fit at most, so the checks, set on refined
+//! results, doubt more right ones there; a result that does not coincide is not trusted
+//! either way.
 //!
 //! `Refined<R>` refines with [`RefineConfig`] (`+icp`); any other [`rgm_registration::refiner::Refiner`]
 //! composes the same way (`Refined::new(FgrConfig::default(), IcpConfig::default())` is
@@ -363,7 +366,13 @@ impl MethodOptions {
             }),
             // FGR's lengths are set for unit-sphere shapes: the pair is moved into that frame
             // first, as the network's is, and its refined result checked there.
-            (MethodName::Fgr, None) => Method::new(Normalised::new(FgrConfig::default(), FRAME)),
+            (MethodName::Fgr, None) => Method::new(Normalised::new(
+                Checked {
+                    inner: FgrConfig::default(),
+                    check: REFINED_CHECKS,
+                },
+                FRAME,
+            )),
             (MethodName::Fgr, Some(refine)) => Method::new(Normalised::new(
                 Checked {
                     inner: Refined::new(FgrConfig::default(), refine),
@@ -371,7 +380,13 @@ impl MethodOptions {
                 },
                 FRAME,
             )),
-            (MethodName::Rgm, None) => Method::new(Normalised::new(self.build_rgm()?, FRAME)),
+            (MethodName::Rgm, None) => Method::new(Normalised::new(
+                Checked {
+                    inner: self.build_rgm()?,
+                    check: REFINED_CHECKS,
+                },
+                FRAME,
+            )),
             (MethodName::Rgm, Some(refine)) => Method::new(Normalised::new(
                 Checked {
                     inner: Refined::new(self.build_rgm()?, refine),
@@ -508,7 +523,10 @@ where
         }))
     };
     let composite: Box<dyn DynRegistrar<MethodError>> = match refine {
-        None => composite,
+        None => Box::new(Checked {
+            inner: composite,
+            check: REFINED_CHECKS,
+        }),
         Some(_) => Box::new(Checked {
             inner: AtResolution {
                 // A pair denser than the training clouds may be a scene: the object cascade
