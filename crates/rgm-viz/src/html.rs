@@ -437,14 +437,18 @@ mod tests {
             .collect()
     }
 
-    /// The JSON data a page carries.
-    fn data_of(html: &str) -> serde_json::Value {
+    /// The text of the JSON data element of a page.
+    fn data_text(html: &str) -> &str {
         let start = html
             .find(r#"<script id="rgm-data" type="application/json">"#)
             .unwrap();
         let body = &html[start..];
-        let body = &body[body.find('>').unwrap() + 1..body.find("</script>").unwrap()];
-        serde_json::from_str(body).unwrap()
+        &body[body.find('>').unwrap() + 1..body.find("</script>").unwrap()]
+    }
+
+    /// The JSON data a page carries.
+    fn data_of(html: &str) -> serde_json::Value {
+        serde_json::from_str(data_text(html)).unwrap()
     }
 
     /// `n` points along a helix, far from the origin and in metres, like a scan.
@@ -725,9 +729,7 @@ mod tests {
         let html = page.to_html().unwrap();
         assert_eq!(data_of(&html)["title"], page.title);
         // The data element holds no `<` at all, so no parser state can start inside it.
-        let start = html.find(r#"<script id="rgm-data""#).unwrap();
-        let data = &html[start..][html[start..].find('>').unwrap() + 1..];
-        let data = &data[..data.find("</script>").unwrap()];
+        let data = data_text(&html);
         assert!(!data.contains('<'), "{data}");
         assert_eq!(
             html.matches("<script").count(),
