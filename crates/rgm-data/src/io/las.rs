@@ -132,12 +132,13 @@ fn check_sizes(bytes: &[u8]) -> std::result::Result<(), String> {
             }
         }
     }
-    for count in counts.into_iter().filter(|_| !compressed) {
-        if count.saturating_mul(record) > len.saturating_sub(offset_to_points) {
+    // LAS records take their bytes; a LAZ count is checked against memory when read.
+    let room = len.saturating_sub(offset_to_points);
+    for count in counts {
+        if !compressed && count.saturating_mul(record) > room {
             return Err(format!(
-                "{count} points of {record} bytes need more than the {} bytes after byte \
-                 {offset_to_points}",
-                len.saturating_sub(offset_to_points)
+                "{count} points of {record} bytes need more than the {room} bytes after byte \
+                 {offset_to_points}"
             ));
         }
     }
