@@ -89,10 +89,8 @@ fn write(data: &Path, out: &Path) -> Result<()> {
         std::fs::create_dir_all(parent)
             .with_context(|| format!("creating {}", parent.display()))?;
     }
-    let partial = out.with_extension("partial");
-    std::fs::write(&partial, &bytes).with_context(|| format!("writing {}", partial.display()))?;
-    std::fs::rename(&partial, out)
-        .with_context(|| format!("renaming {} to {}", partial.display(), out.display()))?;
+    rgm_data::durable::replace(out, |file| file.write_all(&bytes))
+        .with_context(|| format!("writing {}", out.display()))?;
     println!(
         "{}: {} shapes of {POINTS_PER_SHAPE} points (split train), {} bytes ({:.2} MiB); \
          max error {max_error} (x {}, y {}, z {}; bound {bound:.6}); {:.1} s",

@@ -25,6 +25,7 @@ use std::path::Path;
 use std::process::Command;
 
 use anyhow::{bail, Context, Result};
+use rgm_data::durable::LockError;
 use rgm_nn::io::Storage;
 
 use crate::project_root;
@@ -70,17 +71,22 @@ pub fn run(args: Args) -> Result<()> {
 
 /// Rewrites the run in `folder` for a commit, unless it is training.
 fn snapshot(folder: &Path, finished: bool, committed: &Committed) -> Result<()> {
+    // Held while the run is rewritten, so that no training starts on it meanwhile.
     let lock = folder.join("lock");
-    if lock.exists() {
-        let file = fs::File::open(&lock)?;
-        if file.try_lock().is_err() {
+    let _held = match rgm_data::durable::lock(&lock, fs::OpenOptions::new().read(true)) {
+        Err(LockError::Busy) => {
             println!(
                 "{}: training now (its lock is held); stop it first",
                 folder.display()
             );
             return Ok(());
         }
-    }
+        Err(LockError::Io(error)) if error.kind() == std::io::ErrorKind::NotFound => None,
+        Err(LockError::Io(error)) => {
+            return Err(error).context(format!("locking {}", lock.display()))
+        }
+        Ok(file) => Some(file),
+    };
     let last = folder.join("last.safetensors");
     let best = folder.join("best.safetensors");
     let same = best.is_file() && fs::read(&last)? == fs::read(&best)?;
@@ -202,10 +208,10 @@ fn rewrite(
         .map(|(name, t)| (name.clone(), t.view()))
         .collect();
     kept.sort_by(|a, b| a.0.cmp(&b.0));
-    let staged = path.with_extension("safetensors.snapshot.tmp");
-    rgm_nn::io::write_tensors_stored(&staged, &kept, metadata, storage)
-        .with_context(|| format!("writing {}", staged.display()))?;
-    fs::rename(&staged, path)?;
+    rgm_data::durable::replace_via(path, |staged| {
+        rgm_nn::io::write_tensors_stored(staged, &kept, metadata, storage)
+            .with_context(|| format!("writing {}", staged.display()))
+    })?;
     println!(
         "{}: rewritten for a snapshot ({:.1} → {:.1} MB)",
         path.display(),

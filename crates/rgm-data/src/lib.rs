@@ -6,6 +6,7 @@
 //! knows nothing of tensors, networks or matching. It needs no BLAS.
 
 pub mod correspondence;
+pub mod durable;
 pub mod error;
 pub mod io;
 pub mod memory;

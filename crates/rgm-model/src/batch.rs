@@ -27,6 +27,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 
 use rayon::prelude::*;
+use rgm_data::durable::{self, LockError};
 use rgm_geom::PointCloud;
 use rgm_registration::registrar::Registrar as _;
 use serde_json::{json, Map, Value};
@@ -415,77 +416,38 @@ impl Output {
     }
 }
 
-/// `path` opened for appending, created when missing, and locked; an error when another run
-/// holds it. A lock taken on a file that was renamed away meanwhile (another run's rewrite) is
-/// let go and taken again on the file now at `path`.
+/// `path` opened for appending, created when missing, and locked ([`durable::lock`]); an error
+/// when another run holds it.
 fn lock(path: &Path) -> Result<File, BatchError> {
-    loop {
-        let file = std::fs::OpenOptions::new()
-            .read(true)
-            .append(true)
-            .create(true)
-            .open(path)
-            .map_err(BatchError::io("opening", path))?;
-        match file.try_lock() {
-            Ok(()) => {}
-            Err(std::fs::TryLockError::WouldBlock) => {
-                return Err(BatchError::Busy {
-                    path: path.to_path_buf(),
-                })
-            }
-            Err(std::fs::TryLockError::Error(error)) => {
-                return Err(BatchError::Io {
-                    action: "locking",
-                    path: path.to_path_buf(),
-                    error,
-                })
-            }
-        }
-        if same_file(&file, path) {
-            return Ok(file);
-        }
-    }
-}
-
-#[cfg(unix)]
-fn same_file(file: &File, path: &Path) -> bool {
-    use std::os::unix::fs::MetadataExt;
-    match (file.metadata(), std::fs::metadata(path)) {
-        (Ok(a), Ok(b)) => (a.dev(), a.ino()) == (b.dev(), b.ino()),
-        _ => false,
-    }
-}
-
-#[cfg(not(unix))]
-fn same_file(_: &File, _: &Path) -> bool {
-    true
-}
-
-/// `path` written anew with `text` through a temporary file beside it, locked before it is
-/// renamed over `path` (so the run keeps its lock); the file, open for appending.
-fn replace(path: &Path, text: &str) -> Result<File, BatchError> {
-    let mut name = path.file_name().unwrap_or_default().to_os_string();
-    name.push(format!(".{}.tmp", std::process::id()));
-    let temporary = path.with_file_name(name);
-    let written = (|| {
-        let mut file = std::fs::OpenOptions::new()
-            .read(true)
-            .append(true)
-            .create_new(true)
-            .open(&temporary)?;
-        file.try_lock().map_err(std::io::Error::other)?;
-        file.write_all(text.as_bytes())?;
-        file.sync_all()?;
-        std::fs::rename(&temporary, path)?;
-        Ok(file)
-    })();
-    written.map_err(|error| {
-        let _ = std::fs::remove_file(&temporary);
-        BatchError::Io {
-            action: "rewriting",
+    let options = std::fs::OpenOptions::new()
+        .read(true)
+        .append(true)
+        .create(true)
+        .clone();
+    durable::lock(path, &options).map_err(|error| match error {
+        LockError::Busy => BatchError::Busy {
+            path: path.to_path_buf(),
+        },
+        LockError::Io(error) => BatchError::Io {
+            action: "locking",
             path: path.to_path_buf(),
             error,
-        }
+        },
+    })
+}
+
+/// `path` written anew with `text` ([`durable::replace_with`]), the new file locked before it
+/// is renamed over `path` (so the run keeps its lock); the file, open for appending.
+fn replace(path: &Path, text: &str) -> Result<File, BatchError> {
+    let options = std::fs::OpenOptions::new().read(true).append(true).clone();
+    durable::replace_with(path, &options, |file| {
+        file.try_lock().map_err(std::io::Error::other)?;
+        file.write_all(text.as_bytes())
+    })
+    .map_err(|error| BatchError::Io {
+        action: "rewriting",
+        path: path.to_path_buf(),
+        error,
     })
 }
 

@@ -606,9 +606,8 @@ fn restore_from_history(root: &Path, path: &Path) -> Result<Option<String>> {
     let Some(bytes) = git(&["show", &format!("{revision}:{relative}")]) else {
         return Ok(None);
     };
-    let partial = path.with_extension("gz.tmp");
-    fs::write(&partial, bytes).with_context(|| format!("writing {}", partial.display()))?;
-    fs::rename(&partial, path).with_context(|| format!("writing {}", path.display()))?;
+    rgm_data::durable::replace(path, |out| out.write_all(&bytes))
+        .with_context(|| format!("writing {}", path.display()))?;
     Ok(Some(revision))
 }
 

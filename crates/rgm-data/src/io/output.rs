@@ -41,14 +41,6 @@ fn is_special(path: &Path) -> bool {
         || std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir())
 }
 
-/// The temporary file beside `target` that [`write_file`] writes first.
-fn temporary(target: &Path) -> PathBuf {
-    let name = target
-        .file_name()
-        .map_or_else(|| "output".into(), |n| n.to_string_lossy().into_owned());
-    target.with_file_name(format!(".{name}.rgm-{}.tmp", std::process::id()))
-}
-
 /// Fails now when `path` cannot be written later (its folder is missing or not writable, it is
 /// a folder, the file is read-only), so a long command does not lose its result at the end.
 /// Nothing changes at `path`: an existing file is opened for writing without truncation, a
@@ -65,7 +57,7 @@ pub fn check_writable(path: &Path) -> std::io::Result<()> {
     if target.exists() {
         std::fs::OpenOptions::new().write(true).open(&target)?;
     }
-    let probe = temporary(&target);
+    let probe = crate::durable::temporary_beside(&target);
     std::fs::OpenOptions::new()
         .write(true)
         .create_new(true)
@@ -73,8 +65,8 @@ pub fn check_writable(path: &Path) -> std::io::Result<()> {
     std::fs::remove_file(&probe)
 }
 
-/// Writes `path` with `write`, as the module says: through a temporary file renamed over the
-/// (link-resolved) target, keeping an existing file's permissions; FIFOs and devices directly;
+/// Writes `path` with `write`, as the module says: the (link-resolved) target replaced as
+/// [`crate::durable`] replaces a file, keeping an existing file's permissions; FIFOs and devices directly;
 /// `/dev/stdout` through the standard output.
 pub fn write_file(
     path: &Path,
@@ -96,25 +88,7 @@ pub fn write_file(
         write(&mut out)?;
         return out.flush();
     }
-    let tmp = temporary(&target);
-    let written = (|| {
-        let file = std::fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&tmp)?;
-        let mut out = std::io::BufWriter::new(file);
-        write(&mut out)?;
-        let file = out.into_inner().map_err(|e| e.into_error())?;
-        file.sync_all()?;
-        if let Ok(existing) = std::fs::metadata(&target) {
-            std::fs::set_permissions(&tmp, existing.permissions())?;
-        }
-        std::fs::rename(&tmp, &target)
-    })();
-    if written.is_err() {
-        let _ = std::fs::remove_file(&tmp); // may not exist; the write's error is the one to tell
-    }
-    written
+    crate::durable::replace(&target, write)
 }
 
 #[cfg(test)]

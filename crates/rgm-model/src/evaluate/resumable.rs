@@ -366,19 +366,15 @@ fn gzip(text: &str) -> Vec<u8> {
     gz.finish().expect("writing to memory")
 }
 
-/// The per-pair file `path` of `inputs` holding `lines`, in one gzip member, written beside it
-/// and renamed so that a run killed meanwhile leaves the old file whole.
+/// The per-pair file `path` of `inputs` holding `lines`, in one gzip member, replaced whole
+/// ([`rgm_data::durable`]), so that a run killed meanwhile leaves the old file.
 fn write_file(path: &Path, inputs: &str, lines: &[Line]) -> std::io::Result<()> {
     let header = Header {
         version: VERSION,
         inputs: inputs.to_string(),
     };
-    let temporary = path.with_extension("gz.tmp");
-    fs::write(
-        &temporary,
-        gzip(&(json_lines(&[header]) + &json_lines(lines))),
-    )?;
-    fs::rename(&temporary, path)
+    let bytes = gzip(&(json_lines(&[header]) + &json_lines(lines)));
+    rgm_data::durable::replace(path, |out| out.write_all(&bytes))
 }
 
 /// `lines` appended to the per-pair file `path`, a gzip member of their own.

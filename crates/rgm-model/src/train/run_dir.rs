@@ -6,6 +6,7 @@ use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use rgm_data::durable::{self, LockError};
 use serde::{Deserialize, Serialize};
 
 use super::{Result, TrainError, TrainState};
@@ -150,24 +151,22 @@ impl RunDir {
 fn lock_run(dir: &Path) -> Result<fs::File> {
     fs::create_dir_all(dir).map_err(io_err(dir))?;
     let path = dir.join("lock");
-    let mut file = fs::OpenOptions::new()
+    let options = fs::OpenOptions::new()
         .read(true)
         .write(true)
         .create(true)
         .truncate(false)
-        .open(&path)
-        .map_err(io_err(&path))?;
-    match file.try_lock() {
-        Ok(()) => {}
-        Err(fs::TryLockError::WouldBlock) => {
-            let pid = fs::read_to_string(&path).unwrap_or_default();
-            return Err(TrainError::Busy {
-                dir: dir.to_path_buf(),
-                pid: pid.trim().to_string(),
-            });
-        }
-        Err(fs::TryLockError::Error(e)) => return Err(io_err(&path)(e)),
-    }
+        .clone();
+    let mut file = durable::lock(&path, &options).map_err(|error| match error {
+        LockError::Busy => TrainError::Busy {
+            dir: dir.to_path_buf(),
+            pid: fs::read_to_string(&path)
+                .unwrap_or_default()
+                .trim()
+                .to_string(),
+        },
+        LockError::Io(error) => io_err(&path)(error),
+    })?;
     file.set_len(0).map_err(io_err(&path))?;
     writeln!(file, "{}", std::process::id()).map_err(io_err(&path))?;
     Ok(file)
@@ -175,9 +174,7 @@ fn lock_run(dir: &Path) -> Result<fs::File> {
 
 /// Flushes the file or folder at `path` to the disk.
 fn sync(path: &Path) -> Result<()> {
-    fs::File::open(path)
-        .and_then(|f| f.sync_all())
-        .map_err(io_err(path))
+    durable::sync(path).map_err(io_err(path))
 }
 
 /// Moves the files of a committed checkpoint (`dir/checkpoint/`) over the run's own, then
@@ -230,22 +227,13 @@ fn recover(dir: &Path) -> Result<Option<TrainState>> {
     Ok(Some(state))
 }
 
-/// Writes `path` through a temporary file and a rename, so an interruption never
-/// leaves a half-written file behind.
-fn write_atomic(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
-    let tmp = path.with_extension("tmp");
-    write(&tmp)?;
-    fs::rename(&tmp, path).map_err(io_err(path))
-}
-
+/// Writes `value` as JSON to `path`, replacing it whole ([`durable::replace`]).
 pub(super) fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<()> {
-    write_atomic(path, |tmp| {
-        let text = serde_json::to_string_pretty(value).map_err(|source| TrainError::Json {
-            path: tmp.to_path_buf(),
-            source,
-        })?;
-        fs::write(tmp, text).map_err(io_err(tmp))
-    })
+    let text = serde_json::to_string_pretty(value).map_err(|source| TrainError::Json {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    durable::replace(path, |out| out.write_all(text.as_bytes())).map_err(io_err(path))
 }
 
 pub(super) fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T> {
