@@ -22,12 +22,20 @@ fn data_dir() -> String {
 }
 
 /// Two small clouds as `.xyz` files in `dir`: a grid and the same grid moved by 0.01. Its rows
-/// are spaced unevenly along x and y (0.3 times the squares), so that no turn maps it onto
-/// itself: an even grid's pose is ambiguous, and it is rightly not registered.
+/// are spaced unevenly along each axis, and differently along each, so that no turn maps it
+/// onto itself: an even grid's pose is ambiguous, and it is rightly not registered (so is one
+/// spaced alike along two axes and evenly along the third, which a half turn about the diagonal
+/// maps onto itself).
 fn clouds(dir: &Path) -> (String, String) {
-    let uneven = |k: usize| 0.3 * (k * k) as f64;
+    let uneven = |k: usize, a: f64, b: f64| (a * k as f64 + b * (k * k) as f64);
     let grid: Vec<[f64; 3]> = (0..125)
-        .map(|i| [uneven(i % 5), uneven(i / 5 % 5), (i / 25) as f64 * 1.3])
+        .map(|i| {
+            [
+                uneven(i % 5, 0.0, 0.3),
+                uneven(i / 5 % 5, 0.3, 0.2),
+                uneven(i / 25, 1.3, 0.1),
+            ]
+        })
         .collect();
     let write = |name: &str, shift: f64| {
         let path = dir.join(name);
@@ -691,7 +699,8 @@ fn a_resume_with_other_files_of_the_same_names_registers_them_again() {
         String::from_utf8_lossy(&out.stderr)
     );
     let first = shift();
-    assert!(first.len() == 1 && first[0] > 0.005, "{first:?}");
+    // FGR unrefined on 125 points finds about half the shift, but its sign.
+    assert!(first.len() == 1 && first[0] > 0.002, "{first:?}");
     let second = run(&day2);
     let said = String::from_utf8_lossy(&second.stderr);
     assert!(second.status.success(), "{said}");
@@ -700,7 +709,7 @@ fn a_resume_with_other_files_of_the_same_names_registers_them_again() {
         "{said}"
     );
     let again = shift();
-    assert!(again.len() == 1 && again[0] < -0.005, "{again:?}");
+    assert!(again.len() == 1 && again[0] < -0.002, "{again:?}");
     // Day 2 again: finished, nothing runs.
     let third = run(&day2);
     assert!(String::from_utf8_lossy(&third.stderr).contains("registering 0"));
@@ -722,5 +731,70 @@ fn a_cloud_of_copies_of_one_point_is_refused_by_what_it_is() {
             err.contains("the source cloud's 100000 points all lie at one place"),
             "{method}: {err}"
         );
+    }
+}
+
+/// Issue 59, E4: a cube sampled twice (its 24 symmetries leave the covariance's axes
+/// arbitrary) and a sphere were trusted 90–180° off by `--method fgr`. Now neither cloud's pose
+/// is trusted, refined or not, and the reason names the symmetry.
+#[test]
+fn a_symmetric_shape_is_never_registered() {
+    let dir = Scratch::new("hostile-symmetric");
+    let turn = rgm_geom::RigidTransform::new(
+        rgm_geom::euler::rotation_xyz_intrinsic(0.3, -0.5, 0.8),
+        rgm_geom::Vector3::new(0.1, -0.05, 0.02),
+    );
+    let write = |name: &str, cloud: &rgm_geom::PointCloud, moved: bool| {
+        let path = dir.join(name);
+        let text: String = cloud
+            .points
+            .iter()
+            .map(|p| if moved { turn.apply(p) } else { *p })
+            .map(|p| format!("{} {} {}\n", p.x, p.y, p.z))
+            .collect();
+        std::fs::write(&path, text).unwrap();
+        path.to_string_lossy().into_owned()
+    };
+    let cube = |seed| rgm_geom::testing::box_surface_of([0.5, 0.5, 0.5], 2048, seed);
+    // Golden-angle spirals, the second turned half a step along the spiral: two samplings.
+    let sphere = |phase: f64| {
+        let n = 2048;
+        rgm_geom::PointCloud::new(
+            (0..n)
+                .map(|i| {
+                    let k = i as f64 + phase;
+                    let z = 1.0 - 2.0 * k / n as f64;
+                    let (r, angle) = ((1.0 - z * z).max(0.0).sqrt(), k * 2.399_963_229_728_653);
+                    rgm_geom::Point3::new(r * angle.cos(), r * angle.sin(), z)
+                })
+                .collect(),
+        )
+    };
+    let pairs = [
+        (
+            write("cube_a.xyz", &cube(1), false),
+            write("cube_b.xyz", &cube(2), true),
+        ),
+        (
+            write("sphere_a.xyz", &sphere(0.0), false),
+            write("sphere_b.xyz", &sphere(0.5), true),
+        ),
+    ];
+    for (source, target) in &pairs {
+        for refine in [None, Some("--no-refine")] {
+            let mut args = vec!["register", source, target, "--method", "fgr", "--json"];
+            args.extend(refine);
+            let out = rgm(&args);
+            assert!(!out.status.success(), "{args:?}");
+            let value = json(&out);
+            assert_eq!(value["registered"], false, "{args:?}");
+            // Unrefined, the resampled clouds may not coincide at all; refined, they do, and
+            // only the symmetry is left to doubt them.
+            let reason = value["reason"].as_str().unwrap();
+            assert!(
+                refine.is_some() || reason.contains("ambiguous (a symmetric shape"),
+                "{args:?}: {reason}"
+            );
+        }
     }
 }

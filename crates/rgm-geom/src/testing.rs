@@ -20,11 +20,17 @@ pub fn uniform_cube(n: usize, rng: &mut StdRng) -> Vec<Point3<f64>> {
         .collect()
 }
 
-/// `n` points on the faces of a 1.0 × 0.6 × 0.4 box centred at the origin: a shape with no
-/// rotational symmetry, reproducible from `seed`.
+/// `n` points on the faces of a 1.0 × 0.6 × 0.4 box centred at the origin, reproducible from
+/// `seed`: a shape with three unequal axes, so that its only rotational symmetries are the half
+/// turns about them.
 pub fn box_surface(n: usize, seed: u64) -> PointCloud {
+    box_surface_of([0.5, 0.3, 0.2], n, seed)
+}
+
+/// `n` points on the faces of the box of half sides `half` centred at the origin, each on a face
+/// pair chosen evenly (so the smaller faces are the denser), reproducible from `seed`.
+pub fn box_surface_of(half: [f64; 3], n: usize, seed: u64) -> PointCloud {
     let mut rng = StdRng::seed_from_u64(seed);
-    let half = [0.5, 0.3, 0.2];
     let points = (0..n)
         .map(|_| {
             let axis = rng.gen_range(0..3);

@@ -15,7 +15,7 @@ use rgm_geom::cloud::median;
 use rgm_geom::frame::{FrameRule, NearPair, Normalisation};
 use rgm_geom::{KnnIndex, PointCloud, RigidTransform};
 
-use crate::check::turned_poses;
+use crate::check::{turned_poses, SelfFit};
 use crate::registrar::Registration;
 use crate::thinning::Density;
 
@@ -278,15 +278,19 @@ pub fn sampled_overlap(
 /// target at least `share` as much (by [`sampled_overlap`] at `distance`, or by the
 /// composite's own scores) and passes `rivals_pass` too. Rivals are the other candidates of a
 /// composite more than `apart` (degrees, distance) from the chosen one, and the result turned
-/// about the source's axes ([`turned_poses`]). A symmetric shape, or a part that fits two places
-/// of the other cloud, has no one pose that the clouds tell; reporting one as registered would
-/// be a guess.
+/// about the source's axes ([`turned_poses`]). And it is doubted when either cloud fits itself
+/// turned ([`SelfFit`]): every pose turned by the symmetry fits exactly as well, whether or not
+/// the rival's own overlap, unrefined, clears `rivals_pass` (on a resampled surface it may miss
+/// by a little where the result's refined one just cleared it). A symmetric shape, or a part
+/// that fits two places of the other cloud, has no one pose that the clouds tell; reporting one
+/// as registered would be a guess.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Unambiguous<C> {
     pub share: f64,
     pub distance: f64,
     pub apart: (f64, f64),
     pub rivals_pass: C,
+    pub self_fit: SelfFit,
 }
 
 impl<C: Check> Unambiguous<C> {
@@ -317,10 +321,22 @@ impl<C: Check> Check for Unambiguous<C> {
         if own <= 0.0 {
             return None;
         }
-        turned_poses(source.0, transform).iter().find_map(|turned| {
+        let rival = turned_poses(source.0, transform).iter().find_map(|turned| {
             let ratio = sampled_overlap(source, target, turned, self.distance) / own;
             (ratio >= self.share && self.rivals_pass.doubt_of(source, target, turned).is_none())
                 .then(|| self.rival_doubt("the result turned about an axis of the source", ratio))
+        });
+        rival.or_else(|| {
+            let (which, turn) = [("source", source), ("target", target)]
+                .into_iter()
+                .find_map(|(which, (cloud, index))| {
+                    Some((which, self.self_fit.symmetry(cloud, index)?))
+                })?;
+            Some(format!(
+                "the {which} fits itself turned by {:.0}°: every pose turned so fits as well, and \
+                 the pose is ambiguous (a symmetric shape)",
+                turn.rotation_angle_deg()
+            ))
         })
     }
 
@@ -625,6 +641,13 @@ mod tests {
                 far: 0.08,
                 least: 0.35,
             },
+            // Out of reach: this test is of the rivals.
+            self_fit: SelfFit {
+                within: 1.0,
+                share: 1.1,
+                near_equal: 0.8,
+                flat: 0.1,
+            },
         };
         let same = RigidTransform::identity();
         let boxed = rgm_geom::testing::box_surface(20_000, 7); // dense: a turned copy lies on it
@@ -677,5 +700,44 @@ mod tests {
         let on_plane = |rival, score| check.doubt((a, &ai), (a, &ai), &found(rival, score));
         assert_eq!(on_plane(half, 1.9), None);
         assert_eq!(on_plane(turn(3.0), 1.9), None);
+    }
+
+    /// Issue 59, E4: two samplings of a cube (24 symmetries, its covariance's axes arbitrary)
+    /// at the right pose are doubted as a symmetric shape even where no turned rival clears
+    /// `rivals_pass`; two samplings of the airplane are not.
+    #[test]
+    fn a_cloud_that_fits_itself_turned_is_ambiguous() {
+        let check = Unambiguous {
+            share: 0.75,
+            distance: 0.02,
+            apart: (5.0, 0.05),
+            // No rival passes this.
+            rivals_pass: Coincides {
+                near: 0.02,
+                far: 0.08,
+                least: 1.1,
+            },
+            self_fit: SelfFit {
+                within: 1.0,
+                share: 0.9,
+                near_equal: 0.8,
+                flat: 0.1,
+            },
+        };
+        let same = RigidTransform::identity();
+        let cube = |seed| rgm_geom::testing::box_surface_of([0.5, 0.5, 0.5], 2048, seed);
+        let (source, target) = (cube(1), cube(2));
+        let (s, si) = indexed(&source);
+        let (t, ti) = indexed(&target);
+        let doubt = check
+            .doubt_of((s, &si), (t, &ti), &same)
+            .expect("a cube is ambiguous");
+        assert!(
+            doubt.starts_with("the source fits itself turned by"),
+            "{doubt}"
+        );
+        let plane = airplane();
+        let (a, ai) = indexed(&plane);
+        assert_eq!(check.doubt_of((a, &ai), (a, &ai), &same), None);
     }
 }

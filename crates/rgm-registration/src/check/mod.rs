@@ -3,15 +3,17 @@
 //! [`CoincidesAtSpacing`], [`Unambiguous`], [`InFrame`]) and the [`Judge`] a composite scores its
 //! candidates with, by the caller's [`Scoring`] and [`Acceptance`].
 //!
-//! Bottom first: `overlap` (the measures), `coincidence` (the checks), `judge` (the judge and
+//! Bottom first: `symmetry` (whether a cloud fits itself turned), `overlap` (the measures), `coincidence` (the checks), `judge` (the judge and
 //! its configuration).
 
 mod coincidence;
 mod judge;
 mod overlap;
+mod symmetry;
 
 pub use coincidence::{
     coincidence, sampled_overlap, Check, Coincides, CoincidesAtSpacing, InFrame, Unambiguous,
 };
 pub use judge::{Acceptance, Judge, Scoring};
 pub use overlap::{agree, overlap_score, turned_poses, turned_share};
+pub use symmetry::SelfFit;

@@ -3,7 +3,9 @@
 //! the source's axes fits as well ([`turned_share`], [`turned_poses`]), and whether two
 //! transforms agree ([`agree`]).
 
-use rgm_geom::{KnnIndex, Matrix3, PointCloud, RigidTransform};
+use rgm_geom::{KnnIndex, PointCloud, RigidTransform};
+
+use crate::check::symmetry::{principal_axes, turn_about};
 
 use crate::fit::score;
 
@@ -51,24 +53,15 @@ pub fn turned_share(
 /// `transform` with the source first turned by a quarter, a half or three quarters about each
 /// of its principal axes (through its centroid): the nine poses a symmetric shape fits as well.
 pub fn turned_poses(source: &PointCloud, transform: &RigidTransform) -> Vec<RigidTransform> {
-    let centre = source.centroid();
-    let mut covariance = Matrix3::zeros();
-    for p in &source.points {
-        let d = p - centre;
-        covariance += d * d.transpose();
-    }
-    let axes = covariance.symmetric_eigen().eigenvectors; // (3, 3), one axis a column
+    let (centre, _, axes) = principal_axes(source);
     let mut poses = Vec::with_capacity(9);
     for axis in axes.column_iter() {
-        let axis = nalgebra::Unit::new_normalize(axis.into_owned());
         for quarters in 1..4 {
-            let turn = nalgebra::Rotation3::from_axis_angle(
-                &axis,
+            let about = turn_about(
+                &centre,
+                &axis.into_owned(),
                 quarters as f64 * std::f64::consts::FRAC_PI_2,
-            )
-            .into_inner();
-            // About the centroid: p ↦ c + R (p − c).
-            let about = RigidTransform::new(turn, centre.coords - turn * centre.coords);
+            );
             poses.push(transform.compose(&about));
         }
     }

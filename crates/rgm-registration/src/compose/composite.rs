@@ -101,7 +101,7 @@ impl Tally {
                     // A result that coincides beats one that does not; ties go to the earlier
                     // candidate.
                     let beats = |b: &Winner| {
-                        coincides > b.coincides || coincides == b.coincides && score > b.score
+                        (coincides && !b.coincides) || (coincides == b.coincides && score > b.score)
                     };
                     if self.best.as_ref().is_none_or(beats) {
                         self.best = Some(Winner {
