@@ -12,6 +12,7 @@ pub mod io;
 pub mod memory;
 pub mod modelnet;
 pub mod pack;
+pub mod pair_list;
 pub mod pairs;
 pub mod scans;
 pub mod scenes;

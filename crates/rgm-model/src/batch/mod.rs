@@ -19,15 +19,18 @@
 //! the old one (the CLI drops the old ones before it starts, [`Output::forget`]; a later
 //! line of a pair supersedes an earlier one when a file is read).
 
+mod output;
+
+pub use output::Output;
+
 use std::collections::{HashMap, HashSet};
-use std::fs::File;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 
 use rayon::prelude::*;
-use rgm_data::durable::{self, LockError};
+use rgm_data::pair_list::{self, ListedPair};
 use rgm_geom::PointCloud;
 use rgm_registration::registrar::Registrar as _;
 use serde_json::{json, Map, Value};
@@ -310,272 +313,6 @@ fn crc32(bytes: &[u8]) -> u32 {
     crc.sum()
 }
 
-/// A run's output file (JSON Lines), locked for the run, with what earlier runs finished.
-pub struct Output {
-    path: PathBuf,
-    /// Open for appending, locked until dropped.
-    file: Mutex<File>,
-    done: HashMap<Key, Done>,
-}
-
-impl Output {
-    /// Opens `path` for a run of `settings` (see the module's doc), rewriting it without the
-    /// lines to be done again; a file that is not rgm's, or of other settings, or that another
-    /// run holds, is an error and left as it is.
-    pub fn open(
-        path: &Path,
-        settings: &Map<String, Value>,
-        progress: &dyn Progress,
-    ) -> Result<Self, BatchError> {
-        let path = match std::fs::canonicalize(path) {
-            Ok(resolved) => resolved,
-            Err(_) => path.to_path_buf(),
-        };
-        if path.exists() && !path.is_file() {
-            return Err(BatchError::Output(format!(
-                "{}: not a regular file; the output is a file that later runs resume (leave it \
-                 out to write the lines to stdout)",
-                path.display()
-            )));
-        }
-        let file = lock(&path)?;
-        // Bytes, not text: a line cut inside a character by a kill or a full disk is dropped
-        // like any cut-off line, wherever it was cut.
-        let bytes = std::fs::read(&path).map_err(BatchError::io("reading", &path))?;
-        let header = json!({HEADER_KEY: FORMAT, "settings": settings}).to_string() + "\n";
-        if bytes.is_empty() {
-            (&file)
-                .write_all(header.as_bytes())
-                .map_err(BatchError::io("writing", &path))?;
-            return Ok(Self {
-                path,
-                file: Mutex::new(file),
-                done: HashMap::new(),
-            });
-        }
-        let (first, rest) = bytes.split_at(
-            bytes
-                .iter()
-                .position(|&b| b == b'\n')
-                .map_or(bytes.len(), |n| n + 1),
-        );
-        check_header(&path, &String::from_utf8_lossy(first), settings)?;
-        let (done, kept, rewrite) = earlier_lines(&path, rest, progress)?;
-        let file = match rewrite {
-            true => replace(&path, &(header + &kept))?,
-            false => file,
-        };
-        Ok(Self {
-            path,
-            file: Mutex::new(file),
-            done,
-        })
-    }
-
-    /// The outcome of each pair an earlier run finished.
-    pub fn done(&self) -> &HashMap<Key, Done> {
-        &self.done
-    }
-
-    /// Rewrites the file without the lines of `stale` (pairs whose inputs changed since: they
-    /// run again), so that it never holds two lines of one pair.
-    pub fn forget(&mut self, stale: &HashSet<Key>) -> Result<(), BatchError> {
-        if stale.is_empty() {
-            return Ok(());
-        }
-        let bytes = std::fs::read(&self.path).map_err(BatchError::io("reading", &self.path))?;
-        let text = String::from_utf8_lossy(&bytes);
-        let mut kept = String::with_capacity(text.len());
-        for (i, line) in text.lines().enumerate() {
-            let value: Value = serde_json::from_str(line).unwrap_or(Value::Null);
-            let key = (value["source"].as_str(), value["target"].as_str());
-            let named = match key {
-                (Some(s), Some(t)) => stale.contains(&(s.to_string(), t.to_string())),
-                _ => false,
-            };
-            if i == 0 || !named {
-                kept.push_str(line);
-                kept.push('\n');
-            }
-        }
-        let file = replace(&self.path, &kept)?;
-        *self.file.lock().unwrap_or_else(|p| p.into_inner()) = file;
-        for key in stale {
-            self.done.remove(key);
-        }
-        Ok(())
-    }
-
-    pub fn path(&self) -> &Path {
-        &self.path
-    }
-
-    /// Where [`register_all`] appends the lines.
-    pub fn lines(&self) -> (&Path, &Mutex<dyn Write + Send + '_>) {
-        (&self.path, &self.file)
-    }
-}
-
-/// `path` opened for appending, created when missing, and locked ([`durable::lock`]); an error
-/// when another run holds it.
-fn lock(path: &Path) -> Result<File, BatchError> {
-    let options = std::fs::OpenOptions::new()
-        .read(true)
-        .append(true)
-        .create(true)
-        .clone();
-    durable::lock(path, &options).map_err(|error| match error {
-        LockError::Busy => BatchError::Busy {
-            path: path.to_path_buf(),
-        },
-        LockError::Io(error) => BatchError::Io {
-            action: "locking",
-            path: path.to_path_buf(),
-            error,
-        },
-    })
-}
-
-/// `path` written anew with `text` ([`durable::replace_with`]), the new file locked before it
-/// is renamed over `path` (so the run keeps its lock); the file, open for appending.
-fn replace(path: &Path, text: &str) -> Result<File, BatchError> {
-    let options = std::fs::OpenOptions::new().read(true).append(true).clone();
-    durable::replace_with(path, &options, |file| {
-        file.try_lock().map_err(std::io::Error::other)?;
-        file.write_all(text.as_bytes())
-    })
-    .map_err(|error| BatchError::Io {
-        action: "rewriting",
-        path: path.to_path_buf(),
-        error,
-    })
-}
-
-/// Refuses a file whose first line is not rgm's header, or one of other settings.
-fn check_header(path: &Path, first: &str, settings: &Map<String, Value>) -> Result<(), BatchError> {
-    let header: Option<Map<String, Value>> = serde_json::from_str(first).ok();
-    let Some(header) = header.filter(|h| h.get(HEADER_KEY).is_some()) else {
-        return Err(BatchError::Output(format!(
-            "{}:1: not an output of rgm's batches (its first line is not rgm's header \
-             {{\"{HEADER_KEY}\": …}}), so it is left as it is; give another output file (a file \
-             written by an rgm before the header existed is not resumed either): `{}`",
-            path.display(),
-            shortened(first.trim_end())
-        )));
-    };
-    if header[HEADER_KEY] != FORMAT {
-        return Err(BatchError::Output(format!(
-            "{}:1: batch output format {}, this rgm writes {FORMAT}; give another output file",
-            path.display(),
-            header[HEADER_KEY]
-        )));
-    }
-    let written = header.get("settings").and_then(Value::as_object);
-    let empty = Map::new();
-    let written = written.unwrap_or(&empty);
-    let mut names: Vec<&String> = settings.keys().chain(written.keys()).collect();
-    names.sort();
-    names.dedup();
-    for name in names {
-        let (was, now) = (
-            written.get(name).unwrap_or(&Value::Null),
-            settings.get(name).unwrap_or(&Value::Null),
-        );
-        if was != now {
-            return Err(BatchError::Output(format!(
-                "{}: its results were made with {name} {was}, this run asks for {name} {now} \
-                 (null: the method's default); the file is left as it is: resume with its \
-                 settings, or give another output file for these",
-                path.display()
-            )));
-        }
-    }
-    Ok(())
-}
-
-/// What became of each pair an earlier run finished, from the lines after the header
-/// (`bytes`), the lines to keep, and whether the file must be rewritten without others: a
-/// cut-off last line, a failed pair's line, a pair's earlier line where a later one supersedes
-/// it (the last line of a pair says what became of it). A line that is not one of ours is an
-/// error.
-fn earlier_lines(
-    path: &Path,
-    bytes: &[u8],
-    progress: &dyn Progress,
-) -> Result<(HashMap<Key, Done>, String, bool), BatchError> {
-    let mut done = HashMap::new();
-    let (complete, cut) = match bytes.iter().rposition(|&b| b == b'\n') {
-        Some(end) => bytes.split_at(end + 1),
-        None => (&[][..], bytes),
-    };
-    let complete = std::str::from_utf8(complete).map_err(|e| {
-        let line = 2 + complete[..e.valid_up_to()]
-            .iter()
-            .filter(|&&b| b == b'\n')
-            .count();
-        BatchError::Output(format!(
-            "{}:{line}: not text (a byte that is not UTF-8), so not a line of rgm's batches \
-             (give another output file)",
-            path.display()
-        ))
-    })?;
-    let mut rewrite = !cut.is_empty();
-    if rewrite {
-        progress.note(&format!(
-            "{}: the last line was cut off (a killed run?); its pair runs again",
-            path.display()
-        ));
-    }
-    // Each pair's last line, by its place among the lines.
-    let mut last: HashMap<Key, (usize, &str)> = HashMap::new();
-    for (i, line) in complete.lines().enumerate() {
-        let at = || format!("{}:{}", path.display(), i + 2);
-        if line.trim().is_empty() {
-            rewrite = true;
-            continue;
-        }
-        let value: Value = serde_json::from_str(line).map_err(|_| {
-            BatchError::Output(format!(
-                "{}: not a line of rgm's batches (give another output file): `{}`",
-                at(),
-                shortened(line)
-            ))
-        })?;
-        let (Some(source), Some(target)) = (value["source"].as_str(), value["target"].as_str())
-        else {
-            return Err(BatchError::Output(format!(
-                "{}: a line without \"source\" and \"target\" is not one of rgm's batches (give \
-                 another output file): `{}`",
-                at(),
-                shortened(line)
-            )));
-        };
-        let key = (source.to_string(), target.to_string());
-        if value.get("error").is_some() {
-            rewrite = true;
-            done.remove(&key);
-            last.remove(&key);
-            continue;
-        }
-        let outcome = if value["registered"] == true {
-            Outcome::Registered
-        } else {
-            Outcome::NotRegistered
-        };
-        let inputs = value.get("inputs").cloned().unwrap_or(Value::Null);
-        rewrite |= done.insert(key.clone(), Done { outcome, inputs }).is_some();
-        last.insert(key, (i, line));
-    }
-    let mut lines: Vec<(usize, &str)> = last.into_values().collect();
-    lines.sort_unstable_by_key(|&(i, _)| i);
-    let mut kept = String::with_capacity(complete.len());
-    for (_, line) in lines {
-        kept.push_str(line);
-        kept.push('\n');
-    }
-    Ok((done, kept, rewrite))
-}
-
 /// Registers each of `jobs` with a copy of `method` per worker of the current rayon pool,
 /// taking jobs as workers come free (an iterator is never collected). Each pair's line
 /// (its [`result_json`] with `"source"` and `"target"`, or `{"source", "target", "method",
@@ -668,20 +405,19 @@ fn register_job(
     }
 }
 
-/// The pairs of the list file `path`, CSV or JSON (by its first character), a repeated pair
-/// once (noted).
+/// The pairs of the list file `path` ([`rgm_data::pair_list`]), a repeated pair once (noted).
 pub fn read_list(path: &Path, progress: &dyn Progress) -> Result<Vec<Listed>, BatchError> {
     let text = std::fs::read_to_string(path).map_err(BatchError::io("reading", path))?;
-    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
     let folder = path.parent().unwrap_or(Path::new(""));
-    let named = if text.trim_start().starts_with(['[', '{']) {
-        json_list(path, text)?
-    } else {
-        csv_list(path, text)?
-    };
+    let named = pair_list::parse(path, &text).map_err(|e| BatchError::List(e.0))?;
     let mut first: HashMap<Key, String> = HashMap::new();
     let mut pairs = Vec::with_capacity(named.len());
-    for (source, target, place) in named {
+    for ListedPair {
+        source,
+        target,
+        place,
+    } in named
+    {
         let key = (source, target);
         if let Some(earlier) = first.get(&key) {
             progress.note(&format!(
@@ -729,148 +465,9 @@ pub fn remaining<'a>(
     (todo, earlier, stale)
 }
 
-/// (source, target, place) of each row of a CSV list.
-fn csv_list(path: &Path, text: &str) -> Result<Vec<(String, String, String)>, BatchError> {
-    let mut rows = text
-        .lines()
-        .enumerate()
-        .map(|(i, line)| (i + 1, line))
-        .filter(|(_, line)| !line.trim().is_empty() && !line.trim_start().starts_with('#'));
-    let at = |n: usize| format!("{}:{n}", path.display());
-    let Some((n, header)) = rows.next() else {
-        return Err(BatchError::List(format!(
-            "{}: no header line `source,target`",
-            path.display()
-        )));
-    };
-    let names = csv_fields(header)
-        .map_err(|why| BatchError::List(format!("{}: {why}: `{header}`", at(n))))?;
-    let column = |name: &str| names.iter().position(|h| h.eq_ignore_ascii_case(name));
-    let (Some(s), Some(t)) = (column("source"), column("target")) else {
-        return Err(BatchError::List(format!(
-            "{}: the header must name the columns `source` and `target`: `{header}`",
-            at(n)
-        )));
-    };
-    let mut pairs = Vec::new();
-    for (n, line) in rows {
-        let fields = csv_fields(line)
-            .map_err(|why| BatchError::List(format!("{}: {why}: `{line}`", at(n))))?;
-        let get = |k: usize, name: &str| match fields.get(k) {
-            Some(f) if !f.is_empty() => Ok(f.clone()),
-            _ => Err(BatchError::List(format!(
-                "{}: no {name} file (column {}): `{line}`",
-                at(n),
-                k + 1
-            ))),
-        };
-        pairs.push((get(s, "source")?, get(t, "target")?, at(n)));
-    }
-    Ok(pairs)
-}
-
-/// The comma-separated fields of a CSV line, trimmed; a field in double quotes may hold commas,
-/// and `""` inside it is one quote.
-fn csv_fields(line: &str) -> Result<Vec<String>, &'static str> {
-    let mut fields = Vec::new();
-    let mut chars = line.chars().peekable();
-    loop {
-        while chars.peek().is_some_and(|c| c.is_whitespace()) {
-            chars.next();
-        }
-        let mut field = String::new();
-        if chars.peek() == Some(&'"') {
-            chars.next();
-            loop {
-                match chars.next() {
-                    Some('"') if chars.peek() == Some(&'"') => {
-                        chars.next();
-                        field.push('"');
-                    }
-                    Some('"') => break,
-                    Some(c) => field.push(c),
-                    None => return Err("a quoted field has no closing quote"),
-                }
-            }
-            while chars.peek().is_some_and(|c| c.is_whitespace()) {
-                chars.next();
-            }
-            if !matches!(chars.peek(), None | Some(',')) {
-                return Err("text after a quoted field");
-            }
-        } else {
-            while let Some(&c) = chars.peek() {
-                if c == ',' {
-                    break;
-                }
-                field.push(c);
-                chars.next();
-            }
-            field = field.trim_end().to_string();
-        }
-        fields.push(field);
-        if chars.next().is_none() {
-            return Ok(fields);
-        }
-    }
-}
-
-/// (source, target, place) of each entry of a JSON list.
-fn json_list(path: &Path, text: &str) -> Result<Vec<(String, String, String)>, BatchError> {
-    let value: Value = serde_json::from_str(text)
-        .map_err(|e| BatchError::List(format!("{}: not valid JSON: {e}", path.display())))?;
-    let entries = value
-        .as_array()
-        .or_else(|| value.get("pairs").and_then(Value::as_array))
-        .ok_or_else(|| {
-            BatchError::List(format!(
-                "{}: a JSON list of pairs is a list of {{\"source\": FILE, \"target\": FILE}}, \
-                 or an object whose \"pairs\" is one",
-                path.display()
-            ))
-        })?;
-    entries
-        .iter()
-        .enumerate()
-        .map(|(i, entry)| {
-            let place = format!("{} entry {}", path.display(), i + 1);
-            let get = |name: &str| match entry.get(name) {
-                Some(Value::String(file)) if !file.is_empty() => Ok(file.clone()),
-                _ => Err(BatchError::List(format!(
-                    "{place}: no \"{name}\" file name: `{}`",
-                    shortened(&entry.to_string())
-                ))),
-            };
-            Ok((get("source")?, get("target")?, place))
-        })
-        .collect()
-}
-
-/// `text` cut to its first 120 characters, for messages.
-fn shortened(text: &str) -> String {
-    match text.char_indices().nth(120) {
-        Some((end, _)) => format!("{}…", &text[..end]),
-        None => text.to_string(),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn csv_fields_split_on_commas_outside_quotes() {
-        assert_eq!(csv_fields(" a.ply , b.ply").unwrap(), ["a.ply", "b.ply"]);
-        assert_eq!(
-            csv_fields(r#""x, y.ply", "say ""hi"".ply",,z"#).unwrap(),
-            ["x, y.ply", r#"say "hi".ply"#, "", "z"]
-        );
-        assert_eq!(
-            csv_fields(r#""open"#),
-            Err("a quoted field has no closing quote")
-        );
-        assert_eq!(csv_fields(r#""a"b,c"#), Err("text after a quoted field"));
-    }
 
     /// A folder for a test's output file `out.jsonl`, the default method's settings and the
     /// header they give.
@@ -905,7 +502,7 @@ mod tests {
         );
         assert_eq!(output.done().len(), 1);
         // The file now at the path is the one this run holds.
-        let other = File::open(&path).unwrap();
+        let other = std::fs::File::open(&path).unwrap();
         assert!(matches!(
             other.try_lock(),
             Err(std::fs::TryLockError::WouldBlock)
