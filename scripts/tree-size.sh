@@ -74,7 +74,7 @@ if total > LIMIT:
     print(f"tree-size: {total:,} bytes is {total - LIMIT:,} bytes over the limit of {LIMIT:,} "
           f"(24 MiB): what travels to a GPU machine must leave room for the data pack and a "
           f"checkpoint within 64 MiB. Remove finished work from the tree with `git rm` (it stays "
-          f"in the history) or ignore generated files; see README.md, 'A small clone'.",
+          f"in the history) or ignore generated files; see docs/usage.md, 'A small clone'.",
           file=sys.stderr)
     sys.exit(1)
 EOF
