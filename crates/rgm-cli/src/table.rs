@@ -19,7 +19,7 @@ pub fn report(
             "setting": setting,
             "pairs": records,
         });
-        crate::write_text(path, &serde_json::to_string_pretty(&value)?)?;
+        crate::files::write_text(path, &serde_json::to_string_pretty(&value)?)?;
     }
     rgm_cli::outln!("{}", table_header())?;
     rgm_cli::outln!("{}", table_row(method, setting, &summary))?;

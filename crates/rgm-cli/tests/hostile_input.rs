@@ -27,7 +27,7 @@ fn data_dir() -> String {
 /// spaced alike along two axes and evenly along the third, which a half turn about the diagonal
 /// maps onto itself).
 fn clouds(dir: &Path) -> (String, String) {
-    let uneven = |k: usize, a: f64, b: f64| (a * k as f64 + b * (k * k) as f64);
+    let uneven = |k: usize, a: f64, b: f64| a * k as f64 + b * (k * k) as f64;
     let grid: Vec<[f64; 3]> = (0..125)
         .map(|i| {
             [

@@ -10,7 +10,7 @@ use anyhow::{bail, Context, Result};
 use rgm_model::batch::{self, Output};
 use rgm_model::progress::Progress as _;
 
-use crate::{MethodArgs, WorkerArgs};
+use crate::args::{MethodArgs, WorkerArgs};
 
 /// The batch options of `rgm register`.
 #[derive(clap::Args, Debug)]
@@ -58,7 +58,7 @@ pub fn run(args: &BatchArgs, method: &MethodArgs) -> Result<()> {
         .pairs
         .as_deref()
         .context("SOURCE and TARGET name one pair, --pairs LIST many")?;
-    let options = method.options(crate::Defaults::Register)?;
+    let options = method.options(crate::args::Defaults::Register)?;
     let method = options.build()?;
     let bar = rgm_cli::TaskBar::new(method.name());
     let listed = batch::read_list(list, &bar)?;

@@ -17,7 +17,8 @@ use rgm_model::evaluate::{
 };
 use rgm_model::Method;
 
-use crate::{progress, table, DataArgs, MethodArgs, WorkerArgs};
+use crate::args::{DataArgs, MethodArgs, WorkerArgs};
+use crate::{progress, table};
 
 /// Options of `rgm eval`.
 #[derive(clap::Args, Debug)]
@@ -49,13 +50,13 @@ pub struct Args {
 
 pub fn run(args: Args) -> Result<()> {
     if let Some(json) = &args.json {
-        crate::check_writable(json)?;
+        crate::files::check_writable(json)?;
     }
     // The paper's protocol is ModelNet40's; on scenes the default is `rgm register`'s.
     let defaults = if args.scenes.is_empty() {
-        crate::Defaults::Paper
+        crate::args::Defaults::Paper
     } else {
-        crate::Defaults::Register
+        crate::args::Defaults::Register
     };
     let method = args.method.build(defaults)?;
     if !args.data.scans.is_empty() {
@@ -120,7 +121,7 @@ fn run_scans(args: &Args, method: &Method) -> Result<()> {
 /// `rgm eval --scenes`: one table row per folder (every turn of its pairs), and one for all when
 /// there are several.
 fn run_scenes(args: &Args, method: &Method) -> Result<()> {
-    let names = crate::folder_names(&args.scenes, "--scenes")?;
+    let names = crate::args::folder_names(&args.scenes, "--scenes")?;
     let folders: Vec<SceneFolder> = args
         .scenes
         .iter()
@@ -223,7 +224,7 @@ impl<R: Clone + serde::Serialize> Table<R> {
                 .map(|(name, records)| serde_json::json!({self.kind: name, "pairs": records}))
                 .collect();
             let value = serde_json::json!({"method": method, "folders": folders});
-            crate::write_text(path, &serde_json::to_string_pretty(&value)?)?;
+            crate::files::write_text(path, &serde_json::to_string_pretty(&value)?)?;
         }
         rgm_cli::outln!("{}", self.header)?;
         for (name, records) in results {

@@ -51,7 +51,7 @@ impl HtmlArgs {
                 path.display()
             );
         }
-        crate::check_writable(path)
+        crate::files::check_writable(path)
     }
 
     /// Writes the page of `transform` on the pair read from `paths`, described by `notes`, when
@@ -84,7 +84,7 @@ impl HtmlArgs {
         let html = page
             .to_html()
             .with_context(|| format!("making the page {}", path.display()))?;
-        crate::write_text(path, &html)?;
+        crate::files::write_text(path, &html)?;
         eprintln!(
             "rgm: wrote {} ({} KB)",
             path.display(),

@@ -15,7 +15,8 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use rgm_data::write_point_cloud;
 
-use crate::{progress, DataArgs};
+use crate::args::DataArgs;
+use crate::progress;
 
 /// Options of `rgm pairs`.
 #[derive(clap::Args, Debug)]
@@ -60,7 +61,7 @@ pub fn run(args: Args) -> Result<()> {
         "pairs": entries,
     });
     let path = args.out.join("pairs.json");
-    crate::write_text(&path, &serde_json::to_string(&manifest)?)?;
+    crate::files::write_text(&path, &serde_json::to_string(&manifest)?)?;
     rgm_cli::outln!("wrote {} pairs to {}", indices.len(), args.out.display())?;
     Ok(())
 }
@@ -89,7 +90,7 @@ fn run_scans(args: &Args) -> Result<()> {
         }
         let manifest = serde_json::json!({"scans": name, "pairs": entries});
         let path = out.join("pairs.json");
-        crate::write_text(&path, &serde_json::to_string(&manifest)?)?;
+        crate::files::write_text(&path, &serde_json::to_string(&manifest)?)?;
         rgm_cli::outln!("wrote {} pairs to {}", pairs.len(), out.display())?;
     }
     Ok(())

@@ -7,7 +7,7 @@ use anyhow::Result;
 use rgm_data::write_point_cloud;
 use rgm_viz::html::ResultNotes;
 
-use crate::MethodArgs;
+use crate::args::MethodArgs;
 
 /// Options of `rgm register`.
 #[derive(clap::Args, Debug)]
@@ -16,7 +16,7 @@ pub struct Args {
     #[arg(
         required_unless_present = "pairs",
         conflicts_with = "pairs",
-        long_help = crate::source_help("The cloud to move.")
+        long_help = crate::files::source_help("The cloud to move.")
     )]
     source: Option<PathBuf>,
     /// The cloud to move it onto.
@@ -47,12 +47,12 @@ pub fn run(args: Args) -> Result<()> {
     args.page.check()?;
     if let Some(out) = &args.out {
         rgm_data::io::format_of(out)?;
-        crate::check_writable(out)?;
+        crate::files::check_writable(out)?;
     }
-    let (source, target) = crate::read_pair(source_path, target_path)?;
-    let mut method = args.method.build(crate::Defaults::Register)?;
+    let (source, target) = crate::files::read_pair(source_path, target_path)?;
+    let mut method = args.method.build(crate::args::Defaults::Register)?;
     let registration =
-        crate::register_files(&mut method, (&source, &target), (source_path, target_path))?;
+        crate::files::register_files(&mut method, (&source, &target), (source_path, target_path))?;
     let result = &registration.result;
     let refined = method.is_refined();
     let doubt = registration.doubt.as_deref();

@@ -10,7 +10,7 @@ use rgm_geom::{Matrix4, RigidTransform};
 use rgm_viz::html::ResultNotes;
 use rgm_viz::{correct_fraction, correspondence_figure, registration_figure};
 
-use crate::MethodArgs;
+use crate::args::MethodArgs;
 
 /// Blocks per side of the correspondence picture (the paper's Figure 5 uses 36).
 const MATRIX_BLOCKS: usize = 36;
@@ -19,7 +19,7 @@ const MATRIX_BLOCKS: usize = 36;
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// The cloud that moves; the format by extension (the list: `rgm_data::io::FORMATS`).
-    #[arg(long_help = crate::source_help("The cloud that moves."))]
+    #[arg(long_help = crate::files::source_help("The cloud that moves."))]
     source: PathBuf,
     /// The cloud it moves onto.
     target: PathBuf,
@@ -58,7 +58,7 @@ fn check_png(path: &Path, option: &str) -> Result<()> {
             path.display()
         );
     }
-    crate::check_writable(path)
+    crate::files::check_writable(path)
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -69,7 +69,7 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(matrix) = &args.matrix {
         check_png(matrix, "--matrix")?;
     }
-    let (source, target) = crate::read_pair(&args.source, &args.target)?;
+    let (source, target) = crate::files::read_pair(&args.source, &args.target)?;
     let given = args
         .transform
         .as_deref()
@@ -78,8 +78,8 @@ pub fn run(args: Args) -> Result<()> {
     let found = match (&given, &args.matrix) {
         (Some(_), None) => None, // nothing to find
         _ => {
-            let mut method = args.method.build(crate::Defaults::Register)?;
-            let registration = crate::register_files(
+            let mut method = args.method.build(crate::args::Defaults::Register)?;
+            let registration = crate::files::register_files(
                 &mut method,
                 (&source, &target),
                 (&args.source, &args.target),

@@ -132,7 +132,7 @@ fn rigid<R: AsRef<[f64]>>(rows: &[R], what: &str) -> Result<RigidTransform> {
 
 pub fn run(args: Args) -> Result<()> {
     if let Some(json) = &args.json {
-        crate::check_writable(json)?;
+        crate::files::check_writable(json)?;
     }
     let found: Transforms = read_json(&args.transforms)?;
     let manifest: Manifest = read_json(&args.pairs.join("pairs.json"))?;
@@ -250,7 +250,7 @@ fn score_scans(args: &Args, found: &Transforms, manifest: &Manifest, scans: &str
     // The file first: output that cannot be printed (a full disk) loses no result.
     if let Some(path) = &args.json {
         let value = serde_json::json!({"method": found.method, "scans": scans, "pairs": records});
-        crate::write_text(path, &serde_json::to_string_pretty(&value)?)?;
+        crate::files::write_text(path, &serde_json::to_string_pretty(&value)?)?;
     }
     rgm_cli::outln!("{}", scan_table_header())?;
     if let Some(row) = scan_table_row(&found.method, scans, &records) {

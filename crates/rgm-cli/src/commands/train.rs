@@ -11,7 +11,8 @@ use rgm_model::train::{
 };
 use rgm_model::weights::Variant;
 
-use crate::{checked_precision, progress};
+use crate::args::checked_precision;
+use crate::progress;
 
 /// What `rgm train` runs when given no option ([`TrainConfig::default`]: the built-in model's
 /// recipe, the paper's schedule of spec §3): the defaults of the options below.
