@@ -7,9 +7,9 @@
 //! | name | composition |
 //! |---|---|
 //! | `icp` | `Checked<IcpConfig, InFrame<REFINED_CHECKS>>` (its own refinement, checked in the unit-sphere frame) |
-//! | `fgr`, `fgr+icp` | `Normalised<Checked<FgrConfig, REFINED_CHECKS>>`, `Normalised<Checked<Refined<FgrConfig>, REFINED_CHECKS>>` |
-//! | `rgm`, `rgm+icp` | [`Normalised`]`<Checked<RgmRegistrar, REFINED_CHECKS>>`, `Normalised<Checked<Refined<RgmRegistrar>, REFINED_CHECKS>>` |
-//! | `auto` | `Normalised<Checked<Thinned<Cascade { first: FgrConfig, rest: [Normalised<RgmRegistrar>] }>, REFINED_CHECKS>>` |
+//! | `fgr`, `fgr+icp` | `Normalised<Checked<FgrConfig, unrefined_checks()>>`, `Normalised<Checked<Refined<FgrConfig>, REFINED_CHECKS>>` |
+//! | `rgm`, `rgm+icp` | [`Normalised`]`<Checked<RgmRegistrar, unrefined_checks()>>`, `Normalised<Checked<Refined<RgmRegistrar>, REFINED_CHECKS>>` |
+//! | `auto` | `Normalised<Checked<Thinned<Cascade { first: FgrConfig, rest: [Normalised<RgmRegistrar>] }>, unrefined_checks()>>` |
 //! | `auto+icp` | `Normalised<Checked<AtResolution<Thinned<Cascade { first: Refined<FgrConfig>, rest: [Refined<Normalised<RgmRegistrar>>] }>, AtSpacing>, REFINED_CHECKS>>` |
 //!
 //! (`BestOf[first, rest]` in place of the `Cascade` when `accept` takes nothing; inside the
@@ -22,10 +22,9 @@
 //!
 //! [`Checked`] doubts a result whose overlap is not one where the clouds coincide, or that a
 //! rival pose fits nearly as well ([`REFINED_CHECKS`]): refined results, ICP's (refined by its
-//! nature) and, since issue 59, unrefined ones too (`--no-refine`, the paper's protocol). An
-//! unrefined result is a few degrees from its best fit at most, so the checks, set on refined
-//! results, doubt more right ones there; a result that does not coincide is not trusted
-//! either way.
+//! nature) and, since issue 59, unrefined ones too (`--no-refine`, the paper's protocol), which
+//! must also lie near where the refinement takes them ([`unrefined_checks`]): an unrefined result
+//! that coincides may still be degrees off.
 //!
 //! `Refined<R>` refines with [`RefineConfig`] (`+icp`); any other [`rgm_registration::refiner::Refiner`]
 //! composes the same way (`Refined::new(FgrConfig::default(), IcpConfig::default())` is
@@ -43,7 +42,7 @@ use std::str::FromStr;
 
 use rgm_geom::frame::FrameRule;
 use rgm_registration::check::{
-    Acceptance, Coincides, CoincidesAtSpacing, InFrame, Scoring, SelfFit, Unambiguous,
+    Acceptance, Coincides, CoincidesAtSpacing, InFrame, Precise, Scoring, SelfFit, Unambiguous,
 };
 use rgm_registration::compose::{
     AtResolution, BestOf, Cascade, Checked, Normalised, OnFirstUse, Refined, Thinned, UpTo,
@@ -273,6 +272,24 @@ pub type RefinedChecks = (
 /// The checks of a refined result: [`REFINED_COINCIDES`], then [`UNAMBIGUOUS`].
 pub const REFINED_CHECKS: RefinedChecks = (REFINED_COINCIDES, UNAMBIGUOUS);
 
+/// The type of [`unrefined_checks`].
+pub type UnrefinedChecks = (RefinedChecks, Precise);
+
+/// The checks of an unrefined result (`--no-refine`): [`REFINED_CHECKS`], then [`Precise`]: the
+/// refinement (`RefineConfig::default`, on at most 2,048 points of each cloud) must move it by
+/// less than 5° and 0.05, the 5° at which issue 59 counts a result wrong (E3: 5 of 40 partial
+/// test pairs trusted 5.6–174° off before; docs/confidence.md).
+pub fn unrefined_checks() -> UnrefinedChecks {
+    (
+        REFINED_CHECKS,
+        Precise {
+            refine: RefineConfig::default(),
+            within: (5.0, 0.05),
+            points: 2048,
+        },
+    )
+}
+
 /// When the default takes the object cascade's result on a dense pair without running the
 /// scene stage after it: an overlap score of at least [`ACCEPT`]'s, whatever its
 /// turned share (a room overlaps itself turned about the vertical as a box does, and the
@@ -383,7 +400,7 @@ impl MethodOptions {
             (MethodName::Fgr, None) => Method::new(Normalised::new(
                 Checked {
                     inner: FgrConfig::default(),
-                    check: REFINED_CHECKS,
+                    check: unrefined_checks(),
                 },
                 FRAME,
             )),
@@ -397,7 +414,7 @@ impl MethodOptions {
             (MethodName::Rgm, None) => Method::new(Normalised::new(
                 Checked {
                     inner: self.build_rgm()?,
-                    check: REFINED_CHECKS,
+                    check: unrefined_checks(),
                 },
                 FRAME,
             )),
@@ -539,7 +556,7 @@ where
     let composite: Box<dyn DynRegistrar<MethodError>> = match refine {
         None => Box::new(Checked {
             inner: composite,
-            check: REFINED_CHECKS,
+            check: unrefined_checks(),
         }),
         Some(_) => Box::new(Checked {
             inner: AtResolution {

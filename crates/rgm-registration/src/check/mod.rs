@@ -3,12 +3,14 @@
 //! [`CoincidesAtSpacing`], [`Unambiguous`], [`InFrame`]) and the [`Judge`] a composite scores its
 //! candidates with, by the caller's [`Scoring`] and [`Acceptance`].
 //!
-//! Bottom first: `symmetry` (whether a cloud fits itself turned), `overlap` (the measures), `coincidence` (the checks), `judge` (the judge and
+//! Bottom first: `symmetry` (whether a cloud fits itself turned), `overlap` (the measures), `coincidence` (the checks), `precise` (an unrefined result near where the clouds fit
+//! best), `judge` (the judge and
 //! its configuration).
 
 mod coincidence;
 mod judge;
 mod overlap;
+mod precise;
 mod symmetry;
 
 pub use coincidence::{
@@ -16,4 +18,5 @@ pub use coincidence::{
 };
 pub use judge::{Acceptance, Judge, Scoring};
 pub use overlap::{agree, overlap_score, turned_poses, turned_share};
+pub use precise::Precise;
 pub use symmetry::SelfFit;
