@@ -2,6 +2,7 @@
 
 pub mod batch;
 pub mod eval;
+pub mod merge;
 pub mod page;
 pub mod pairs;
 pub mod register;
