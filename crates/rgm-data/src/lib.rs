@@ -10,6 +10,7 @@ pub mod error;
 pub mod io;
 pub mod memory;
 pub mod modelnet;
+pub mod multiway;
 pub mod pack;
 pub mod pairs;
 pub mod scans;

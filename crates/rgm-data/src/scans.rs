@@ -345,7 +345,7 @@ pub fn overlap(a: (&PointCloud, &KnnIndex), b: (&PointCloud, &KnnIndex), reach: 
 
 /// A rotation by an angle uniform in [0, `max_angle_deg`] about a uniformly random axis through
 /// `centre`, then a shift in a uniformly random direction of length uniform in [0, `max_shift`].
-fn random_motion(
+pub fn random_motion(
     rng: &mut StdRng,
     centre: &Point3<f64>,
     max_angle_deg: f64,

@@ -146,7 +146,12 @@ fn pose_json(pose: &Option<RigidTransform>) -> Value {
 /// What `poses.json` holds: per scan (in the order given) its path, pose `model ← scan`
 /// (`null` when unplaced), whether it was placed, its component and residual; each
 /// component's reference and spacing; every pair's edge and why it was left out.
-pub fn summary_json(paths: &[PathBuf], merged: &MultiwayResult, method: &str, seconds: f64) -> Value {
+pub fn summary_json(
+    paths: &[PathBuf],
+    merged: &MultiwayResult,
+    method: &str,
+    seconds: f64,
+) -> Value {
     let edges: Vec<Value> = merged
         .edges
         .iter()
@@ -185,9 +190,10 @@ pub fn summary_json(paths: &[PathBuf], merged: &MultiwayResult, method: &str, se
 /// The name a scan has in `poses.conf`: its file name without `.gz` (Stanford's `.conf` names
 /// `bun000.ply` for `bun000.ply.gz`, and rgm reads either).
 fn conf_name(path: &Path) -> String {
-    let name = path
-        .file_name()
-        .map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned());
+    let name = path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    );
     name.strip_suffix(".gz").map(str::to_string).unwrap_or(name)
 }
 
@@ -195,7 +201,8 @@ fn conf_name(path: &Path) -> String {
 /// frame as the world; every other scan named on a comment line (a `.conf` reader skips them).
 fn conf_text(paths: &[PathBuf], merged: &MultiwayResult) -> String {
     let names: Vec<String> = paths.iter().map(|p| conf_name(p)).collect();
-    let mut text = String::from("# rgm merge: model ← scan of component 0 (p_model = R(q)ᵀ·p + t)\n");
+    let mut text =
+        String::from("# rgm merge: model ← scan of component 0 (p_model = R(q)ᵀ·p + t)\n");
     let placed: Vec<(&str, &RigidTransform)> = (0..paths.len())
         .filter(|&s| merged.component[s] == Some(0))
         .filter_map(|s| Some((names[s].as_str(), merged.poses[s].as_ref()?)))
@@ -213,7 +220,11 @@ fn conf_text(paths: &[PathBuf], merged: &MultiwayResult) -> String {
 
 /// The scans of component 0 in the model frame, one point per cube of side `voxel`, with each
 /// point's scan (its index in the order given). // (P,), (P,)
-pub fn model_cloud(scans: &[PointCloud], merged: &MultiwayResult, voxel: f64) -> (PointCloud, Vec<u32>) {
+pub fn model_cloud(
+    scans: &[PointCloud],
+    merged: &MultiwayResult,
+    voxel: f64,
+) -> (PointCloud, Vec<u32>) {
     let mut points = Vec::new();
     let mut labels = Vec::new();
     for (s, scan) in scans.iter().enumerate() {
