@@ -49,6 +49,8 @@ pub struct Args {
     /// of the object's diagonal, counted within 1° and 0.5 %; time.
     #[arg(long, value_name = "DIR", num_args = 1.., conflicts_with_all = ["scans", "scenes"])]
     multiway: Vec<PathBuf>,
+    #[command(flatten)]
+    merge: super::merge::MergeArgs,
     /// Also write every pair's transform and metrics to this JSON file.
     #[arg(long, value_name = "FILE")]
     json: Option<PathBuf>,
@@ -69,7 +71,12 @@ pub fn run(args: Args) -> Result<()> {
     };
     let method = args.method.build(defaults)?;
     if !args.multiway.is_empty() {
-        return super::eval_multiway::run(&args.multiway, &method, args.json.as_deref());
+        return super::eval_multiway::run(
+            &args.multiway,
+            &method,
+            &args.merge.config()?,
+            args.json.as_deref(),
+        );
     }
     if !args.data.scans.is_empty() {
         return run_scans(&args, &method);

@@ -22,9 +22,14 @@ pub const SEED: u64 = 0;
 /// counts as right: the criterion.
 const WITHIN: (f64, f64) = (1.0, 0.005);
 
-/// Merges and scores each folder of `dirs`, printing a table per folder and writing every scan's
+/// Merges (with `config`) and scores each folder of `dirs`, printing a table per folder and writing every scan's
 /// errors to `json` when given.
-pub fn run(dirs: &[PathBuf], method: &Method, json: Option<&std::path::Path>) -> Result<()> {
+pub fn run(
+    dirs: &[PathBuf],
+    method: &Method,
+    config: &MultiwayConfig,
+    json: Option<&std::path::Path>,
+) -> Result<()> {
     let names = crate::folder_names(dirs, "--multiway")?;
     let mut records = Vec::new();
     rgm_cli::outln!(
@@ -41,7 +46,7 @@ pub fn run(dirs: &[PathBuf], method: &Method, json: Option<&std::path::Path>) ->
         let scans = moved_and_shuffled(&folder, SEED);
         let clouds: Vec<_> = scans.iter().map(|s| s.cloud.clone()).collect();
         let start = Instant::now();
-        let merged = merge_scans(&clouds, method, &MultiwayConfig::default())?;
+        let merged = merge_scans(&clouds, method, config)?;
         let seconds = start.elapsed().as_secs_f64();
         let errors = pose_errors(&scans, &merged.poses, &merged.component);
         let placed: Vec<PoseError> = errors.iter().flatten().copied().collect();

@@ -29,15 +29,45 @@ pub struct Args {
     /// its own scan].
     #[arg(long, value_name = "LENGTH")]
     voxel: Option<f64>,
-    /// Rounds of multiway ICP (each scan refined against the union of the others), 0 for the
-    /// pose graph's poses.
-    #[arg(long, value_name = "N", default_value_t = MultiwayConfig::default().joint.rounds)]
-    rounds: usize,
+    #[command(flatten)]
+    merge: MergeArgs,
     /// Print the summary (poses.json's content) as one JSON object instead of a table.
     #[arg(long)]
     json: bool,
     #[command(flatten)]
     method: MethodArgs,
+}
+
+/// How a merge runs (`rgm merge`, `rgm eval --multiway`).
+#[derive(clap::Args, Debug)]
+pub struct MergeArgs {
+    /// Rounds of multiway ICP (each scan refined against the union of the others), 0 for the
+    /// pose graph's poses.
+    #[arg(long, value_name = "N", default_value_t = MultiwayConfig::default().joint.rounds)]
+    rounds: usize,
+    /// Register the pairs on the scans thinned to one point (the mean) per cube of K times each
+    /// scan's point spacing (1: as given); multiway ICP then runs on the scans as given.
+    #[arg(long, value_name = "K", default_value_t = MultiwayConfig::default().pair_spacings)]
+    pair_spacings: f64,
+}
+
+impl MergeArgs {
+    pub fn config(&self) -> Result<MultiwayConfig> {
+        anyhow::ensure!(
+            self.pair_spacings.is_finite() && self.pair_spacings >= 0.0,
+            "--pair-spacings {}: give a number ≥ 0",
+            self.pair_spacings
+        );
+        let defaults = MultiwayConfig::default();
+        Ok(MultiwayConfig {
+            joint: multiway::JointConfig {
+                rounds: self.rounds,
+                ..defaults.joint
+            },
+            pair_spacings: self.pair_spacings,
+            ..defaults
+        })
+    }
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -55,15 +85,8 @@ pub fn run(args: Args) -> Result<()> {
     }
     let scans = read_scans(&args.scans)?;
     let method = args.method.build(crate::Defaults::Register)?;
-    let config = MultiwayConfig {
-        joint: multiway::JointConfig {
-            rounds: args.rounds,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
     let start = Instant::now();
-    let merged = merge_scans(&scans, &method, &config)?;
+    let merged = merge_scans(&scans, &method, &args.merge.config()?)?;
     let seconds = start.elapsed().as_secs_f64();
     let summary = summary_json(&args.scans, &merged, &method.name(), seconds);
     crate::write_text(&outputs[0], &serde_json::to_string_pretty(&summary)?)?;
@@ -127,14 +150,30 @@ pub fn merge_scans(
 ) -> Result<MultiwayResult> {
     let pairs = scans.len() * (scans.len() - 1) / 2;
     let bar = crate::progress(pairs, "pairs");
+    let start = Instant::now();
+    let graph = std::sync::Mutex::new(start);
     let progress = |stage: Stage| match stage {
         Stage::Pairs { done, .. } => bar.set_position(done as u64),
-        Stage::PoseGraph => bar.finish_and_clear(),
-        Stage::Joint => eprintln!("rgm: pose graph solved; multiway ICP"),
+        Stage::PoseGraph => {
+            bar.finish_and_clear();
+            eprintln!(
+                "rgm: {pairs} pairs registered in {:.1} s",
+                start.elapsed().as_secs_f64()
+            );
+            *graph.lock().unwrap_or_else(|p| p.into_inner()) = Instant::now();
+        }
+        Stage::Joint => {
+            let graph = graph.lock().unwrap_or_else(|p| p.into_inner());
+            eprintln!(
+                "rgm: pose graph solved in {:.2} s; multiway ICP",
+                graph.elapsed().as_secs_f64()
+            );
+        }
     };
     // On one of rayon's workers, as `rgm register` runs: the pairs' parallel steps then share
     // the pool with this thread.
     let merged = rayon::scope(|_| multiway::merge(scans, method, config, &progress))?;
+    eprintln!("rgm: merged in {:.1} s", start.elapsed().as_secs_f64());
     Ok(merged)
 }
 

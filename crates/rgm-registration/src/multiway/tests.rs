@@ -86,10 +86,12 @@ impl Oracle {
         }
     }
 
+    /// The scan `cloud` is (or a thinning of): the one whose centroid is nearest its own.
     fn which(&self, cloud: &PointCloud) -> usize {
-        self.views
-            .iter()
-            .position(|v| v.cloud.points[0] == cloud.points[0])
+        let c = cloud.centroid();
+        let distance = |v: &View| (v.cloud.centroid() - c).norm();
+        (0..self.views.len())
+            .min_by(|&a, &b| distance(&self.views[a]).total_cmp(&distance(&self.views[b])))
             .expect("a scan of the test")
     }
 }
