@@ -92,7 +92,7 @@ pub fn run(args: Args) -> Result<()> {
     crate::write_text(&outputs[0], &serde_json::to_string_pretty(&summary)?)?;
     crate::write_text(&outputs[1], &conf_text(&args.scans, &merged))?;
     let voxel = args.voxel.or(merged.spacing.first().copied());
-    let model = voxel.map(|voxel| model_cloud(&scans, &merged, voxel));
+    let model = voxel.map(|voxel| merged.model(&scans, 0, voxel));
     if let Some((cloud, labels)) = &model {
         rgm_data::io::output::write_file(&outputs[2], |out| {
             rgm_data::io::ply::write_labelled(out, cloud, Some(("scan", labels)))
@@ -255,27 +255,6 @@ fn conf_text(paths: &[PathBuf], merged: &MultiwayResult) -> String {
         }
     }
     text
-}
-
-/// The scans of component 0 in the model frame, one point per cube of side `voxel`, with each
-/// point's scan (its index in the order given). // (P,), (P,)
-pub fn model_cloud(
-    scans: &[PointCloud],
-    merged: &MultiwayResult,
-    voxel: f64,
-) -> (PointCloud, Vec<u32>) {
-    let mut points = Vec::new();
-    let mut labels = Vec::new();
-    for (s, scan) in scans.iter().enumerate() {
-        let (Some(pose), Some(0)) = (merged.poses[s], merged.component[s]) else {
-            continue;
-        };
-        points.extend(scan.points.iter().map(|p| pose.apply(p)));
-        labels.extend(std::iter::repeat_n(s as u32, scan.len()));
-    }
-    let all = PointCloud::new(points);
-    let kept = all.voxel_firsts(voxel);
-    (all.select(&kept), kept.iter().map(|&i| labels[i]).collect())
 }
 
 /// One line per scan: its component, residual and where it went.

@@ -90,6 +90,32 @@ pub struct MultiwayResult {
     pub spacing: Vec<f64>,
 }
 
+impl MultiwayResult {
+    /// The scans of component `component` in its model frame, thinned to one point (the first
+    /// met, scans in order) per cube of side `voxel`, with each point's scan. // (P,), (P,)
+    pub fn model(
+        &self,
+        scans: &[PointCloud],
+        component: usize,
+        voxel: f64,
+    ) -> (PointCloud, Vec<u32>) {
+        let mut points = Vec::new();
+        let mut labels = Vec::new();
+        for (s, scan) in scans.iter().enumerate() {
+            let (Some(pose), Some(c)) = (self.poses[s], self.component[s]) else {
+                continue;
+            };
+            if c == component {
+                points.extend(scan.points.iter().map(|p| pose.apply(p)));
+                labels.extend(std::iter::repeat_n(s as u32, scan.len()));
+            }
+        }
+        let all = PointCloud::new(points);
+        let kept = all.voxel_firsts(voxel);
+        (all.select(&kept), kept.iter().map(|&i| labels[i]).collect())
+    }
+}
+
 /// Puts `scans` into one frame per component with `registrar` as the pairwise method (see the
 /// module documentation). Errors when a scan has fewer than 3 points or non-finite ones; a
 /// pair the method fails on is only an edge left out.
