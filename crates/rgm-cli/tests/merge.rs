@@ -178,6 +178,22 @@ fn a_bad_scan_is_named() {
     let stderr = String::from_utf8_lossy(&result.stderr);
     assert!(stderr.contains("bad.ply"), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
+    // Two clouds that share nothing: outputs written, then a failure that says so.
+    let far = dir.join("far.xyz");
+    std::fs::write(&far, "5 5 5\n6 5 5\n5 6 5\n5 5 6\n7 7 7\n").unwrap();
+    let result = rgm(&[
+        "merge",
+        good.to_str().unwrap(),
+        far.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(
+        !result.status.success() && stderr.contains("no pair of the scans was registered"),
+        "{stderr}"
+    );
+    assert!(out.join("poses.json").is_file());
     let missing = dir.join("missing.ply");
     let result = rgm(&[
         "merge",

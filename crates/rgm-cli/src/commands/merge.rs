@@ -77,6 +77,7 @@ pub fn run(args: Args) -> Result<()> {
             "--voxel {voxel}: give a length > 0"
         );
     }
+    let config = args.merge.config()?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot make the folder {}", args.out.display()))?;
     let outputs = ["poses.json", "poses.conf", "model.ply"].map(|name| args.out.join(name));
@@ -86,19 +87,27 @@ pub fn run(args: Args) -> Result<()> {
     let scans = read_scans(&args.scans)?;
     let method = args.method.build(crate::Defaults::Register)?;
     let start = Instant::now();
-    let merged = merge_scans(&scans, &method, &args.merge.config()?)?;
+    let merged = merge_scans(&scans, &method, &config)?;
     let seconds = start.elapsed().as_secs_f64();
     let summary = summary_json(&args.scans, &merged, &method.name(), seconds);
     crate::write_text(&outputs[0], &serde_json::to_string_pretty(&summary)?)?;
     crate::write_text(&outputs[1], &conf_text(&args.scans, &merged))?;
-    let voxel = args.voxel.or(merged.spacing.first().copied());
-    let model = voxel.map(|voxel| merged.model(&scans, 0, voxel));
-    if let Some((cloud, labels)) = &model {
-        rgm_data::io::output::write_file(&outputs[2], |out| {
-            rgm_data::io::ply::write_labelled(out, cloud, Some(("scan", labels)))
-        })
-        .with_context(|| format!("writing {}", outputs[2].display()))?;
-    }
+    // With no component the model is empty, whatever the voxel.
+    let voxel = args
+        .voxel
+        .or(merged.spacing.first().copied())
+        .unwrap_or(1.0);
+    let (model, labels) = merged.model(&scans, 0, voxel);
+    rgm_data::io::output::write_file(&outputs[2], |out| {
+        rgm_data::io::ply::write_labelled(out, &model, Some(("scan", &labels)))
+    })
+    .with_context(|| format!("writing {}", outputs[2].display()))?;
+    anyhow::ensure!(
+        !merged.references.is_empty(),
+        "no pair of the scans was registered, so none is placed ({} says why each pair was \
+         left out)",
+        outputs[0].display()
+    );
     if args.json {
         return rgm_cli::outln!("{summary}");
     }
@@ -111,13 +120,10 @@ pub fn run(args: Args) -> Result<()> {
         seconds,
         outputs.map(|p| p.display().to_string()).join(", ")
     )?;
-    if let (Some((cloud, _)), Some(voxel)) = (&model, voxel) {
-        rgm_cli::outln!(
-            "# model.ply: {} points of component 0, one per cube of {voxel:.6}",
-            cloud.len()
-        )?;
-    }
-    Ok(())
+    rgm_cli::outln!(
+        "# model.ply: {} points of component 0, one per cube of {voxel:.6}",
+        model.len()
+    )
 }
 
 /// The scans read side by side, each failure naming its file; the readings' warnings on stderr.
