@@ -42,7 +42,7 @@ pub struct MultiwayConfig {
     pub tolerance: Tolerance,
     /// The pairs are registered on the scans thinned to one point (the mean) per cube of this
     /// many times each scan's point spacing; 1 or less registers them as given (default 3:
-    /// as accurate on the Stanford bunny as 1 and 2, and 28 % faster than 1, `docs/baselines.md`).
+    /// as accurate on the Stanford bunny as 1 and 2, in 28 % less time than 1, `docs/multiway.md`).
     pub pair_spacings: f64,
     pub pose_graph: PoseGraphConfig,
     pub joint: JointConfig,
@@ -137,15 +137,24 @@ where
             }
             .into());
         }
-        if !scan.points.iter().all(|p| p.iter().all(|v| v.is_finite())) {
-            return Err(GeomError::NonFinite { op: OP }.into());
+        if let Some(i) = scan
+            .points
+            .iter()
+            .position(|p| !p.iter().all(|v| v.is_finite()))
+        {
+            return Err(GeomError::Degenerate {
+                op: OP,
+                why: format!("scan {s} has a non-finite coordinate in point {i}"),
+            }
+            .into());
         }
     }
+    // (S,) each scan's median nearest-neighbour distance
     let spacings: Vec<f64> = scans
         .iter()
         .map(|scan| median_spacing(&scan.points, &KnnIndex::new(&scan.points), 2000))
-        .collect(); // (S,)
-                    // The pairs on thinned scans: the joint refinement brings back the scans' own resolution.
+        .collect();
+    // The pairs on thinned scans: the joint refinement brings back the scans' own resolution.
     let prepared: Vec<Prepared> = scans
         .iter()
         .zip(&spacings)
