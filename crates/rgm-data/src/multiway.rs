@@ -47,7 +47,7 @@ pub fn moved_and_shuffled(folder: &ScanFolder, seed: u64) -> Vec<MovedScan> {
 
 /// Points of each scan used to align the frames and measure displacements: at most this many,
 /// at an even stride.
-const SAMPLE: usize = 2000;
+pub const SAMPLE: usize = 2000;
 
 /// The errors of one placed scan.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -14,7 +14,7 @@ pub enum EdgeStatus {
     Failed(String),
     /// The pairwise method did not trust its result (its [`crate::Registration::doubt`]).
     Doubted(String),
-    /// In no consistent cycle of three and contradicted by one whose other edges are.
+    /// In cycles of three, none of them consistent ([`reject_inconsistent`]).
     Inconsistent(String),
     /// Far from the poses the rest of the graph agreed on (pruned after a solve).
     Outlier(String),
