@@ -344,7 +344,7 @@ impl Registrar {
         })?;
         let merged = merged.map_err(|e| method_error(&name, e))?;
         let voxel = voxel.or(merged.spacing.first().copied()).unwrap_or(f64::INFINITY);
-        if !(voxel > 0.0) {
+        if voxel.is_nan() || voxel <= 0.0 {
             return Err(value_error(format!("voxel must be > 0, got {voxel}")));
         }
         let (model, labels) = merged.model(&clouds, 0, voxel);
