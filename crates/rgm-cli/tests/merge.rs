@@ -208,3 +208,57 @@ fn a_bad_scan_is_named() {
         "{stderr}"
     );
 }
+
+#[test]
+fn eval_multiway_scores_a_small_folder_against_its_conf() {
+    // Three bunny scans thinned to 2 mm in a folder of their own, with their `.conf` poses.
+    let dir = Scratch::new("cli-eval-multiway");
+    let bunny = stanford("bunny");
+    let folder = dir.join("three");
+    std::fs::create_dir_all(&folder).unwrap();
+    let chosen = ["bun000.ply", "bun045.ply", "bun315.ply"];
+    let scans: Vec<_> = chosen
+        .iter()
+        .map(|name| bunny.scans.iter().find(|s| s.name == *name).unwrap())
+        .collect();
+    for scan in &scans {
+        write_point_cloud(
+            folder.join(&scan.name),
+            &scan.cloud.voxel_downsampled(0.002),
+        )
+        .unwrap();
+    }
+    let conf = rgm_data::scans::conf_text(scans.iter().map(|s| (s.name.as_str(), &s.pose)));
+    std::fs::write(folder.join("three.conf"), conf).unwrap();
+    let json = dir.join("errors.json");
+    let out = rgm(&[
+        "eval",
+        "--multiway",
+        folder.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // folder, scans, placed, within 1° and 0.5 %, …
+    let row: Vec<&str> = stdout
+        .lines()
+        .find(|l| l.starts_with("three\t"))
+        .unwrap_or_else(|| panic!("{stdout}"))
+        .split('\t')
+        .collect();
+    assert_eq!(row[1..4], ["3", "3", "3"], "{stdout}");
+    let value: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let records = value["records"].as_array().unwrap();
+    let scored: Vec<f64> = records
+        .iter()
+        .filter_map(|r| r["rotation_deg"].as_f64())
+        .collect();
+    assert_eq!(scored.len(), 3);
+    assert!(scored.iter().all(|&deg| deg < 1.0), "{scored:?}");
+}
