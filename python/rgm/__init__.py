@@ -36,10 +36,12 @@ __all__ = [
     "Candidate",
     "DEFAULT_METHOD",
     "METHODS",
+    "MergeResult",
     "Metrics",
     "ModelNetPairs",
     "Registrar",
     "RegistrationResult",
+    "merge",
     "metrics",
     "modelnet_pairs",
     "register",
@@ -413,6 +415,65 @@ def register(
         None if accept is None else float(accept),
     )
     return registrar.register(source, target)
+
+
+@dataclass(frozen=True)
+class MergeResult:
+    """Every scan of an object in one frame, as ``rgm merge`` puts them (``rgm.merge``).
+
+    Attributes:
+        poses: per scan, in the order given, its (4, 4) float64 pose model ← scan, or ``None``
+            for a scan no trusted pair links (left unplaced rather than forced in).
+        registered: per scan, whether it was placed.
+        component: per placed scan, its group (0 the largest): scans in separate groups are
+            merged each in its own frame; ``None`` when unplaced.
+        residual: per placed scan, the median point-to-plane distance of its points to the
+            other scans of its component, in the scans' units.
+        points: (P, 3) float64, component 0's scans in its frame, one point per ``voxel`` cube.
+        scan_index: (P,) int64, the scan each of ``points`` comes from.
+    """
+
+    poses: list
+    registered: list
+    component: list
+    residual: list
+    points: np.ndarray
+    scan_index: np.ndarray
+
+
+def merge(scans, voxel: Optional[float] = None, method: str = DEFAULT_METHOD) -> MergeResult:
+    """Puts every scan of ``scans`` (each in its own frame, any order) into one frame, as
+    ``rgm merge`` does: every pair registered by ``method`` (``rgm register``'s by default),
+    wrong pairs found by cycles of three that do not close, a pose graph, then each scan
+    refined against the others (docs/multiway.md).
+
+    Args:
+        scans: a list of float32 or float64 (N, 3) arrays, at least 2.
+        voxel: the merged cloud keeps one point per cube of this side. Default: the scans'
+            point spacing (the median distance from a point to its nearest neighbour).
+        method: the pairwise method (``rgm.METHODS``), refined as ``rgm register`` refines.
+
+    Returns:
+        A MergeResult.
+
+    Raises:
+        ValueError: fewer than 2 scans, or a scan that is not a float (N, 3) array or holds
+            NaN or infinity (the message names it).
+        RuntimeError: a scan of fewer than 3 points (the message gives its index).
+    """
+    arrays = [_points(f"scans[{k}]", scan) for k, scan in enumerate(scans)]
+    registrar = _cached_registrar(method, _rgm.DEFAULT_REFINE, None, None, None, None, None, None)
+    poses, component, residual, points, scan_index = registrar._native.merge(
+        arrays, None if voxel is None else float(voxel)
+    )
+    return MergeResult(
+        poses=list(poses),
+        registered=[p is not None for p in poses],
+        component=list(component),
+        residual=list(residual),
+        points=points,
+        scan_index=scan_index,
+    )
 
 
 @dataclass(frozen=True)

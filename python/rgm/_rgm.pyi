@@ -29,6 +29,15 @@ class Registrar:
     def register_many(
         self, pairs: Iterator[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]]
     ) -> tuple[list[Optional[RegistrationResult]], list[tuple[int, str]]]: ...
+    def merge(
+        self, scans: list[npt.NDArray[np.float64]], voxel: Optional[float]
+    ) -> tuple[
+        list[Optional[npt.NDArray[np.float64]]],  # (S,) model ← scan, (4, 4) each
+        list[Optional[int]],  # (S,) component
+        list[Optional[float]],  # (S,) residual
+        npt.NDArray[np.float64],  # (P, 3) component 0's merged points
+        npt.NDArray[np.int64],  # (P,) each point's scan
+    ]: ...
     def register_many_into(
         self, pairs: Iterator[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]], output: str
     ) -> tuple[int, int, int, int]: ...

@@ -314,6 +314,51 @@ impl Registrar {
         RegistrationResult::from_registration(py, name, &registration, &pairs, Some(arrays))
     }
 
+    /// Puts every scan of `scans` (float64 (N, 3) arrays, each in its own frame) into one frame
+    /// as `rgm merge` does (`rgm_registration::multiway::merge`, this method for the pairs):
+    /// each scan's pose (`model ← scan`, (4, 4), or `None` unplaced), component and residual,
+    /// and component 0's scans merged, one point per cube of `voxel` (default: its spacing),
+    /// with each point's scan.
+    #[pyo3(signature = (scans, voxel=None))]
+    fn merge<'py>(
+        &self,
+        py: Python<'py>,
+        scans: Vec<PyReadonlyArray2<'py, f64>>,
+        voxel: Option<f64>,
+    ) -> PyResult<MergeFields<'py>> {
+        if scans.len() < 2 {
+            return Err(value_error(format!("merge needs 2 scans or more, got {}", scans.len())));
+        }
+        let clouds: Vec<PointCloud> = scans
+            .iter()
+            .enumerate()
+            .map(|(k, scan)| cloud(scan, &format!("scan {k}")))
+            .collect::<PyResult<_>>()?;
+        let copies = self.copies.clone();
+        let name = self.name();
+        let (merged, clouds) = on_pool(py, &name, move |_| {
+            let method = copies.prototype.clone();
+            let config = rgm_registration::multiway::MultiwayConfig::default();
+            let merged = rgm_registration::multiway::merge(&clouds, &method, &config, &|_| {});
+            (merged, clouds)
+        })?;
+        let merged = merged.map_err(|e| method_error(&name, e))?;
+        let voxel = voxel.or(merged.spacing.first().copied()).unwrap_or(f64::INFINITY);
+        if voxel.is_nan() || voxel <= 0.0 {
+            return Err(value_error(format!("voxel must be > 0, got {voxel}")));
+        }
+        let (model, labels) = merged.model(&clouds, 0, voxel);
+        let poses = merged.poses.iter().map(|p| p.map(|p| matrix_array(py, &p))).collect();
+        let labels = numpy::ndarray::Array1::from_iter(labels.iter().map(|&l| l as i64));
+        Ok((
+            poses,
+            merged.component,
+            merged.residual,
+            points_array(py, &model),
+            labels.into_pyarray(py),
+        ))
+    }
+
     /// Registers each (source, target) of the iterator `pairs` (float64 clouds) on all of the
     /// pool's threads, taking pairs as threads come free; the results in the order of
     /// `pairs` (`None` for a pair that failed) and each failed pair's (index, error).
@@ -525,6 +570,15 @@ fn metrics<'py>(
     dict.set_item("recall", m.recall)?;
     Ok(dict)
 }
+
+/// A merge's fields, in the order `rgm/__init__.py` reads them.
+type MergeFields<'py> = (
+    Vec<Option<Bound<'py, PyArray2<f64>>>>, // (S,) model ← scan, (4, 4) each
+    Vec<Option<usize>>,                     // (S,) component
+    Vec<Option<f64>>,                       // (S,) residual
+    Bound<'py, PyArray2<f64>>,              // (P, 3) component 0's merged points
+    Bound<'py, numpy::PyArray1<i64>>,       // (P,) each point's scan
+);
 
 /// One benchmark pair's fields, in the order `rgm/__init__.py` reads them.
 type PairFields<'py> = (

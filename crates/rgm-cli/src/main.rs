@@ -71,6 +71,22 @@ enum Command {
     Train(commands::train::Args),
     /// Draw SRC and TGT before and after a registration (PNG): a given transform or a method's.
     Render(commands::render::Args),
+    /// Put every scan of an object (or a room) into one frame, with no initial poses.
+    ///
+    /// Every pair of scans is registered by `rgm register`'s method (--method etc. change it);
+    /// results it doubts are left out, wrong ones found by cycles of three that do not close,
+    /// and the poses solved as a pose graph from the maximum spanning tree of the pairs'
+    /// fitness, then refined by multiway ICP (each scan against the union of the others, at
+    /// the scans' own point spacing). Scans that hang together form a component, each merged
+    /// on its own; a scan no trusted pair links is left unplaced and named. Writes
+    /// DIR/poses.json ({"scans", "poses": 4×4 model ← scan or null, "registered", "component",
+    /// "residual": median point-to-plane distance to the other scans, "edges": every pair,
+    /// used or why not}), DIR/poses.conf (Stanford's `bmesh NAME tx ty tz qx qy qz qw` lines of
+    /// the largest component, p_model = R(q)ᵀ·p + t) and DIR/model.ply (the largest
+    /// component's scans in one frame, one point per --voxel cube, a `scan` property giving
+    /// each point's scan by its place in the list). Fails when no pair of the scans could be
+    /// registered (the files written first).
+    Merge(commands::merge::Args),
 }
 
 /// Gives SIGPIPE its default action back (Rust ignores it, so `println!` to a closed pipe
@@ -97,6 +113,7 @@ fn main() -> ExitCode {
         Command::Score(args) => commands::score::run(args),
         Command::Train(args) => commands::train::run(args),
         Command::Render(args) => commands::render::run(args),
+        Command::Merge(args) => commands::merge::run(args),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

@@ -11,6 +11,7 @@ pub mod error;
 pub mod io;
 pub mod memory;
 pub mod modelnet;
+pub mod multiway;
 pub mod pack;
 pub mod pair_list;
 pub mod pairs;

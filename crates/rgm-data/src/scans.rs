@@ -218,6 +218,66 @@ impl ScanFolder {
     }
 }
 
+/// The quaternion `(x, y, z, w)` of a rotation matrix (the inverse of [`quaternion_rotation`],
+/// `w` ≥ 0), by the largest of its four squared components (Shepperd's method: no division by
+/// a small number).
+pub fn rotation_quaternion(r: &Matrix3<f64>) -> [f64; 4] {
+    let trace = r.trace();
+    let (x, y, z, w);
+    if trace > r[(0, 0)].max(r[(1, 1)]).max(r[(2, 2)]) {
+        let s = 2.0 * (1.0 + trace).sqrt(); // 4w
+        (w, x, y, z) = (
+            s / 4.0,
+            (r[(2, 1)] - r[(1, 2)]) / s,
+            (r[(0, 2)] - r[(2, 0)]) / s,
+            (r[(1, 0)] - r[(0, 1)]) / s,
+        );
+    } else if r[(0, 0)] >= r[(1, 1)] && r[(0, 0)] >= r[(2, 2)] {
+        let s = 2.0 * (1.0 + r[(0, 0)] - r[(1, 1)] - r[(2, 2)]).sqrt(); // 4x
+        (w, x, y, z) = (
+            (r[(2, 1)] - r[(1, 2)]) / s,
+            s / 4.0,
+            (r[(0, 1)] + r[(1, 0)]) / s,
+            (r[(0, 2)] + r[(2, 0)]) / s,
+        );
+    } else if r[(1, 1)] >= r[(2, 2)] {
+        let s = 2.0 * (1.0 + r[(1, 1)] - r[(0, 0)] - r[(2, 2)]).sqrt(); // 4y
+        (w, x, y, z) = (
+            (r[(0, 2)] - r[(2, 0)]) / s,
+            (r[(0, 1)] + r[(1, 0)]) / s,
+            s / 4.0,
+            (r[(1, 2)] + r[(2, 1)]) / s,
+        );
+    } else {
+        let s = 2.0 * (1.0 + r[(2, 2)] - r[(0, 0)] - r[(1, 1)]).sqrt(); // 4z
+        (w, x, y, z) = (
+            (r[(1, 0)] - r[(0, 1)]) / s,
+            (r[(0, 2)] + r[(2, 0)]) / s,
+            (r[(1, 2)] + r[(2, 1)]) / s,
+            s / 4.0,
+        );
+    }
+    let sign = if w < 0.0 { -1.0 } else { 1.0 };
+    [sign * x, sign * y, sign * z, sign * w]
+}
+
+/// A `.conf` file of `scans` (file name, `t_world_scan`): one `bmesh FILE tx ty tz qx qy qz qw`
+/// line each, in Stanford's convention (`p_world = R(q)ᵀ · p + t`, as [`ScanFolder::open`]
+/// reads it), at full f64 precision.
+pub fn conf_text<'a>(scans: impl IntoIterator<Item = (&'a str, &'a RigidTransform)>) -> String {
+    let mut text = String::new();
+    for (name, pose) in scans {
+        let t = pose.translation;
+        // The file's rotation is the pose's transposed.
+        let [qx, qy, qz, qw] = rotation_quaternion(&pose.rotation.transpose());
+        text.push_str(&format!(
+            "bmesh {name} {} {} {} {qx} {qy} {qz} {qw}\n",
+            t.x, t.y, t.z
+        ));
+    }
+    text
+}
+
 /// The `bmesh` lines of a `.conf` file: (line number, file name, pose).
 fn parse_conf(text: &str, conf: &Path) -> Result<Vec<(usize, (String, RigidTransform))>> {
     let mut scans = Vec::new();
@@ -285,7 +345,7 @@ pub fn overlap(a: (&PointCloud, &KnnIndex), b: (&PointCloud, &KnnIndex), reach: 
 
 /// A rotation by an angle uniform in [0, `max_angle_deg`] about a uniformly random axis through
 /// `centre`, then a shift in a uniformly random direction of length uniform in [0, `max_shift`].
-fn random_motion(
+pub fn random_motion(
     rng: &mut StdRng,
     centre: &Point3<f64>,
     max_angle_deg: f64,
@@ -385,6 +445,54 @@ mod tests {
         let r = quaternion_rotation(0.3, -1.0, 2.0, 0.5);
         assert!((r * r.transpose() - Matrix3::identity()).norm() < 1e-12);
         assert!((r.determinant() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_written_conf_reads_back_as_the_poses_it_was_written_from() {
+        // Stanford's own bun.conf, read, written and read again: the same poses; and every
+        // branch of the quaternion (turns of 0°, 180° about each axis, and about a diagonal).
+        let path = Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../../shared/data/stanford/bunny/bun.conf"
+        ));
+        let text = std::fs::read_to_string(path).unwrap();
+        let read = parse_conf(&text, path).unwrap();
+        assert_eq!(read.len(), 10);
+        let mut poses: Vec<(String, RigidTransform)> = read.into_iter().map(|(_, p)| p).collect();
+        for (k, axis) in [
+            Vector3::x(),
+            Vector3::y(),
+            Vector3::z(),
+            Vector3::new(1.0, -2.0, 0.5),
+        ]
+        .iter()
+        .enumerate()
+        {
+            let r = axis_angle(&axis.normalize(), std::f64::consts::PI);
+            poses.push((
+                format!("turn{k}"),
+                RigidTransform::new(r, Vector3::new(0.1, 0.0, -2.0)),
+            ));
+        }
+        let written = conf_text(poses.iter().map(|(n, p)| (n.as_str(), p)));
+        let again = parse_conf(&written, Path::new("poses.conf")).unwrap();
+        assert_eq!(again.len(), poses.len());
+        for ((_, (name, back)), (original_name, original)) in again.iter().zip(&poses) {
+            assert_eq!(name, original_name);
+            assert!(
+                (back.rotation - original.rotation).abs().max() < 1e-12,
+                "{name}"
+            );
+            assert!(
+                (back.translation - original.translation).abs().max() < 1e-15,
+                "{name}"
+            );
+        }
+        // bun000's line is the identity: `0 0 0 0 0 0 1`.
+        assert!(
+            written.starts_with("bmesh bun000.ply 0 0 0 0 0 0 1\n"),
+            "{written}"
+        );
     }
 
     /// Writes a scan folder of a sphere (radius 0.1) seen from three directions, 60° apart:

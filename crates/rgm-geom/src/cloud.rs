@@ -139,6 +139,19 @@ impl PointCloud {
         )
     }
 
+    /// The index of the first point met in each occupied cube of side `voxel` (cubes aligned on
+    /// the origin), in the order the cubes are first met: a thinning that keeps points as they
+    /// are, so that what belongs to each (its scan) goes with it.
+    pub fn voxel_firsts(&self, voxel: f64) -> Vec<usize> {
+        let mut seen = rustc_hash::FxHashSet::default();
+        (0..self.len())
+            .filter(|&i| {
+                let key = self.points[i].coords.map(|v| (v / voxel).floor() as i64);
+                seen.insert((key.x, key.y, key.z))
+            })
+            .collect()
+    }
+
     /// One point per occupied cube of side `voxel` (cubes aligned on the origin): the mean of
     /// the cube's points, as Open3D's `voxel_down_sample`; in the order the cubes are first met.
     pub fn voxel_downsampled(&self, voxel: f64) -> Self {
@@ -319,6 +332,8 @@ mod tests {
         assert!((d.points[0] - Point3::new(0.2, 0.2, 0.2)).norm() < 1e-15);
         assert_eq!(d.points[1], Point3::new(1.2, 0.0, 0.0));
         assert_eq!(d.points[2], Point3::new(-0.2, 0.0, 0.0));
+        // The same cubes, each kept as its first point.
+        assert_eq!(c.voxel_firsts(0.5), vec![0, 2, 3]);
     }
 
     #[test]

@@ -15,7 +15,9 @@
 //! - [`refiner`]: the trait of a refinement that improves a given transform, for the local
 //!   methods;
 //! - [`check`]: how a result is judged without ground truth (overlap, coincidence, the judge);
-//! - [`compose`]: the wrappers and composites that make one method of several.
+//! - [`compose`]: the wrappers and composites that make one method of several;
+//! - [`multiway`]: many scans put into one frame with any of those methods as the pairwise one
+//!   (the pose graph, its loop checks and solver, multiway ICP).
 
 // `!(x > 0.0)` is used on purpose: it also rejects NaN, which `x <= 0.0` would let through.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -24,6 +26,7 @@ pub mod check;
 pub mod compose;
 pub mod fit;
 pub mod methods;
+pub mod multiway;
 pub mod prepared;
 pub mod refiner;
 pub mod registrar;

@@ -41,6 +41,17 @@ pub struct Args {
     /// or about the axis X,Y,Z: `--turns 0 90 180 90@1,1,1`.
     #[arg(long, value_name = "DEG[@X,Y,Z]", num_args = 1.., requires = "scenes")]
     turns: Vec<Turn>,
+    /// Many scans at once instead: folders in the Stanford layout (as --scans), each scan moved
+    /// by a random rigid motion (any angle about its centroid, a shift of up to half the
+    /// object's diagonal) and the scans shuffled (seed 0), merged as `rgm merge` merges them
+    /// (the method defaults to `rgm register`'s), and each scan scored after the one rigid
+    /// motion that best maps the merge's frame onto the `.conf` poses' (Kabsch over the
+    /// scans' points): its rotation error and the RMS displacement of its points as a share
+    /// of the object's diagonal, counted within 1° and 0.5 %; time.
+    #[arg(long, value_name = "DIR", num_args = 1.., conflicts_with_all = ["scans", "scenes"])]
+    multiway: Vec<PathBuf>,
+    #[command(flatten)]
+    merge: super::merge::MergeArgs,
     /// Also write every pair's transform and metrics to this JSON file.
     #[arg(long, value_name = "FILE")]
     json: Option<PathBuf>,
@@ -52,13 +63,22 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(json) = &args.json {
         crate::files::check_writable(json)?;
     }
-    // The paper's protocol is ModelNet40's; on scenes the default is `rgm register`'s.
-    let defaults = if args.scenes.is_empty() {
+    // The paper's protocol is ModelNet40's; on scenes and many scans the default is `rgm
+    // register`'s.
+    let defaults = if args.scenes.is_empty() && args.multiway.is_empty() {
         crate::args::Defaults::Paper
     } else {
         crate::args::Defaults::Register
     };
     let method = args.method.build(defaults)?;
+    if !args.multiway.is_empty() {
+        return super::eval_multiway::run(
+            &args.multiway,
+            &method,
+            &args.merge.config()?,
+            args.json.as_deref(),
+        );
+    }
     if !args.data.scans.is_empty() {
         return run_scans(&args, &method);
     }

@@ -2,6 +2,8 @@
 
 pub mod batch;
 pub mod eval;
+pub mod eval_multiway;
+pub mod merge;
 pub mod page;
 pub mod pairs;
 pub mod register;

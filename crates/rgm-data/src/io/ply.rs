@@ -567,24 +567,41 @@ pub(crate) fn float32_suffices(cloud: &PointCloud) -> bool {
 /// Writes a binary little-endian PLY with float32 x, y, z, or double where float32 would move
 /// the points by more than [`FLOAT32_LOSS`] of the cloud's size.
 pub fn write(out: &mut impl Write, cloud: &PointCloud) -> std::io::Result<()> {
+    write_labelled(out, cloud, None)
+}
+
+/// [`write`], each point followed by a `uint` property `name` from `labels` (`rgm merge`'s
+/// scan index) when given. // labels: (N,)
+pub fn write_labelled(
+    out: &mut (impl Write + ?Sized),
+    cloud: &PointCloud,
+    labels: Option<(&str, &[u32])>,
+) -> std::io::Result<()> {
+    if let Some((_, labels)) = labels {
+        assert_eq!(labels.len(), cloud.len(), "one label per point");
+    }
     let float = if float32_suffices(cloud) {
         "float"
     } else {
         "double"
     };
+    let label = labels.map_or(String::new(), |(name, _)| format!("property uint {name}\n"));
     write!(
         out,
         "ply\nformat binary_little_endian 1.0\nelement vertex {}\n\
-         property {float} x\nproperty {float} y\nproperty {float} z\nend_header\n",
+         property {float} x\nproperty {float} y\nproperty {float} z\n{label}end_header\n",
         cloud.len()
     )?;
-    for p in &cloud.points {
+    for (i, p) in cloud.points.iter().enumerate() {
         for v in [p.x, p.y, p.z] {
             if float == "float" {
                 out.write_all(&(v as f32).to_le_bytes())?;
             } else {
                 out.write_all(&v.to_le_bytes())?;
             }
+        }
+        if let Some((_, labels)) = labels {
+            out.write_all(&labels[i].to_le_bytes())?;
         }
     }
     Ok(())
@@ -604,6 +621,29 @@ mod tests {
 
     fn err(b: &[u8]) -> String {
         parse_bytes(b).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn a_labelled_cloud_reads_back_with_its_labels_after_each_point() {
+        let cloud = PointCloud::new(vec![
+            Point3::new(0.1, -0.2, 0.3),
+            Point3::new(1.0, 2.0, 3.0),
+        ]);
+        let mut bytes = Vec::new();
+        write_labelled(&mut bytes, &cloud, Some(("scan", &[7, 4_000_000_000]))).unwrap();
+        let points = parse_bytes(&bytes).unwrap();
+        for (read, written) in points.iter().zip(&cloud.points) {
+            assert!((read - written).norm() < 1e-6, "{read} {written}");
+        }
+        let body = bytes.len() - 2 * (3 * 4 + 4);
+        assert!(std::str::from_utf8(&bytes[..body])
+            .unwrap()
+            .ends_with("property uint scan\nend_header\n"));
+        let label = |k: usize| {
+            let at = body + k * 16 + 12;
+            u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap())
+        };
+        assert_eq!((label(0), label(1)), (7, 4_000_000_000));
     }
 
     #[test]

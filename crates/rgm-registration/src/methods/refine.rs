@@ -231,7 +231,29 @@ struct StageOutcome {
     solvable: bool,
 }
 
-impl PlaneFit<'_> {
+impl<'a> PlaneFit<'a> {
+    /// The clouds with the target's normals estimated when first needed, from the nearest
+    /// neighbours at the target's own density (a radius of 8 point spacings).
+    fn at_spacing(
+        source: &'a PointCloud,
+        target: &'a PointCloud,
+        index: &'a KnnIndex,
+        spacing: f64,
+    ) -> Self {
+        Self {
+            source,
+            target,
+            index,
+            normals: TargetNormals::Lazy {
+                config: NormalsConfig {
+                    radius: 8.0 * spacing,
+                    ..NormalsConfig::default()
+                },
+                cache: RefCell::new(vec![None; target.len()]),
+            },
+        }
+    }
+
     /// The normal of target point `j`.
     fn normal(&self, j: usize) -> Vector3<f64> {
         match &self.normals {
@@ -440,19 +462,7 @@ pub fn refine_at_resolution(
     } else {
         Cow::Borrowed(source)
     };
-    let plane = PlaneFit {
-        source: &sampled,
-        target,
-        index,
-        // Normals from the nearest neighbours at the target's own density.
-        normals: TargetNormals::Lazy {
-            config: NormalsConfig {
-                radius: 8.0 * spacing,
-                ..NormalsConfig::default()
-            },
-            cache: RefCell::new(vec![None; target.len()]),
-        },
-    };
+    let plane = PlaneFit::at_spacing(&sampled, target, index, spacing);
     let mut transform = *initial;
     let mut scratch = PlaneScratch::default();
     let mut iterations = 0;
@@ -476,6 +486,21 @@ pub fn refine_at_resolution(
         iterations += plane.run(&stage, &mut transform, &mut scratch).iterations;
     }
     Ok((transform, iterations))
+}
+
+/// The median absolute point-to-plane residual of `source`'s points moved by `transform` that
+/// have a point of `target` within `max_distance` (`index` indexes `target`), the normals
+/// estimated at 8 × `spacing` as [`refine_at_resolution`] estimates them; `None` when no point
+/// has. How well a refined scan lies on the others ([`crate::multiway`]).
+pub fn median_plane_residual(
+    source: &PointCloud,
+    target: &PointCloud,
+    index: &KnnIndex,
+    transform: &RigidTransform,
+    max_distance: f64,
+    spacing: f64,
+) -> Option<f64> {
+    PlaneFit::at_spacing(source, target, index, spacing).median_residual(transform, max_distance)
 }
 
 /// The rigid step minimising the linearised point-to-plane residuals of `pairs`
