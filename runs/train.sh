@@ -22,10 +22,13 @@ COMMON="--preset fast --optimizer adam --val-shapes 300 --checkpoint-every 50 --
 # git:REV:PATH files). Listed here again, a run whose folder is missing starts from scratch.
 # `partial-fast-717` (the built-in model's run) was retired in session 34: its lr 1.2e-5 was a
 # GPU window's last milestone, and its validation sat at 84–87 % for 20 CPU epochs.
+# `clean-1024` and `noise-1024` (Tables 1–2, below) finished in sessions 34–35 and left the tree
+# at 6eae498: their weights are `git:6eae498:runs/clean-1024/best.safetensors` and
+# `git:6eae498:runs/noise-1024/best.safetensors`.
 #
 # The order is what moves a table of the paper most per CPU hour (issue 55), each on a schedule
 # made for the CPU time it gets (≈ 4–8 pairs a second on 2 cores):
-# 1–2. Tables 1 and 2: the built-in model fine-tuned on whole clouds (1,024 points) of the clean
+# 1–2. (Finished.) Tables 1 and 2: the built-in model fine-tuned on whole clouds (1,024 points) of the clean
 #      and the noise protocol, one epoch each at lr 1e-4 (their schedule's second epoch, at
 #      2e-5, is not queued: an epoch of 1,024-point pairs takes ≈ 90 CPU minutes, session 34).
 #      The built-in model alone already registers nearly every such pair; the tables' old
@@ -39,8 +42,6 @@ COMMON="--preset fast --optimizer adam --val-shapes 300 --checkpoint-every 50 --
 # `init=` names the weights a run starts from; `git:REV:PATH` ones are written out of the
 # history into target/queue-init/ when the run starts (`rgm train` reads --init only then).
 QUEUE=(
-  "clean-1024|1|--setting clean --match-points 0 --batch 32 --lr 1e-4 --epochs 2 --milestones 1 --val-sample spread --precision bf16 init=crates/rgm-model/weights/partial-fast.safetensors"
-  "noise-1024|1|--setting noise --match-points 0 --batch 32 --lr 1e-4 --epochs 2 --milestones 1 --val-sample spread --precision bf16 init=crates/rgm-model/weights/partial-fast.safetensors"
   "unseen-717|60|--setting partial --unseen --match-points 0 --batch 32 --lr 3e-4 --epochs 60 --milestones 40,52 --val-sample spread --precision bf16 init=git:057fef1:runs/unseen-fast/best.safetensors"
 )
 # A run whose last 3 validations set neither a new best recall (the network alone, the paper's
