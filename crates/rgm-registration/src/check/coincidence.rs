@@ -266,12 +266,41 @@ pub fn sampled_overlap(
     transform: &RigidTransform,
     distance: f64,
 ) -> f64 {
-    let share = |points: &[rgm_geom::Point3<f64>], onto: &KnnIndex, moved: &RigidTransform| {
-        let (_, within_distance, all) = within(points, onto, moved, distance, distance);
-        within_distance as f64 / all.max(1) as f64
-    };
-    share(&source.0.points, target.1, transform)
-        + share(&target.0.points, source.1, &transform.inverse())
+    overlap_reaching(source, target, transform, distance, f64::NEG_INFINITY).unwrap_or(0.0)
+}
+
+/// [`sampled_overlap`] where it reaches `least`; `None` as soon as the points left to measure
+/// cannot bring it there (most rivals of a pose that tells itself fall short after a few
+/// hundred queries of the 8,192).
+fn overlap_reaching(
+    source: (&PointCloud, &KnnIndex),
+    target: (&PointCloud, &KnnIndex),
+    transform: &RigidTransform,
+    distance: f64,
+    least: f64,
+) -> Option<f64> {
+    // The share of `points` moved by `moved` within `distance` of `onto`, if it reaches `least`.
+    let share =
+        |points: &[rgm_geom::Point3<f64>], onto: &KnnIndex, moved: &RigidTransform, least: f64| {
+            let all = sample(points).count();
+            let needed = least * all.max(1) as f64;
+            let mut near = 0usize;
+            for (seen, p) in sample(points).enumerate() {
+                near += usize::from(onto.nearest_within(&moved.apply(p), distance).is_some());
+                if ((near + all - seen - 1) as f64) < needed {
+                    return None;
+                }
+            }
+            Some(near as f64 / all.max(1) as f64)
+        };
+    let there = share(&source.0.points, target.1, transform, least - 1.0)?;
+    let back = share(
+        &target.0.points,
+        source.1,
+        &transform.inverse(),
+        least - there,
+    )?;
+    Some(there + back)
 }
 
 /// No other pose fits nearly as well: a result is doubted when a rival pose overlaps the
@@ -321,8 +350,10 @@ impl<C: Check> Check for Unambiguous<C> {
         if own <= 0.0 {
             return None;
         }
+        // A hair below the share, so that rounding never drops a rival that reaches it.
+        let least = self.share * own * (1.0 - 1e-9);
         let rival = turned_poses(source.0, transform).iter().find_map(|turned| {
-            let ratio = sampled_overlap(source, target, turned, self.distance) / own;
+            let ratio = overlap_reaching(source, target, turned, self.distance, least)? / own;
             (ratio >= self.share && self.rivals_pass.doubt_of(source, target, turned).is_none())
                 .then(|| self.rival_doubt("the result turned about an axis of the source", ratio))
         });
