@@ -174,11 +174,17 @@ pub fn write_tensors_stored<T: Scalar>(
             Ok((name.clone(), view))
         })
         .collect::<Result<Vec<_>>>()?;
-    safetensors::serialize_to_file(views, &Some(metadata), path).map_err(|source| {
-        NnError::Safetensors {
+    // The crate's errors print as their Debug form; a failed write (a full disk) is told as
+    // the I/O error it is.
+    safetensors::serialize_to_file(views, &Some(metadata), path).map_err(|error| match error {
+        SafeTensorError::IoError(source) => NnError::Io {
             path: path.to_path_buf(),
             source,
-        }
+        },
+        source => NnError::Safetensors {
+            path: path.to_path_buf(),
+            source,
+        },
     })
 }
 
@@ -655,5 +661,18 @@ mod tests {
             "/dev/zero: is a device, FIFO or socket, not a file"
         );
         std::fs::remove_file(&path).unwrap();
+    }
+
+    /// Issue 59, E10: a full disk while saving (here `/dev/full`) was told in the safetensors
+    /// crate's Debug form (`IoError(Os { code: 28, … })`); it is the I/O error, by its path.
+    #[test]
+    fn a_full_disk_is_told_as_an_io_error() {
+        let bn = BatchNorm::<f32>::new(2);
+        let err = save_params(Path::new("/dev/full"), &bn).unwrap_err();
+        assert!(matches!(err, NnError::Io { .. }), "{err:?}");
+        assert_eq!(
+            err.to_string(),
+            "/dev/full: No space left on device (os error 28)"
+        );
     }
 }
