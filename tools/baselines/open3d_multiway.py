@@ -21,10 +21,10 @@ The scans are read in their own scanner frames (no initial poses); Open3D's gene
 The time is the wall time of all the above, the scans read beforehand, one thread.
 """
 import argparse
-import gzip
 import json
 import os
 import pathlib
+import sys
 import time
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -32,52 +32,10 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 import open3d as o3d  # noqa: E402
 
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
+from stanford import read_folder  # noqa: E402
+
 reg = o3d.pipelines.registration
-
-
-def read_ply_gz(path):
-    """The vertices of a Stanford ASCII PLY (gzip), skipping the stray `bye` header lines that
-    Open3D's own reader refuses."""
-    with gzip.open(path, "rt") as f:
-        lines = f.read().splitlines()
-    vertices, i = 0, 0
-    while lines[i].strip() != "end_header":
-        if lines[i].startswith("element vertex"):
-            vertices = int(lines[i].split()[2])
-        i += 1
-    rows = [line.split()[:3] for line in lines[i + 1 : i + 1 + vertices]]
-    return np.asarray(rows, dtype=np.float64)
-
-
-def quaternion_rotation(x, y, z, w):
-    n = np.sqrt(x * x + y * y + z * z + w * w)
-    x, y, z, w = x / n, y / n, z / n, w / n
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def read_folder(folder):
-    """(name, points, t_world_scan 4x4) per `bmesh` line: p_world = R(q)^T p + t."""
-    conf = next(folder.glob("*.conf"))
-    scans = []
-    for line in conf.read_text().splitlines():
-        tokens = line.split()
-        if not tokens or tokens[0] != "bmesh":
-            continue
-        name = tokens[1]
-        t = np.array([float(v) for v in tokens[2:5]])
-        q = [float(v) for v in tokens[5:9]]
-        pose = np.eye(4)
-        pose[:3, :3] = quaternion_rotation(*q).T
-        pose[:3, 3] = t
-        path = folder / name if (folder / name).exists() else folder / (name + ".gz")
-        scans.append((name, read_ply_gz(path), pose))
-    return scans
 
 
 def kabsch(a, b):

@@ -11,52 +11,19 @@ merged cloud at random, the source another N points drawn independently, turned 
 about (1, 1, 0) and shifted by 0.02 (the object's units). Seeded: the same command writes the same
 files. The ground truth is written as truth.txt (4x4 t_target_source).
 """
-import gzip
 import pathlib
 import sys
 
 import numpy as np
 
-
-def read_ascii_ply(path):
-    with gzip.open(path, "rt") if path.suffix == ".gz" else open(path) as f:
-        count = None
-        for line in f:
-            words = line.split()
-            if words[:2] == ["element", "vertex"]:
-                count = int(words[2])
-            if words and words[0] == "end_header":
-                break
-        rows = [f.readline().split()[:3] for _ in range(count)]
-    return np.array(rows, dtype=np.float64)
-
-
-def quaternion_rotation(x, y, z, w):
-    n = np.sqrt(x * x + y * y + z * z + w * w)
-    x, y, z, w = x / n, y / n, z / n, w / n
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
+from stanford import read_folder  # noqa: E402
 
 
 def main():
     folder, n, out = pathlib.Path(sys.argv[1]), int(sys.argv[2]), pathlib.Path(sys.argv[3])
-    conf = next(folder.glob("*.conf"))
-    merged = []
-    for line in conf.read_text().splitlines():
-        words = line.split()
-        if not words or words[0] != "bmesh":
-            continue
-        path = folder / words[1]
-        if not path.exists():
-            path = folder / (words[1] + ".gz")
-        t = np.array([float(v) for v in words[2:5]])
-        r = quaternion_rotation(*[float(v) for v in words[5:9]])
-        merged.append(read_ascii_ply(path) @ r + t)  # (R^T p^T)^T = p R
+    # p_world = R^T p + t, row by row: p R + t.
+    merged = [points @ pose[:3, :3].T + pose[:3, 3] for _, points, pose in read_folder(folder)]
     cloud = np.concatenate(merged)
     rng = np.random.default_rng(0)
     target = cloud[rng.choice(len(cloud), n, replace=len(cloud) < n)]
