@@ -175,6 +175,14 @@ impl PointCloud {
     }
 }
 
+/// At most `most` of `points`, spread evenly over them (every k-th, from the first): every one
+/// when there are no more. The sample a measure takes of a dense cloud.
+pub fn evenly(points: &[Point3<f64>], most: usize) -> impl Iterator<Item = &Point3<f64>> + Clone {
+    points
+        .iter()
+        .step_by(points.len().div_ceil(most.max(1)).max(1))
+}
+
 /// The median of `values` (the upper one of an even count); NaN for none.
 pub fn median(mut values: Vec<f64>) -> f64 {
     if values.is_empty() {

@@ -11,7 +11,7 @@
 //! puts a [`Check`] on any registrar. The tuned lengths and shares are configuration, set where
 //! methods are composed.
 
-use rgm_geom::cloud::median;
+use rgm_geom::cloud::{evenly, median};
 use rgm_geom::frame::{FrameRule, NearPair, Normalisation};
 use rgm_geom::{KnnIndex, PointCloud, RigidTransform};
 
@@ -23,11 +23,6 @@ use crate::thinning::Density;
 /// scan's 300,000 points.
 const SAMPLE: usize = 4096;
 
-/// Points spread evenly over `points`: every one when there are at most [`SAMPLE`].
-fn sample(points: &[rgm_geom::Point3<f64>]) -> impl Iterator<Item = &rgm_geom::Point3<f64>> {
-    points.iter().step_by(points.len().div_ceil(SAMPLE).max(1))
-}
-
 /// Of at most [`SAMPLE`] of `points` moved by `moved`: how many lie within `near` of `onto`,
 /// how many within `far`, and how many were measured.
 fn within(
@@ -38,7 +33,7 @@ fn within(
     far: f64,
 ) -> (usize, usize, usize) {
     let (mut within_near, mut within_far, mut all) = (0usize, 0usize, 0usize);
-    for p in sample(points) {
+    for p in evenly(points, SAMPLE) {
         all += 1;
         if let Some((_, d)) = onto.nearest_within(&moved.apply(p), far) {
             within_far += 1;
@@ -201,10 +196,7 @@ const SPACING_SAMPLE: usize = 2000;
 /// `cloud`'s median nearest-neighbour distance, or `None` when its points lie along scan lines
 /// ([`CoincidesAtSpacing::scan_lines`]).
 fn surface_spacing(cloud: &PointCloud, index: &KnnIndex, scan_lines: f64) -> Option<f64> {
-    let (first, sixteenth): (Vec<f64>, Vec<f64>) = cloud
-        .points
-        .iter()
-        .step_by(cloud.len().div_ceil(SPACING_SAMPLE).max(1))
+    let (first, sixteenth): (Vec<f64>, Vec<f64>) = evenly(&cloud.points, SPACING_SAMPLE)
         .filter_map(|p| {
             let near = index.k_nearest(p, 17);
             Some((near.get(1)?.1, near.get(16)?.1))
@@ -282,10 +274,10 @@ fn overlap_reaching(
     // The share of `points` moved by `moved` within `distance` of `onto`, if it reaches `least`.
     let share =
         |points: &[rgm_geom::Point3<f64>], onto: &KnnIndex, moved: &RigidTransform, least: f64| {
-            let all = sample(points).count();
+            let all = evenly(points, SAMPLE).count();
             let needed = least * all.max(1) as f64;
             let mut near = 0usize;
-            for (seen, p) in sample(points).enumerate() {
+            for (seen, p) in evenly(points, SAMPLE).enumerate() {
                 near += usize::from(onto.nearest_within(&moved.apply(p), distance).is_some());
                 if ((near + all - seen - 1) as f64) < needed {
                     return None;

@@ -3,6 +3,7 @@
 //! degrees off, so it is refined once, and a pose the refinement moves far is not trusted as
 //! it is. The refined pose is not reported: the method's own is, as asked (`--no-refine`).
 
+use rgm_geom::cloud::evenly;
 use rgm_geom::{KnnIndex, PointCloud, RigidTransform};
 
 use crate::check::{agree, Check};
@@ -27,8 +28,7 @@ impl Check for Precise {
         transform: &RigidTransform,
     ) -> Option<String> {
         let spread = |cloud: &PointCloud| {
-            let step = cloud.len().div_ceil(self.points.max(1)).max(1);
-            PointCloud::new(cloud.points.iter().step_by(step).copied().collect())
+            PointCloud::new(evenly(&cloud.points, self.points).copied().collect())
         };
         let refined = refine(
             &spread(source.0),

@@ -10,24 +10,34 @@
 //! a regular solid is on an axis of 3-, 4- or 5-fold symmetry). [`SelfFit`] tries those turns.
 
 use nalgebra::{Rotation3, Unit, Vector3};
-use rgm_geom::cloud::median;
+use rgm_geom::cloud::{evenly, median};
 use rgm_geom::{KnnIndex, Matrix3, Point3, PointCloud, RigidTransform};
 
 /// The centroid, the spreads (ascending) and the principal axes (one a column, in the spreads'
 /// order) of `cloud`'s covariance.
 pub(crate) fn principal_axes(cloud: &PointCloud) -> (Point3<f64>, Vector3<f64>, Matrix3<f64>) {
-    let centre = cloud.centroid();
-    let mut covariance = Matrix3::zeros();
-    for p in &cloud.points {
-        let d = p - centre;
-        covariance += d * d.transpose();
-    }
+    let (centre, covariance) = scatter(cloud.points.iter());
     let eigen = covariance.symmetric_eigen();
     let mut order = [0, 1, 2];
     order.sort_by(|&a, &b| eigen.eigenvalues[a].total_cmp(&eigen.eigenvalues[b]));
     let spreads = Vector3::from_fn(|i, _| eigen.eigenvalues[order[i]]);
     let axes = Matrix3::from_fn(|r, c| eigen.eigenvectors[(r, order[c])]);
     (centre, spreads, axes)
+}
+
+/// The mean of `points` and the sum of their outer products about it (the covariance, unscaled);
+/// the origin and zero for none.
+fn scatter<'a>(
+    points: impl Iterator<Item = &'a Point3<f64>> + Clone,
+) -> (Point3<f64>, Matrix3<f64>) {
+    let n = points.clone().count().max(1) as f64;
+    let centre = Point3::from(points.clone().map(|p| p.coords).sum::<Vector3<f64>>() / n);
+    let mut covariance = Matrix3::zeros();
+    for p in points {
+        let d = p - centre;
+        covariance += d * d.transpose();
+    }
+    (centre, covariance)
 }
 
 /// The turn by `angle` (radians) about `axis` through `centre`: p ↦ c + R (p − c).
@@ -99,13 +109,9 @@ impl SelfFit {
         if cloud.len() <= PLANE_NEIGHBOURS {
             return None;
         }
-        let step = cloud.len().div_ceil(SAMPLE).max(1);
         // Each tried point with how near its turned copy must come: its own neighbours'
         // distance, so that a cloud denser in some parts is measured in each part's spacing.
-        let tried: Vec<(Point3<f64>, f64)> = cloud
-            .points
-            .iter()
-            .step_by(step)
+        let tried: Vec<(Point3<f64>, f64)> = evenly(&cloud.points, SAMPLE)
             .map(|p| {
                 (
                     *p,
@@ -129,10 +135,7 @@ impl SelfFit {
         })?;
         // Measured only for a cloud that fits itself, which few do.
         let flatness = median(
-            cloud
-                .points
-                .iter()
-                .step_by(step)
+            evenly(&cloud.points, SAMPLE)
                 .map(|p| flatness(cloud, &index.k_nearest(p, PLANE_NEIGHBOURS + 1)))
                 .collect(),
         );
@@ -144,17 +147,7 @@ impl SelfFit {
 /// their covariance's eigenvalues over the sum (0 on a plane, 1/3 for a ball; 1 when they are
 /// all one point, which says nothing of a surface).
 fn flatness(cloud: &PointCloud, around: &[(usize, f64)]) -> f64 {
-    let n = around.len().max(1) as f64;
-    let centre = around
-        .iter()
-        .map(|&(i, _)| cloud.points[i].coords)
-        .sum::<Vector3<f64>>()
-        / n;
-    let mut covariance = Matrix3::zeros();
-    for &(i, _) in around {
-        let d = cloud.points[i].coords - centre;
-        covariance += d * d.transpose();
-    }
+    let (_, covariance) = scatter(around.iter().map(|&(i, _)| &cloud.points[i]));
     let spreads = covariance.symmetric_eigen().eigenvalues;
     let total = spreads.sum();
     if total > 0.0 {

@@ -379,10 +379,7 @@ impl<'a> PlaneFit<'a> {
 /// `sample` points taken at an even stride; `index` must index `points`. Duplicates count as
 /// distance 0.
 pub fn median_spacing(points: &[Point3<f64>], index: &KnnIndex, sample: usize) -> f64 {
-    let stride = points.len().div_ceil(sample.max(1)).max(1);
-    let mut gaps: Vec<f64> = points
-        .iter()
-        .step_by(stride)
+    let mut gaps: Vec<f64> = rgm_geom::cloud::evenly(points, sample)
         .filter_map(|p| index.k_nearest(p, 2).get(1).map(|&(_, d)| d))
         .collect();
     if gaps.is_empty() {
