@@ -472,6 +472,27 @@ mod tests {
         (cloud, KnnIndex::new(&cloud.points))
     }
 
+    /// The rival check as the options set it but for the coincidence a rival must reach
+    /// (`least`) and the share of a cloud's points that must fit it turned (`self_share`).
+    fn unambiguous(least: f64, self_share: f64) -> Unambiguous<Coincides> {
+        Unambiguous {
+            share: 0.75,
+            distance: 0.02,
+            apart: (5.0, 0.05),
+            rivals_pass: Coincides {
+                near: 0.02,
+                far: 0.08,
+                least,
+            },
+            self_fit: SelfFit {
+                within: 1.0,
+                share: self_share,
+                near_equal: 0.8,
+                flat: 0.1,
+            },
+        }
+    }
+
     /// A cloud coincides with itself; shifted by a little less than `far` it lies near itself
     /// everywhere and coincides nowhere.
     #[test]
@@ -655,23 +676,8 @@ mod tests {
     /// little or lies within `apart`.
     #[test]
     fn a_pose_that_a_rival_fits_as_well_is_doubted() {
-        let check = Unambiguous {
-            share: 0.75,
-            distance: 0.02,
-            apart: (5.0, 0.05),
-            rivals_pass: Coincides {
-                near: 0.02,
-                far: 0.08,
-                least: 0.35,
-            },
-            // Out of reach: this test is of the rivals.
-            self_fit: SelfFit {
-                within: 1.0,
-                share: 1.1,
-                near_equal: 0.8,
-                flat: 0.1,
-            },
-        };
+        // The self-fit out of reach: this test is of the rivals.
+        let check = unambiguous(0.35, 1.1);
         let same = RigidTransform::identity();
         let boxed = rgm_geom::testing::box_surface(20_000, 7); // dense: a turned copy lies on it
         let (b, bi) = indexed(&boxed);
@@ -730,23 +736,8 @@ mod tests {
     /// `rivals_pass`; two samplings of the airplane are not.
     #[test]
     fn a_cloud_that_fits_itself_turned_is_ambiguous() {
-        let check = Unambiguous {
-            share: 0.75,
-            distance: 0.02,
-            apart: (5.0, 0.05),
-            // No rival passes this.
-            rivals_pass: Coincides {
-                near: 0.02,
-                far: 0.08,
-                least: 1.1,
-            },
-            self_fit: SelfFit {
-                within: 1.0,
-                share: 0.9,
-                near_equal: 0.8,
-                flat: 0.1,
-            },
-        };
+        // No rival passes this.
+        let check = unambiguous(1.1, 0.9);
         let same = RigidTransform::identity();
         let cube = |seed| rgm_geom::testing::box_surface_of([0.5, 0.5, 0.5], 2048, seed);
         let (source, target) = (cube(1), cube(2));
