@@ -139,15 +139,11 @@ impl ScanFolder {
 
     /// The diagonal of the bounding box of every scan in the world frame.
     pub fn diagonal(&self) -> f64 {
-        let mut low = Vector3::repeat(f64::INFINITY);
-        let mut high = Vector3::repeat(f64::NEG_INFINITY);
-        for scan in &self.scans {
-            for p in &scan.cloud.points {
-                let w = scan.pose.apply(p).coords;
-                low = low.inf(&w);
-                high = high.sup(&w);
-            }
-        }
+        let world = self
+            .scans
+            .iter()
+            .flat_map(|scan| scan.cloud.points.iter().map(|p| scan.pose.apply(p)));
+        let (low, high) = rgm_geom::cloud::bounds(world);
         (high - low).norm()
     }
 

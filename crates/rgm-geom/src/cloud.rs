@@ -175,6 +175,18 @@ impl PointCloud {
     }
 }
 
+/// The corners of the box that holds `points` (lowest and highest coordinate on each axis);
+/// infinities the wrong way round for none.
+pub fn bounds(points: impl IntoIterator<Item = Point3<f64>>) -> (Vector3<f64>, Vector3<f64>) {
+    points.into_iter().fold(
+        (
+            Vector3::repeat(f64::INFINITY),
+            Vector3::repeat(f64::NEG_INFINITY),
+        ),
+        |(low, high), p| (low.inf(&p.coords), high.sup(&p.coords)),
+    )
+}
+
 /// At most `most` of `points`, spread evenly over them (every k-th, from the first): every one
 /// when there are no more. The sample a measure takes of a dense cloud.
 pub fn evenly(points: &[Point3<f64>], most: usize) -> impl Iterator<Item = &Point3<f64>> + Clone {

@@ -321,14 +321,8 @@ struct PageFrame {
 impl PageFrame {
     /// Centred on the middle of the box holding every cloud, scaled so that its largest side is 2.
     fn of(clouds: &[&PointCloud]) -> Self {
-        let (mut lo, mut hi) = (
-            Vector3::repeat(f64::INFINITY),
-            Vector3::repeat(f64::NEG_INFINITY),
-        );
-        for p in clouds.iter().flat_map(|c| &c.points) {
-            lo = lo.inf(&p.coords);
-            hi = hi.sup(&p.coords);
-        }
+        let (lo, hi) =
+            rgm_geom::cloud::bounds(clouds.iter().flat_map(|c| c.points.iter().copied()));
         let side = (hi - lo).max();
         Self {
             centre: (lo + hi) / 2.0,

@@ -12,7 +12,7 @@
 
 use std::time::Instant;
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::Point3;
 use rgm_geom::fpfh::{features, FpfhConfig};
 use rgm_geom::normals::NormalsConfig;
 use rgm_geom::{kabsch, GeomError, PointCloud, Result, RigidTransform};
@@ -266,13 +266,7 @@ fn thinned_pair(
     if source.len() <= max_points && target.len() <= max_points {
         return None;
     }
-    let (lo, hi) = source.points.iter().chain(&target.points).fold(
-        (
-            Vector3::repeat(f64::INFINITY),
-            Vector3::repeat(f64::NEG_INFINITY),
-        ),
-        |(lo, hi), p| (lo.inf(&p.coords), hi.sup(&p.coords)),
-    );
+    let (lo, hi) = rgm_geom::cloud::bounds(source.points.iter().chain(&target.points).copied());
     let extent = (hi - lo).max();
     if !(extent > 0.0) {
         return Some((

@@ -189,13 +189,7 @@ fn downsampled(cloud: &PointCloud, max_points: usize) -> Option<PointCloud> {
     if cloud.len() <= max_points {
         return None;
     }
-    let (lo, hi) = cloud.points.iter().fold(
-        (
-            Vector3::repeat(f64::INFINITY),
-            Vector3::repeat(f64::NEG_INFINITY),
-        ),
-        |(lo, hi), p| (lo.inf(&p.coords), hi.sup(&p.coords)),
-    );
+    let (lo, hi) = rgm_geom::cloud::bounds(cloud.points.iter().copied());
     let extent = (hi - lo).max();
     if !(extent > 0.0) {
         // One point repeated.

@@ -25,9 +25,9 @@ mod tests;
 
 use std::fmt::Display;
 
-use rgm_geom::{GeomError, KnnIndex, Point3, PointCloud, RigidTransform, Vector3};
+use rgm_geom::{GeomError, KnnIndex, Point3, PointCloud, RigidTransform};
 
-use rgm_geom::cloud::median;
+use rgm_geom::cloud::{bounds, median};
 
 use crate::methods::refine::median_spacing;
 use crate::{DynRegistrar, Prepared};
@@ -199,13 +199,7 @@ where
 
 /// A scan's size: the diagonal of its bounding box (in its own frame).
 fn diagonal(scan: &PointCloud) -> f64 {
-    let (low, high) = scan.points.iter().fold(
-        (
-            Vector3::repeat(f64::INFINITY),
-            Vector3::repeat(f64::NEG_INFINITY),
-        ),
-        |(low, high), p| (low.inf(&p.coords), high.sup(&p.coords)),
-    );
+    let (low, high) = bounds(scan.points.iter().copied());
     (high - low).norm()
 }
 
