@@ -38,6 +38,15 @@ impl Edge {
         self.status == EdgeStatus::Used
     }
 
+    /// How far poses `model ← target` and `model ← source` disagree with the edge:
+    /// `T_ts⁻¹ · P_t⁻¹ · P_s`, the identity where they agree (in the source's frame).
+    pub fn disagreement(&self, target: &RigidTransform, source: &RigidTransform) -> RigidTransform {
+        self.t_target_source
+            .inverse()
+            .compose(&target.inverse())
+            .compose(source)
+    }
+
     /// The edge read from `from` to the other scan: that scan and the transform `from ← other`.
     fn towards(&self, from: usize) -> (usize, RigidTransform) {
         if from == self.target {

@@ -273,11 +273,7 @@ fn prune_outliers(
         let (Some(pt), Some(ps)) = (poses[e.target], poses[e.source]) else {
             continue;
         };
-        let error = e
-            .t_target_source
-            .inverse()
-            .compose(&pt.inverse())
-            .compose(&ps);
+        let error = e.disagreement(&pt, &ps);
         let (angle, shift) = graph::deviation(&error, &centroids[e.source], sizes[e.source]);
         if !tolerance.admits((angle, shift)) {
             e.status = EdgeStatus::Outlier(format!(

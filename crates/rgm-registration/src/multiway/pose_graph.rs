@@ -53,11 +53,7 @@ struct Problem<'a> {
 impl Problem<'_> {
     /// Edge `e`'s residual under target pose `pt` and source pose `ps`.
     fn residual(&self, e: &Edge, pt: &RigidTransform, ps: &RigidTransform) -> Vector6<f64> {
-        let error = e
-            .t_target_source
-            .inverse()
-            .compose(&pt.inverse())
-            .compose(ps);
+        let error = e.disagreement(pt, ps);
         let turn = Rotation3::from_matrix_unchecked(error.rotation).scaled_axis();
         let c = self.centroids[e.source];
         let shift = (error.apply(&c) - c) / self.radius;
