@@ -6,6 +6,7 @@
 use rand::rngs::StdRng;
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
+use rgm_geom::cloud::evenly;
 use rgm_geom::{kabsch, Point3, PointCloud, RigidTransform};
 
 use crate::scans::random_motion;
@@ -68,8 +69,7 @@ pub fn pose_errors(
     component: &[Option<usize>],
 ) -> Vec<Option<PoseError>> {
     let sample = |cloud: &PointCloud| -> Vec<Point3<f64>> {
-        let stride = cloud.len().div_ceil(SAMPLE).max(1);
-        cloud.points.iter().step_by(stride).copied().collect()
+        evenly(&cloud.points, SAMPLE).copied().collect()
     };
     let samples: Vec<Vec<Point3<f64>>> = scans.iter().map(|s| sample(&s.cloud)).collect();
     let components = component.iter().flatten().max().map_or(0, |c| c + 1);
