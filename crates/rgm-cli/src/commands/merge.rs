@@ -49,6 +49,10 @@ pub struct MergeArgs {
     /// scan's point spacing (1: as given); multiway ICP then runs on the scans as given.
     #[arg(long, value_name = "K", default_value_t = MultiwayConfig::default().pair_spacings)]
     pair_spacings: f64,
+    /// Register every pair of scans, instead of choosing pairs round by round from the poses
+    /// the pairs so far give (a pair those poses show apart skipped).
+    #[arg(long)]
+    all_pairs: bool,
 }
 
 impl MergeArgs {
@@ -65,6 +69,10 @@ impl MergeArgs {
                 ..defaults.joint
             },
             pair_spacings: self.pair_spacings,
+            pairs: match self.all_pairs {
+                true => multiway::PairChoice::All,
+                false => multiway::PairChoice::default(),
+            },
             ..defaults
         })
     }
@@ -207,6 +215,7 @@ pub fn summary_json(
                 EdgeStatus::Doubted(why) => ("doubted", Some(why)),
                 EdgeStatus::Inconsistent(why) => ("inconsistent", Some(why)),
                 EdgeStatus::Outlier(why) => ("outlier", Some(why)),
+                EdgeStatus::Skipped(why) => ("skipped", Some(why)),
             };
             json!({
                 "target": e.target,

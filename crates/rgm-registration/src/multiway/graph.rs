@@ -18,6 +18,9 @@ pub enum EdgeStatus {
     Inconsistent(String),
     /// Far from the poses the rest of the graph agreed on (pruned after a solve).
     Outlier(String),
+    /// Not registered: the poses found from the other pairs show the two scans overlapping too
+    /// little ([`super::prior`]).
+    Skipped(String),
 }
 
 /// One pairwise registration: scan `source` mapped onto scan `target`.
@@ -105,6 +108,26 @@ pub fn reject_inconsistent(
     sizes: &[f64],
     tolerance: &Tolerance,
 ) {
+    let (support, cycles) = triangle_support(edges, centroids, sizes, tolerance);
+    for (k, e) in edges.iter_mut().enumerate() {
+        if e.is_used() && support[k] == 0 && cycles[k] > 0 {
+            e.status = EdgeStatus::Inconsistent(format!(
+                "in {} cycle{} of three, none of them consistent",
+                cycles[k],
+                if cycles[k] == 1 { "" } else { "s" }
+            ));
+        }
+    }
+}
+
+/// For every edge, the consistent cycles of three used edges it lies in and all the cycles it
+/// lies in (both 0 for an edge not used); as [`reject_inconsistent`] measures them. // (E,), (E,)
+pub fn triangle_support(
+    edges: &[Edge],
+    centroids: &[Point3<f64>],
+    sizes: &[f64],
+    tolerance: &Tolerance,
+) -> (Vec<usize>, Vec<usize>) {
     let scans = centroids.len();
     // by_pair[a * S + b]: the used edge between scans a and b, either way.
     let mut by_pair: Vec<Option<usize>> = vec![None; scans * scans]; // (S * S,)
@@ -113,8 +136,9 @@ pub fn reject_inconsistent(
         by_pair[e.source * scans + e.target] = Some(k);
     }
     let edge = |a: usize, b: usize| by_pair[a * scans + b];
-    // Each triangle a < b < c once: (its three edges, whether a ← b ← c ← a is the identity).
-    let mut triangles = Vec::new();
+    let mut support = vec![0usize; edges.len()]; // (E,) consistent triangles of each edge
+    let mut cycles = vec![0usize; edges.len()]; // (E,) triangles of each edge
+                                                // Each triangle a < b < c once: is a ← b ← c ← a the identity?
     for a in 0..scans {
         for b in a + 1..scans {
             let Some(ab) = edge(a, b) else { continue };
@@ -127,27 +151,14 @@ pub fn reject_inconsistent(
                 let c_from_a = edges[ca].towards(c).1;
                 let round = a_from_b.compose(&b_from_c).compose(&c_from_a);
                 let consistent = tolerance.admits(deviation(&round, &centroids[a], sizes[a]));
-                triangles.push(([ab, bc, ca], consistent));
+                for k in [ab, bc, ca] {
+                    cycles[k] += 1;
+                    support[k] += usize::from(consistent);
+                }
             }
         }
     }
-    let mut support = vec![0usize; edges.len()]; // (E,) consistent triangles of each edge
-    let mut cycles = vec![0usize; edges.len()]; // (E,) triangles of each edge
-    for (sides, consistent) in &triangles {
-        for &k in sides {
-            cycles[k] += 1;
-            support[k] += usize::from(*consistent);
-        }
-    }
-    for (k, e) in edges.iter_mut().enumerate() {
-        if e.is_used() && support[k] == 0 && cycles[k] > 0 {
-            e.status = EdgeStatus::Inconsistent(format!(
-                "in {} cycle{} of three, none of them consistent",
-                cycles[k],
-                if cycles[k] == 1 { "" } else { "s" }
-            ));
-        }
-    }
+    (support, cycles)
 }
 
 /// The component of every scan under the used edges, numbered from 0 by size (largest first,

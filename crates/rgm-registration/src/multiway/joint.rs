@@ -21,7 +21,8 @@ use crate::methods::refine::{median_plane_residual, refine_at_resolution, Resolu
 pub struct JointConfig {
     /// Rounds of refinement against the others (default 3; 0 keeps the pose graph's poses).
     pub rounds: usize,
-    /// The point-to-plane stages of each refinement (default [`ResolutionConfig::default`]).
+    /// The point-to-plane stages of each refinement (default [`ResolutionConfig::default`]'s,
+    /// on at most 5,000 points of the scan).
     pub resolution: ResolutionConfig,
     /// A scan's residual counts its points within this many spacings of the others (default 3).
     pub residual_spacings: f64,
@@ -31,7 +32,13 @@ impl Default for JointConfig {
     fn default() -> Self {
         Self {
             rounds: 3,
-            resolution: ResolutionConfig::default(),
+            // 5,000 points of the scan pin its six degrees of freedom against the union as well
+            // as 30,000 (the bunny's residuals to the others: median 90.1 against 90.0 µm, the
+            // scans' errors within 0.01°) in 45 % of the time (`docs/multiway.md`).
+            resolution: ResolutionConfig {
+                max_source_points: 5_000,
+                ..ResolutionConfig::default()
+            },
             residual_spacings: 3.0,
         }
     }

@@ -1,8 +1,9 @@
 //! Many scans, one model: every scan of an object (or a room), each in its own frame and in any
 //! order, put into one frame with no initial poses ([`merge`]).
 //!
-//! 1. [`pairs`]: every pair registered by the caller's method; a result the method doubts, or
-//!    a failure, is no edge.
+//! 1. [`pairs`]: pairs registered by the caller's method, chosen round by round from the poses
+//!    the pairs so far give ([`prior`]: a pair the poses show apart is not registered); a result
+//!    the method doubts, or a failure, is no edge.
 //! 2. [`graph`]: wrong edges found by loop consistency (cycles of three), the scans split into
 //!    components (scans in separate groups are merged each group on its own; a scan with no
 //!    trusted edge is left unplaced), first poses from each component's maximum spanning tree
@@ -19,6 +20,7 @@ pub mod graph;
 pub mod joint;
 pub mod pairs;
 pub mod pose_graph;
+pub mod prior;
 
 #[cfg(test)]
 mod tests;
@@ -34,6 +36,7 @@ use crate::{DynRegistrar, Prepared};
 pub use graph::{Edge, EdgeStatus, Tolerance};
 pub use joint::JointConfig;
 pub use pose_graph::PoseGraphConfig;
+pub use prior::{OverlapPrior, PairChoice};
 
 /// Settings of [`merge`].
 #[derive(Clone, Debug, PartialEq)]
@@ -44,6 +47,8 @@ pub struct MultiwayConfig {
     /// many times each scan's point spacing; 1 or less registers them as given (default 3:
     /// as accurate on the Stanford bunny as 1 and 2, in 28 % less time than 1, `docs/multiway.md`).
     pub pair_spacings: f64,
+    /// Which pairs are registered (default: in rounds, from the poses found so far).
+    pub pairs: PairChoice,
     pub pose_graph: PoseGraphConfig,
     pub joint: JointConfig,
 }
@@ -53,6 +58,7 @@ impl Default for MultiwayConfig {
         Self {
             tolerance: Tolerance::default(),
             pair_spacings: 3.0,
+            pairs: PairChoice::default(),
             pose_graph: PoseGraphConfig::default(),
             joint: JointConfig::default(),
         }
@@ -83,7 +89,8 @@ pub struct MultiwayResult {
     /// Each placed scan's median point-to-plane distance to the other scans of its component,
     /// in the scans' units. // (S,)
     pub residual: Vec<Option<f64>>,
-    /// Every pair's registration, with whether it was used and why not. // (S·(S−1)/2,)
+    /// Every pair's registration (or why it was not registered), with whether it was used and
+    /// why not. // (S·(S−1)/2,)
     pub edges: Vec<Edge>,
     /// Each component's point spacing: the median of its scans' median nearest-neighbour
     /// distances; the joint refinement's and the residuals' unit. // (C,)
@@ -155,18 +162,33 @@ where
         .map(|scan| median_spacing(&scan.points, &KnnIndex::new(&scan.points), 2000))
         .collect();
     // The pairs on thinned scans: the joint refinement brings back the scans' own resolution.
-    let prepared: Vec<Prepared> = scans
-        .iter()
-        .zip(&spacings)
-        .map(|(scan, &spacing)| match config.pair_spacings {
-            k if k > 1.0 && spacing > 0.0 => Prepared::new(scan.voxel_downsampled(k * spacing)),
-            _ => Prepared::new(scan),
+    let thinned = |s: usize| config.pair_spacings > 1.0 && spacings[s] > 0.0;
+    let prepared: Vec<Prepared> = (0..scans.len())
+        .map(|s| match thinned(s) {
+            true => Prepared::new(scans[s].voxel_downsampled(config.pair_spacings * spacings[s])),
+            false => Prepared::new(&scans[s]),
         })
         .collect();
-    let mut edges = pairs::register_pairs(&prepared, registrar, progress);
-    drop(prepared);
+    // (S,) the point spacing of the clouds the pairs run on
+    let pair_spacing: Vec<f64> = (0..scans.len())
+        .map(|s| match thinned(s) {
+            true => config.pair_spacings * spacings[s],
+            false => spacings[s],
+        })
+        .collect();
     let centroids: Vec<Point3<f64>> = scans.iter().map(PointCloud::centroid).collect(); // (S,)
     let sizes: Vec<f64> = scans.iter().map(diagonal).collect(); // (S,)
+    let mut edges = pairs::register_pairs(
+        &prepared,
+        &pair_spacing,
+        registrar,
+        &config.pairs,
+        &centroids,
+        &sizes,
+        &config.tolerance,
+        progress,
+    );
+    drop(prepared);
     graph::reject_inconsistent(&mut edges, &centroids, &sizes, &config.tolerance);
     progress(Stage::PoseGraph);
     let (mut poses, references) = solve_graph(&mut edges, &centroids, &sizes, config);

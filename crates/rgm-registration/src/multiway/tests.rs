@@ -203,14 +203,48 @@ fn every_scan_is_placed_sharper_than_its_pairs() {
         let r = r.expect("every scan lies on others");
         assert!(r < 0.0015, "{r}");
     }
-    // The views 180° apart share nothing: their pairs are doubted, the rest used.
-    let doubted = found
-        .edges
-        .iter()
-        .filter(|e| matches!(e.status, EdgeStatus::Doubted(_)))
-        .count();
-    assert_eq!(doubted, 3);
-    assert_eq!(found.edges.iter().filter(|e| e.is_used()).count(), 12);
+    // The views 180° apart share nothing: the other pairs place them apart, so they are not
+    // registered (nor, by the poses, some views 120° apart that share a thin band); the
+    // neighbours 60° apart are all used.
+    let opposite = |e: &Edge| e.source - e.target == 3;
+    for e in &found.edges {
+        match e.source - e.target {
+            3 => assert!(matches!(e.status, EdgeStatus::Skipped(_)), "{e:?}"),
+            1 | 5 => assert!(e.is_used(), "{e:?}"),
+            _ => assert!(
+                e.is_used() || matches!(e.status, EdgeStatus::Skipped(_)),
+                "{e:?}"
+            ),
+        }
+    }
+    // Every pair registered: the method doubts those three.
+    let config = MultiwayConfig {
+        pairs: PairChoice::All,
+        ..MultiwayConfig::default()
+    };
+    let clouds: Vec<PointCloud> = views.iter().map(|v| v.cloud.clone()).collect();
+    let every = merge(&clouds, &Oracle::new(&views, vec![]), &config, &|_| {}).unwrap();
+    for e in &every.edges {
+        assert_eq!(
+            matches!(e.status, EdgeStatus::Doubted(_)),
+            opposite(e),
+            "{e:?}"
+        );
+    }
+    let (angle, shift) = worst_error(&views, &every, &all);
+    assert!(angle < 0.35 && shift < 0.003, "{angle}° {shift}");
+}
+
+/// Scan `s` is where `alone` put it, within 0.05° and a twelfth of the point spacing: a scan
+/// added to the merge may change which pairs are registered (the choice runs in rounds over
+/// every scan), not where the others go.
+fn assert_stays(found: &MultiwayResult, alone: &MultiwayResult, s: usize) {
+    let (pose, before) = (found.poses[s].unwrap(), alone.poses[s].unwrap());
+    let off = before.inverse().compose(&pose);
+    assert!(
+        off.rotation_angle_deg() < 0.05 && off.translation.norm() < 5e-4,
+        "scan {s} moved: {off:?}"
+    );
 }
 
 #[test]
@@ -231,7 +265,7 @@ fn a_scan_of_another_object_trusted_by_the_method_is_left_unplaced() {
         assert!(matches!(e.status, EdgeStatus::Inconsistent(_)), "{e:?}");
     }
     for s in 0..6 {
-        assert_eq!(found.poses[s], alone.poses[s], "scan {s} moved");
+        assert_stays(&found, &alone, s);
     }
 }
 
@@ -245,7 +279,7 @@ fn a_scan_that_overlaps_nothing_is_left_unplaced_and_the_others_stay() {
     assert_eq!(found.poses[6], None);
     assert_eq!(found.residual[6], None);
     for s in 0..6 {
-        assert_eq!(found.poses[s], alone.poses[s], "scan {s} moved");
+        assert_stays(&found, &alone, s);
     }
 }
 
