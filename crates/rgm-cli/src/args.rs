@@ -27,9 +27,9 @@ pub fn checked_precision(precision: Precision) -> Precision {
 /// The method and, for RGM, its weights and test-time options.
 #[derive(clap::Args, Debug, Clone)]
 pub struct MethodArgs {
-    /// The registration method [default: auto in `rgm register` and `rgm render`; rgm, the
-    /// paper's method, in `rgm eval`]. RGM uses the model built into rgm unless --weights names
-    /// another.
+    /// The registration method [default: auto in `rgm register` and `rgm render`; scene in
+    /// `rgm merge` and `rgm eval --multiway`; rgm, the paper's method, in `rgm eval`]. RGM uses
+    /// the model built into rgm unless --weights names another.
     #[arg(long, value_enum)]
     pub(crate) method: Option<MethodName>,
     /// RGM weights: a safetensors file with the authors' parameter names
@@ -102,6 +102,8 @@ pub enum Defaults {
     Register,
     /// The paper's protocol (`rgm eval`): RGM, unrefined.
     Paper,
+    /// `rgm merge`'s (and `rgm eval --multiway`'s): `scene`, refined.
+    Merge,
 }
 
 impl MethodArgs {
@@ -114,11 +116,12 @@ impl MethodArgs {
     /// `defaults` unless --no-refine is (ICP is its own refinement). `rgm_model::MethodOptions`
     /// builds the method, as it does for the Python package.
     pub(crate) fn options(&self, defaults: Defaults) -> anyhow::Result<MethodOptions> {
-        let refine_by_default = defaults == Defaults::Register;
-        let method = match self.method {
-            Some(method) => method,
-            None if refine_by_default => MethodOptions::default().method,
-            None => MethodName::Rgm,
+        let refine_by_default = defaults != Defaults::Paper;
+        let method = match (self.method, defaults) {
+            (Some(method), _) => method,
+            (None, Defaults::Register) => MethodOptions::default().method,
+            (None, Defaults::Merge) => MethodName::Scene,
+            (None, Defaults::Paper) => MethodName::Rgm,
         };
         if method == MethodName::Icp && self.refine {
             anyhow::bail!("--refine adds ICP after RGM or FGR; --method icp is ICP already");

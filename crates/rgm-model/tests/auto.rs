@@ -57,7 +57,12 @@ fn metrics_against_truth(found: &Registration, pair: &rgm_data::Pair) -> PairMet
 /// `auto+icp` with `rgm`, both candidates on every pair.
 fn auto_with(rgm: RgmRegistrar) -> Method {
     let never = rgm_registration::check::Acceptance::NEVER;
-    rgm_model::options::auto(rgm, Some(RefineConfig::default()), never)
+    rgm_model::options::auto(
+        rgm,
+        Some(RefineConfig::default()),
+        never,
+        rgm_model::options::DenseStage::ObjectThenScene,
+    )
 }
 
 /// `rgm register`'s default, but both candidates on every pair.

@@ -44,7 +44,7 @@ pub struct Args {
     /// Many scans at once instead: folders in the Stanford layout (as --scans), each scan moved
     /// by a random rigid motion (any angle about its centroid, a shift of up to half the
     /// object's diagonal) and the scans shuffled (seed 0), merged as `rgm merge` merges them
-    /// (the method defaults to `rgm register`'s), and each scan scored after the one rigid
+    /// (the method defaults to `rgm merge`'s: scene, refined), and each scan scored after the one rigid
     /// motion that best maps the merge's frame onto the `.conf` poses' (Kabsch over the
     /// scans' points): its rotation error and the RMS displacement of its points as a share
     /// of the object's diagonal, counted within 1° and 0.5 %; time.
@@ -63,9 +63,11 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(json) = &args.json {
         crate::files::check_writable(json)?;
     }
-    // The paper's protocol is ModelNet40's; on scenes and many scans the default is `rgm
-    // register`'s.
-    let defaults = if args.scenes.is_empty() && args.multiway.is_empty() {
+    // The paper's protocol is ModelNet40's; on scenes the default is `rgm register`'s, on many
+    // scans `rgm merge`'s.
+    let defaults = if !args.multiway.is_empty() {
+        crate::args::Defaults::Merge
+    } else if args.scenes.is_empty() {
         crate::args::Defaults::Paper
     } else {
         crate::args::Defaults::Register

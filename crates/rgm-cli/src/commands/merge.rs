@@ -93,7 +93,7 @@ pub fn run(args: Args) -> Result<()> {
         crate::files::check_writable(path)?;
     }
     let scans = read_scans(&args.scans)?;
-    let method = args.method.build(crate::args::Defaults::Register)?;
+    let method = args.method.build(crate::args::Defaults::Merge)?;
     let start = Instant::now();
     let merged = merge_scans(&scans, &method, &config)?;
     let seconds = start.elapsed().as_secs_f64();

@@ -273,7 +273,10 @@ pub fn settings(
     options: &MethodOptions,
     method: &Method,
 ) -> Result<Map<String, Value>, BatchError> {
-    let network = matches!(options.method, MethodName::Rgm | MethodName::Auto);
+    let network = matches!(
+        options.method,
+        MethodName::Rgm | MethodName::Auto | MethodName::Scene
+    );
     let weights = match (&options.weights, network) {
         (_, false) => Value::Null,
         (Some(path), true) => {
@@ -297,7 +300,7 @@ pub fn settings(
         "test_statistics": options.test_statistics.map(|s| format!("{s:?}").to_lowercase()),
         "match_points": options.match_points,
         "passes": options.passes,
-        "accept": (options.method == MethodName::Auto).then(|| options.accept.to_string()),
+        "accept": matches!(options.method, MethodName::Auto | MethodName::Scene).then(|| options.accept.to_string()),
         "refine": options.refine,
         "precision": options.precision.name(),
     });
