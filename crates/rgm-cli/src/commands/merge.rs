@@ -166,12 +166,21 @@ pub fn merge_scans(
     let bar = crate::progress(pairs, "pairs");
     let start = Instant::now();
     let graph = std::sync::Mutex::new(start);
+    let registered = std::sync::atomic::AtomicUsize::new(0);
     let progress = |stage: Stage| match stage {
-        Stage::Pairs { done, .. } => bar.set_position(done as u64),
+        Stage::Pairs { done, .. } => {
+            registered.fetch_max(done, std::sync::atomic::Ordering::Relaxed);
+            bar.set_position(done as u64)
+        }
         Stage::PoseGraph => {
             bar.finish_and_clear();
+            let registered = registered.load(std::sync::atomic::Ordering::Relaxed);
+            let skipped = match pairs - registered {
+                0 => String::new(),
+                n => format!(" ({n} skipped: the other pairs place those scans apart)"),
+            };
             eprintln!(
-                "rgm: {pairs} pairs registered in {:.1} s",
+                "rgm: {registered} of {pairs} pairs registered{skipped} in {:.1} s",
                 start.elapsed().as_secs_f64()
             );
             *graph.lock().unwrap_or_else(|p| p.into_inner()) = Instant::now();
