@@ -441,11 +441,12 @@ class MergeResult:
     scan_index: np.ndarray
 
 
-def merge(scans, voxel: Optional[float] = None, method: str = DEFAULT_METHOD) -> MergeResult:
+def merge(scans, voxel: Optional[float] = None, method: str = "scene") -> MergeResult:
     """Puts every scan of ``scans`` (each in its own frame, any order) into one frame, as
-    ``rgm merge`` does: every pair registered by ``method`` (``rgm register``'s by default),
-    wrong pairs found by cycles of three that do not close, a pose graph, then each scan
-    refined against the others (docs/multiway.md).
+    ``rgm merge`` does: pairs registered by ``method`` (``rgm merge``'s, ``"scene"``, by
+    default) in rounds chosen from the poses the pairs so far give, wrong pairs found by
+    cycles of three that do not close, a pose graph, then each scan refined against the others
+    (docs/multiway.md).
 
     Args:
         scans: a list of float32 or float64 (N, 3) arrays, at least 2.

@@ -40,9 +40,11 @@ enum Command {
     /// too little or, short of a whole overlap, fits as well turned about one of the source's
     /// axes (--accept) also RGM,
     /// with the partial-to-partial model built into rgm (or --weights), refined the same way,
-    /// and returns the one whose result overlaps better; the output names the candidates and
-    /// their scores. --method rgm, fgr or icp runs one method; --no-refine skips the
-    /// refinement; docs/results.md compares them. Clouds of any size, scale and density:
+    /// and returns the one whose result overlaps better; on a pair denser than ModelNet40, where
+    /// neither result is taken, also the scene stage (second-order spatial compatibility on the
+    /// pair's own FPFH matches; --method scene runs it alone on dense pairs). The output names
+    /// the candidates and their scores. --method rgm, fgr or icp runs one method; --no-refine
+    /// skips the refinement; docs/results.md compares them. Clouds of any size, scale and density:
     /// unless already in the unit-sphere frame, both are centred and scaled by one factor into
     /// it, clouds denser than ModelNet40's 1,024 points are thinned to 1,024 (a second way,
     /// its candidates named …/cells, when no result of the first is taken and the candidates

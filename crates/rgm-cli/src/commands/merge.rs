@@ -177,7 +177,7 @@ pub fn merge_scans(
             let registered = registered.load(std::sync::atomic::Ordering::Relaxed);
             let skipped = match pairs - registered {
                 0 => String::new(),
-                n => format!(" ({n} skipped: the other pairs place those scans apart)"),
+                n => format!(" ({n} skipped by what the other pairs show)"),
             };
             eprintln!(
                 "rgm: {registered} of {pairs} pairs registered{skipped} in {:.1} s",

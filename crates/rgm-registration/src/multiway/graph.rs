@@ -19,7 +19,7 @@ pub enum EdgeStatus {
     /// Far from the poses the rest of the graph agreed on (pruned after a solve).
     Outlier(String),
     /// Not registered: the poses found from the other pairs show the two scans overlapping too
-    /// little ([`super::prior`]).
+    /// little, or both have enough trusted pairs ([`super::prior`]).
     Skipped(String),
 }
 

@@ -60,16 +60,12 @@ pub fn register_pairs<E: Display>(
     if let PairChoice::Predicted(prior) = choice {
         let plan = Plan::new(scans, spacing, &edges, centroids, sizes, tolerance);
         for &(a, b) in every.iter().filter(|&&(a, b)| !tried[a * count + b]) {
-            let score = plan.predicted(a, b, prior).unwrap_or(0.0);
             edges.push(Edge {
                 target: a,
                 source: b,
                 t_target_source: RigidTransform::identity(),
                 weight: 0.0,
-                status: EdgeStatus::Skipped(format!(
-                    "the other pairs' poses overlap the two by {score:.2} (of 2), under {}",
-                    prior.min_score
-                )),
+                status: EdgeStatus::Skipped(plan.skip_reason(a, b, prior)),
             });
         }
     }
