@@ -602,7 +602,12 @@ impl Variant {
         };
         Ok(Self {
             name: spec.to_string(),
-            method: rgm_model::options::auto(rgm, Some(RefineConfig::default()), acceptance),
+            method: rgm_model::options::auto(
+                rgm,
+                Some(RefineConfig::default()),
+                acceptance,
+                rgm_model::options::DenseStage::ObjectThenScene,
+            ),
         })
     }
 }
