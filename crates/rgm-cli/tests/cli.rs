@@ -398,16 +398,20 @@ fn rgm_options_with_another_method_are_refused() {
     for (args, says) in [
         (
             ["--method", "fgr", "--match-points", "100"],
-            "apply to the rgm and auto methods only",
+            "apply to the rgm, auto and scene methods only",
         ),
         (["--method", "icp", "--refine", "--json"], "ICP already"),
         (
             ["--method", "rgm", "--accept", "1"],
-            "accept applies to the auto method only",
+            "accept applies to the auto and scene methods only",
         ),
         (
             ["--method", "auto", "--accept=-1", "--json"],
             "accept must be a score of at least 0",
+        ),
+        (
+            ["--method", "scene", "--no-refine", "--json"],
+            "the scene method refines its results",
         ),
     ] {
         let out = rgm(&[&["register", src, tgt][..], &args[..]].concat());

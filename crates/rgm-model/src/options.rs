@@ -474,7 +474,7 @@ impl MethodOptions {
             || self.passes.is_some()
             || self.precision != Precision::F32;
         if matches!(self.method, MethodName::Icp | MethodName::Fgr) && rgm_only {
-            return invalid("weights, preset, test statistics, match points, passes and precision apply to the rgm and auto methods only");
+            return invalid("weights, preset, test statistics, match points, passes and precision apply to the rgm, auto and scene methods only");
         }
         if self.weights.is_none() && (self.preset.is_some() || self.test_statistics.is_some()) {
             return invalid("a preset and test statistics describe given weights; the built-in model has its own");

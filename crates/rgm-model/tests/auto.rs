@@ -203,25 +203,7 @@ fn a_dense_pair_whose_methods_agree_is_thinned_once_and_refined_at_its_resolutio
     // a cloud, more than the training clouds' 1,024, so both methods run on the voxel
     // thinning; they agree on this clean pair, so the cell thinning is skipped.
     let pair = clean_pair();
-    let dense = |c: &PointCloud| {
-        let offsets = [
-            (1.0, 0.0, 0.0),
-            (0.0, 1.0, 0.0),
-            (0.0, 0.0, 1.0),
-            (-1.0, -1.0, -1.0),
-        ];
-        PointCloud::new(
-            c.points
-                .iter()
-                .flat_map(|p| {
-                    offsets
-                        .iter()
-                        .map(move |&(x, y, z)| p + 0.003 * rgm_geom::Vector3::new(x, y, z))
-                })
-                .collect(),
-        )
-    };
-    let (source, target) = (dense(&pair.source), dense(&pair.target));
+    let (source, target) = (four_fold(&pair.source), four_fold(&pair.target));
     assert_eq!(source.len(), 4096);
     let mut method = both_candidates();
     let found = method.register(&source, &target).unwrap();
@@ -242,6 +224,63 @@ fn a_dense_pair_whose_methods_agree_is_thinned_once_and_refined_at_its_resolutio
     assert!(winner.inverse().compose(&result).rotation_angle_deg() < 1.0);
     let metrics = metrics_against_truth(&found, &pair);
     assert!(metrics.recall, "{metrics:?}");
+}
+
+/// Each point of `cloud` made four, 0.003 apart along fixed directions: a cloud four times as
+/// dense as the training clouds.
+fn four_fold(cloud: &PointCloud) -> PointCloud {
+    let offsets = [
+        (1.0, 0.0, 0.0),
+        (0.0, 1.0, 0.0),
+        (0.0, 0.0, 1.0),
+        (-1.0, -1.0, -1.0),
+    ];
+    PointCloud::new(
+        cloud
+            .points
+            .iter()
+            .flat_map(|p| {
+                offsets
+                    .iter()
+                    .map(move |&(x, y, z)| p + 0.003 * rgm_geom::Vector3::new(x, y, z))
+            })
+            .collect(),
+    )
+}
+
+#[test]
+fn scene_runs_only_the_scene_stage_on_a_dense_pair_and_is_auto_on_a_sparse_one() {
+    let scene = || {
+        MethodOptions {
+            method: rgm_model::MethodName::Scene,
+            ..MethodOptions::default()
+        }
+        .build()
+        .unwrap()
+    };
+    let pair = clean_pair();
+    // Dense: the scene stage alone (the default runs the object cascade first, above).
+    let (source, target) = (four_fold(&pair.source), four_fold(&pair.target));
+    let found = scene().register(&source, &target).unwrap();
+    assert!(
+        !candidate_names(&found).contains(&"auto+icp"),
+        "{:?}",
+        candidate_names(&found)
+    );
+    assert!(found.doubt.is_none(), "{:?}", found.doubt);
+    assert!(metrics_against_truth(&found, &pair).recall);
+    // As sparse as the training clouds: exactly the default's result.
+    let sparse = scene().register(&pair.source, &pair.target).unwrap();
+    let default = MethodOptions::default()
+        .build()
+        .unwrap()
+        .register(&pair.source, &pair.target)
+        .unwrap();
+    assert_eq!(
+        sparse.result.t_target_source,
+        default.result.t_target_source
+    );
+    assert_eq!(candidate_names(&sparse), candidate_names(&default));
 }
 
 /// The rotation error of `found` against `truth`, in degrees, and its translation error

@@ -137,7 +137,7 @@ fn options_that_do_not_fit_the_method_are_named() {
                 passes: Some(1),
                 ..fgr.clone()
             },
-            "apply to the rgm and auto methods only",
+            "apply to the rgm, auto and scene methods only",
         ),
         (
             MethodOptions {
