@@ -49,16 +49,17 @@ fn clouds(dir: &Path) -> (String, String) {
     (write("a.xyz", 0.0), write("b.xyz", 0.01))
 }
 
-/// Runs rgm with its stdout a pipe closed before rgm writes: the output and stderr.
+/// Runs rgm with its stdout a pipe whose reading end is closed before rgm starts (so that its
+/// first write fails however fast it runs): the exit status and stderr.
 fn with_closed_stdout(args: &[&str]) -> Output {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_rgm"))
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    Command::new(env!("CARGO_BIN_EXE_rgm"))
         .args(args)
-        .stdout(Stdio::piped())
+        .stdout(writer)
         .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    drop(child.stdout.take());
-    child.wait_with_output().unwrap()
+        .output()
+        .unwrap()
 }
 
 /// Issue 14, case 5: `rgm register a b | head -1` and `rgm eval … | true` panicked (exit 101).

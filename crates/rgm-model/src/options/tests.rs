@@ -175,6 +175,6 @@ fn options_that_do_not_fit_the_method_are_named() {
     let err = "gicp".parse::<MethodName>().unwrap_err().to_string();
     assert_eq!(
         err,
-        "unknown method \"gicp\" (expected one of icp, fgr, rgm, auto)"
+        "unknown method \"gicp\" (expected one of icp, fgr, rgm, auto, scene)"
     );
 }
