@@ -75,8 +75,11 @@ enum Command {
     Render(commands::render::Args),
     /// Put every scan of an object (or a room) into one frame, with no initial poses.
     ///
-    /// Every pair of scans is registered by `rgm register`'s method (--method etc. change it);
-    /// results it doubts are left out, wrong ones found by cycles of three that do not close,
+    /// Pairs of scans are registered (by --method scene unless told otherwise) in rounds, each
+    /// round's pairs chosen from the poses the pairs so far give: a pair those poses place
+    /// apart is skipped, a scan not yet in a consistent cycle of three tries more partners
+    /// (--all-pairs registers every pair). Results the method doubts are left out, wrong ones
+    /// found by cycles of three that do not close,
     /// and the poses solved as a pose graph from the maximum spanning tree of the pairs'
     /// fitness, then refined by multiway ICP (each scan against the union of the others, at
     /// the scans' own point spacing). Scans that hang together form a component, each merged
