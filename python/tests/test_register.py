@@ -137,7 +137,7 @@ def test_non_finite_coordinates_are_value_errors(airplane, value, dtype):
 
 def test_options_that_do_not_fit_are_value_errors(tmp_path):
     for kwargs, says in [
-        ({"method": "gicp"}, 'unknown method "gicp" (expected one of icp, fgr, rgm, auto)'),
+        ({"method": "gicp"}, 'unknown method "gicp" (expected one of icp, fgr, rgm, auto, scene)'),
         ({"method": "fgr", "passes": 1}, "apply to the rgm, auto and scene methods only"),
         ({"preset": "tiny"}, "the built-in model has its own"),
         ({"passes": 0}, "passes must be at least 1, got 0"),
