@@ -51,8 +51,11 @@ enum Node {
 pub struct KnnIndex {
     /// Tree nodes, root first; empty for an empty point set.
     nodes: Vec<Node>,
-    /// The points in tree order, each with its index in the caller's slice. // (N,)
-    points: Vec<([f64; 3], u32)>,
+    /// The points' coordinates in tree order, one array per axis, so that a leaf's squared
+    /// distances are computed side by side. // (3, N)
+    xyz: [Vec<f64>; 3],
+    /// Each point's index in the caller's slice, in tree order. // (N,)
+    ids: Vec<u32>,
 }
 
 /// What [`KnnIndex::new`] calls with the points of every index it builds, once set.
@@ -76,20 +79,27 @@ impl KnnIndex {
         if !tree_points.is_empty() {
             build(&mut nodes, &mut tree_points, 0, SIDE_BY_SIDE_POINTS);
         }
+        let mut xyz = [(); 3].map(|_| Vec::with_capacity(tree_points.len()));
+        for (p, _) in &tree_points {
+            for (axis, coords) in xyz.iter_mut().enumerate() {
+                coords.push(p[axis]);
+            }
+        }
         Self {
             nodes,
-            points: tree_points,
+            xyz,
+            ids: tree_points.iter().map(|&(_, i)| i).collect(),
         }
     }
 
     /// Number of indexed points.
     pub fn len(&self) -> usize {
-        self.points.len()
+        self.ids.len()
     }
 
     /// True when the index holds no point.
     pub fn is_empty(&self) -> bool {
-        self.points.is_empty()
+        self.ids.is_empty()
     }
 
     /// The nearest point to `query`: (index, distance); the lowest index among equally near
@@ -220,19 +230,35 @@ impl KnnIndex {
     ) {
         match self.nodes[node] {
             Node::Leaf { start, end } => {
-                for (p, i) in &self.points[start as usize..end as usize] {
-                    found.offer((*i as usize, squared_distance(p, q)));
-                    #[cfg(test)]
-                    OFFERS.with(|n| n.set(n.get() + 1));
+                let (start, end) = (start as usize, end as usize);
+                let mut d2 = [0.0; LEAF_SIZE];
+                leaf_squared_distances(
+                    [
+                        &self.xyz[0][start..end],
+                        &self.xyz[1][start..end],
+                        &self.xyz[2][start..end],
+                    ],
+                    q,
+                    &mut d2,
+                );
+                // Only candidates the search could take are offered (the answer is the same:
+                // every other one would be turned away).
+                for (&i, &d2) in self.ids[start..end].iter().zip(&d2) {
+                    if d2 <= found.limit() {
+                        found.offer((i as usize, d2));
+                        #[cfg(test)]
+                        OFFERS.with(|n| n.set(n.get() + 1));
+                    }
                 }
             }
             Node::Same { start, end } => {
-                let same = &self.points[start as usize..end as usize];
-                let d2 = squared_distance(&same[0].0, q);
-                for (_, i) in same {
+                let (start, end) = (start as usize, end as usize);
+                let p = [self.xyz[0][start], self.xyz[1][start], self.xyz[2][start]];
+                let d2 = squared_distance(&p, q);
+                for &i in &self.ids[start..end] {
                     #[cfg(test)]
                     OFFERS.with(|n| n.set(n.get() + 1));
-                    if !found.offer((*i as usize, d2)) {
+                    if !found.offer((i as usize, d2)) {
                         break;
                     }
                 }
@@ -338,6 +364,8 @@ trait Found {
     /// would be every candidate at the same distance with a larger index.
     fn offer(&mut self, candidate: (usize, f64)) -> bool;
     fn may_improve(&self, cell_d2: f64) -> bool;
+    /// A squared distance above which every candidate would be turned away.
+    fn limit(&self) -> f64;
 }
 
 /// The single first point by (distance, index).
@@ -356,6 +384,10 @@ impl Found for Nearest {
     fn may_improve(&self, cell_d2: f64) -> bool {
         // `<=`: a point as far as the current best may still win on its index.
         cell_d2 <= self.0 .1
+    }
+    #[inline]
+    fn limit(&self) -> f64 {
+        self.0 .1
     }
 }
 
@@ -415,6 +447,10 @@ impl Found for Best<'_> {
         // `<=`: a point as far as the bound may still come before it on its index.
         cell_d2 < self.r2 && cell_d2 <= self.bound.1
     }
+    #[inline]
+    fn limit(&self) -> f64 {
+        self.r2.min(self.bound.1)
+    }
 }
 
 /// Every point with squared distance below `r2`, unsorted.
@@ -435,6 +471,10 @@ impl Found for Within<'_> {
     #[inline]
     fn may_improve(&self, cell_d2: f64) -> bool {
         cell_d2 < self.r2
+    }
+    #[inline]
+    fn limit(&self) -> f64 {
+        self.r2
     }
 }
 
@@ -556,6 +596,19 @@ thread_local! {
 fn squared_distance(p: &[f64; 3], q: &[f64; 3]) -> f64 {
     let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
     d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+}
+
+/// `out[k]` = [`squared_distance`] from `q` to point k of a leaf given as its x, y and z (each
+/// of one length, at most [`LEAF_SIZE`]): the same sums, laid out so the compiler computes
+/// several points at once.
+#[inline]
+fn leaf_squared_distances(xyz: [&[f64]; 3], q: &[f64; 3], out: &mut [f64; LEAF_SIZE]) {
+    let n = xyz[0].len();
+    let (x, y, z) = (&xyz[0][..n], &xyz[1][..n], &xyz[2][..n]);
+    for (k, d2) in out[..n].iter_mut().enumerate() {
+        let d = [x[k] - q[0], y[k] - q[1], z[k] - q[2]];
+        *d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+    }
 }
 
 /// The order of results: by distance, ties by index.

@@ -20,7 +20,14 @@ fn subtrees_built_side_by_side_make_the_same_tree() {
         .build()
         .unwrap();
     let index = pool.install(|| KnnIndex::new(&cloud));
-    assert_eq!((format!("{:?}", index.nodes), index.points), one_by_one());
+    let (nodes, points) = one_by_one();
+    assert_eq!(format!("{:?}", index.nodes), nodes);
+    let ids: Vec<u32> = points.iter().map(|&(_, i)| i).collect();
+    assert_eq!(index.ids, ids);
+    for axis in 0..3 {
+        let coords: Vec<f64> = points.iter().map(|(p, _)| p[axis]).collect();
+        assert_eq!(index.xyz[axis], coords);
+    }
 }
 
 /// Every point with its distance to `q`, sorted by distance then index.
