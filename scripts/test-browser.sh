@@ -9,10 +9,12 @@
 #   bash scripts/test-browser.sh a.html b.html   # these pages instead
 #   SCREENSHOT=docs/figures/viewer.png bash scripts/test-browser.sh   # also keep the screenshot
 #
+# With no pages given it also tests the page of `rgm merge` (the model, a colour per scan) of
+# a clean pair of the same shape (or of the synthetic pair).
 # The `rgm` binary: $RGM_BIN, else target/debug/rgm (`cargo test --workspace` builds it), else
 # target/release/rgm. The ModelNet40 data: $RGM_DATA, else ../shared/data/modelnet40_npy1024;
 # without it the page is of a synthetic pair (a helix and its turned copy).
-# CI time: about 5 s a page on 2 cores; one page in CI.
+# CI time: about 5 s a page on 2 cores; two pages in CI.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -35,6 +37,10 @@ if [ ${#pages[@]} -eq 0 ]; then
     "$rgm" pairs --setting partial --limit 1 --data "$data" --out "$work/pair" >/dev/null
     source_cloud=$work/pair/0000_source.ply
     target_cloud=$work/pair/0000_target.ply
+    # A clean pair (the whole shape twice) for `rgm merge`, which would rightly doubt the
+    # partial one.
+    "$rgm" pairs --setting clean --limit 1 --data "$data" --out "$work/clean" >/dev/null
+    scans=("$work/clean/0000_source.ply" "$work/clean/0000_target.ply")
   else
     echo "test-browser: no ModelNet40 data at $data; a synthetic pair instead"
     python3 - "$work" <<'EOF'
@@ -51,12 +57,17 @@ for name, turn in (("source", 0.4), ("target", 0.0)):
 EOF
     source_cloud=$work/source.xyz
     target_cloud=$work/target.xyz
+    scans=("$source_cloud" "$target_cloud")
   fi
   # The default method, as users run it: its transform, candidates and colouring.
   "$rgm" register "$source_cloud" "$target_cloud" --html "$work/page.html" >/dev/null ||
     echo "test-browser: the pair was reported as not registered; its page is tested all the same"
   [ -s "$work/page.html" ] || { echo "test-browser: rgm wrote no page" >&2; exit 1; }
-  pages=("$work/page.html")
+  # Two clouds merged as two scans: the model page (one colour per scan) of `rgm merge`.
+  "$rgm" merge "${scans[@]}" --out "$work/merged" >/dev/null 2>&1 ||
+    { echo "test-browser: rgm merge placed neither scan" >&2; exit 1; }
+  [ -s "$work/merged/model.html" ] || { echo "test-browser: rgm merge wrote no page" >&2; exit 1; }
+  pages=("$work/page.html" "$work/merged/model.html")
 fi
 
 # Headless Chromium with WebGL on SwiftShader; a fixed window, so that screenshots compare.

@@ -89,8 +89,9 @@ enum Command {
     /// used or why not}), DIR/poses.conf (Stanford's `bmesh NAME tx ty tz qx qy qz qw` lines of
     /// the largest component, p_model = R(q)ᵀ·p + t) and DIR/model.ply (the largest
     /// component's scans in one frame, one point per --voxel cube, a `scan` property giving
-    /// each point's scan by its place in the list). Fails when no pair of the scans could be
-    /// registered (the files written first).
+    /// each point's scan by its place in the list) and DIR/model.html (that model in the
+    /// browser, a colour per scan, toggled to the scans as given). Fails when no pair of the
+    /// scans could be registered (the files written first).
     Merge(commands::merge::Args),
 }
 

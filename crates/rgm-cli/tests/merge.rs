@@ -150,6 +150,17 @@ fn scans_are_placed_as_the_truth_and_strangers_are_left_unplaced() {
         serde_json::json!([true, true, true, false, false])
     );
     assert_eq!(summary["component"][3], serde_json::Value::Null);
+    // model.html: every scan named, the two strangers with no point in the model.
+    let page = std::fs::read_to_string(out.join("model.html")).unwrap();
+    let start = page.find(r#"type="application/json">"#).unwrap() + 24;
+    let end = start + page[start..].find("</script>").unwrap();
+    let data: serde_json::Value = serde_json::from_str(&page[start..end]).unwrap();
+    let in_model: Vec<u64> = (0..5)
+        .map(|s| data["model"]["scans"][s]["inModel"].as_u64().unwrap())
+        .collect();
+    assert!(in_model[..3].iter().all(|&n| n > 1000), "{in_model:?}");
+    assert_eq!(in_model[3..], [0, 0]);
+    assert_eq!(data["model"]["scans"][3]["name"], files[3].display().to_string());
     for k in 0..3 {
         let off = three[k].unwrap().inverse().compose(&five[k].unwrap());
         assert!(

@@ -297,30 +297,35 @@ impl Page<'_> {
                 "target": base64(&frame.f32_bytes(&line_target)),
             },
         });
-        // No `<` in the data: the HTML parser would read `</script` as the end of its element
-        // and `<!--` followed by `<script` as the start of its double-escaped state, which
-        // swallows the viewer's script. JSON has `<` only inside strings, where `\u003c` is
-        // the same character.
-        let data = data.to_string().replace('<', "\\u003c");
-        let (head, rest) = TEMPLATE
-            .split_once("/*DATA*/")
-            .expect("the template marks its data");
-        let (middle, tail) = rest
-            .split_once("/*VIEWER*/")
-            .expect("the template marks its viewer");
-        Ok([head, &data, middle, VIEWER, tail].concat())
+        Ok(page_with(&data))
     }
 }
 
+/// The viewer's page with `data` in it.
+pub(crate) fn page_with(data: &serde_json::Value) -> String {
+    // No `<` in the data: the HTML parser would read `</script` as the end of its element
+    // and `<!--` followed by `<script` as the start of its double-escaped state, which
+    // swallows the viewer's script. JSON has `<` only inside strings, where `\u003c` is
+    // the same character.
+    let data = data.to_string().replace('<', "\\u003c");
+    let (head, rest) = TEMPLATE
+        .split_once("/*DATA*/")
+        .expect("the template marks its data");
+    let (middle, tail) = rest
+        .split_once("/*VIEWER*/")
+        .expect("the template marks its viewer");
+    [head, &data, middle, VIEWER, tail].concat()
+}
+
 /// The page's coordinates: `p' = (p − centre) / scale`.
-struct PageFrame {
+pub(crate) struct PageFrame {
     centre: Vector3<f64>,
     scale: f64,
 }
 
 impl PageFrame {
     /// Centred on the middle of the box holding every cloud, scaled so that its largest side is 2.
-    fn of(clouds: &[&PointCloud]) -> Self {
+    pub(crate) fn of(clouds: &[&PointCloud]) -> Self {
         let (lo, hi) =
             rgm_geom::cloud::bounds(clouds.iter().flat_map(|c| c.points.iter().copied()));
         let side = (hi - lo).max();
@@ -331,7 +336,7 @@ impl PageFrame {
     }
 
     /// The points of `cloud` in this frame as little-endian f32 bytes. // (N, 3) f32
-    fn f32_bytes(&self, cloud: &PointCloud) -> Vec<u8> {
+    pub(crate) fn f32_bytes(&self, cloud: &PointCloud) -> Vec<u8> {
         cloud
             .points
             .iter()
@@ -360,7 +365,7 @@ impl PageFrame {
 }
 
 /// Standard base64 (RFC 4648, with `=` padding), as the browser's `atob` reads it.
-fn base64(bytes: &[u8]) -> String {
+pub(crate) fn base64(bytes: &[u8]) -> String {
     const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
     for chunk in bytes.chunks(3) {
@@ -382,7 +387,7 @@ fn base64(bytes: &[u8]) -> String {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use rgm_geom::{Matrix3, Point3};
 
@@ -394,7 +399,7 @@ mod tests {
     };
 
     /// Standard base64 back to bytes (what the page's `atob` does).
-    fn unbase64(text: &str) -> Vec<u8> {
+    pub(crate) fn unbase64(text: &str) -> Vec<u8> {
         let value = |c: u8| match c {
             b'A'..=b'Z' => c - b'A',
             b'a'..=b'z' => c - b'a' + 26,
@@ -418,7 +423,7 @@ mod tests {
     }
 
     /// The f32 rows of a base64 field. // (N, 3)
-    fn points_of(field: &serde_json::Value) -> Vec<[f32; 3]> {
+    pub(crate) fn points_of(field: &serde_json::Value) -> Vec<[f32; 3]> {
         let bytes = unbase64(field.as_str().unwrap());
         assert_eq!(bytes.len() % 12, 0);
         bytes
@@ -441,7 +446,7 @@ mod tests {
     }
 
     /// The JSON data a page carries.
-    fn data_of(html: &str) -> serde_json::Value {
+    pub(crate) fn data_of(html: &str) -> serde_json::Value {
         serde_json::from_str(data_text(html)).unwrap()
     }
 

@@ -6,7 +6,8 @@
 //!
 //! - [`html`]: the same registration as one self-contained HTML page that turns in a browser
 //!   (WebGL, rgm's own small renderer), with the source coloured by its distance to the target
-//!   and the result's candidates.
+//!   and the result's candidates;
+//! - [`model`]: many scans merged into one frame as such a page, each point coloured by its scan.
 //!
 //! Layering rule: builds on rgm-geom (clouds, transforms, kNN, the unit-sphere frame),
 //! rgm-registration (the [`rgm_registration::Registration`] a page describes, the scores and
@@ -17,6 +18,7 @@
 use std::path::{Path, PathBuf};
 
 pub mod html;
+pub mod model;
 
 use rgm_data::Correspondence;
 use rgm_geom::{Point3, PointCloud, RigidTransform, Vector3};

@@ -21,7 +21,8 @@ pub struct Args {
     /// gzip-compressed too).
     #[arg(required = true, num_args = 2.., value_name = "SCAN")]
     scans: Vec<PathBuf>,
-    /// The folder to write poses.json, poses.conf and model.ply into (made if missing).
+    /// The folder to write poses.json, poses.conf, model.ply and model.html into (made if
+    /// missing).
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
     /// model.ply keeps one point per cube of this side (the scans' units) [default: the largest
@@ -88,7 +89,8 @@ pub fn run(args: Args) -> Result<()> {
     let config = args.merge.config()?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot make the folder {}", args.out.display()))?;
-    let outputs = ["poses.json", "poses.conf", "model.ply"].map(|name| args.out.join(name));
+    let outputs =
+        ["poses.json", "poses.conf", "model.ply", "model.html"].map(|name| args.out.join(name));
     for path in &outputs {
         crate::files::check_writable(path)?;
     }
@@ -110,6 +112,25 @@ pub fn run(args: Args) -> Result<()> {
         rgm_data::io::ply::write_labelled(out, &model, Some(("scan", &labels)))
     })
     .with_context(|| format!("writing {}", outputs[2].display()))?;
+    if !model.is_empty() {
+        let page = rgm_viz::model::ModelPage {
+            title: format!("{} scans merged", scans.len()),
+            scans: args
+                .scans
+                .iter()
+                .map(|p| p.display().to_string())
+                .zip(&scans)
+                .collect(),
+            model: &model,
+            labels: &labels,
+            point_budget: rgm_viz::html::DEFAULT_POINT_BUDGET,
+        };
+        crate::files::write_text(&outputs[3], &page.to_html()?)?;
+    } else if outputs[3].exists() {
+        // No model, so no page of it: an earlier run's would tell of scans this run did not place.
+        std::fs::remove_file(&outputs[3])
+            .with_context(|| format!("removing the old {}", outputs[3].display()))?;
+    }
     anyhow::ensure!(
         !merged.references.is_empty(),
         "no pair of the scans was registered, so none is placed ({} says why each pair was \

@@ -1,6 +1,8 @@
 // rgm's viewer of a registration: WebGL 1, no library. The data (rgm-viz's html.rs) is one JSON
 // object whose point arrays are base64 of little-endian f32 (x, y, z) rows in the page's frame
 // (centred, within [-1, 1]); `after` moves the source into the target's frame.
+// A page of many scans merged (rgm-viz's model.rs, `data.model`) shows the merged model with
+// each point coloured by its scan, and toggles to the scans as given (`#before` opens there).
 // With `#selftest` in the URL it draws both states, compares them and writes a verdict into
 // #selftest, for scripts/test-browser.sh; `#before` opens it on the clouds before the transform.
 "use strict";
@@ -18,7 +20,7 @@
   };
   var BACKGROUND = [1, 1, 1];
   // Kinds of vertex: which colour it takes and whether `after` moves it.
-  var KIND = { outlier: 0, inlier: 1, target: 2, lineSource: 3, lineTarget: 4 };
+  var KIND = { outlier: 0, inlier: 1, target: 2, lineSource: 3, lineTarget: 4, scan: 5 };
 
   function bytesOf(b64) {
     var text = atob(b64);
@@ -34,12 +36,28 @@
     return new Float32Array(bytes.buffer, 0, bytes.length / 4); // (N, 3)
   }
 
-  var sourceXyz = floatsOf(data.source.xyz); // (n, 3)
-  var targetXyz = floatsOf(data.target.xyz); // (m, 3)
-  var inlier = bytesOf(data.inlier); // (n,)
-  var lineSource = floatsOf(data.correspondences.source); // (k, 3)
-  var lineTarget = floatsOf(data.correspondences.target); // (k, 3)
+  function scansOf(b64) {
+    var bytes = bytesOf(b64);
+    return new Uint16Array(bytes.buffer, 0, bytes.length / 2); // (N,)
+  }
+  var model = data.model || null;
+  // A model page: the scans as given in the source's place, the merged model in the target's
+  // (the view centres on it); nothing moves by `after`.
+  var sourceXyz = floatsOf(model ? model.given.xyz : data.source.xyz); // (n, 3)
+  var targetXyz = floatsOf(model ? model.xyz : data.target.xyz); // (m, 3)
+  var inlier = model ? new Uint8Array(0) : bytesOf(data.inlier); // (n,)
+  var lineSource = model ? new Float32Array(0) : floatsOf(data.correspondences.source); // (k, 3)
+  var lineTarget = model ? new Float32Array(0) : floatsOf(data.correspondences.target); // (k, 3)
   var n = sourceXyz.length / 3, m = targetXyz.length / 3, k = lineSource.length / 3;
+  // A scan's colour: hues a golden angle apart, so that neighbours in the list differ.
+  function scanColour(s) {
+    var h = (s * 0.6180339887) % 1, sat = 0.75, v = 0.85;
+    var f = function (o) {
+      var c = (o + h * 6) % 6;
+      return v - v * sat * Math.max(0, Math.min(c, 4 - c, 1));
+    };
+    return [f(5), f(3), f(1)];
+  }
 
   // ---- the panel ----
   function el(tag, text, cls) {
@@ -53,56 +71,89 @@
   document.title = "rgm: " + data.title;
   document.getElementById("title").textContent = data.title;
   var info = document.getElementById("info");
-  var status = el("div", data.doubt ? "not registered: " + data.doubt : "registered by " + data.method,
-    data.doubt ? "bad" : "");
-  info.appendChild(status);
-  var matrix = el("table", undefined, "matrix");
-  data.transform.forEach(function (row) {
-    var tr = el("tr");
-    row.forEach(function (x) { tr.appendChild(el("td", x.toFixed(6))); });
-    matrix.appendChild(tr);
-  });
-  info.appendChild(el("div", "transform target ← source (y = R x + t):", "note"));
-  info.appendChild(matrix);
-  if (data.fitness !== null) {
-    info.appendChild(el("div", "fitness " + fmt(data.fitness, 4) + ", inlier RMSE " +
-      fmt(data.inlierRmse, 6) + ", time " + fmt(data.timeMs, 1) + " ms", "note"));
-  }
-  if (data.candidates.length > 0) {
+  function modelPanel() {
+    var placed = model.scans.filter(function (scan) { return scan.inModel > 0; }).length;
+    info.appendChild(el("div", placed + " of " + model.scans.length + " scans in the model",
+      placed < model.scans.length ? "bad" : ""));
     var table = el("table");
     var head = el("tr");
-    ["candidate", "score", "ms", "taken"].forEach(function (h) { head.appendChild(el("th", h)); });
+    ["scan", "points", "in the model"].forEach(function (h) { head.appendChild(el("th", h)); });
     table.appendChild(head);
-    data.candidates.forEach(function (c) {
+    model.scans.forEach(function (scan, s) {
       var tr = el("tr");
-      tr.appendChild(el("td", c.method));
-      tr.appendChild(el("td", c.failure ? "failed" : fmt(c.score, 4)));
-      tr.appendChild(el("td", fmt(c.timeMs, 1)));
-      tr.appendChild(el("td", c.chosen ? "✓" : ""));
-      if (c.failure) tr.title = c.failure;
+      var name = el("td");
+      var dot = el("span", "", "swatch");
+      dot.style.background = "rgb(" + scanColour(s).map(function (x) { return Math.round(255 * x); }).join(",") + ")";
+      name.appendChild(dot);
+      // The file's name, its whole path on hover.
+      name.appendChild(document.createTextNode(scan.name.split(/[\\/]/).pop()));
+      name.title = scan.name;
+      tr.appendChild(name);
+      tr.appendChild(el("td", count(scan.points)));
+      tr.appendChild(el("td", scan.inModel > 0 ? count(scan.inModel) : "not placed"));
       table.appendChild(tr);
     });
     info.appendChild(table);
+    info.appendChild(el("div", "points shown: the model " + count(model.shown) + " of " +
+      count(model.points) + ", the scans as given " + count(model.given.shown) +
+      " (thinned by a fixed stride to the page's budget of " + count(data.budget) + " points).", "note"));
   }
-  var within = 0;
-  for (var i = 0; i < n; i++) within += inlier[i];
-  info.appendChild(el("div", "source points within " + data.inlierDistance.toPrecision(4) +
-    " of the target after the transform: " + count(within) + " of " + count(n) + " shown (" +
-    fmt(100 * within / Math.max(n, 1), 1) + " %); the distance is " + data.inlierWhy + ".", "note"));
-  var thinned = data.source.shown < data.source.points || data.target.shown < data.target.points;
-  info.appendChild(el("div", "points shown: source " + count(data.source.shown) + " of " +
-    count(data.source.points) + ", target " + count(data.target.shown) + " of " +
-    count(data.target.points) + (thinned ? " — thinned by a fixed stride to the page's budget of " +
-    count(data.budget) + " points (rgm: --html-points)" : " (all)") + ".", "note"));
-  var c = data.correspondences;
-  info.appendChild(el("div", "correspondences: " + (c.total > 0 ? c.note + ", " + count(c.shown) +
-    " of " + count(c.total) + " drawn" : c.note) + ".", "note"));
-
+  function pairPanel() {
+    var status = el("div", data.doubt ? "not registered: " + data.doubt : "registered by " + data.method,
+      data.doubt ? "bad" : "");
+    info.appendChild(status);
+    var matrix = el("table", undefined, "matrix");
+    data.transform.forEach(function (row) {
+      var tr = el("tr");
+      row.forEach(function (x) { tr.appendChild(el("td", x.toFixed(6))); });
+      matrix.appendChild(tr);
+    });
+    info.appendChild(el("div", "transform target ← source (y = R x + t):", "note"));
+    info.appendChild(matrix);
+    if (data.fitness !== null) {
+      info.appendChild(el("div", "fitness " + fmt(data.fitness, 4) + ", inlier RMSE " +
+        fmt(data.inlierRmse, 6) + ", time " + fmt(data.timeMs, 1) + " ms", "note"));
+    }
+    if (data.candidates.length > 0) {
+      var table = el("table");
+      var head = el("tr");
+      ["candidate", "score", "ms", "taken"].forEach(function (h) { head.appendChild(el("th", h)); });
+      table.appendChild(head);
+      data.candidates.forEach(function (c) {
+        var tr = el("tr");
+        tr.appendChild(el("td", c.method));
+        tr.appendChild(el("td", c.failure ? "failed" : fmt(c.score, 4)));
+        tr.appendChild(el("td", fmt(c.timeMs, 1)));
+        tr.appendChild(el("td", c.chosen ? "✓" : ""));
+        if (c.failure) tr.title = c.failure;
+        table.appendChild(tr);
+      });
+      info.appendChild(table);
+    }
+    var within = 0;
+    for (var i = 0; i < n; i++) within += inlier[i];
+    info.appendChild(el("div", "source points within " + data.inlierDistance.toPrecision(4) +
+      " of the target after the transform: " + count(within) + " of " + count(n) + " shown (" +
+      fmt(100 * within / Math.max(n, 1), 1) + " %); the distance is " + data.inlierWhy + ".", "note"));
+    var thinned = data.source.shown < data.source.points || data.target.shown < data.target.points;
+    info.appendChild(el("div", "points shown: source " + count(data.source.shown) + " of " +
+      count(data.source.points) + ", target " + count(data.target.shown) + " of " +
+      count(data.target.points) + (thinned ? " — thinned by a fixed stride to the page's budget of " +
+      count(data.budget) + " points (rgm: --html-points)" : " (all)") + ".", "note"));
+    var c = data.correspondences;
+    info.appendChild(el("div", "correspondences: " + (c.total > 0 ? c.note + ", " + count(c.shown) +
+      " of " + count(c.total) + " drawn" : c.note) + ".", "note"));
+  }
+  if (model) modelPanel(); else pairPanel();
   var toggle = document.getElementById("toggle");
   var colourBox = document.getElementById("colour");
   var linesBox = document.getElementById("lines");
   var sizeSlider = document.getElementById("size");
   linesBox.disabled = k === 0;
+  if (model) {
+    colourBox.parentNode.hidden = true;
+    linesBox.parentNode.hidden = true;
+  }
   var legend = document.getElementById("legend");
   function swatch(colour, text) {
     var s = el("span", "", "swatch");
@@ -119,6 +170,7 @@
   var VERTEX = [
     "attribute vec3 position;",
     "attribute float kind;",
+    "attribute vec3 paint;",
     "uniform mat4 viewProjection;",
     "uniform mat4 after;",
     "uniform float pointSize;",
@@ -133,7 +185,8 @@
     "  if (kind < 0.5) colour = mix(sourceColour, outlierColour, byDistance);",
     "  else if (kind < 1.5) colour = mix(sourceColour, inlierColour, byDistance);",
     "  else if (kind < 2.5) colour = targetColour;",
-    "  else colour = lineColour;",
+    "  else if (kind < 4.5) colour = lineColour;",
+    "  else colour = paint;",
     "}",
   ].join("\n");
   var FRAGMENT = [
@@ -155,6 +208,9 @@
   var program = gl.createProgram();
   gl.attachShader(program, shader(gl.VERTEX_SHADER, VERTEX));
   gl.attachShader(program, shader(gl.FRAGMENT_SHADER, FRAGMENT));
+  // `position` at location 0, always an array: some drivers draw nothing when attribute 0 is
+  // not one (a pair page leaves `paint` off).
+  gl.bindAttribLocation(program, 0, "position");
   gl.linkProgram(program);
   if (!gl.getProgramParameter(program, gl.LINK_STATUS)) throw new Error("link: " + gl.getProgramInfoLog(program));
   gl.useProgram(program);
@@ -165,14 +221,16 @@
   });
   var positionAttribute = gl.getAttribLocation(program, "position");
   var kindAttribute = gl.getAttribLocation(program, "kind");
+  var paintAttribute = gl.getAttribLocation(program, "paint");
   gl.uniform3fv(uniform.sourceColour, COLOURS.source);
   gl.uniform3fv(uniform.inlierColour, COLOURS.inlier);
   gl.uniform3fv(uniform.outlierColour, COLOURS.outlier);
   gl.uniform3fv(uniform.targetColour, COLOURS.target);
   gl.uniform3fv(uniform.lineColour, COLOURS.line);
 
-  // One buffer pair (positions, kinds) per draw: the clouds, then the lines.
-  function buffers(parts) {
+  // One buffer pair (positions, kinds) per draw: the clouds, then the lines; a model's clouds
+  // also carry each point's colour (`paint`, by its scan).
+  function buffers(parts, scans) {
     var total = 0;
     parts.forEach(function (p) { total += p.xyz.length / 3; });
     var xyz = new Float32Array(3 * total); // (total, 3)
@@ -189,12 +247,23 @@
     var kind = gl.createBuffer();
     gl.bindBuffer(gl.ARRAY_BUFFER, kind);
     gl.bufferData(gl.ARRAY_BUFFER, kinds, gl.STATIC_DRAW);
-    return { position: position, kind: kind, count: total };
+    var paint = null;
+    if (scans) {
+      var colours = new Float32Array(3 * total); // (total, 3)
+      for (var v = 0; v < total; v++) colours.set(scanColour(scans[v]), 3 * v);
+      paint = gl.createBuffer();
+      gl.bindBuffer(gl.ARRAY_BUFFER, paint);
+      gl.bufferData(gl.ARRAY_BUFFER, colours, gl.STATIC_DRAW);
+    }
+    return { position: position, kind: kind, paint: paint, count: total };
   }
-  var clouds = buffers([
+  var scanKind = function () { return KIND.scan; };
+  // A model's two states are two clouds: the merged model and the scans as given.
+  var clouds = model ? buffers([{ xyz: targetXyz, kind: scanKind }], scansOf(model.scan)) : buffers([
     { xyz: sourceXyz, kind: function (i) { return inlier[i] ? KIND.inlier : KIND.outlier; } },
     { xyz: targetXyz, kind: function () { return KIND.target; } },
   ]);
+  var given = model ? buffers([{ xyz: sourceXyz, kind: scanKind }], scansOf(model.given.scan)) : null;
   // Lines as (source end, target end) vertex pairs.
   var lineXyz = new Float32Array(6 * k); // (k, 2, 3)
   for (var l = 0; l < k; l++) {
@@ -211,6 +280,14 @@
     gl.bindBuffer(gl.ARRAY_BUFFER, b.kind);
     gl.enableVertexAttribArray(kindAttribute);
     gl.vertexAttribPointer(kindAttribute, 1, gl.FLOAT, false, 0, 0);
+    if (paintAttribute < 0) return; // compiled out where no vertex reads it
+    if (b.paint) {
+      gl.bindBuffer(gl.ARRAY_BUFFER, b.paint);
+      gl.enableVertexAttribArray(paintAttribute);
+      gl.vertexAttribPointer(paintAttribute, 3, gl.FLOAT, false, 0, 0);
+    } else {
+      gl.disableVertexAttribArray(paintAttribute);
+    }
   }
 
   // ---- the camera: orbiting `centre` at `distance`, z up ----
@@ -226,7 +303,7 @@
   var home = [0, 1, 2].map(function (axis) {
     return median(targetXyz.filter(function (_, i) { return i % 3 === axis; }));
   });
-  var A = data.after;
+  var A = model ? IDENTITY : data.after;
   var norms = new Float32Array(m + 2 * n); // (m + 2n,) distances from `home`
   var away = function (x, y, z) { return Math.hypot(x - home[0], y - home[1], z - home[2]); };
   for (var t = 0; t < m; t++) norms[t] = away(targetXyz[3 * t], targetXyz[3 * t + 1], targetXyz[3 * t + 2]);
@@ -290,12 +367,13 @@
     gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
     gl.enable(gl.DEPTH_TEST);
     gl.uniformMatrix4fv(uniform.viewProjection, false, viewProjection());
-    gl.uniformMatrix4fv(uniform.after, false, state.after ? data.after : IDENTITY);
+    gl.uniformMatrix4fv(uniform.after, false, state.after ? A : IDENTITY);
     gl.uniform1f(uniform.pointSize, Number(sizeSlider.value) * (window.devicePixelRatio || 1));
     gl.uniform1f(uniform.byDistance, state.after && colourBox.checked ? 1 : 0);
     gl.uniform1f(uniform.round, 1);
-    bind(clouds);
-    gl.drawArrays(gl.POINTS, 0, clouds.count);
+    var drawn = model && !state.after ? given : clouds;
+    bind(drawn);
+    gl.drawArrays(gl.POINTS, 0, drawn.count);
     if (linesBox.checked && k > 0) {
       gl.uniform1f(uniform.round, 0);
       bind(lines);
@@ -310,8 +388,14 @@
   }
 
   function showState() {
-    toggle.textContent = state.after ? "after ▸ show before" : "before ▸ show after";
     legend.textContent = "";
+    if (model) {
+      toggle.textContent = state.after ? "merged ▸ show as given" : "as given ▸ show merged";
+      legend.appendChild(document.createTextNode(state.after ? "the merged model, a colour per scan" :
+        "each scan in its own frame, as given"));
+      return;
+    }
+    toggle.textContent = state.after ? "after ▸ show before" : "before ▸ show after";
     if (state.after && colourBox.checked) {
       swatch(COLOURS.inlier, "source within " + data.inlierDistance.toPrecision(3));
       swatch(COLOURS.outlier, "source farther");
