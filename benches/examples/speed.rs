@@ -15,6 +15,10 @@
 //! `--weights` (the cost does not depend on them, except through how many correspondences the
 //! assignment sees).
 //!
+//! `product_gflop` is the FLOPs of the matrix products of one run (2 a multiply-add, as
+//! `rgm_nn::gemm::multiply_adds` counts them) and `product_gflop_per_s` that over the median
+//! time: the achieved rate to hold against the processor's peak (`benches/benches/gemm.rs`).
+//!
 //! `tools/speed/run.sh` runs every configuration of `docs/speed.md`.
 
 use std::time::Instant;
@@ -104,6 +108,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut stages = Vec::new();
     let mut correspondences = 0;
     let mut gradients = "null".to_string();
+    let counted_before = rgm_nn::gemm::multiply_adds();
     match what.as_str() {
         "forward" | "train" => {
             let (x, y) = (rows(&source), rows(&target));
@@ -139,6 +144,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         other => return Err(format!("--what {other:?}: forward, train or procedure").into()),
     }
+    // Every run computes the same products: their FLOPs (2 a multiply-add) per run.
+    let product_gflop = 2.0 * (rgm_nn::gemm::multiply_adds() - counted_before) as f64
+        / seconds.len() as f64
+        / 1e9;
     seconds.remove(0); // warm-up: buffers allocated, pages touched
     let stage_share = match stages.get(1..) {
         Some(s) if !s.is_empty() => {
@@ -157,7 +166,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let text = |v: Option<String>| v.map_or("null".to_string(), |v| format!("{v:?}"));
     let line = format!(
-        r#"{{"implementation": "rgm", "preset": {:?}, "what": {:?}, "points": {points}, "match_points": {}, "weights": {}, "reps": {reps}, "precision": "{precision}", "bf16_kernel": {:?}, "median_s": {:.4}, "seconds": {:?}, "vm_hwm_mib": {:.1}, "blas_threads": {}, "correspondences": {correspondences}, "gradient_fnv": {gradients}, "stage_share": {stage_share}}}"#,
+        r#"{{"implementation": "rgm", "preset": {:?}, "what": {:?}, "points": {points}, "match_points": {}, "weights": {}, "reps": {reps}, "precision": "{precision}", "bf16_kernel": {:?}, "median_s": {:.4}, "seconds": {:?}, "vm_hwm_mib": {:.1}, "blas_threads": {}, "correspondences": {correspondences}, "gradient_fnv": {gradients}, "stage_share": {stage_share}, "product_gflop": {product_gflop:.4}, "product_gflop_per_s": {:.2}}}"#,
         preset,
         what,
         text(match_points.map(|m| m.to_string())).replace('"', ""),
@@ -167,6 +176,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         seconds,
         vm_hwm_kib() as f64 / 1024.0,
         rgm_nn::threads::blas_threads(),
+        product_gflop / median(seconds.clone()),
     );
     println!("{line}");
     Ok(())

@@ -485,6 +485,7 @@ fn scaling_backward<T: Scalar>(
     }
     let mut r = Array2::<T>::zeros((n, m)); // (N, M)
     general_mat_mul(T::one(), &left, &right.t(), T::zero(), &mut r);
+    rgm_nn::gemm::count_multiply_adds(n, left.ncols(), m);
     Zip::from(&mut ds)
         .and(k)
         .and(&r)

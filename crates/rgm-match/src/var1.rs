@@ -5,6 +5,7 @@
 
 use crate::error::{check_shape, Result};
 use ndarray::linalg::general_mat_mul;
+use rgm_nn::gemm::count_multiply_adds;
 use ndarray::{ArrayView2, ArrayViewMut2, Axis, Zip};
 use rgm_nn::Scalar;
 
@@ -40,6 +41,7 @@ pub fn var1_forward<T: Scalar>(
     let y_sq = fy.map_axis(Axis(1), |r| r.dot(&r)); // (M)
                                                     // s = offset − ‖x‖² − ‖y‖² + 2·x·y
     general_mat_mul(T::from_f64(2.0), &fx, &fy.t(), T::zero(), &mut s);
+    count_multiply_adds(n, q, m);
     let offset = T::from_f64(cfg.offset);
     Zip::indexed(&mut s).for_each(|(i, j), s| *s += offset - x_sq[i] - y_sq[j]);
     Ok(())
@@ -68,6 +70,7 @@ pub fn var1_backward<T: Scalar>(
         .and(&w_rows)
         .for_each(|mut d, x, &c| d.scaled_add(-two * c, &x));
     general_mat_mul(two, &ds, &fy, T::one(), &mut dfx);
+    count_multiply_adds(n, m, q);
     // dF_Yj += Σ_i w_ij (F_Yj − F_Xi)
     let w_cols = ds.sum_axis(Axis(0)); // (M)
     Zip::from(dfy.rows_mut())
@@ -75,6 +78,7 @@ pub fn var1_backward<T: Scalar>(
         .and(&w_cols)
         .for_each(|mut d, y, &c| d.scaled_add(-two * c, &y));
     general_mat_mul(two, &ds.t(), &fx, T::one(), &mut dfy);
+    count_multiply_adds(m, n, q);
     Ok(())
 }
 

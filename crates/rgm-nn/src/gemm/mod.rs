@@ -56,6 +56,23 @@ use ndarray::{
     s, ArrayBase, ArrayView2, ArrayViewMut2, Axis, Data, DataMut, Ix2, ShapeBuilder, Zip,
 };
 use std::cell::RefCell;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Multiply-adds of the matrix products this process computed through [`mat_mul`] and
+/// [`mat_mul_then`], and of those [`count_multiply_adds`] was told of: what a training step's
+/// achieved FLOP/s is measured by (`benches/examples/speed.rs`; 2 FLOPs a multiply-add).
+static MULTIPLY_ADDS: AtomicU64 = AtomicU64::new(0);
+
+/// The multiply-adds of every matrix product so far (see [`MULTIPLY_ADDS`]).
+pub fn multiply_adds() -> u64 {
+    MULTIPLY_ADDS.load(Ordering::Relaxed)
+}
+
+/// Counts `m · k · n` multiply-adds of a product computed elsewhere (BLAS through ndarray), so
+/// that [`multiply_adds`] holds every product of a step.
+pub fn count_multiply_adds(m: usize, k: usize, n: usize) {
+    MULTIPLY_ADDS.fetch_add((m * k * n) as u64, Ordering::Relaxed);
+}
 
 /// `c = alpha · a · b + beta · c`, `a`: (M, K), `b`: (K, N), `c`: (M, N), in `compute`'s
 /// precision for f32 (f64 is always BLAS). `beta = 0` ignores what `c` held.
@@ -73,6 +90,7 @@ pub fn mat_mul<T, S1, S2, S3>(
     S2: Data<Elem = T>,
     S3: DataMut<Elem = T>,
 {
+    count_multiply_adds(a.nrows(), a.ncols(), b.ncols());
     T::mat_mul(alpha, a.view(), b.view(), beta, c.view_mut(), compute);
 }
 
@@ -92,6 +110,7 @@ pub fn mat_mul_then<T, S1, S2, S3>(
     S2: Data<Elem = T>,
     S3: DataMut<Elem = T>,
 {
+    count_multiply_adds(a.nrows(), a.ncols(), b.ncols());
     T::mat_mul_then(a.view(), b.view(), then, c.view_mut(), compute);
 }
 
