@@ -273,3 +273,66 @@ fn eval_multiway_scores_a_small_folder_against_its_conf() {
     assert_eq!(scored.len(), 3);
     assert!(scored.iter().all(|&deg| deg < 1.0), "{scored:?}");
 }
+
+#[test]
+fn eval_multiway_scores_a_scene_folder_against_its_gt_log() {
+    // Three bunny scans thinned to 2 mm as fragments in the 3DMatch layout, each in its own
+    // frame, with gt.log's relative poses made from the `.conf` ones (p_i = T p_j).
+    let dir = Scratch::new("cli-eval-multiway-scene");
+    let bunny = stanford("bunny");
+    let folder = dir.join("room");
+    std::fs::create_dir_all(&folder).unwrap();
+    let chosen = ["bun000.ply", "bun045.ply", "bun315.ply"];
+    let scans: Vec<_> = chosen
+        .iter()
+        .map(|name| bunny.scans.iter().find(|s| s.name == *name).unwrap())
+        .collect();
+    for (k, scan) in scans.iter().enumerate() {
+        let file = folder.join(format!("cloud_bin_{k}.ply"));
+        write_point_cloud(file, &scan.cloud.voxel_downsampled(0.002)).unwrap();
+    }
+    let mut log = String::new();
+    for (i, j) in [(0, 1), (0, 2), (1, 2)] {
+        let t = scans[i].pose.inverse().compose(&scans[j].pose);
+        log += &format!("{i} {j} 3\n");
+        for row in t.to_rows() {
+            log += &format!("{} {} {} {}\n", row[0], row[1], row[2], row[3]);
+        }
+    }
+    std::fs::write(folder.join("gt.log"), log).unwrap();
+    let json = dir.join("errors.json");
+    let out = rgm(&[
+        "eval",
+        "--multiway",
+        folder.to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // folder, fragments, placed, pairs, in one component, within 15° and 0.3, …
+    let row: Vec<&str> = stdout
+        .lines()
+        .find(|l| l.starts_with("room\t"))
+        .unwrap_or_else(|| panic!("{stdout}"))
+        .split('\t')
+        .collect();
+    assert_eq!(row[1..6], ["3", "3", "3", "3", "3"], "{stdout}");
+    let value: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let records = value["records"].as_array().unwrap();
+    let errors: Vec<(f64, f64)> = records
+        .iter()
+        .filter_map(|r| Some((r["rotation_deg"].as_f64()?, r["translation"].as_f64()?)))
+        .collect();
+    assert_eq!(errors.len(), 3);
+    // The bunny is 0.15 m across: far within 3DMatch's criterion, so held to 1° and 1 mm.
+    assert!(
+        errors.iter().all(|&(r, t)| r < 1.0 && t < 0.001),
+        "{errors:?}"
+    );
+}

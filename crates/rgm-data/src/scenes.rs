@@ -115,6 +115,22 @@ impl SceneFolder {
     }
 }
 
+impl SceneFolder {
+    /// The fragments its pairs name, each once, in the order `gt.log` first names them (its
+    /// target, then its source).
+    pub fn fragments(&self) -> Vec<PathBuf> {
+        let mut seen = Vec::new();
+        for pair in &self.pairs {
+            for file in [&pair.target, &pair.source] {
+                if !seen.contains(file) {
+                    seen.push(file.clone());
+                }
+            }
+        }
+        seen
+    }
+}
+
 impl ScenePair {
     /// The source's and the target's file names, for tables.
     pub fn names(&self) -> (String, String) {
@@ -155,10 +171,15 @@ impl LoadedScenePair {
     /// The errors of `found` (a `t_target_source`) as the 3DMatch benchmark measures them: the
     /// angle of `R_truthᵀ R` in degrees, and `‖t − t_truth‖` in the clouds' units (metres).
     pub fn errors(&self, found: &RigidTransform) -> (f64, f64) {
-        let truth = &self.t_target_source;
-        let rotation = truth.inverse().compose(found).rotation_angle_deg();
-        (rotation, (found.translation - truth.translation).norm())
+        transform_errors(&self.t_target_source, found)
     }
+}
+
+/// The errors of `found` against `truth` (both `t_target_source`) as the 3DMatch benchmark
+/// measures them: the angle of `R_truthᵀ R` in degrees, and `‖t − t_truth‖` in the clouds' units.
+pub fn transform_errors(truth: &RigidTransform, found: &RigidTransform) -> (f64, f64) {
+    let rotation = truth.inverse().compose(found).rotation_angle_deg();
+    (rotation, (found.translation - truth.translation).norm())
 }
 
 impl Turn {

@@ -47,7 +47,10 @@ pub struct Args {
     /// (the method defaults to `rgm merge`'s: scene, refined), and each scan scored after the one rigid
     /// motion that best maps the merge's frame onto the `.conf` poses' (Kabsch over the
     /// scans' points): its rotation error and the RMS displacement of its points as a share
-    /// of the object's diagonal, counted within 1° and 0.5 %; time.
+    /// of the object's diagonal, counted within 1° and 0.5 %; time. A folder in the 3DMatch
+    /// layout (as --scenes: a gt.log) has the fragments its gt.log names merged as they are
+    /// (each in its own frame), and each gt.log pair scored by the merge's pose of its source
+    /// relative to its target, counted within 15° and 0.3.
     #[arg(long, value_name = "DIR", num_args = 1.., conflicts_with_all = ["scans", "scenes"])]
     multiway: Vec<PathBuf>,
     #[command(flatten)]
