@@ -1,5 +1,6 @@
 //! Issue 14's command-line cases: a closed stdout, outputs that cannot be written, options that
 //! select nothing. Each ends with a clear error (or quietly, for a closed pipe), never a panic.
+//! The file is long because each hostile case is its own test, set up in full where it is read.
 
 use std::os::unix::process::ExitStatusExt;
 use std::path::{Path, PathBuf};
