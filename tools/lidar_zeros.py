@@ -1,10 +1,13 @@
 """A LiDAR pair densified to about a million points per sweep, with and without missing returns
 stored as (0, 0, 0), for timing `rgm register` on copies of one point (issue 59, E2;
-`docs/speed.md`, "Copies of one point"): each point of `../shared/data/scenes/lidar`'s two
-sweeps (binary PCD, x y z intensity) repeated `--copies` times with a 2 cm jitter (seed 0), then
-`--zeros` of the points set to the origin. Writes OUT/{source,target}{,_zeros}.npy.
+`docs/speed.md`, "Copies of one point"): between each point of `../shared/data/scenes/lidar`'s
+two sweeps (binary PCD, x y z intensity, in the scanner's order: `--beams` points a column, so a
+beam's next point is `--beams` on) and the next point of its beam, when the two lie within
+`--gap` metres (one surface), `--copies` − 1 more points evenly on the segment, as a scanner of
+that many times the azimuth resolution would see them; then
+`--zeros` of the points (seed 0) set to the origin. Writes OUT/{source,target}{,_zeros}.npy.
 
-    python tools/lidar_zeros.py ../shared/data/scenes/lidar OUT --copies 10 --zeros 0.3
+    python tools/lidar_zeros.py ../shared/data/scenes/lidar OUT --copies 15 --zeros 0.3
 """
 import argparse
 import pathlib
@@ -28,6 +31,8 @@ def main():
     parser.add_argument("out")
     parser.add_argument("--copies", type=int, default=10)
     parser.add_argument("--zeros", type=float, default=0.3)
+    parser.add_argument("--gap", type=float, default=0.3)
+    parser.add_argument("--beams", type=int, default=32)
     args = parser.parse_args()
     rng = np.random.default_rng(0)
     out = pathlib.Path(args.out)
@@ -36,9 +41,13 @@ def main():
     for name, path in zip(["source", "target"], sweeps[::-1]):
         points = read_pcd(path)
         points = points[np.isfinite(points).all(1)]
-        dense = np.repeat(points, args.copies, axis=0)
-        dense += rng.normal(scale=0.02, size=dense.shape)
-        rng.shuffle(dense)
+        b = args.beams
+        step = points[b:] - points[:-b]  # (N - b, 3): each point to its beam's next
+        near = np.linalg.norm(step, axis=1) < args.gap
+        parts = [points]
+        for k in range(1, args.copies):
+            parts.append(points[:-b][near] + (k / args.copies) * step[near])
+        dense = np.concatenate(parts)
         np.save(out / f"{name}.npy", dense)
         zeros = dense.copy()
         zeros[rng.random(len(zeros)) < args.zeros] = 0.0
