@@ -145,9 +145,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         other => return Err(format!("--what {other:?}: forward, train or procedure").into()),
     }
     // Every run computes the same products: their FLOPs (2 a multiply-add) per run.
-    let product_gflop = 2.0 * (rgm_nn::gemm::multiply_adds() - counted_before) as f64
-        / seconds.len() as f64
-        / 1e9;
+    let product_gflop =
+        2.0 * (rgm_nn::gemm::multiply_adds() - counted_before) as f64 / seconds.len() as f64 / 1e9;
     seconds.remove(0); // warm-up: buffers allocated, pages touched
     let stage_share = match stages.get(1..) {
         Some(s) if !s.is_empty() => {

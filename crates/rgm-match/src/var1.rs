@@ -5,8 +5,8 @@
 
 use crate::error::{check_shape, Result};
 use ndarray::linalg::general_mat_mul;
-use rgm_nn::gemm::count_multiply_adds;
 use ndarray::{ArrayView2, ArrayViewMut2, Axis, Zip};
+use rgm_nn::gemm::count_multiply_adds;
 use rgm_nn::Scalar;
 
 /// Settings of the Var1 score.

@@ -24,7 +24,14 @@ fn every_product_counts_its_multiply_adds() {
     mat_mul(1.0, &a64, &a64.t(), 0.0, &mut c64, Compute::default());
     assert_eq!(multiply_adds() - start, 226);
     if bf16_available() {
-        mat_mul(1.0, &a, &b, 0.0, &mut c, Compute::with_precision(Precision::Bf16));
+        mat_mul(
+            1.0,
+            &a,
+            &b,
+            0.0,
+            &mut c,
+            Compute::with_precision(Precision::Bf16),
+        );
         assert_eq!(multiply_adds() - start, 331);
         assert_eq!(c[(0, 0)], 7.0);
     }

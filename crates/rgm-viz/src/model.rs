@@ -45,7 +45,11 @@ impl ModelPage<'_> {
                 self.model.len()
             )));
         }
-        if let Some(&label) = self.labels.iter().find(|&&l| l as usize >= self.scans.len()) {
+        if let Some(&label) = self
+            .labels
+            .iter()
+            .find(|&&l| l as usize >= self.scans.len())
+        {
             return Err(invalid(format!(
                 "a model point is labelled scan {label}, but there are {} scans",
                 self.scans.len()
@@ -58,13 +62,15 @@ impl ModelPage<'_> {
             .iter()
             .any(|c| c.points.iter().any(|p| p.iter().any(|x| !x.is_finite())))
         {
-            return Err(invalid("a point has a coordinate that is not finite".into()));
+            return Err(invalid(
+                "a point has a coordinate that is not finite".into(),
+            ));
         }
         let half = self.point_budget / 2;
         let model_kept = stride_indices(self.model.len(), half);
         let model = self.model.select(&model_kept);
         let labels: Vec<u32> = model_kept.iter().map(|&i| self.labels[i]).collect(); // (shown,)
-        // The scans as given share their half of the budget by their sizes.
+                                                                                     // The scans as given share their half of the budget by their sizes.
         let total: usize = self.scans.iter().map(|(_, c)| c.len()).sum();
         let given_each: Vec<PointCloud> = self
             .scans
@@ -99,7 +105,10 @@ impl ModelPage<'_> {
             })
             .collect();
         let label_bytes = |labels: &[u32]| -> Vec<u8> {
-            labels.iter().flat_map(|&l| (l as u16).to_le_bytes()).collect()
+            labels
+                .iter()
+                .flat_map(|&l| (l as u16).to_le_bytes())
+                .collect()
         };
         if self.scans.len() > u16::MAX as usize {
             return Err(invalid(format!(
@@ -194,7 +203,10 @@ mod tests {
             point_budget: 100,
         };
         let error = page(&[0, 0, 0, 0, 1]).to_html().unwrap_err().to_string();
-        assert!(error.contains("labelled scan 1, but there are 1 scans"), "{error}");
+        assert!(
+            error.contains("labelled scan 1, but there are 1 scans"),
+            "{error}"
+        );
         let error = page(&[0, 0]).to_html().unwrap_err().to_string();
         assert!(error.contains("2 labels for 5 model points"), "{error}");
     }

@@ -131,9 +131,10 @@ fn scene_folder(
         let (s, t) = (place(&pair.source), place(&pair.target));
         let together = merged.component[s].is_some() && merged.component[s] == merged.component[t];
         let errors = match (merged.poses[s], merged.poses[t]) {
-            (Some(ps), Some(pt)) if together => {
-                Some(transform_errors(&pair.t_target_source, &pt.inverse().compose(&ps)))
-            }
+            (Some(ps), Some(pt)) if together => Some(transform_errors(
+                &pair.t_target_source,
+                &pt.inverse().compose(&ps),
+            )),
             _ => None,
         };
         let (source, target) = (file_name(&pair.source), file_name(&pair.target));
