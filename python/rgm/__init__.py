@@ -429,6 +429,8 @@ class MergeResult:
             merged each in its own frame; ``None`` when unplaced.
         residual: per placed scan, the median point-to-plane distance of its points to the
             other scans of its component, in the scans' units.
+        on_loop: per scan, whether one of its trusted pairs lies on a loop of trusted pairs; a
+            placed scan without one hangs on pairs nothing else checks (two scans never have one).
         points: (P, 3) float64, component 0's scans in its frame, one point per ``voxel`` cube.
         scan_index: (P,) int64, the scan each of ``points`` comes from.
     """
@@ -437,6 +439,7 @@ class MergeResult:
     registered: list
     component: list
     residual: list
+    on_loop: list
     points: np.ndarray
     scan_index: np.ndarray
 
@@ -464,7 +467,7 @@ def merge(scans, voxel: Optional[float] = None, method: str = "scene") -> MergeR
     """
     arrays = [_points(f"scans[{k}]", scan) for k, scan in enumerate(scans)]
     registrar = _cached_registrar(method, _rgm.DEFAULT_REFINE, None, None, None, None, None, None)
-    poses, component, residual, points, scan_index = registrar._native.merge(
+    poses, component, residual, on_loop, points, scan_index = registrar._native.merge(
         arrays, None if voxel is None else float(voxel)
     )
     return MergeResult(
@@ -472,6 +475,7 @@ def merge(scans, voxel: Optional[float] = None, method: str = "scene") -> MergeR
         registered=[p is not None for p in poses],
         component=list(component),
         residual=list(residual),
+        on_loop=list(on_loop),
         points=points,
         scan_index=scan_index,
     )

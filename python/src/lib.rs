@@ -316,7 +316,8 @@ impl Registrar {
 
     /// Puts every scan of `scans` (float64 (N, 3) arrays, each in its own frame) into one frame
     /// as `rgm merge` does (`rgm_registration::multiway::merge`, this method for the pairs):
-    /// each scan's pose (`model ← scan`, (4, 4), or `None` unplaced), component and residual,
+    /// each scan's pose (`model ← scan`, (4, 4), or `None` unplaced), component, residual and
+    /// whether one of its pairs lies on a loop,
     /// and component 0's scans merged, one point per cube of `voxel` (default: its spacing),
     /// with each point's scan.
     #[pyo3(signature = (scans, voxel=None))]
@@ -354,6 +355,7 @@ impl Registrar {
             poses,
             merged.component,
             merged.residual,
+            merged.on_loop,
             points_array(py, &model),
             labels.into_pyarray(py),
         ))
@@ -576,6 +578,7 @@ type MergeFields<'py> = (
     Vec<Option<Bound<'py, PyArray2<f64>>>>, // (S,) model ← scan, (4, 4) each
     Vec<Option<usize>>,                     // (S,) component
     Vec<Option<f64>>,                       // (S,) residual
+    Vec<bool>,                              // (S,) one of its pairs on a loop
     Bound<'py, PyArray2<f64>>,              // (P, 3) component 0's merged points
     Bound<'py, numpy::PyArray1<i64>>,       // (P,) each point's scan
 );

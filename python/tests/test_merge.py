@@ -66,6 +66,7 @@ def test_three_bunny_scans_are_placed_as_the_truth_and_a_dragon_scan_is_not():
     dragon = read_scan(STANFORD / "dragon_stand" / "dragonStandRight_0.ply.gz")
     result = rgm.merge(scans + [dragon])
     assert result.registered == [True, True, True, False]
+    assert result.on_loop == [True, True, True, False]
     assert result.poses[3] is None and result.component[3] is None
     # The frames differ by one motion: that of scan 0's. Every scan within 1° and 1 mm of it.
     world_from_model = world_from_input[0] @ np.linalg.inv(result.poses[0])

@@ -85,8 +85,9 @@ enum Command {
     /// the scans' own point spacing). Scans that hang together form a component, each merged
     /// on its own; a scan no trusted pair links is left unplaced and named. Writes
     /// DIR/poses.json ({"scans", "poses": 4×4 model ← scan or null, "registered", "component",
-    /// "residual": median point-to-plane distance to the other scans, "edges": every pair,
-    /// used or why not}), DIR/poses.conf (Stanford's `bmesh NAME tx ty tz qx qy qz qw` lines of
+    /// "residual": median point-to-plane distance to the other scans, "on_loop": whether one
+    /// of its pairs lies on a loop of pairs (a scan without one is placed unchecked), "edges":
+    /// every pair, used or why not}), DIR/poses.conf (Stanford's `bmesh NAME tx ty tz qx qy qz qw` lines of
     /// the largest component, p_model = R(q)ᵀ·p + t) and DIR/model.ply (the largest
     /// component's scans in one frame, one point per --voxel cube, a `scan` property giving
     /// each point's scan by its place in the list) and DIR/model.html (that model in the

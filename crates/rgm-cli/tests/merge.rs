@@ -96,6 +96,8 @@ fn scans_are_placed_as_the_truth_and_strangers_are_left_unplaced() {
     let out = merge(&dir, &files, "three");
     let (three, summary) = poses(&out);
     assert_eq!(summary["registered"], serde_json::json!([true, true, true]));
+    // Three pairs make a loop: each scan's placement is checked by the others.
+    assert_eq!(summary["on_loop"], serde_json::json!([true, true, true]));
     let component = vec![Some(0); 3];
     let diagonal = bunny.diagonal();
     for error in pose_errors(&scans, &three, &component) {
@@ -150,6 +152,10 @@ fn scans_are_placed_as_the_truth_and_strangers_are_left_unplaced() {
         serde_json::json!([true, true, true, false, false])
     );
     assert_eq!(summary["component"][3], serde_json::Value::Null);
+    assert_eq!(
+        summary["on_loop"],
+        serde_json::json!([true, true, true, false, false])
+    );
     // model.html: every scan named, the two strangers with no point in the model.
     let page = std::fs::read_to_string(out.join("model.html")).unwrap();
     let start = page.find(r#"type="application/json">"#).unwrap() + 24;
@@ -160,7 +166,10 @@ fn scans_are_placed_as_the_truth_and_strangers_are_left_unplaced() {
         .collect();
     assert!(in_model[..3].iter().all(|&n| n > 1000), "{in_model:?}");
     assert_eq!(in_model[3..], [0, 0]);
-    assert_eq!(data["model"]["scans"][3]["name"], files[3].display().to_string());
+    assert_eq!(
+        data["model"]["scans"][3]["name"],
+        files[3].display().to_string()
+    );
     for k in 0..3 {
         let off = three[k].unwrap().inverse().compose(&five[k].unwrap());
         assert!(

@@ -227,7 +227,8 @@ fn pose_json(pose: &Option<RigidTransform>) -> Value {
 }
 
 /// What `poses.json` holds: per scan (in the order given) its path, pose `model ← scan`
-/// (`null` when unplaced), whether it was placed, its component and residual; each
+/// (`null` when unplaced), whether it was placed, its component, residual and whether one of
+/// its pairs lies on a loop of pairs; each
 /// component's reference and spacing; every pair's edge and why it was left out.
 pub fn summary_json(
     paths: &[PathBuf],
@@ -263,6 +264,7 @@ pub fn summary_json(
         "registered": merged.poses.iter().map(Option::is_some).collect::<Vec<_>>(),
         "component": merged.component,
         "residual": merged.residual,
+        "on_loop": merged.on_loop,
         "references": merged.references,
         "spacing": merged.spacing,
         "method": method,
@@ -311,8 +313,12 @@ fn print_table(paths: &[PathBuf], merged: &MultiwayResult) -> Result<()> {
             (Some(pose), Some(c)) => {
                 let residual = merged.residual[s].map_or("-".into(), |r| format!("{r:.3e}"));
                 let t = pose.translation;
+                let unchecked = match merged.on_loop[s] {
+                    true => "",
+                    false => "\tunchecked: none of its pairs lies on a loop of pairs",
+                };
                 rgm_cli::outln!(
-                    "{name}\t{c}\t{residual}\t{:.3}°, ({:.6}, {:.6}, {:.6})",
+                    "{name}\t{c}\t{residual}\t{:.3}°, ({:.6}, {:.6}, {:.6}){unchecked}",
                     pose.rotation_angle_deg(),
                     t.x,
                     t.y,

@@ -161,17 +161,40 @@ pub fn triangle_support(
     (support, cycles)
 }
 
+/// The root of `a`'s set in the union-find forest `root`, halving the path on the way.
+fn find(root: &mut [usize], mut a: usize) -> usize {
+    while root[a] != a {
+        root[a] = root[root[a]];
+        a = root[a];
+    }
+    a
+}
+
+/// Whether each scan has a used edge on a loop of used edges (its two scans still linked
+/// without it). A placed scan that has none hangs on edges no other path checks: a pair the
+/// method trusted wrongly would place it wrong, and neither the cycles of three nor the pose
+/// graph could tell. // (S,)
+pub fn on_loops(edges: &[Edge], scans: usize) -> Vec<bool> {
+    let used: Vec<&Edge> = edges.iter().filter(|e| e.is_used()).collect();
+    let mut on_loop = vec![false; scans];
+    for (k, e) in used.iter().enumerate() {
+        let mut root: Vec<usize> = (0..scans).collect(); // (S,) union-find parents
+        for (_, other) in used.iter().enumerate().filter(|(j, _)| *j != k) {
+            let (a, b) = (find(&mut root, other.target), find(&mut root, other.source));
+            root[a.max(b)] = a.min(b);
+        }
+        if find(&mut root, e.target) == find(&mut root, e.source) {
+            on_loop[e.target] = true;
+            on_loop[e.source] = true;
+        }
+    }
+    on_loop
+}
+
 /// The component of every scan under the used edges, numbered from 0 by size (largest first,
 /// ties by lowest scan); `None` for a scan with no used edge.
 pub fn components(edges: &[Edge], scans: usize) -> Vec<Option<usize>> {
     let mut root: Vec<usize> = (0..scans).collect(); // (S,) union-find parents
-    fn find(root: &mut [usize], mut a: usize) -> usize {
-        while root[a] != a {
-            root[a] = root[root[a]];
-            a = root[a];
-        }
-        a
-    }
     let mut linked = vec![false; scans];
     for e in edges.iter().filter(|e| e.is_used()) {
         let (a, b) = (find(&mut root, e.target), find(&mut root, e.source));
@@ -265,6 +288,27 @@ mod tests {
             weight: 0.5,
             status: EdgeStatus::Used,
         }
+    }
+
+    #[test]
+    fn a_scan_on_bridges_alone_is_on_no_loop() {
+        // A ring 0-1-2-3-0, scan 4 hanging on 3 alone, 5 on 4; 6 linked by a doubted edge only.
+        let poses: Vec<RigidTransform> = (0..7).map(|k| turn(30.0 * k as f64, 0.1)).collect();
+        let mut edges: Vec<Edge> = [(0, 1), (1, 2), (2, 3), (0, 3), (3, 4), (4, 5), (5, 6)]
+            .iter()
+            .map(|&(a, b)| edge(&poses, a, b, turn(0.0, 0.0)))
+            .collect();
+        edges[6].status = EdgeStatus::Doubted("not trusted".into());
+        assert_eq!(
+            on_loops(&edges, 7),
+            [true, true, true, true, false, false, false]
+        );
+        // Closing 4 and 5 onto the ring puts them on a loop too.
+        edges.push(edge(&poses, 1, 5, turn(0.0, 0.0)));
+        assert_eq!(
+            on_loops(&edges, 7),
+            [true, true, true, true, true, true, false]
+        );
     }
 
     #[test]

@@ -89,6 +89,9 @@ pub struct MultiwayResult {
     /// Each placed scan's median point-to-plane distance to the other scans of its component,
     /// in the scans' units. // (S,)
     pub residual: Vec<Option<f64>>,
+    /// Whether each scan has a used edge on a loop ([`graph::on_loops`]): a placed scan that
+    /// has not hangs on pairs nothing else checks (two scans alone never have one). // (S,)
+    pub on_loop: Vec<bool>,
     /// Every pair's registration (or why it was not registered), with whether it was used and
     /// why not. // (S·(S−1)/2,)
     pub edges: Vec<Edge>,
@@ -210,6 +213,7 @@ where
     )?;
     let residual = joint::residuals(scans, &poses, &component, &spacing, &config.joint);
     Ok(MultiwayResult {
+        on_loop: graph::on_loops(&edges, scans.len()),
         poses,
         component,
         references,

@@ -194,6 +194,7 @@ fn every_scan_is_placed_sharper_than_its_pairs() {
         "{:?}",
         found.component
     );
+    assert!(found.on_loop.iter().all(|&on| on), "{:?}", found.on_loop);
     let (angle, shift) = worst_error(&views, &found, &all);
     // Pairs are off by up to ~0.9° (0.40° after the pose graph, 0.31° after the joint
     // refinement's three rounds); the merge lands within 0.35° and half the point spacing
