@@ -23,9 +23,6 @@ pub enum GeomError {
     /// A 4×4 matrix is not a rigid transform.
     #[error("not a rigid transform: {why}")]
     NotRigid { why: String },
-    /// Every candidate of a composite method failed; each one's cause, `method: why; …`.
-    #[error("every candidate failed ({0})")]
-    AllCandidatesFailed(String),
     /// A numeric input is NaN or infinite.
     #[error("{op}: non-finite value in input")]
     NonFinite { op: &'static str },

@@ -13,6 +13,9 @@ pub enum MethodError {
     /// A geometric step failed (too few points, degenerate Kabsch, ...).
     #[error(transparent)]
     Geom(#[from] GeomError),
+    /// Every candidate of a composite method failed.
+    #[error(transparent)]
+    AllCandidatesFailed(#[from] rgm_registration::AllCandidatesFailed),
     /// The network could not be built, loaded or run.
     #[error(transparent)]
     Network(#[from] NetworkError),

@@ -5,13 +5,14 @@
 use std::path::PathBuf;
 
 use rgm_data::{ModelNet40, PairGenerator, Setting, Split};
-use rgm_geom::{GeomError, PairMetrics, Point3, PointCloud, RigidTransform};
+use rgm_geom::{PairMetrics, Point3, PointCloud, RigidTransform};
 use rgm_model::network::{Config, Rgm};
 use rgm_model::options::SCORING;
 use rgm_model::{
     Method, MethodError, MethodOptions, ProcedureConfig, Registrar, Registration, RgmRegistrar,
 };
 use rgm_registration::methods::refine::RefineConfig;
+use rgm_registration::AllCandidatesFailed;
 
 /// The tiny network of `tests/fixtures` (random weights: its transforms are poor).
 fn tiny_rgm() -> RgmRegistrar {
@@ -153,7 +154,7 @@ fn a_failed_candidate_leaves_the_other_and_both_failing_names_both() {
     // An empty target: neither can run, and both failures are named.
     let empty = PointCloud::default();
     match method.register(&few(&pair.source), &empty) {
-        Err(MethodError::Geom(GeomError::AllCandidatesFailed(why))) => {
+        Err(MethodError::AllCandidatesFailed(AllCandidatesFailed(why))) => {
             assert!(
                 why.contains("fgr+icp: ") && why.contains("rgm+icp: "),
                 "{why}"

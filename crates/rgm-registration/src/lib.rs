@@ -8,7 +8,7 @@
 //! `options` gives them). Everything is f64, as in rgm-geom.
 //!
 //! The modules, bottom first, as a registration runs through them:
-//! - [`fit`] (what a method returns), [`prepared`] (a cloud with its tree and normals, made
+//! - [`error`] (what a method fails with), [`fit`] (what a method returns), [`prepared`] (a cloud with its tree and normals, made
 //!   once per registration), [`thinning`] (a dense cloud at the density a method was tuned
 //!   at), and [`registrar`] (the trait every method implements);
 //! - [`methods`]: the estimators, global and local, each a [`Registrar`];
@@ -24,6 +24,7 @@
 
 pub mod check;
 pub mod compose;
+pub mod error;
 pub mod fit;
 pub mod methods;
 pub mod multiway;
@@ -35,6 +36,7 @@ pub mod thinning;
 #[cfg(test)]
 mod testing;
 
+pub use error::{AllCandidatesFailed, RegistrationError};
 pub use fit::Fit;
 pub use prepared::Prepared;
 pub use registrar::{DynRegistrar, MethodId, Registrar, Registration};

@@ -103,7 +103,7 @@ impl Fixed {
     }
 }
 
-impl Registrar<GeomError> for Fixed {
+impl<E: From<GeomError>> Registrar<E> for Fixed {
     fn id(&self) -> MethodId {
         MethodId::plain(self.name)
     }
@@ -113,7 +113,7 @@ impl Registrar<GeomError> for Fixed {
         source: &Prepared,
         target: &Prepared,
         _: &mut dyn FnMut(Progress),
-    ) -> Result<Registration, GeomError> {
+    ) -> Result<Registration, E> {
         self.seen.lock().unwrap().push((source.len(), target.len()));
         let result = Fit {
             t_target_source: self.transform,

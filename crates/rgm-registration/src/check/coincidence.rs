@@ -579,7 +579,9 @@ mod tests {
                 inner: fixed,
                 check,
             };
-            method.register(&source, &sheet).unwrap().doubt
+            Registrar::<rgm_geom::GeomError>::register(&mut method, &source, &sheet)
+                .unwrap()
+                .doubt
         };
         assert_eq!(checked(right), None);
         let doubt = checked(quarter.compose(&right)).expect("a wrong place is doubted");

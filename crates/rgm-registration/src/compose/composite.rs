@@ -15,6 +15,7 @@ use rayon::prelude::*;
 use rgm_geom::{GeomError, RigidTransform};
 
 use crate::check::{Acceptance, Judge, Scoring};
+use crate::error::AllCandidatesFailed;
 use crate::fit::{score, Fit};
 use crate::prepared::indexed_pair;
 use crate::registrar::{
@@ -180,7 +181,7 @@ fn composite_id<'c, E: 'c>(
 /// its index among `candidates`), scored at the judge's [`Scoring::result_distance`] with its
 /// correspondences; doubted when it overlaps less than [`Scoring::min_overlap`]; an error when
 /// every candidate failed.
-pub fn conclude<E: From<GeomError>>(
+pub fn conclude<E: From<AllCandidatesFailed>>(
     judge: &Judge,
     candidates: Vec<Candidate>,
     best: Option<(usize, usize)>,
@@ -196,7 +197,7 @@ pub fn conclude<E: From<GeomError>>(
             .iter()
             .map(|c| format!("{}: {}", c.method, c.failure.as_deref().unwrap_or("?")))
             .collect();
-        return Err(GeomError::AllCandidatesFailed(why.join("; ")).into());
+        return Err(AllCandidatesFailed(why.join("; ")).into());
     };
     let winner = &candidates[chosen];
     let (transform, value) = (winner.t_target_source, winner.score.unwrap_or(0.0));
@@ -231,7 +232,7 @@ pub fn conclude<E: From<GeomError>>(
 }
 
 /// `composite` on the pair as given, judged there.
-fn register_composite<E: From<GeomError>>(
+fn register_composite<E: From<GeomError> + From<AllCandidatesFailed>>(
     composite: &mut impl Composite<E>,
     source: &Prepared,
     target: &Prepared,
@@ -265,7 +266,7 @@ impl<E: 'static> Clone for BestOf<E> {
     }
 }
 
-impl<E: From<GeomError> + ToString + Send> Composite<E> for BestOf<E> {
+impl<E: From<GeomError> + From<AllCandidatesFailed> + ToString + Send> Composite<E> for BestOf<E> {
     fn run_judged(&mut self, source: &Prepared, target: &Prepared, judge: &Judge) -> Outcome {
         let mut tally = Tally::new(judge);
         tally.run(&mut self.candidates, source, target, judge);
@@ -277,7 +278,7 @@ impl<E: From<GeomError> + ToString + Send> Composite<E> for BestOf<E> {
     }
 }
 
-impl<E: From<GeomError> + ToString + Send> Registrar<E> for BestOf<E> {
+impl<E: From<GeomError> + From<AllCandidatesFailed> + ToString + Send> Registrar<E> for BestOf<E> {
     /// `base`, refined as every candidate is when they are all refined alike.
     fn id(&self) -> MethodId {
         composite_id(self.base, &self.candidates)
@@ -320,7 +321,7 @@ impl<E: 'static> Clone for Cascade<E> {
     }
 }
 
-impl<E: From<GeomError> + ToString + Send> Composite<E> for Cascade<E> {
+impl<E: From<GeomError> + From<AllCandidatesFailed> + ToString + Send> Composite<E> for Cascade<E> {
     fn run_judged(&mut self, source: &Prepared, target: &Prepared, judge: &Judge) -> Outcome {
         let mut tally = Tally::new(judge);
         tally.run(std::slice::from_mut(&mut self.first), source, target, judge);
@@ -337,7 +338,7 @@ impl<E: From<GeomError> + ToString + Send> Composite<E> for Cascade<E> {
     }
 }
 
-impl<E: From<GeomError> + ToString + Send> Registrar<E> for Cascade<E> {
+impl<E: From<GeomError> + From<AllCandidatesFailed> + ToString + Send> Registrar<E> for Cascade<E> {
     /// `base`, refined as every stage is when they are all refined alike.
     fn id(&self) -> MethodId {
         composite_id(self.base, std::iter::once(&self.first).chain(&self.rest))
@@ -358,6 +359,7 @@ mod tests {
     use super::*;
     use crate::check::{agree, overlap_score, turned_share};
     use crate::testing::{Fixed, SCORING};
+    use crate::RegistrationError;
     use rgm_geom::{KnnIndex, Matrix3, Point3, PointCloud, Vector3};
 
     #[test]
@@ -387,7 +389,7 @@ mod tests {
             Fixed::new("right", 0.0),
             Fixed::new("also", 0.0),
         );
-        let mut best_of = BestOf::<GeomError> {
+        let mut best_of = BestOf::<RegistrationError> {
             base: "all",
             candidates: vec![
                 Box::new(wrong.clone()),
@@ -424,7 +426,7 @@ mod tests {
                 .collect(),
         );
         let run = |first: &Fixed, second: &Fixed, accept: Acceptance| {
-            let mut cascade = Cascade::<GeomError> {
+            let mut cascade = Cascade::<RegistrationError> {
                 base: "both",
                 first: Box::new(first.clone()),
                 rest: vec![Box::new(second.clone())],
@@ -504,7 +506,7 @@ mod tests {
             ..SCORING
         };
         for (scoring, chosen) in [(SCORING, "lifted"), (coinciding, "slid")] {
-            let mut best_of = BestOf::<GeomError> {
+            let mut best_of = BestOf::<RegistrationError> {
                 base: "both",
                 candidates: vec![Box::new(lifted.clone()), Box::new(slid.clone())],
                 scoring,
@@ -517,7 +519,7 @@ mod tests {
             );
             assert_eq!(found.candidates[found.chosen.unwrap()].method, chosen);
             // A cascade takes the lifted line at once unless it must coincide.
-            let mut cascade = Cascade::<GeomError> {
+            let mut cascade = Cascade::<RegistrationError> {
                 base: "both",
                 first: Box::new(lifted.clone()),
                 rest: vec![Box::new(slid.clone())],

@@ -6,6 +6,7 @@ use rgm_geom::{GeomError, RigidTransform};
 
 use crate::check::{agree, Judge};
 use crate::compose::{conclude, Composite};
+use crate::error::AllCandidatesFailed;
 use crate::prepared::Prepared;
 use crate::registrar::{MethodId, Progress, Registrar, Registration};
 use crate::thinning::{thinned, Density, Thinning};
@@ -28,7 +29,7 @@ pub struct Thinned<C> {
 
 impl<E, C> Registrar<E> for Thinned<C>
 where
-    E: From<GeomError>,
+    E: From<GeomError> + From<AllCandidatesFailed>,
     C: Composite<E>,
 {
     fn id(&self) -> MethodId {
@@ -98,9 +99,10 @@ mod tests {
     use crate::check::Acceptance;
     use crate::compose::{BestOf, Cascade};
     use crate::testing::{Fixed, DENSITY, SCORING};
+    use crate::RegistrationError;
     use rgm_geom::testing::box_surface;
 
-    fn thinned_best_of(candidates: &[&Fixed]) -> Thinned<BestOf<GeomError>> {
+    fn thinned_best_of(candidates: &[&Fixed]) -> Thinned<BestOf<RegistrationError>> {
         Thinned {
             inner: BestOf {
                 base: "both",
@@ -150,7 +152,7 @@ mod tests {
         let dense = box_surface(3000, 1);
         let (right, never_run) = (Fixed::new("right", 0.0), Fixed::new("later", 0.3));
         let mut thinned = Thinned {
-            inner: Cascade::<GeomError> {
+            inner: Cascade::<RegistrationError> {
                 base: "cascade",
                 first: Box::new(right.clone()),
                 rest: vec![Box::new(never_run.clone())],
@@ -169,6 +171,9 @@ mod tests {
         let found = thinned.register(&dense, &dense).unwrap();
         assert_eq!(found.candidates.len(), 1);
         assert_eq!((right.calls(), never_run.calls()), (1, 0));
-        assert_eq!(Registrar::<GeomError>::id(&thinned).to_string(), "cascade");
+        assert_eq!(
+            Registrar::<RegistrationError>::id(&thinned).to_string(),
+            "cascade"
+        );
     }
 }
