@@ -229,27 +229,25 @@ fn a_bad_scan_is_named() {
     );
 }
 
-#[test]
-fn eval_multiway_scores_a_small_folder_against_its_conf() {
-    // Three bunny scans thinned to 2 mm in a folder of their own, with their `.conf` poses.
-    let dir = Scratch::new("cli-eval-multiway");
+/// bun000, bun045 and bun315 thinned to 2 mm: (name, cloud, `.conf` pose).
+fn three_thinned_bunny_scans() -> Vec<(String, PointCloud, RigidTransform)> {
     let bunny = stanford("bunny");
-    let folder = dir.join("three");
-    std::fs::create_dir_all(&folder).unwrap();
-    let chosen = ["bun000.ply", "bun045.ply", "bun315.ply"];
-    let scans: Vec<_> = chosen
+    ["bun000.ply", "bun045.ply", "bun315.ply"]
         .iter()
-        .map(|name| bunny.scans.iter().find(|s| s.name == *name).unwrap())
-        .collect();
-    for scan in &scans {
-        write_point_cloud(
-            folder.join(&scan.name),
-            &scan.cloud.voxel_downsampled(0.002),
-        )
-        .unwrap();
-    }
-    let conf = rgm_data::scans::conf_text(scans.iter().map(|s| (s.name.as_str(), &s.pose)));
-    std::fs::write(folder.join("three.conf"), conf).unwrap();
+        .map(|name| {
+            let scan = bunny.scans.iter().find(|s| s.name == *name).unwrap();
+            (
+                scan.name.clone(),
+                scan.cloud.voxel_downsampled(0.002),
+                scan.pose,
+            )
+        })
+        .collect()
+}
+
+/// `rgm eval --multiway FOLDER --json`: the table's row of `FOLDER` (named `name`), split at
+/// its tabs, and the JSON file's records.
+fn eval_multiway(dir: &Path, folder: &Path, name: &str) -> (Vec<String>, Vec<serde_json::Value>) {
     let json = dir.join("errors.json");
     let out = rgm(&[
         "eval",
@@ -264,17 +262,34 @@ fn eval_multiway_scores_a_small_folder_against_its_conf() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    // folder, scans, placed, within 1° and 0.5 %, …
-    let row: Vec<&str> = stdout
+    let row = stdout
         .lines()
-        .find(|l| l.starts_with("three\t"))
+        .find(|l| l.starts_with(&format!("{name}\t")))
         .unwrap_or_else(|| panic!("{stdout}"))
         .split('\t')
+        .map(str::to_string)
         .collect();
-    assert_eq!(row[1..4], ["3", "3", "3"], "{stdout}");
     let value: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
-    let records = value["records"].as_array().unwrap();
+    (row, value["records"].as_array().unwrap().clone())
+}
+
+#[test]
+fn eval_multiway_scores_a_small_folder_against_its_conf() {
+    // Three thinned bunny scans in a folder of their own, with their `.conf` poses.
+    let dir = Scratch::new("cli-eval-multiway");
+    let folder = dir.join("three");
+    std::fs::create_dir_all(&folder).unwrap();
+    let scans = three_thinned_bunny_scans();
+    for (name, cloud, _) in &scans {
+        write_point_cloud(folder.join(name), cloud).unwrap();
+    }
+    let conf =
+        rgm_data::scans::conf_text(scans.iter().map(|(name, _, pose)| (name.as_str(), pose)));
+    std::fs::write(folder.join("three.conf"), conf).unwrap();
+    let (row, records) = eval_multiway(&dir, &folder, "three");
+    // folder, scans, placed, within 1° and 0.5 %, …
+    assert_eq!(row[1..4], ["3", "3", "3"], "{row:?}");
     let scored: Vec<f64> = records
         .iter()
         .filter_map(|r| r["rotation_deg"].as_f64())
@@ -285,55 +300,27 @@ fn eval_multiway_scores_a_small_folder_against_its_conf() {
 
 #[test]
 fn eval_multiway_scores_a_scene_folder_against_its_gt_log() {
-    // Three bunny scans thinned to 2 mm as fragments in the 3DMatch layout, each in its own
-    // frame, with gt.log's relative poses made from the `.conf` ones (p_i = T p_j).
+    // The three thinned bunny scans as fragments in the 3DMatch layout, each in its own frame,
+    // with gt.log's relative poses made from the `.conf` ones (p_i = T p_j).
     let dir = Scratch::new("cli-eval-multiway-scene");
-    let bunny = stanford("bunny");
     let folder = dir.join("room");
     std::fs::create_dir_all(&folder).unwrap();
-    let chosen = ["bun000.ply", "bun045.ply", "bun315.ply"];
-    let scans: Vec<_> = chosen
-        .iter()
-        .map(|name| bunny.scans.iter().find(|s| s.name == *name).unwrap())
-        .collect();
-    for (k, scan) in scans.iter().enumerate() {
-        let file = folder.join(format!("cloud_bin_{k}.ply"));
-        write_point_cloud(file, &scan.cloud.voxel_downsampled(0.002)).unwrap();
+    let scans = three_thinned_bunny_scans();
+    for (k, (_, cloud, _)) in scans.iter().enumerate() {
+        write_point_cloud(folder.join(format!("cloud_bin_{k}.ply")), cloud).unwrap();
     }
     let mut log = String::new();
     for (i, j) in [(0, 1), (0, 2), (1, 2)] {
-        let t = scans[i].pose.inverse().compose(&scans[j].pose);
+        let t = scans[i].2.inverse().compose(&scans[j].2);
         log += &format!("{i} {j} 3\n");
         for row in t.to_rows() {
             log += &format!("{} {} {} {}\n", row[0], row[1], row[2], row[3]);
         }
     }
     std::fs::write(folder.join("gt.log"), log).unwrap();
-    let json = dir.join("errors.json");
-    let out = rgm(&[
-        "eval",
-        "--multiway",
-        folder.to_str().unwrap(),
-        "--json",
-        json.to_str().unwrap(),
-    ]);
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let (row, records) = eval_multiway(&dir, &folder, "room");
     // folder, fragments, placed, pairs, in one component, within 15° and 0.3, …
-    let row: Vec<&str> = stdout
-        .lines()
-        .find(|l| l.starts_with("room\t"))
-        .unwrap_or_else(|| panic!("{stdout}"))
-        .split('\t')
-        .collect();
-    assert_eq!(row[1..6], ["3", "3", "3", "3", "3"], "{stdout}");
-    let value: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
-    let records = value["records"].as_array().unwrap();
+    assert_eq!(row[1..6], ["3", "3", "3", "3", "3"], "{row:?}");
     let errors: Vec<(f64, f64)> = records
         .iter()
         .filter_map(|r| Some((r["rotation_deg"].as_f64()?, r["translation"].as_f64()?)))

@@ -113,9 +113,7 @@ impl SceneFolder {
             pairs,
         })
     }
-}
 
-impl SceneFolder {
     /// The fragments its pairs name, each once, in the order `gt.log` first names them (its
     /// target, then its source).
     pub fn fragments(&self) -> Vec<PathBuf> {

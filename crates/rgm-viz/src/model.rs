@@ -38,6 +38,14 @@ impl ModelPage<'_> {
                 self.point_budget
             )));
         }
+        // The page carries each point's scan as a u16.
+        if self.scans.len() > u16::MAX as usize {
+            return Err(invalid(format!(
+                "{} scans: a page shows at most {}",
+                self.scans.len(),
+                u16::MAX
+            )));
+        }
         if self.labels.len() != self.model.len() {
             return Err(invalid(format!(
                 "{} labels for {} model points",
@@ -110,13 +118,6 @@ impl ModelPage<'_> {
                 .flat_map(|&l| (l as u16).to_le_bytes())
                 .collect()
         };
-        if self.scans.len() > u16::MAX as usize {
-            return Err(invalid(format!(
-                "{} scans: a page shows at most {}",
-                self.scans.len(),
-                u16::MAX
-            )));
-        }
         let data = json!({
             "title": self.title,
             "budget": self.point_budget,

@@ -118,12 +118,6 @@ fn scene_folder(
     let merged = merge_scans(&clouds, method, config)?;
     let seconds = start.elapsed().as_secs_f64();
     let place = |file: &std::path::PathBuf| files.iter().position(|f| f == file).expect("listed");
-    let file_name = |file: &std::path::Path| {
-        file.file_name()
-            .unwrap_or_default()
-            .to_string_lossy()
-            .into_owned()
-    };
     // (rotation °, translation) of each pair both of whose fragments one component holds.
     let mut scored = Vec::new();
     let mut lines = Vec::new();
@@ -137,7 +131,7 @@ fn scene_folder(
             )),
             _ => None,
         };
-        let (source, target) = (file_name(&pair.source), file_name(&pair.target));
+        let (source, target) = pair.names();
         lines.push(match errors {
             Some((r, t)) => format!("  {source} → {target}\t{r:.3}°\t{t:.4}"),
             None => format!("  {source} → {target}\tnot in one component"),
