@@ -45,7 +45,8 @@ use rgm_registration::check::{
     Acceptance, Coincides, CoincidesAtSpacing, InFrame, Precise, Scoring, SelfFit, Unambiguous,
 };
 use rgm_registration::compose::{
-    AtResolution, BestOf, Cascade, Checked, Normalised, OnFirstUse, Refined, Thinned, UpTo,
+    AtResolution, BestOf, Cascade, Checked, Named, Normalised, OnFirstUse, Refined, Thinned,
+    UpTo,
 };
 use rgm_registration::methods::fgr::{self, FgrConfig};
 use rgm_registration::methods::icp::{self, IcpConfig};
@@ -634,10 +635,16 @@ where
     // A few markers have no neighbourhoods for features or the network: searched whole.
     let triplets = TripletConfig::default();
     Method::new(Normalised::new(
-        UpTo {
-            points: triplets.max_points,
-            small: triplets,
-            other: composite,
+        Named {
+            base: match dense {
+                DenseStage::ObjectThenScene => AUTO,
+                DenseStage::SceneOnly => SCENE,
+            },
+            inner: UpTo {
+                points: triplets.max_points,
+                small: triplets,
+                other: composite,
+            },
         },
         FRAME,
     ))

@@ -116,6 +116,8 @@ fn options_reach_the_method() {
             },
             "auto",
         ),
+        // Named as chosen, not by its scene stage (`sc2+icp`), the part that runs on dense pairs.
+        ("scene", MethodOptions::default(), "scene+icp"),
     ] {
         let options = MethodOptions {
             method: name.parse().unwrap(),

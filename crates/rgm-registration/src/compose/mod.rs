@@ -12,4 +12,4 @@ mod wrappers;
 
 pub use composite::{conclude, BestOf, Cascade, Composite, Outcome};
 pub use thinned::Thinned;
-pub use wrappers::{AtResolution, Checked, Normalised, OnFirstUse, Refined, UpTo};
+pub use wrappers::{AtResolution, Checked, Named, Normalised, OnFirstUse, Refined, UpTo};

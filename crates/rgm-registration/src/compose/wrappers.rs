@@ -1,8 +1,9 @@
 //! The wrappers that compose registrars without knowing what they wrap: [`Refined`] (its
 //! transform improved by a [`Refiner`]), [`Normalised`] (the pair centred and scaled into the
 //! unit-sphere frame, for a registrar or a refiner), [`AtResolution`] (a last refinement of a
-//! dense pair only, at its own point spacing), [`UpTo`] (a method of its own for tiny clouds) and
-//! [`OnFirstUse`] (a method made only when a pair needs it).
+//! dense pair only, at its own point spacing), [`UpTo`] (a method of its own for tiny clouds),
+//! [`OnFirstUse`] (a method made only when a pair needs it) and [`Named`] (a composition under
+//! the name users chose it by).
 
 use std::fmt;
 use std::sync::Arc;
@@ -221,6 +222,32 @@ impl<E, S: Registrar<E>, R: Registrar<E>> Registrar<E> for UpTo<S, R> {
         } else {
             self.other.register_prepared(source, target, progress)
         }
+    }
+}
+
+/// `inner` under the base name `base` (its refiner kept): a composition that users choose by a
+/// name of its own (`scene`) is reported by that name, not by the part that usually runs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Named<R> {
+    pub base: &'static str,
+    pub inner: R,
+}
+
+impl<E, R: Registrar<E>> Registrar<E> for Named<R> {
+    fn id(&self) -> MethodId {
+        MethodId {
+            base: self.base,
+            ..self.inner.id()
+        }
+    }
+
+    fn register_prepared(
+        &mut self,
+        source: &Prepared,
+        target: &Prepared,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        self.inner.register_prepared(source, target, progress)
     }
 }
 
