@@ -45,8 +45,7 @@ use rgm_registration::check::{
     Acceptance, Coincides, CoincidesAtSpacing, InFrame, Precise, Scoring, SelfFit, Unambiguous,
 };
 use rgm_registration::compose::{
-    AtResolution, BestOf, Cascade, Checked, Named, Normalised, OnFirstUse, Refined, Thinned,
-    UpTo,
+    AtResolution, BestOf, Cascade, Checked, Named, Normalised, OnFirstUse, Refined, Thinned, UpTo,
 };
 use rgm_registration::methods::fgr::{self, FgrConfig};
 use rgm_registration::methods::icp::{self, IcpConfig};
