@@ -218,7 +218,7 @@ class Registrar:
 
     @property
     def name(self) -> str:
-        """The method's name as ``rgm register`` prints it (``auto+icp`` by default)."""
+        """The method's name as ``rgm register`` prints it (``auto+refine`` by default)."""
         return self._native.name
 
     def register(self, source: np.ndarray, target: np.ndarray) -> RegistrationResult:
@@ -277,7 +277,7 @@ class Registrar:
                 (the message names the pair's index: ``pairs[3] target ...``); pairs before it
                 are registered (and written to ``output``).
             BatchError: a RuntimeError, when the method found no transform for some pairs:
-                its message names the first (``pair 3: rgm+icp failed: ...``), its
+                its message names the first (``pair 3: rgm+refine failed: ...``), its
                 ``results`` holds every pair's result (``None`` where it failed) and its
                 ``errors`` each failed pair's (index, message). With ``output``, failed pairs
                 are lines with their ``"error"`` instead.

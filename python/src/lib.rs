@@ -285,7 +285,7 @@ impl Registrar {
         })
     }
 
-    /// The method's name as `rgm register` prints it (`rgm+icp` when refined).
+    /// The method's name as `rgm register` prints it (`rgm+refine` when refined).
     #[getter]
     fn name(&self) -> String {
         self.copies.prototype.name()

@@ -97,7 +97,7 @@ fn every_line_is_what_rgm_register_json_prints_for_its_pair() {
         ]);
         let mut alone: serde_json::Value =
             serde_json::from_slice(&one.stdout).expect("rgm register --json prints an object");
-        assert_eq!(alone["method"], "auto+icp");
+        assert_eq!(alone["method"], "auto+refine");
         // The method's own time (and each candidate's) differs from run to run; everything else
         // is the same.
         for value in [&mut line, &mut alone] {

@@ -266,7 +266,7 @@ pub fn result_json(
 }
 
 /// Every setting of `options` that changes results, as the output's header records them: the
-/// method's name (`method`, with `+icp` when refined), the weights' CRC-32 (the built-in
+/// method's name (`method`, with `+refine` when refined), the weights' CRC-32 (the built-in
 /// model's name and CRC-32 for `rgm` and `auto` without weights) and each option as given
 /// (`null`: the method's default).
 pub fn settings(
