@@ -258,7 +258,7 @@ def test_register_many_gives_the_one_by_one_results(data, registrar):
         registrar.register_many([(airplane, airplane), (airplane, np.zeros((30, 2)))])
     with pytest.raises(ValueError, match=r"^pairs\[0\] must be a \(source, target\) pair"):
         registrar.register_many([airplane])
-    with pytest.raises(rgm.BatchError, match=r"^pair 1: rgm\+refine failed: .*needs at least"):
+    with pytest.raises(rgm.PairsError, match=r"^pair 1: rgm\+refine failed: .*needs at least"):
         rgm.Registrar(method="rgm").register_many([(airplane, airplane), (airplane[:5], airplane[:5])])
 
 
