@@ -516,7 +516,7 @@ fn robustness(
             continue;
         }
         let (mut outcomes, mut ms) = (Vec::new(), 0.0);
-        // Each candidate's outcomes, by its name (`rgm+icp`, `fgr+icp`, `…/cells`).
+        // Each candidate's outcomes, by its name (`rgm+refine`, `fgr+refine`, `…/cells`).
         let mut per_candidate: std::collections::BTreeMap<String, Vec<Outcome>> =
             Default::default();
         for &i in indices {

@@ -39,6 +39,7 @@ __all__ = [
     "MergeResult",
     "Metrics",
     "ModelNetPairs",
+    "PairsError",
     "Registrar",
     "RegistrationResult",
     "merge",
@@ -122,8 +123,10 @@ Candidate = _rgm.Candidate
 RegistrationResult = _rgm.RegistrationResult
 
 
-class BatchError(RuntimeError):
+class PairsError(RuntimeError):
     """Some pairs of ``Registrar.register_many`` failed; the others' results are kept.
+
+    (``rgm.BatchError``, its name before issue 58, is the same class, kept for one release.)
 
     Attributes:
         results: one entry per pair, in the order of the pairs: its RegistrationResult, or
@@ -140,6 +143,11 @@ class BatchError(RuntimeError):
         )
         self.results = results
         self.errors = errors
+
+
+#: ``PairsError``'s name before issue 58 (a list of pairs was called a batch, the word now kept
+#: for training's mini-batches): the same class, kept for one release.
+BatchError = PairsError
 
 
 class Registrar:
@@ -218,7 +226,7 @@ class Registrar:
 
     @property
     def name(self) -> str:
-        """The method's name as ``rgm register`` prints it (``auto+icp`` by default)."""
+        """The method's name as ``rgm register`` prints it (``auto+refine`` by default)."""
         return self._native.name
 
     def register(self, source: np.ndarray, target: np.ndarray) -> RegistrationResult:
@@ -276,8 +284,8 @@ class Registrar:
             ValueError: a pair that is not two clouds, or a cloud that ``register`` refuses
                 (the message names the pair's index: ``pairs[3] target ...``); pairs before it
                 are registered (and written to ``output``).
-            BatchError: a RuntimeError, when the method found no transform for some pairs:
-                its message names the first (``pair 3: rgm+icp failed: ...``), its
+            PairsError: a RuntimeError, when the method found no transform for some pairs:
+                its message names the first (``pair 3: rgm+refine failed: ...``), its
                 ``results`` holds every pair's result (``None`` where it failed) and its
                 ``errors`` each failed pair's (index, message). With ``output``, failed pairs
                 are lines with their ``"error"`` instead.
@@ -300,7 +308,7 @@ class Registrar:
             return dict(zip(("registered", "not_registered", "failed", "skipped"), counts))
         results, errors = self._native.register_many(checked())
         if errors:
-            raise BatchError(results, errors)
+            raise PairsError(results, errors)
         return results
 
     def __reduce__(self):

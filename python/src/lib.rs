@@ -22,7 +22,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyIterator};
 use rgm_data::{DataError, ModelNet40, PairGenerator, Setting, Shape, Split};
 use rgm_geom::{Matrix4, PairMetrics, Point3, PointCloud, RigidTransform};
-use rgm_model::batch;
+use rgm_model::many_pairs;
 use rgm_model::network::TestStatistics;
 use rgm_model::Registrar as _;
 use rgm_model::{Method, MethodError, MethodName, MethodOptions, Registration};
@@ -127,7 +127,7 @@ fn transform(matrix: &PyReadonlyArray2<'_, f64>, name: &str) -> PyResult<RigidTr
 struct Registrar {
     /// Shared with the pool's work, which may outlive a call interrupted by Ctrl-C.
     copies: Arc<Copies>,
-    /// What the method was built from, recorded in a batch's output.
+    /// What the method was built from, recorded in the output of many pairs.
     options: MethodOptions,
 }
 
@@ -285,7 +285,7 @@ impl Registrar {
         })
     }
 
-    /// The method's name as `rgm register` prints it (`rgm+icp` when refined).
+    /// The method's name as `rgm register` prints it (`rgm+refine` when refined).
     #[getter]
     fn name(&self) -> String {
         self.copies.prototype.name()
@@ -376,7 +376,7 @@ impl Registrar {
         let into = kept.clone();
         let copies = self.copies.clone();
         on_pool(py, &name, move |stop| {
-            batch::register_all(
+            many_pairs::register_all(
                 &copies.prototype,
                 pulled,
                 None,
@@ -426,15 +426,15 @@ impl Registrar {
     ) -> PyResult<(usize, usize, usize, usize)> {
         let name = self.name();
         let method = &self.copies.prototype;
-        let settings = batch::settings(&self.options, method).map_err(batch_error)?;
-        let output = Arc::new(batch::Output::open(&output, &settings, &()).map_err(batch_error)?);
+        let settings = many_pairs::settings(&self.options, method).map_err(pairs_error)?;
+        let output = Arc::new(many_pairs::Output::open(&output, &settings, &()).map_err(pairs_error)?);
         let done = output.done().clone();
         let pulled = Pulled::new(pairs, Some(done));
         let (failed, skipped) = (pulled.error.clone(), pulled.skipped.clone());
         let copies = self.copies.clone();
         let file = output.clone();
         let tally = on_pool(py, &name, move |stop| {
-            batch::register_all(
+            many_pairs::register_all(
                 &copies.prototype,
                 pulled,
                 Some(file.lines()),
@@ -443,7 +443,7 @@ impl Registrar {
                 |_, _| {},
             )
         })?
-        .map_err(batch_error)?;
+        .map_err(pairs_error)?;
         if let Some(error) = lock(&failed).take() {
             return Err(error);
         }
@@ -457,17 +457,17 @@ impl Registrar {
     }
 }
 
-/// A failed pair of a batch: its index and why.
+/// A failed pair of many: its index and why.
 type PairError = (usize, String);
 
-/// A pair of a batch as it finished: its index and its registration, or why it failed.
+/// A pair of many as it finished: its index and its registration, or why it failed.
 type Finished = (usize, Result<Registration, String>);
 
-/// A batch's error: `OSError` for a file that could not be read or written, `ValueError` for
+/// The error of many pairs: `OSError` for a file that could not be read or written, `ValueError` for
 /// an output that is not rgm's or of other settings, or is busy.
-fn batch_error(err: batch::BatchError) -> PyErr {
+fn pairs_error(err: many_pairs::PairsError) -> PyErr {
     match err {
-        batch::BatchError::Io { .. } => PyOSError::new_err(err.to_string()),
+        many_pairs::PairsError::Io { .. } => PyOSError::new_err(err.to_string()),
         other => value_error(other),
     }
 }
@@ -479,7 +479,7 @@ fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
         .unwrap_or_else(|poisoned| poisoned.into_inner())
 }
 
-/// The pairs of a Python iterator as batch jobs, pulled under the GIL by the thread that
+/// The pairs of a Python iterator as jobs of many pairs, pulled under the GIL by the thread that
 /// takes the next job; the first Python error (a pair that is not two clouds) ends the
 /// iteration and is kept for the caller. Pairs named in `skip` are passed over.
 struct Pulled {
@@ -487,13 +487,13 @@ struct Pulled {
     next: usize,
     /// The pairs with a line already, and what they were (a pair of other clouds at the same
     /// place of the list runs again).
-    skip: Option<HashMap<batch::Key, batch::Done>>,
+    skip: Option<HashMap<many_pairs::Key, many_pairs::Done>>,
     skipped: Arc<std::sync::atomic::AtomicUsize>,
     error: Arc<Mutex<Option<PyErr>>>,
 }
 
 impl Pulled {
-    fn new(pairs: Bound<'_, PyIterator>, skip: Option<HashMap<batch::Key, batch::Done>>) -> Self {
+    fn new(pairs: Bound<'_, PyIterator>, skip: Option<HashMap<many_pairs::Key, many_pairs::Done>>) -> Self {
         Self {
             pairs: pairs.unbind(),
             next: 0,
@@ -505,9 +505,9 @@ impl Pulled {
 }
 
 impl Iterator for Pulled {
-    type Item = batch::Job;
+    type Item = many_pairs::Job;
 
-    fn next(&mut self) -> Option<batch::Job> {
+    fn next(&mut self) -> Option<many_pairs::Job> {
         Python::attach(|py| loop {
             if lock(&self.error).is_some() {
                 return None;
@@ -530,13 +530,13 @@ impl Iterator for Pulled {
                 .and_then(|(s, t)| Ok((cloud(&s, "source")?, cloud(&t, "target")?)));
             match clouds {
                 Ok((source, target)) => {
-                    let clouds = batch::Clouds::Given { source, target };
+                    let clouds = many_pairs::Clouds::Given { source, target };
                     let line = self.skip.as_ref().and_then(|skip| skip.get(&key));
-                    if line.is_some_and(|line| line.is_of(&batch::inputs(&clouds))) {
+                    if line.is_some_and(|line| line.is_of(&many_pairs::inputs(&clouds))) {
                         self.skipped.fetch_add(1, Ordering::Relaxed);
                         continue;
                     }
-                    return Some(batch::Job { index, key, clouds });
+                    return Some(many_pairs::Job { index, key, clouds });
                 }
                 Err(error) => {
                     *lock(&self.error) = Some(error);

@@ -27,7 +27,7 @@ fn repr<'py>(py: Python<'py>, value: impl IntoPyObject<'py>) -> PyResult<String>
 /// that overlaps better.
 ///
 /// Attributes:
-///     method: ``"rgm+icp"`` or ``"fgr+icp"`` (without ``+icp`` when unrefined; with ``/cells``
+///     method: ``"rgm+refine"`` or ``"fgr+refine"`` (without ``+refine`` when unrefined; with ``/cells``
 ///         on the second thinning of a dense pair).
 ///     score: the share of each cloud's points within 0.02 of the other cloud after the
 ///         transform (in the unit-sphere frame), source to target plus target to source: 0 to
@@ -103,13 +103,13 @@ pub type CloudArrays = (Py<PyArray2<f64>>, Py<PyArray2<f64>>);
 ///         RGM's matches of its last pass (unrefined), or the source points that the transform
 ///         brings within the method's scoring distance of their nearest target point.
 ///     time_ms: the method's own time in milliseconds (no conversion, no file reading).
-///     method: the method run, as ``rgm register`` names it (``auto+icp`` by default,
-///         ``rgm+icp`` for RGM refined).
+///     method: the method run, as ``rgm register`` names it (``auto+refine`` by default,
+///         ``rgm+refine`` for RGM refined).
 ///     iterations: RGM's passes plus ICP iterations, or the method's iterations.
 ///     converged: whether the method's convergence test stopped it.
 ///     candidates: the default method's candidates (RGM's, then FGR's; on a pair denser
-///         than 1,024 points both again on a second thinning, ``rgm+icp/cells`` and
-///         ``fgr+icp/cells``), each a Candidate with its score; empty for the other methods.
+///         than 1,024 points both again on a second thinning, ``rgm+refine/cells`` and
+///         ``fgr+refine/cells``), each a Candidate with its score; empty for the other methods.
 ///     chosen: the method of the candidate returned, or ``None`` for the other methods.
 ///     registered: ``False`` when the result is not credible (the default method's best
 ///         candidate overlaps too little: fewer than one point in twenty of each cloud lies on

@@ -31,7 +31,7 @@ def test_a_local_dask_cluster_gives_the_single_process_transforms(data):
         found = example.register_on_cluster(client, registrar, pairs)
     assert len(found) == len(pairs)
     for (source, target), result in zip(pairs, found):
-        assert isinstance(result, rgm.RegistrationResult) and result.method == "auto+icp"
+        assert isinstance(result, rgm.RegistrationResult) and result.method == "auto+refine"
         alone = registrar.register(source, target)
         np.testing.assert_array_equal(result.transformation, alone.transformation)
         np.testing.assert_array_equal(result.correspondences, alone.correspondences)

@@ -127,7 +127,7 @@ def test_register_many_keeps_the_results_of_the_pairs_that_did_not_fail(airplane
     # Issue 44, D8: one failing pair among many raised, and every result was lost.
     registrar = rgm.Registrar(method="rgm", refine=False)
     good = (airplane, moved(airplane, KNOWN))
-    with pytest.raises(rgm.BatchError) as raised:
+    with pytest.raises(rgm.PairsError) as raised:
         registrar.register_many([good, (airplane[:5], airplane[:5]), good])
     assert isinstance(raised.value, RuntimeError)
     results, failed = raised.value.results, raised.value.errors
@@ -173,7 +173,7 @@ def test_register_many_writes_and_resumes_rgm_s_json_lines(airplane, tmp_path):
     assert registrar.register_many(iter(pairs), output=output) == {
         "registered": 1, "not_registered": 0, "failed": 0, "skipped": 2}
     header, *lines = [json.loads(line) for line in output.read_text().splitlines()]
-    assert header["rgm_batch"] == 1 and header["settings"]["method"] == "icp"
+    assert header["rgm_many_pairs"] == 1 and header["settings"]["method"] == "icp"
     assert sorted(line["source"] for line in lines) == [f"pairs[{k}].source" for k in range(3)]
     for line in lines:
         k = int(line["source"][6])
@@ -185,9 +185,27 @@ def test_register_many_writes_and_resumes_rgm_s_json_lines(airplane, tmp_path):
         rgm.Registrar(method="fgr").register_many(pairs, output=output)
     notes = tmp_path / "notes.txt"
     notes.write_text("my notes")
-    with pytest.raises(ValueError, match="notes.txt:1: not an output of rgm's batches"):
+    with pytest.raises(ValueError, match="notes.txt:1: not an output of rgm's pair lists"):
         registrar.register_many(pairs, output=notes)
     assert (output.read_text(), notes.read_text()) == (before, "my notes")
+
+
+def test_names_of_before_issue_58_still_work(airplane, tmp_path):
+    # Issue 58: rgm.BatchError is rgm.PairsError for one release, and a register_many file
+    # written before it (header "rgm_batch", the method named fgr+icp) resumes, its header
+    # rewritten as today's.
+    assert rgm.BatchError is rgm.PairsError
+    registrar = rgm.Registrar(method="fgr")
+    pairs = [(airplane, moved(airplane, pose((5 * k, 0, 0), (0, 0, 0)))) for k in range(2)]
+    output = tmp_path / "out.jsonl"
+    assert registrar.register_many(pairs, output=output)["failed"] == 0
+    header, rest = output.read_text().split("\n", 1)
+    assert '"method":"fgr+refine"' in header and '"rgm_many_pairs":1' in header, header
+    old = header.replace("rgm_many_pairs", "rgm_batch").replace("fgr+refine", "fgr+icp")
+    rest = rest.replace("fgr+refine", "fgr+icp")
+    output.write_text(old + "\n" + rest)
+    assert registrar.register_many(pairs, output=output)["skipped"] == 2
+    assert output.read_text() == header + "\n" + rest
 
 
 def test_options_are_what_they_say(airplane):

@@ -32,7 +32,7 @@ def registrar():
 def test_the_default_recovers_a_known_pose(airplane, registrar):
     target = moved(airplane, KNOWN)
     result = rgm.register(airplane, target)
-    assert result.method == "auto+icp" == registrar.name
+    assert result.method == "auto+refine" == registrar.name
     assert result.transformation.shape == (4, 4) and result.transformation.dtype == np.float64
     angle, shift = errors(result.transformation, KNOWN)
     assert angle < 1.0 and shift < 0.01, (angle, shift)
@@ -48,12 +48,12 @@ def test_the_default_recovers_a_known_pose(airplane, registrar):
     assert 0.9 < result.fitness <= 1.0 and 0 < result.inlier_rmse < 0.03
     assert result.time_ms > 0 and result.iterations > 2 and result.converged
     # FGR's result overlaps well and fits no turned pose as well: the network does not run.
-    assert [c.method for c in result.candidates] == ["fgr+icp"] and result.chosen == "fgr+icp"
+    assert [c.method for c in result.candidates] == ["fgr+refine"] and result.chosen == "fgr+refine"
     # accept=inf runs both: both scored (two-way overlap, at most 2), the winner named.
     both = rgm.Registrar(accept=float("inf")).register(airplane, target)
-    assert [c.method for c in both.candidates] == ["fgr+icp", "rgm+icp"]
+    assert [c.method for c in both.candidates] == ["fgr+refine", "rgm+refine"]
     assert all(1.5 < c.score <= 2.0 and c.failure is None for c in both.candidates)
-    assert both.chosen in ("fgr+icp", "rgm+icp")
+    assert both.chosen in ("fgr+refine", "rgm+refine")
     # The source points within 0.03 of their nearest target point after the transform.
     pairs = result.correspondences
     assert pairs.dtype == np.int64 and pairs.ndim == 2 and pairs.shape[1] == 2
@@ -151,7 +151,7 @@ def test_options_that_do_not_fit_are_value_errors(tmp_path):
 
 
 def test_too_few_points_is_a_runtime_error_that_says_why(airplane):
-    with pytest.raises(RuntimeError, match="rgm\\+icp failed: .*needs at least"):
+    with pytest.raises(RuntimeError, match="rgm\\+refine failed: .*needs at least"):
         rgm.Registrar(method="rgm").register(airplane[:5], airplane[:5])
 
 
@@ -258,7 +258,7 @@ def test_register_many_gives_the_one_by_one_results(data, registrar):
         registrar.register_many([(airplane, airplane), (airplane, np.zeros((30, 2)))])
     with pytest.raises(ValueError, match=r"^pairs\[0\] must be a \(source, target\) pair"):
         registrar.register_many([airplane])
-    with pytest.raises(rgm.BatchError, match=r"^pair 1: rgm\+icp failed: .*needs at least"):
+    with pytest.raises(rgm.PairsError, match=r"^pair 1: rgm\+refine failed: .*needs at least"):
         rgm.Registrar(method="rgm").register_many([(airplane, airplane), (airplane[:5], airplane[:5])])
 
 
@@ -267,9 +267,9 @@ def test_a_result_has_named_read_only_fields_a_repr_and_pickles(airplane, regist
     assert isinstance(result, rgm.RegistrationResult)
     assert isinstance(result.candidates[0], rgm.Candidate)
     text = repr(result)
-    assert text.startswith("RegistrationResult(method='auto+icp', registered=True, reason=None"), text
+    assert text.startswith("RegistrationResult(method='auto+refine', registered=True, reason=None"), text
     assert f"correspondences=<{len(result.correspondences)} pairs>" in text
-    assert "Candidate(method='fgr+icp', score=" in text and "transformation=array([[" in text
+    assert "Candidate(method='fgr+refine', score=" in text and "transformation=array([[" in text
     with pytest.raises(AttributeError):
         result.fitness = 1.0
     copy = pickle.loads(pickle.dumps(result))

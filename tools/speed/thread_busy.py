@@ -6,7 +6,7 @@ Runs COMMAND, samples its threads' /proc/PID/task/*/schedstat (nanoseconds on a 
 waiting on a run queue) every 0.2 s, and prints for each thread on a core more than 5 % of the
 wall time its shares of it. A thread that is rarely asleep keeps its core busy whenever the
 scheduler lets it: on a shared machine "waiting" is the other work's share, not the command's
-idling (docs/speed.md, "Batches"). Linux only.
+idling (docs/speed.md, "Pair lists"). Linux only.
 """
 
 import glob

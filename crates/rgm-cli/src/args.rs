@@ -11,7 +11,7 @@ use rgm_data::{
 use rgm_model::network::TestStatistics;
 use rgm_model::{Method, MethodName, MethodOptions};
 use rgm_nn::Precision;
-use rgm_registration::methods::refine::RefineConfig;
+use rgm_registration::methods::refine::{self, RefineConfig};
 
 /// `precision`, after saying on stderr when bf16 falls back to f32 on this processor.
 pub fn checked_precision(precision: Precision) -> Precision {
@@ -83,13 +83,16 @@ fn refine_help() -> String {
         d.join(", then ")
     };
     format!(
-        "Refine the transform of RGM or FGR (both with auto) with ICP on the full clouds: \
+        "Refine the transform of RGM or FGR (both with auto), the method then named with \
+         +{} (auto+{}; --method icp is plain ICP, a method of its own): ICP on the full clouds, \
          trimmed point-to-plane with pairs closer than {}, and point-to-point at {} (RGM and \
          auto measure them in the unit-sphere frame, FGR alone in the clouds' own units, like \
          its own radii, which suit unit-sized shapes); with auto on clouds denser than 1,024 \
          points, then point-to-plane on the clouds as given at a few point spacings and at 3 \
          noise σ (rgm_registration::methods::refine::refine_at_resolution). On by default in `rgm register` and \
          `rgm render`; `rgm eval` follows the paper's protocol and refines only when asked",
+        refine::NAME,
+        refine::NAME,
         then(&refine.distances),
         then(&refine.point_distances)
     )

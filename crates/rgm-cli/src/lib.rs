@@ -39,7 +39,7 @@ pub fn progress(len: usize, what: &str) -> ProgressBar {
     bar
 }
 
-/// The progress of a resumable evaluation or a batch ([`rgm_model::progress::Progress`]) as a
+/// The progress of a resumable evaluation or of many pairs ([`rgm_model::progress::Progress`]) as a
 /// [`progress`] bar labelled `what`, drawn only once pairs are computed (none when an
 /// evaluation reads every pair back); notes go to stderr, above the bar.
 pub struct TaskBar {

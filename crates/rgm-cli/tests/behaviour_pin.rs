@@ -33,9 +33,9 @@ const NETWORK_STRIDE: usize = 3;
 const VARIANTS: [(&str, &[&str], bool); 7] = [
     ("icp", &["--method", "icp"], false),
     ("fgr", &["--method", "fgr", "--no-refine"], false),
-    ("fgr+icp", &["--method", "fgr", "--refine"], false),
+    ("fgr+refine", &["--method", "fgr", "--refine"], false),
     ("rgm", &["--method", "rgm", "--no-refine"], true),
-    ("rgm+icp", &["--method", "rgm", "--refine"], true),
+    ("rgm+refine", &["--method", "rgm", "--refine"], true),
     ("auto", &["--method", "auto", "--no-refine"], true),
     ("default", &[], true),
 ];
@@ -283,7 +283,10 @@ fn a_changed_value_fails_the_pin() {
     assert_eq!(differences(&pinned("rgm", true, moved), &golden).len(), 1);
     moved[0][3] = t[0][3] + 5e-10;
     assert!(differences(&pinned("rgm", true, moved), &golden).is_empty());
-    assert_eq!(differences(&pinned("rgm+icp", true, t), &golden).len(), 1);
+    assert_eq!(
+        differences(&pinned("rgm+refine", true, t), &golden).len(),
+        1
+    );
     assert_eq!(
         differences(&pinned("rgm", false, t), &golden),
         ["partial/0/rgm: registered false, pinned true"]

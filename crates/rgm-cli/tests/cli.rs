@@ -319,7 +319,7 @@ fn register_runs_rgm_with_the_built_in_model() {
     .unwrap();
     assert_eq!(
         (&refined["method"], &refined["refined"]),
-        (&"rgm+icp".into(), &true.into())
+        (&"rgm+refine".into(), &true.into())
     );
     // Refined, the correspondences are the refinement's inliers: every source point of this
     // clean pair.
@@ -351,16 +351,16 @@ fn register_by_default_runs_fgr_first_and_rgm_when_asked_and_names_the_winner() 
         serde_json::from_str(&stdout(&rgm(&["register", src, tgt, "--json"]))).unwrap();
     assert_eq!(
         (&out["method"], &out["refined"]),
-        (&"auto+icp".into(), &true.into())
+        (&"auto+refine".into(), &true.into())
     );
-    assert_eq!(names(&out), ["fgr+icp"]);
-    assert_eq!(out["chosen"], "fgr+icp");
+    assert_eq!(names(&out), ["fgr+refine"]);
+    assert_eq!(out["chosen"], "fgr+refine");
     // --accept inf runs both.
     let out: serde_json::Value = serde_json::from_str(&stdout(&rgm(&[
         "register", src, tgt, "--json", "--accept", "inf",
     ])))
     .unwrap();
-    assert_eq!(names(&out), ["fgr+icp", "rgm+icp"]);
+    assert_eq!(names(&out), ["fgr+refine", "rgm+refine"]);
     let candidates = out["candidates"].as_array().unwrap();
     let chosen = candidates
         .iter()
@@ -384,7 +384,7 @@ fn register_by_default_runs_fgr_first_and_rgm_when_asked_and_names_the_winner() 
     // The text output lists both, the winner marked.
     let text = stdout(&rgm(&["register", src, tgt, "--accept", "inf"]));
     assert!(
-        text.contains("# candidate rgm+icp: overlap score"),
+        text.contains("# candidate rgm+refine: overlap score"),
         "{text}"
     );
     assert!(text.contains("(chosen)"), "{text}");
@@ -422,8 +422,8 @@ fn rgm_options_with_another_method_are_refused() {
 }
 
 #[test]
-fn fgr_refined_with_icp_is_named_and_recovers_the_pose() {
-    let dir = Scratch::new("cli-fgr-icp");
+fn fgr_refined_is_named_and_recovers_the_pose() {
+    let dir = Scratch::new("cli-fgr-refine");
     let (src, tgt) = known_pair(&dir);
     let (src, tgt) = (src.to_str().unwrap(), tgt.to_str().unwrap());
     let out: serde_json::Value = serde_json::from_str(&stdout(&rgm(&[
@@ -432,7 +432,7 @@ fn fgr_refined_with_icp_is_named_and_recovers_the_pose() {
     .unwrap();
     assert_eq!(
         (&out["method"], &out["refined"]),
-        (&"fgr+icp".into(), &true.into())
+        (&"fgr+refine".into(), &true.into())
     );
     let residual = known_pose().inverse().compose(&parse_transform(&out));
     assert!(

@@ -290,7 +290,10 @@ fn scene_pairs_of_a_gt_log_are_scored_by_the_3dmatch_criterion() {
         json.to_str().unwrap(),
     ]));
     // The method is `rgm register`'s default unless named.
-    let row = text.lines().find(|l| l.starts_with("| auto+icp")).unwrap();
+    let row = text
+        .lines()
+        .find(|l| l.starts_with("| auto+refine"))
+        .unwrap();
     let cells: Vec<&str> = row.split('|').map(str::trim).collect();
     // Both right under both turns, none wrong and trusted.
     assert_eq!(&cells[2..6], ["kitchen", "4", "4 / 4", "0 / 4"], "{row}");

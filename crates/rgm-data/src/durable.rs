@@ -1,7 +1,7 @@
 //! Files that a kill or a power cut never leaves half written, and files for one process at a
-//! time: the one place rgm replaces a file (written clouds, batch outputs, evaluation records,
-//! training checkpoints, the runner's packs and tables) and locks one (a batch output, a
-//! training run).
+//! time: the one place rgm replaces a file (written clouds, the outputs of pair lists,
+//! evaluation records, training checkpoints, the runner's packs and tables) and locks one (a
+//! pair list's output, a training run).
 //!
 //! A file is replaced through a temporary file beside it: written, flushed to the disk, given
 //! the permissions of the file it replaces, renamed over it, and the folder flushed, so that

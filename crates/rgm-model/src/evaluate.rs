@@ -68,7 +68,7 @@ impl PairRecord {
         })
     }
 
-    /// This record's transform refined by `refiner` as `rgm+icp` composes it
+    /// This record's transform refined by `refiner` as `rgm+refine` composes it
     /// (`Normalised<Refined<RgmRegistrar>>`: in the network's frame), scored: the record
     /// `rgm eval --refine` would give, without running the network again (its correspondences
     /// the refinement's inliers). Its time adds the refinement's to this record's. A failed
@@ -564,8 +564,8 @@ mod tests {
             record(30.0, 0.2, false),
         ];
         assert_eq!(
-            scan_table_row("auto+icp", "bunny", &records).unwrap(),
-            "| auto+icp     | bunny          |     5 |      3 / 5 |      2 / 5 |          1 / 5 |     0.900 |      0.400 |     100.0 |"
+            scan_table_row("auto+refine", "bunny", &records).unwrap(),
+            "| auto+refine  | bunny          |     5 |      3 / 5 |      2 / 5 |          1 / 5 |     0.900 |      0.400 |     100.0 |"
         );
         assert_eq!(scan_table_row("x", "y", &[]), None);
         assert_eq!(scan_table_header().lines().count(), 2);
@@ -594,8 +594,8 @@ mod tests {
             record(170.0, 3.0, false),
         ];
         assert_eq!(
-            scene_table_row("auto+icp", "redkitchen", &records).unwrap(),
-            "| auto+icp     | redkitchen     |     4 |       2 / 4 |         1 / 4 |      8.00 |        0.570 |    1000.0 |"
+            scene_table_row("auto+refine", "redkitchen", &records).unwrap(),
+            "| auto+refine  | redkitchen     |     4 |       2 / 4 |         1 / 4 |      8.00 |        0.570 |    1000.0 |"
         );
         assert_eq!(scene_table_row("x", "y", &[]), None);
         assert_eq!(scene_table_header().lines().count(), 2);

@@ -26,7 +26,7 @@ impl Method {
         Self(Box::new(registrar))
     }
 
-    /// The method's name as users spell it (`fgr+icp`).
+    /// The method's name as users spell it (`fgr+refine`).
     pub fn name(&self) -> String {
         self.id().to_string()
     }

@@ -7,14 +7,14 @@
 //! | name | composition |
 //! |---|---|
 //! | `icp` | `Checked<IcpConfig, InFrame<REFINED_CHECKS>>` (its own refinement, checked in the unit-sphere frame) |
-//! | `fgr`, `fgr+icp` | `Normalised<Checked<FgrConfig, unrefined_checks()>>`, `Normalised<Checked<Refined<FgrConfig>, REFINED_CHECKS>>` |
-//! | `rgm`, `rgm+icp` | [`Normalised`]`<Checked<RgmRegistrar, unrefined_checks()>>`, `Normalised<Checked<Refined<RgmRegistrar>, REFINED_CHECKS>>` |
+//! | `fgr`, `fgr+refine` | `Normalised<Checked<FgrConfig, unrefined_checks()>>`, `Normalised<Checked<Refined<FgrConfig>, REFINED_CHECKS>>` |
+//! | `rgm`, `rgm+refine` | [`Normalised`]`<Checked<RgmRegistrar, unrefined_checks()>>`, `Normalised<Checked<Refined<RgmRegistrar>, REFINED_CHECKS>>` |
 //! | `auto` | `Normalised<Checked<Thinned<Cascade { first: FgrConfig, rest: [Normalised<RgmRegistrar>] }>, unrefined_checks()>>` |
-//! | `auto+icp` | `Normalised<Checked<AtResolution<Thinned<Cascade { first: Refined<FgrConfig>, rest: [Refined<Normalised<RgmRegistrar>>] }>, AtSpacing>, REFINED_CHECKS>>` |
+//! | `auto+refine` | `Normalised<Checked<AtResolution<Thinned<Cascade { first: Refined<FgrConfig>, rest: [Refined<Normalised<RgmRegistrar>>] }>, AtSpacing>, REFINED_CHECKS>>` |
 //!
 //! (`BestOf[first, rest]` in place of the `Cascade` when `accept` takes nothing; inside the
 //! `Normalised`, `UpTo { points: 32, small: TripletConfig, .. }` sends a pair of a few points to
-//! [`rgm_registration::methods::triplets`]; with `+icp`, a pair denser than the training clouds (a scan, a room)
+//! [`rgm_registration::methods::triplets`]; with `+refine`, a pair denser than the training clouds (a scan, a room)
 //! goes through `Cascade { first: the Thinned composite, rest: [Sc2Config] }` judged by
 //! [`SCENE_ACCEPT`]: second-order compatibility on the pair's own FPFH matches,
 //! [`rgm_registration::methods::sc2`], where the object cascade's result does not coincide with the target at
@@ -26,7 +26,7 @@
 //! must also lie near where the refinement takes them ([`unrefined_checks`]): an unrefined result
 //! that coincides may still be degrees off.
 //!
-//! `Refined<R>` refines with [`RefineConfig`] (`+icp`); any other [`rgm_registration::refiner::Refiner`]
+//! `Refined<R>` refines with [`RefineConfig`] (`+refine`); any other [`rgm_registration::refiner::Refiner`]
 //! composes the same way (`Refined::new(FgrConfig::default(), IcpConfig::default())` is
 //! `fgr+p2p`).
 //!
@@ -222,7 +222,7 @@ pub const WHOLE_DISTANCE: f64 = 0.05;
 /// (`docs/training/default-study/cascade-whole-overlap.md`).
 pub const WHOLE_OVERLAP: f64 = 1.98;
 
-/// How a refined result of the default or of `rgm+icp` must coincide with the other cloud where
+/// How a refined result of the default or of `rgm+refine` must coincide with the other cloud where
 /// it overlaps it, in the unit-sphere frame: the least that kept every right result of 198
 /// validation pairs registered and doubted all but a few wrong ones on pairs at 10 % overlap
 /// (`docs/confidence.md`).
@@ -546,7 +546,7 @@ pub enum DenseStage {
     SceneOnly,
 }
 
-/// `auto` (`auto+icp` with `refine`): FGR's candidate in the network's frame, and RGM's when
+/// `auto` (`auto+refine` with `refine`): FGR's candidate in the network's frame, and RGM's when
 /// `accept` does not take FGR's (the network costs most of the time; both side by side when
 /// `accept` takes nothing), each refined with `refine`; the better by the overlap score on two
 /// thinnings of a dense pair, and the winner refined at a dense pair's own resolution.

@@ -1,4 +1,4 @@
-//! What a long task reports while it runs: the resumable evaluation and the batch runner tell
+//! What a long task reports while it runs: the resumable evaluation and the runner of many pairs tell
 //! one [`Progress`], which the `rgm` command shows as a bar and the Python package ignores.
 
 /// A long task's report.

@@ -55,7 +55,7 @@ fn metrics_against_truth(found: &Registration, pair: &rgm_data::Pair) -> PairMet
     .unwrap()
 }
 
-/// `auto+icp` with `rgm`, both candidates on every pair.
+/// `auto+refine` with `rgm`, both candidates on every pair.
 fn auto_with(rgm: RgmRegistrar) -> Method {
     let never = rgm_registration::check::Acceptance::NEVER;
     rgm_model::options::auto(
@@ -82,10 +82,10 @@ fn a_first_result_that_overlaps_enough_spares_the_network() {
     // the default's threshold, so the network does not run.
     let pair = clean_pair();
     let mut method = MethodOptions::default().build().unwrap();
-    assert_eq!(method.name(), "auto+icp");
+    assert_eq!(method.name(), "auto+refine");
     let found = method.register(&pair.source, &pair.target).unwrap();
     let names = candidate_names(&found);
-    assert_eq!(names, ["fgr+icp"]);
+    assert_eq!(names, ["fgr+refine"]);
     assert!(found.candidates[0].score.unwrap() > 1.9, "{found:?}");
     assert_eq!(found.chosen, Some(0));
     let metrics = metrics_against_truth(&found, &pair);
@@ -107,10 +107,10 @@ fn the_candidate_that_overlaps_better_wins() {
     // returned, scored on the clouds as given.
     let pair = clean_pair();
     let mut method = both_candidates();
-    assert_eq!(method.name(), "auto+icp");
+    assert_eq!(method.name(), "auto+refine");
     let found = method.register(&pair.source, &pair.target).unwrap();
     let names = candidate_names(&found);
-    assert_eq!(names, ["fgr+icp", "rgm+icp"]);
+    assert_eq!(names, ["fgr+refine", "rgm+refine"]);
     let scores: Vec<f64> = found.candidates.iter().map(|c| c.score.unwrap()).collect();
     let chosen = found.chosen.unwrap();
     assert!(
@@ -156,7 +156,7 @@ fn a_failed_candidate_leaves_the_other_and_both_failing_names_both() {
     match method.register(&few(&pair.source), &empty) {
         Err(MethodError::AllCandidatesFailed(AllCandidatesFailed(why))) => {
             assert!(
-                why.contains("fgr+icp: ") && why.contains("rgm+icp: "),
+                why.contains("fgr+refine: ") && why.contains("rgm+refine: "),
                 "{why}"
             );
         }
@@ -212,7 +212,7 @@ fn a_dense_pair_whose_methods_agree_is_thinned_once_and_refined_at_its_resolutio
     // The scene stage runs after the object cascade: points in tight clusters of four
     // reach their 16th neighbour far beyond their nearest, as points along scan lines do, and
     // there the coincidence check takes nothing.
-    assert_eq!(names, ["auto+icp", "sc2+icp"]);
+    assert_eq!(names, ["auto+refine", "sc2+refine"]);
     let scores: Vec<f64> = found.candidates.iter().map(|c| c.score.unwrap()).collect();
     let chosen = found.chosen.unwrap();
     assert!(scores.iter().all(|&s| s <= scores[chosen]), "{scores:?}");
@@ -264,7 +264,7 @@ fn scene_runs_only_the_scene_stage_on_a_dense_pair_and_is_auto_on_a_sparse_one()
     let (source, target) = (four_fold(&pair.source), four_fold(&pair.target));
     let found = scene().register(&source, &target).unwrap();
     assert!(
-        !candidate_names(&found).contains(&"auto+icp"),
+        !candidate_names(&found).contains(&"auto+refine"),
         "{:?}",
         candidate_names(&found)
     );
@@ -415,7 +415,7 @@ fn fgr_alone_doubts_a_result_where_the_clouds_do_not_coincide() {
     let pair = clean_pair();
     let (low, high): (Vec<_>, Vec<_>) = pair.source.points.iter().partition(|p| p.x < 0.0);
     let [mut default, _, mut fgr] = refined_methods();
-    assert_eq!(fgr.name(), "fgr+icp");
+    assert_eq!(fgr.name(), "fgr+refine");
     for method in [&mut default, &mut fgr] {
         let found = method
             .register(

@@ -95,7 +95,7 @@ fn the_default_builds_one_tree_per_cloud_it_searches() {
         if name.starts_with("redkitchen") {
             let ran: Vec<&str> = found.candidates.iter().map(|c| c.method.as_str()).collect();
             assert!(
-                ran.contains(&"sc2+icp"),
+                ran.contains(&"sc2+refine"),
                 "{name}: the scene stage did not run: {ran:?}"
             );
         }

@@ -3,7 +3,7 @@
 //!
 //! A refiner is a value of one trait, so that a new refinement is one type and one line where
 //! methods are composed (`Refined::new(FgrConfig::default(), MyRefiner)`), and its name is
-//! what the composed method's name ends with (`fgr+icp`).
+//! what the composed method's name ends with (`fgr+refine`).
 
 use std::time::Instant;
 
@@ -17,7 +17,7 @@ use crate::Prepared;
 
 /// A local method: from a transform near the truth to a better one.
 pub trait Refiner: Send + Sync {
-    /// What a method refined by it is called after its `+` (`icp` in `fgr+icp`).
+    /// What a method refined by it is called after its `+` (`refine` in `fgr+refine`).
     fn name(&self) -> &'static str;
 
     /// `initial` (a `t_target_source`) improved so that `source` lies on `target`, with the
@@ -48,7 +48,7 @@ impl<F: Refiner + ?Sized> Refiner for &F {
 }
 
 /// Trimmed point-to-plane ICP, coarse to fine ([`refine::refine`]), scored at its finest
-/// distance: the refinement of every `+icp` method.
+/// distance: the refinement of every `+refine` method.
 impl Refiner for RefineConfig {
     fn name(&self) -> &'static str {
         refine::NAME

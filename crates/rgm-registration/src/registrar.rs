@@ -17,7 +17,7 @@ use crate::fit::{score, Fit};
 use crate::Prepared;
 
 /// What users call a method: its base name and the refiner its transform went through, spelled
-/// `base` or `base+refiner` (`fgr+icp`) in the command line, the tables, the Python package
+/// `base` or `base+refiner` (`fgr+refine`) in the command line, the tables, the Python package
 /// and JSON. The wrappers compose it: [`crate::compose::Refined`] names its refiner.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct MethodId {

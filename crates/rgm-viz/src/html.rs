@@ -71,7 +71,7 @@ impl InlierDistance {
 /// [`ResultNotes::of_registration`], or by hand for a transform that no method found here.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ResultNotes {
-    /// The method that found the transform (`auto+icp`), or where the transform came from.
+    /// The method that found the transform (`auto+refine`), or where the transform came from.
     pub method: String,
     /// A composite's candidates, each with its score; empty for a single method.
     pub candidates: Vec<Candidate>,
@@ -715,7 +715,7 @@ pub(crate) mod tests {
                 .len(),
             2
         );
-        let refined = ResultNotes::of_registration("rgm+icp", &registration);
+        let refined = ResultNotes::of_registration("rgm+refine", &registration);
         assert!(refined.correspondences.is_empty());
         assert!(refined.correspondences_note.contains("inliers"));
     }

@@ -26,7 +26,7 @@ use rgm_model::options::FRAME;
 use rgm_model::weights::{weights_dir, Manifest, ModelEntry, Variant, WeightsFile};
 use rgm_model::{Method, MethodName, MethodOptions, PairRecord, Registrar};
 use rgm_registration::compose::Normalised;
-use rgm_registration::methods::refine::RefineConfig;
+use rgm_registration::methods::refine::{self, RefineConfig};
 use rgm_registration::refiner::Refiner;
 use rgm_registration::registrar::MethodId;
 use rgm_viz::{correct_fraction, correspondence_figure, registration_figure};
@@ -47,10 +47,11 @@ pub struct Args {
     /// target/reproduce-tables/limit-N/ so that docs/ keeps the full tables.
     #[arg(long, value_name = "N")]
     limit: Option<usize>,
-    /// Only these rows (`icp`, `fgr`, `fgr+icp`, `auto+icp` or a model of the manifest, which
-    /// brings its `+icp` row): a new model's rows without recomputing the others' missing
-    /// pairs. Written under target/reproduce-tables/ unless --out says otherwise.
-    #[arg(long, value_delimiter = ',', value_name = "NAME,NAME")]
+    /// Only these rows (`icp`, `fgr`, `fgr+refine`, `auto+refine` or a model of the manifest, which
+    /// brings its `+refine` row): a new model's rows without recomputing the others' missing
+    /// pairs. Written under target/reproduce-tables/ unless --out says otherwise. A name of
+    /// before issue 58 (`fgr+icp`, `auto+icp`) is read as today's (`fgr+refine`, `auto+refine`).
+    #[arg(long, value_delimiter = ',', value_name = "NAME,NAME", value_parser = row_name)]
     only: Vec<String>,
     /// Where results.md, results/ and figures/ go [default: docs/, or
     /// target/reproduce-tables/limit-N[-only-NAMES]/ with --limit or --only].
@@ -74,6 +75,12 @@ pub struct Args {
     /// one the git history last committed at that path.
     #[arg(long)]
     no_history: bool,
+}
+
+/// A row's name as `--only` gives it, spelled as today ([`refine::current_name`]: `fgr+icp`, the
+/// name before issue 58, is `fgr+refine`).
+fn row_name(name: &str) -> Result<String, std::convert::Infallible> {
+    Ok(refine::current_name(name).into_owned())
 }
 
 /// One protocol of test pairs (spec §1): a setting on the whole test split or on the unseen
@@ -133,7 +140,7 @@ struct Candidate {
 }
 
 impl Candidate {
-    /// The name, stem and inputs of its refined row (`<name>+icp`).
+    /// The name, stem and inputs of its refined row (`<name>+refine`).
     fn refined(&self, refiner: &(impl Refiner + Debug)) -> (String, String, String) {
         let suffix = refiner.name();
         (
@@ -338,7 +345,7 @@ fn model_inputs(entry: &ModelEntry) -> Result<String> {
 fn default_row() -> String {
     MethodId {
         base: rgm_model::options::AUTO,
-        refiner: Some(rgm_registration::methods::refine::NAME),
+        refiner: Some(refine::NAME),
     }
     .to_string()
 }
@@ -347,9 +354,9 @@ fn default_row() -> String {
 /// settings; spec §6), on partial pairs also FGR refined by `rgm_registration::methods::refine` (the classical
 /// pipeline RGM competes with there; on clean and noisy pairs FGR alone registers nearly every
 /// pair, docs/results.md),
-/// `rgm register`'s default (`auto+icp`: RGM with the built-in model and FGR, both refined, the
+/// `rgm register`'s default (`auto+refine`: RGM with the built-in model and FGR, both refined, the
 /// better by its score), then every model of the manifest trained for `set`, as the paper runs
-/// it (unrefined; [`run`] adds each model refined, `<name>+icp`, from its own transforms).
+/// it (unrefined; [`run`] adds each model refined, `<name>+refine`, from its own transforms).
 ///
 /// Only the rows named in `only` when it is not empty: the others' methods are not even built
 /// (a model's weights are not read).
@@ -367,7 +374,12 @@ fn candidates(set: TestSet, manifest: &Manifest, only: &[String]) -> Result<Vec<
         let options = MethodOptions::default();
         list.push(Candidate {
             name: default_row(),
-            stem: format!("auto-{}-{}pairs-icp", builtin.name, builtin.pairs_seen),
+            stem: format!(
+                "auto-{}-{}pairs-{}",
+                builtin.name,
+                builtin.pairs_seen,
+                refine::NAME
+            ),
             variant: None,
             pairs_seen: None,
             inputs: format!("{options:?}, built-in model {}", model_inputs(builtin)?),
@@ -397,10 +409,7 @@ fn check_only(manifest: &Manifest, only: &[String]) -> Result<()> {
     let classical = [
         (MethodName::Icp, None),
         (MethodName::Fgr, None),
-        (
-            MethodName::Fgr,
-            Some(rgm_registration::methods::refine::NAME),
-        ),
+        (MethodName::Fgr, Some(refine::NAME)),
     ]
     .map(|(name, refiner)| {
         MethodId {
@@ -472,11 +481,24 @@ fn models_for(manifest: &Manifest, set: TestSet) -> impl Iterator<Item = &ModelE
 impl Run {
     /// The per-pair file of one method on one test set, to resume from: when it is missing,
     /// the one the history last committed at its path is written there first (unless
-    /// `--no-history`).
+    /// `--no-history`), or, for a refined row the history holds only under its stem of before
+    /// issue 58 ([`older_stem`]: `fgr-icp`), that one.
     fn records_file(&self, set: TestSet, stem: &str) -> Result<PathBuf> {
         let path = records_path(&self.out, set, stem);
         if self.history && !path.exists() {
-            if let Some(revision) = restore_from_history(&project_root(), &path)? {
+            let root = project_root();
+            let restored = match restore_from_history(&root, &path)? {
+                Some(revision) => Some(revision),
+                None => match older_stem(stem) {
+                    Some(old) => {
+                        let held = records_path(&self.out, set, &old);
+                        restore_renamed_from_history(&root, &held, &path)?
+                            .map(|revision| format!("{revision} ({old}.jsonl.gz there)"))
+                    }
+                    None => None,
+                },
+            };
+            if let Some(revision) = restored {
                 println!("{}: read back from commit {revision}", path.display());
             }
         }
@@ -559,18 +581,34 @@ fn records_path(out: &Path, set: TestSet, stem: &str) -> PathBuf {
         .join(format!("{stem}.jsonl.gz"))
 }
 
+/// The stem a refined row's per-pair file had before issue 58 renamed the refinement
+/// (`fgr-refine` was `fgr-icp`, `partial-fast-755305pairs-refine` was
+/// `partial-fast-755305pairs-icp`); `None` for a row that is not refined.
+fn older_stem(stem: &str) -> Option<String> {
+    let base = stem.strip_suffix(&format!("-{}", refine::NAME))?;
+    Some(format!("{base}-{}", refine::OLD_NAME))
+}
+
 /// Writes the file `path` of the repository at `root` as the last commit that added or changed
 /// it holds it (a per-pair file removed from the tree since), and returns that commit; `None`,
 /// writing nothing, when no commit holds the path, `path` is outside the repository, or git
 /// cannot tell (a copy of the tree without its history; a shallow clone that lacks the commit).
 fn restore_from_history(root: &Path, path: &Path) -> Result<Option<String>> {
-    let (Some(folder), Some(name)) = (path.parent(), path.file_name()) else {
+    restore_renamed_from_history(root, path, path)
+}
+
+/// [`restore_from_history`] of the file the history held at `held`, written to `path` (the
+/// same file under its older name).
+fn restore_renamed_from_history(root: &Path, held: &Path, path: &Path) -> Result<Option<String>> {
+    let (Some(folder), Some(held_folder), Some(name)) =
+        (path.parent(), held.parent(), held.file_name())
+    else {
         return Ok(None);
     };
     // The folder the file goes to is made anyway (the evaluation writes there); canonical
     // paths, so that a relative --out and the root compare.
     fs::create_dir_all(folder).with_context(|| format!("creating {}", folder.display()))?;
-    let (Ok(root), Ok(folder)) = (fs::canonicalize(root), fs::canonicalize(folder)) else {
+    let (Ok(root), Ok(folder)) = (fs::canonicalize(root), fs::canonicalize(held_folder)) else {
         return Ok(None);
     };
     let Ok(relative) = folder.strip_prefix(&root) else {

@@ -110,7 +110,10 @@ impl Report {
                (`.gitignore`); those committed earlier are in the history, and a run that \
                misses one starts from the copy the last commit to add or change it holds \
                (`git log -1 -- PATH`); delete a file and pass `--no-history` to recompute \
-               it.\n\n";
+               it. A refined row's file ends `-refine` (`fgr-refine.jsonl.gz`); before issue 58 \
+               it ended `-icp` (`fgr-icp.jsonl.gz`, the rows then named `+icp`): the history's \
+               `-icp` files are read back under the new name, and a copy of one elsewhere is \
+               read once renamed `*-refine.jsonl.gz`.\n\n";
         md += &self.models_markdown();
         for table in &TABLES {
             md += &format!("## Table {}: {}\n\n", table.number, table.caption);
@@ -258,11 +261,11 @@ jittered.
 anisotropic (Euler angles in degrees, per axis). CCD follows the authors' code (clipped \
 Euclidean distances, means), not the paper's formula. Recall: MAE(R) < 1° and MAE(t) < 0.1.
 - **Methods**: ICP point-to-point from the identity; FGR on FPFH features; both with Open3D's \
-settings (see baselines.md for the agreement with Open3D). `+icp` rows: the method's transform \
+settings (see baselines.md for the agreement with Open3D). `+refine` rows: the method's transform \
 refined as `rgm register` refines it (`rgm_registration::methods::refine`: {refinement}); the paper reports no refined rows. A \
-trained model's `+icp` row refines the transforms of its own row (what `rgm eval --refine` \
+trained model's `+refine` row refines the transforms of its own row (what `rgm eval --refine` \
 gives, without running the network twice; its time adds the refinement's). \
-`auto+icp`: `rgm register`'s default, RGM with the built-in model and FGR, both refined so, and \
+`auto+refine`: `rgm register`'s default, RGM with the built-in model and FGR, both refined so, and \
 per pair the result with the larger two-way overlap (`rgm_registration::compose`). The paper's learned \
 peers (RPM-Net, IDAM, DeepGMR) are not reproduced here.
 ",
@@ -270,7 +273,7 @@ peers (RPM-Net, IDAM, DeepGMR) are not reproduced here.
     )
 }
 
-/// The refinement of the `+icp` rows in words, from the settings it runs with
+/// The refinement of the `+refine` rows in words, from the settings it runs with
 /// ([`RefineConfig::default`]).
 fn refinement() -> String {
     let config = RefineConfig::default();

@@ -37,12 +37,12 @@ fn only_keeps_the_named_rows_and_refuses_unknown_names() {
             .collect::<Vec<_>>()
     };
     assert_eq!(
-        names(TestSet::ALL[0], &["fgr+icp", "icp"]),
-        ["icp", "fgr+icp"]
+        names(TestSet::ALL[0], &["fgr+refine", "icp"]),
+        ["icp", "fgr+refine"]
     );
-    assert!(names(TestSet::ALL[2], &["fgr+icp"]).is_empty());
+    assert!(names(TestSet::ALL[2], &["fgr+refine"]).is_empty());
     assert_eq!(names(TestSet::ALL[2], &[]), ["icp", "fgr"]);
-    assert!(check_only(&manifest, &["icp".into(), "fgr+icp".into()]).is_ok());
+    assert!(check_only(&manifest, &["icp".into(), "fgr+refine".into()]).is_ok());
     let err = check_only(&manifest, &["icp".into(), "var9".into()]).unwrap_err();
     assert!(
         err.to_string().starts_with("--only var9: no such row"),
@@ -51,7 +51,39 @@ fn only_keeps_the_named_rows_and_refuses_unknown_names() {
 }
 
 #[test]
-fn fgr_refined_by_icp_is_a_row_of_the_partial_tables_only() {
+fn only_reads_a_row_name_of_before_issue_58_as_today_s() {
+    #[derive(clap::Parser)]
+    struct Command {
+        #[command(flatten)]
+        args: Args,
+    }
+    let parsed = <Command as clap::Parser>::try_parse_from([
+        "reproduce-tables",
+        "--only",
+        "icp,fgr+icp,auto+refine,partial-fast",
+    ])
+    .unwrap();
+    assert_eq!(
+        parsed.args.only,
+        ["icp", "fgr+refine", "auto+refine", "partial-fast"]
+    );
+    let manifest: Manifest = serde_json::from_value(serde_json::json!({"models": []})).unwrap();
+    assert!(check_only(&manifest, &parsed.args.only[..3]).is_ok());
+}
+
+#[test]
+fn a_refined_row_s_stem_of_before_issue_58_is_the_same_with_icp() {
+    assert_eq!(older_stem("fgr-refine").as_deref(), Some("fgr-icp"));
+    assert_eq!(
+        older_stem("auto-partial-fast-755305pairs-refine").as_deref(),
+        Some("auto-partial-fast-755305pairs-icp")
+    );
+    assert_eq!(older_stem("partial-fast-755305pairs"), None);
+    assert_eq!(older_stem("icp"), None);
+}
+
+#[test]
+fn fgr_refined_is_a_row_of_the_partial_tables_only() {
     let manifest: Manifest = serde_json::from_value(serde_json::json!({"models": []})).unwrap();
     let names = |set: TestSet| {
         let list = candidates(set, &manifest, &[]).unwrap();
@@ -61,7 +93,7 @@ fn fgr_refined_by_icp_is_a_row_of_the_partial_tables_only() {
             .collect::<Vec<_>>()
     };
     let partial = names(TestSet::ALL[0]);
-    assert_eq!(partial.last().unwrap(), "fgr+icp=fgr+icp");
+    assert_eq!(partial.last().unwrap(), "fgr+refine=fgr+refine");
     assert_eq!(names(TestSet::ALL[1]), partial);
     assert_eq!(names(TestSet::ALL[2]), ["icp=icp", "fgr=fgr"]);
 }
@@ -73,8 +105,8 @@ fn every_table_has_the_default_of_rgm_register() {
     let manifest = Manifest::builtin();
     for set in TestSet::ALL {
         let list = candidates(set, &manifest, &[default_row()]).unwrap();
-        let default = list.iter().find(|c| c.name == "auto+icp").unwrap();
-        assert_eq!(default.method.name(), "auto+icp", "{}", set.key());
+        let default = list.iter().find(|c| c.name == "auto+refine").unwrap();
+        assert_eq!(default.method.name(), "auto+refine", "{}", set.key());
         assert!(
             default.stem.starts_with("auto-partial-fast-"),
             "{}",
@@ -117,6 +149,20 @@ fn a_missing_per_pair_file_is_read_back_from_the_last_commit_that_held_it() {
     let other = root.join("docs/results/clean/fgr.jsonl.gz");
     assert_eq!(restore_from_history(&root, &other).unwrap(), None);
     assert!(!other.exists());
+    // A refined row's file under its name of before issue 58, read back under today's.
+    let old = root.join("docs/results/clean/fgr-icp.jsonl.gz");
+    fs::write(&old, "refined").unwrap();
+    git(&["add", "docs"]);
+    git(&["commit", "-q", "-m", "a refined row"]);
+    let renamed = git(&["rev-parse", "--short", "HEAD"]);
+    git(&["rm", "-q", "-r", "docs"]);
+    git(&["commit", "-q", "-m", "records out of the tree again"]);
+    let new = root.join("docs/results/clean/fgr-refine.jsonl.gz");
+    assert_eq!(restore_from_history(&root, &new).unwrap(), None);
+    let restored = restore_renamed_from_history(&root, &old, &new).unwrap();
+    assert_eq!(restored.as_deref(), Some(renamed.as_str()));
+    assert_eq!(fs::read_to_string(&new).unwrap(), "refined");
+    assert!(!old.exists());
     let outside = root.with_extension("outside").join("icp.jsonl.gz");
     assert_eq!(restore_from_history(&root, &outside).unwrap(), None);
     assert!(!outside.exists());
@@ -130,12 +176,12 @@ fn the_command_line_is_the_one_typed_quoted_where_a_shell_needs_it() {
         "target/debug/xtask",
         "reproduce-tables",
         "--only",
-        "icp,fgr+icp",
+        "icp,fgr+refine",
     ]
     .map(String::from);
     assert_eq!(
         command_line(args.into_iter()),
-        "cargo xtask reproduce-tables --only icp,fgr+icp"
+        "cargo xtask reproduce-tables --only icp,fgr+refine"
     );
     let args = [
         "xtask",

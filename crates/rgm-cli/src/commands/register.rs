@@ -1,5 +1,5 @@
 //! `rgm register SRC TGT`: the transform that maps SRC onto TGT; `--pairs LIST` runs many
-//! pairs ([`super::batch`], which does not depend on this module).
+//! pairs ([`super::pair_list`], which does not depend on this module).
 
 use std::path::PathBuf;
 
@@ -33,7 +33,7 @@ pub struct Args {
     #[command(flatten)]
     page: super::page::HtmlArgs,
     #[command(flatten)]
-    batch: super::batch::BatchArgs,
+    pair_list: super::pair_list::PairListArgs,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -41,9 +41,9 @@ pub fn run(args: Args) -> Result<()> {
         if args.page.html.is_some() {
             anyhow::bail!("--html writes the page of one pair (SOURCE TARGET), not of --pairs");
         }
-        return super::batch::run(&args.batch, &args.method);
+        return super::pair_list::run(&args.pair_list, &args.method);
     };
-    args.batch.refuse_without_pairs()?;
+    args.pair_list.refuse_without_pairs()?;
     args.page.check()?;
     if let Some(out) = &args.out {
         rgm_data::io::format_of(out)?;
@@ -67,8 +67,11 @@ pub fn run(args: Args) -> Result<()> {
     )?;
     let rows = result.t_target_source.to_rows();
     if args.json {
-        let value =
-            rgm_model::batch::result_json(&method, &registration, (source.len(), target.len()));
+        let value = rgm_model::many_pairs::result_json(
+            &method,
+            &registration,
+            (source.len(), target.len()),
+        );
         rgm_cli::outln!("{value}")?;
         return not_registered(doubt);
     }

@@ -546,7 +546,7 @@ mod tests {
             assert_eq!(file.lines.len(), 3);
 
             // Refined from the records: the refinement's own file, every pair of the records.
-            let refined_path = dir.join("results/clean/icp-icp.jsonl.gz");
+            let refined_path = dir.join("results/clean/icp-refine.jsonl.gz");
             let config = RefineConfig::default();
             let refined = run(None)
                 .refine(

@@ -31,7 +31,7 @@ fn the_default_registers_a_few_markers() {
 #[test]
 fn the_default_is_the_built_in_rgm_and_fgr_refined() {
     let options = MethodOptions::default();
-    assert_eq!(options.build().unwrap().name(), "auto+icp");
+    assert_eq!(options.build().unwrap().name(), "auto+refine");
     // RGM inside is the built-in model with its own settings.
     let registrar = options.build_rgm().unwrap();
     let builtin = crate::weights::builtin_registrar().unwrap();
@@ -97,7 +97,7 @@ fn options_reach_the_method() {
         TestStatistics::Running
     );
     for (name, options, expected) in [
-        ("fgr", MethodOptions::default(), "fgr+icp"),
+        ("fgr", MethodOptions::default(), "fgr+refine"),
         (
             "fgr",
             MethodOptions {
@@ -107,7 +107,7 @@ fn options_reach_the_method() {
             "fgr",
         ),
         ("icp", MethodOptions::default(), "icp"),
-        ("rgm", MethodOptions::default(), "rgm+icp"),
+        ("rgm", MethodOptions::default(), "rgm+refine"),
         (
             "auto",
             MethodOptions {
@@ -116,8 +116,8 @@ fn options_reach_the_method() {
             },
             "auto",
         ),
-        // Named as chosen, not by its scene stage (`sc2+icp`), the part that runs on dense pairs.
-        ("scene", MethodOptions::default(), "scene+icp"),
+        // Named as chosen, not by its scene stage (`sc2+refine`), the part that runs on dense pairs.
+        ("scene", MethodOptions::default(), "scene+refine"),
     ] {
         let options = MethodOptions {
             method: name.parse().unwrap(),

@@ -443,11 +443,14 @@ mod tests {
         let fgr = FgrConfig::default();
         assert_eq!(Registrar::<GeomError>::id(&fgr).to_string(), "fgr");
         let refined = Refined::new(fgr, RefineConfig::default());
-        assert_eq!(Registrar::<GeomError>::id(&refined).to_string(), "fgr+icp");
+        assert_eq!(
+            Registrar::<GeomError>::id(&refined).to_string(),
+            "fgr+refine"
+        );
         let normalised = Normalised::new(refined, FRAME);
         assert_eq!(
             Registrar::<GeomError>::id(&normalised).to_string(),
-            "fgr+icp"
+            "fgr+refine"
         );
         assert_eq!(
             Registrar::<GeomError>::id(&IcpConfig::default()).to_string(),

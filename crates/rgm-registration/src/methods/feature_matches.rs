@@ -74,7 +74,7 @@ impl MatchingConfig {
         Ok(Registration::single(result, Vec::new(), start))
     }
 
-    /// The name of an estimator on these matches: `base+icp`, its last step being
+    /// The name of an estimator on these matches: `base+refine`, its last step being
     /// point-to-plane ICP ([`MatchingConfig::refinement`]), unless that has no stage.
     pub fn method_id(&self, base: &'static str) -> MethodId {
         MethodId {

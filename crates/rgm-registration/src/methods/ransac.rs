@@ -281,7 +281,7 @@ fn hypothesis(
 
 /// RANSAC on FPFH matches ([`register`]).
 impl<E: From<GeomError>> Registrar<E> for RansacConfig {
-    /// `ransac+icp`: its last step is point-to-plane ICP ([`MatchingConfig::refinement`]), so a
+    /// `ransac+refine`: its last step is point-to-plane ICP ([`MatchingConfig::refinement`]), so a
     /// composite of it and candidates refined by [`crate::methods::refine`] is named as refined too.
     fn id(&self) -> MethodId {
         self.matching.method_id(NAME)

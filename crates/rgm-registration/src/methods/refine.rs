@@ -35,9 +35,28 @@ use crate::fit::{nearest_each, score, Fit};
 use crate::methods::icp::{self, check_clouds, IcpConfig};
 use crate::Prepared;
 
-/// What a method refined by [`refine`] is called after its `+` (`fgr+icp`): it is ICP, point to
-/// plane and then point to point.
-pub const NAME: &str = "icp";
+/// What a method refined by [`refine`] is called after its `+` (`fgr+refine`): the refinement
+/// (ICP, point to plane and then point to point), named apart from `icp`, the method
+/// ([`crate::methods::icp::NAME`]). Every composed name reads it; none spells it.
+pub const NAME: &str = "refine";
+
+/// What [`NAME`] was before issue 58 (`fgr+icp`, `auto+icp`): read back as [`NAME`] from an
+/// older file or script by [`current_name`].
+pub const OLD_NAME: &str = "icp";
+
+/// `name` as this rgm spells it: a refined name of before issue 58 (`auto+icp`, `sc2+icp`,
+/// `fgr+icp/cells`: the suffix `+icp` after a base, alone or before a `/`) with [`NAME`] in
+/// place of [`OLD_NAME`]; any other name (`icp`, the method; `fgr+p2p`) as it is.
+pub fn current_name(name: &str) -> Cow<'_, str> {
+    let old = format!("+{OLD_NAME}");
+    let (head, tail) = name.split_at(name.find('/').unwrap_or(name.len()));
+    match head.strip_suffix(old.as_str()) {
+        Some(base) if !base.is_empty() && !base.contains('+') => {
+            Cow::Owned(format!("{base}+{NAME}{tail}"))
+        }
+        _ => Cow::Borrowed(name),
+    }
+}
 
 /// Settings of [`refine`]. Distances are in the clouds' units; the defaults suit shapes scaled
 /// into the unit sphere, like ModelNet40's.
@@ -766,5 +785,24 @@ mod tests {
         }
         let empty = PointCloud::new(vec![]);
         assert!(refine(&empty, &cloud, &start, &RefineConfig::default()).is_err());
+    }
+
+    #[test]
+    fn names_of_before_issue_58_read_as_today_s() {
+        for (old, now) in [
+            ("auto+icp", "auto+refine"),
+            ("sc2+icp", "sc2+refine"),
+            ("fgr+icp/cells", "fgr+refine/cells"),
+            ("partial-fast+icp", "partial-fast+refine"),
+            // The method ICP, names of today, other refiners and what is not a name stay.
+            ("icp", "icp"),
+            ("icp/cells", "icp/cells"),
+            ("auto+refine", "auto+refine"),
+            ("fgr+p2p", "fgr+p2p"),
+            ("+icp", "+icp"),
+            ("a+b+icp", "a+b+icp"),
+        ] {
+            assert_eq!(current_name(old), now, "{old}");
+        }
     }
 }

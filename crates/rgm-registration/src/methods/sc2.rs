@@ -236,7 +236,7 @@ impl Compatibility {
 
 /// Second-order compatibility on FPFH matches ([`register`]).
 impl<E: From<GeomError>> Registrar<E> for Sc2Config {
-    /// `sc2+icp`: its last step is point-to-plane ICP ([`MatchingConfig::refinement`]).
+    /// `sc2+refine`: its last step is point-to-plane ICP ([`MatchingConfig::refinement`]).
     fn id(&self) -> MethodId {
         self.matching.method_id(NAME)
     }

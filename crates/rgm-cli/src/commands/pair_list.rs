@@ -1,5 +1,5 @@
 //! `rgm register --pairs LIST`: every pair of a list registered on parallel workers, one JSON
-//! line each, resumable ([`rgm_model::batch`] runs it; each line names its pair by `source` and
+//! line each, resumable ([`rgm_model::many_pairs`] runs it; each line names its pair by `source` and
 //! `target` as LIST spells them).
 
 use std::path::PathBuf;
@@ -7,15 +7,15 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Mutex;
 
 use anyhow::{bail, Context, Result};
-use rgm_model::batch::{self, Output};
+use rgm_model::many_pairs::{self, Output};
 use rgm_model::progress::Progress as _;
 
 use crate::args::{MethodArgs, WorkerArgs};
 
-/// The batch options of `rgm register`.
+/// The pair-list options of `rgm register`.
 #[derive(clap::Args, Debug)]
-#[command(next_help_heading = "Batches")]
-pub struct BatchArgs {
+#[command(next_help_heading = "Pair lists")]
+pub struct PairListArgs {
     /// Register every pair of LIST instead of SOURCE TARGET, all cores busy (--workers), and
     /// write one JSON line per pair.
     ///
@@ -31,20 +31,21 @@ pub struct BatchArgs {
     #[arg(long, value_name = "LIST")]
     pairs: Option<PathBuf>,
     /// Write the lines of --pairs to FILE (JSON Lines) instead of stdout, resumably, after a
-    /// first line that records the settings that change results ({"rgm_batch": 1,
+    /// first line that records the settings that change results ({"rgm_many_pairs": 1,
     /// "settings": {…}}: the method, the weights' CRC-32, the network's options). A run on a
     /// FILE that holds lines already registers only the pairs it has no line for (a killed
     /// run's cut-off last line, and pairs that failed, are done again). Refused, and left as it
     /// is: a FILE without that first line (not rgm's), one of other settings, and one that
-    /// another run is writing.
+    /// another run is writing. A FILE of an rgm before issue 58 ({"rgm_batch": 1, …}, the
+    /// methods named +icp for +refine) resumes too, its header rewritten as today's.
     #[arg(long, value_name = "FILE", requires = "pairs")]
     output: Option<PathBuf>,
     #[command(flatten)]
     workers: WorkerArgs,
 }
 
-impl BatchArgs {
-    /// The refusal of the batch options when SOURCE TARGET name one pair.
+impl PairListArgs {
+    /// The refusal of the pair-list options when SOURCE TARGET name one pair.
     pub fn refuse_without_pairs(&self) -> Result<()> {
         if self.workers.workers.is_some() {
             bail!("--workers applies to --pairs LIST; one pair runs on one thread");
@@ -53,7 +54,7 @@ impl BatchArgs {
     }
 }
 
-pub fn run(args: &BatchArgs, method: &MethodArgs) -> Result<()> {
+pub fn run(args: &PairListArgs, method: &MethodArgs) -> Result<()> {
     let list = args
         .pairs
         .as_deref()
@@ -61,11 +62,11 @@ pub fn run(args: &BatchArgs, method: &MethodArgs) -> Result<()> {
     let options = method.options(crate::args::Defaults::Register)?;
     let method = options.build()?;
     let bar = rgm_cli::TaskBar::new(method.name());
-    let listed = batch::read_list(list, &bar)?;
+    let listed = many_pairs::read_list(list, &bar)?;
     let mut output = match &args.output {
         Some(path) => Some(Output::open(
             path,
-            &batch::settings(&options, &method)?,
+            &many_pairs::settings(&options, &method)?,
             &bar,
         )?),
         None => None,
@@ -75,7 +76,7 @@ pub fn run(args: &BatchArgs, method: &MethodArgs) -> Result<()> {
         .map(Output::done)
         .cloned()
         .unwrap_or_default();
-    let (todo, earlier, stale) = batch::remaining(&listed, &done);
+    let (todo, earlier, stale) = many_pairs::remaining(&listed, &done);
     if let Some(output) = &mut output {
         if !stale.is_empty() {
             eprintln!(
@@ -107,7 +108,7 @@ pub fn run(args: &BatchArgs, method: &MethodArgs) -> Result<()> {
     };
     let jobs = todo.iter().enumerate().map(|(i, pair)| pair.job(i));
     let tally = args.workers.pool()?.install(|| {
-        batch::register_all(
+        many_pairs::register_all(
             &method,
             jobs,
             Some(lines),

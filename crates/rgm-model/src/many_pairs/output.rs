@@ -1,6 +1,7 @@
-//! The output file of a batch: rgm's header, the lock a run holds, the lines earlier runs
+//! The output file of many pairs: rgm's header, the lock a run holds, the lines earlier runs
 //! finished, and the rewrite that drops the others (the module doc of [`super`] says how).
 
+use std::borrow::Cow;
 use std::collections::{HashMap, HashSet};
 use std::fs::File;
 use std::io::Write;
@@ -9,9 +10,10 @@ use std::sync::Mutex;
 
 use rgm_data::durable::{self, LockError};
 use rgm_data::pair_list::shortened;
+use rgm_registration::methods::refine;
 use serde_json::{json, Map, Value};
 
-use super::{BatchError, Done, Key, Outcome, FORMAT, HEADER_KEY};
+use super::{Done, Key, Outcome, PairsError, FORMAT, HEADER_KEY, OLD_HEADER_KEY};
 use crate::progress::Progress;
 
 /// A run's output file (JSON Lines), locked for the run, with what earlier runs finished.
@@ -30,13 +32,13 @@ impl Output {
         path: &Path,
         settings: &Map<String, Value>,
         progress: &dyn Progress,
-    ) -> Result<Self, BatchError> {
+    ) -> Result<Self, PairsError> {
         let path = match std::fs::canonicalize(path) {
             Ok(resolved) => resolved,
             Err(_) => path.to_path_buf(),
         };
         if path.exists() && !path.is_file() {
-            return Err(BatchError::Output(format!(
+            return Err(PairsError::Output(format!(
                 "{}: not a regular file; the output is a file that later runs resume (leave it \
                  out to write the lines to stdout)",
                 path.display()
@@ -45,12 +47,12 @@ impl Output {
         let file = lock(&path)?;
         // Bytes, not text: a line cut inside a character by a kill or a full disk is dropped
         // like any cut-off line, wherever it was cut.
-        let bytes = std::fs::read(&path).map_err(BatchError::io("reading", &path))?;
+        let bytes = std::fs::read(&path).map_err(PairsError::io("reading", &path))?;
         let header = json!({HEADER_KEY: FORMAT, "settings": settings}).to_string() + "\n";
         if bytes.is_empty() {
             (&file)
                 .write_all(header.as_bytes())
-                .map_err(BatchError::io("writing", &path))?;
+                .map_err(PairsError::io("writing", &path))?;
             return Ok(Self {
                 path,
                 file: Mutex::new(file),
@@ -63,9 +65,10 @@ impl Output {
                 .position(|&b| b == b'\n')
                 .map_or(bytes.len(), |n| n + 1),
         );
-        check_header(&path, &String::from_utf8_lossy(first), settings)?;
+        let current = check_header(&path, &String::from_utf8_lossy(first), settings)?;
         let (done, kept, rewrite) = earlier_lines(&path, rest, progress)?;
-        let file = match rewrite {
+        // A header of before issue 58 is rewritten as today's.
+        let file = match rewrite || !current {
             true => replace(&path, &(header + &kept))?,
             false => file,
         };
@@ -83,11 +86,11 @@ impl Output {
 
     /// Rewrites the file without the lines of `stale` (pairs whose inputs changed since: they
     /// run again), so that it never holds two lines of one pair.
-    pub fn forget(&mut self, stale: &HashSet<Key>) -> Result<(), BatchError> {
+    pub fn forget(&mut self, stale: &HashSet<Key>) -> Result<(), PairsError> {
         if stale.is_empty() {
             return Ok(());
         }
-        let bytes = std::fs::read(&self.path).map_err(BatchError::io("reading", &self.path))?;
+        let bytes = std::fs::read(&self.path).map_err(PairsError::io("reading", &self.path))?;
         let text = String::from_utf8_lossy(&bytes);
         let mut kept = String::with_capacity(text.len());
         for (i, line) in text.lines().enumerate() {
@@ -122,17 +125,17 @@ impl Output {
 
 /// `path` opened for appending, created when missing, and locked ([`durable::lock`]); an error
 /// when another run holds it.
-fn lock(path: &Path) -> Result<File, BatchError> {
+fn lock(path: &Path) -> Result<File, PairsError> {
     let options = std::fs::OpenOptions::new()
         .read(true)
         .append(true)
         .create(true)
         .clone();
     durable::lock(path, &options).map_err(|error| match error {
-        LockError::Busy => BatchError::Busy {
+        LockError::Busy => PairsError::Busy {
             path: path.to_path_buf(),
         },
-        LockError::Io(error) => BatchError::Io {
+        LockError::Io(error) => PairsError::Io {
             action: "locking",
             path: path.to_path_buf(),
             error,
@@ -142,41 +145,64 @@ fn lock(path: &Path) -> Result<File, BatchError> {
 
 /// `path` written anew with `text` ([`durable::replace_with`]), the new file locked before it
 /// is renamed over `path` (so the run keeps its lock); the file, open for appending.
-fn replace(path: &Path, text: &str) -> Result<File, BatchError> {
+fn replace(path: &Path, text: &str) -> Result<File, PairsError> {
     let options = std::fs::OpenOptions::new().read(true).append(true).clone();
     durable::replace_with(path, &options, |file| {
         file.try_lock().map_err(std::io::Error::other)?;
         file.write_all(text.as_bytes())
     })
-    .map_err(|error| BatchError::Io {
+    .map_err(|error| PairsError::Io {
         action: "rewriting",
         path: path.to_path_buf(),
         error,
     })
 }
 
-/// Refuses a file whose first line is not rgm's header, or one of other settings.
-fn check_header(path: &Path, first: &str, settings: &Map<String, Value>) -> Result<(), BatchError> {
+/// Refuses a file whose first line is not rgm's header, or one of other settings; `false` when
+/// the header is one of before issue 58 (`{"rgm_batch": 1, …}`, the method named `auto+icp`),
+/// read as today's.
+fn check_header(
+    path: &Path,
+    first: &str,
+    settings: &Map<String, Value>,
+) -> Result<bool, PairsError> {
     let header: Option<Map<String, Value>> = serde_json::from_str(first).ok();
-    let Some(header) = header.filter(|h| h.get(HEADER_KEY).is_some()) else {
-        return Err(BatchError::Output(format!(
-            "{}:1: not an output of rgm's batches (its first line is not rgm's header \
-             {{\"{HEADER_KEY}\": …}}), so it is left as it is; give another output file (a file \
-             written by an rgm before the header existed is not resumed either): `{}`",
+    let key = header.as_ref().and_then(|h| {
+        [HEADER_KEY, OLD_HEADER_KEY]
+            .into_iter()
+            .find(|&key| h.contains_key(key))
+    });
+    let (Some(header), Some(key)) = (header.as_ref(), key) else {
+        return Err(PairsError::Output(format!(
+            "{}:1: not an output of rgm's pair lists (`rgm register --pairs`, \
+             `register_many`: its first line is not rgm's header {{\"{HEADER_KEY}\": …}}), so \
+             it is left as it is; give another output file (a file written by an rgm before the \
+             header existed is not resumed either): `{}`",
             path.display(),
             shortened(first.trim_end())
         )));
     };
-    if header[HEADER_KEY] != FORMAT {
-        return Err(BatchError::Output(format!(
-            "{}:1: batch output format {}, this rgm writes {FORMAT}; give another output file",
+    if header[key] != FORMAT {
+        return Err(PairsError::Output(format!(
+            "{}:1: pair-list output format {}, this rgm writes {FORMAT}; give another output \
+             file",
             path.display(),
-            header[HEADER_KEY]
+            header[key]
         )));
     }
-    let written = header.get("settings").and_then(Value::as_object);
     let empty = Map::new();
-    let written = written.unwrap_or(&empty);
+    let mut written = header
+        .get("settings")
+        .and_then(Value::as_object)
+        .unwrap_or(&empty)
+        .clone();
+    let mut current = key == HEADER_KEY;
+    if let Some(Value::String(method)) = written.get_mut("method") {
+        if let Cow::Owned(now) = refine::current_name(method) {
+            *method = now;
+            current = false;
+        }
+    }
     let mut names: Vec<&String> = settings.keys().chain(written.keys()).collect();
     names.sort();
     names.dedup();
@@ -186,7 +212,7 @@ fn check_header(path: &Path, first: &str, settings: &Map<String, Value>) -> Resu
             settings.get(name).unwrap_or(&Value::Null),
         );
         if was != now {
-            return Err(BatchError::Output(format!(
+            return Err(PairsError::Output(format!(
                 "{}: its results were made with {name} {was}, this run asks for {name} {now} \
                  (null: the method's default); the file is left as it is: resume with its \
                  settings, or give another output file for these",
@@ -194,7 +220,7 @@ fn check_header(path: &Path, first: &str, settings: &Map<String, Value>) -> Resu
             )));
         }
     }
-    Ok(())
+    Ok(current)
 }
 
 /// What became of each pair an earlier run finished, from the lines after the header
@@ -206,7 +232,7 @@ fn earlier_lines(
     path: &Path,
     bytes: &[u8],
     progress: &dyn Progress,
-) -> Result<(HashMap<Key, Done>, String, bool), BatchError> {
+) -> Result<(HashMap<Key, Done>, String, bool), PairsError> {
     let mut done = HashMap::new();
     let (complete, cut) = match bytes.iter().rposition(|&b| b == b'\n') {
         Some(end) => bytes.split_at(end + 1),
@@ -217,8 +243,8 @@ fn earlier_lines(
             .iter()
             .filter(|&&b| b == b'\n')
             .count();
-        BatchError::Output(format!(
-            "{}:{line}: not text (a byte that is not UTF-8), so not a line of rgm's batches \
+        PairsError::Output(format!(
+            "{}:{line}: not text (a byte that is not UTF-8), so not a line of rgm's pair lists \
              (give another output file)",
             path.display()
         ))
@@ -239,16 +265,16 @@ fn earlier_lines(
             continue;
         }
         let value: Value = serde_json::from_str(line).map_err(|_| {
-            BatchError::Output(format!(
-                "{}: not a line of rgm's batches (give another output file): `{}`",
+            PairsError::Output(format!(
+                "{}: not a line of rgm's pair lists (give another output file): `{}`",
                 at(),
                 shortened(line)
             ))
         })?;
         let (Some(source), Some(target)) = (value["source"].as_str(), value["target"].as_str())
         else {
-            return Err(BatchError::Output(format!(
-                "{}: a line without \"source\" and \"target\" is not one of rgm's batches (give \
+            return Err(PairsError::Output(format!(
+                "{}: a line without \"source\" and \"target\" is not one of rgm's pair lists (give \
                  another output file): `{}`",
                 at(),
                 shortened(line)

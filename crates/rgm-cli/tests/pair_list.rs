@@ -51,7 +51,11 @@ fn lines(file: &Path) -> Vec<serde_json::Value> {
     let mut lines = text
         .lines()
         .map(|l| serde_json::from_str::<serde_json::Value>(l).expect("a JSON line"));
-    assert_eq!(lines.next().unwrap()["rgm_batch"], 1, "no header in {text}");
+    assert_eq!(
+        lines.next().unwrap()["rgm_many_pairs"],
+        1,
+        "no header in {text}"
+    );
     lines.collect()
 }
 
@@ -70,7 +74,7 @@ fn by_pair(lines: &[serde_json::Value]) -> HashMap<(String, String), serde_json:
 
 #[test]
 fn every_line_is_what_rgm_register_json_prints_for_its_pair() {
-    let dir = Scratch::new("batch-same");
+    let dir = Scratch::new("pair-list-same");
     let list = written_pairs(&dir, 3);
     let output = dir.join("out.jsonl");
     let out = rgm(&[
@@ -81,9 +85,9 @@ fn every_line_is_what_rgm_register_json_prints_for_its_pair() {
         output.to_str().unwrap(),
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
-    let batch = lines(&output);
-    assert_eq!(batch.len(), 3);
-    for mut line in batch {
+    let found = lines(&output);
+    assert_eq!(found.len(), 3);
+    for mut line in found {
         let (source, target) = (
             line["source"].as_str().unwrap().to_string(),
             line["target"].as_str().unwrap().to_string(),
@@ -97,7 +101,7 @@ fn every_line_is_what_rgm_register_json_prints_for_its_pair() {
         ]);
         let mut alone: serde_json::Value =
             serde_json::from_slice(&one.stdout).expect("rgm register --json prints an object");
-        assert_eq!(alone["method"], "auto+icp");
+        assert_eq!(alone["method"], "auto+refine");
         // The method's own time (and each candidate's) differs from run to run; everything else
         // is the same.
         for value in [&mut line, &mut alone] {
@@ -121,7 +125,7 @@ fn every_line_is_what_rgm_register_json_prints_for_its_pair() {
 
 #[test]
 fn a_rerun_registers_only_the_pairs_without_a_line_and_never_writes_one_twice() {
-    let dir = Scratch::new("batch-resume");
+    let dir = Scratch::new("pair-list-resume");
     let list = written_pairs(&dir, 6);
     let output = dir.join("out.jsonl");
     let run = || {
@@ -186,8 +190,54 @@ fn a_rerun_registers_only_the_pairs_without_a_line_and_never_writes_one_twice() 
 }
 
 #[test]
+fn an_output_of_before_issue_58_resumes_with_today_s_header() {
+    let dir = Scratch::new("pair-list-issue58");
+    let list = written_pairs(&dir, 2);
+    let output = dir.join("out.jsonl");
+    let run = || {
+        rgm(&[
+            "register",
+            "--pairs",
+            list.to_str().unwrap(),
+            "--method",
+            "fgr",
+            "--output",
+            output.to_str().unwrap(),
+        ])
+    };
+    let first = run();
+    assert!(first.status.success(), "{}", stderr(&first));
+    let text = std::fs::read_to_string(&output).unwrap();
+    let (header, rest) = text.split_once('\n').unwrap();
+    assert!(header.contains(r#""method":"fgr+refine""#), "{header}");
+    // The file as an rgm of before issue 58 wrote it: `rgm_batch`, the method `fgr+icp`.
+    let old = header
+        .replace("rgm_many_pairs", "rgm_batch")
+        .replace("fgr+refine", "fgr+icp");
+    let old_lines = rest.replace("fgr+refine", "fgr+icp");
+    std::fs::write(&output, format!("{old}\n{old_lines}")).unwrap();
+    let rerun = run();
+    assert!(rerun.status.success(), "{}", stderr(&rerun));
+    assert!(
+        stderr(&rerun).contains("2 of the 2 pairs have their line in"),
+        "{}",
+        stderr(&rerun)
+    );
+    assert!(
+        stderr(&rerun).contains("registering 0"),
+        "{}",
+        stderr(&rerun)
+    );
+    // Today's header, the lines as they were.
+    assert_eq!(
+        std::fs::read_to_string(&output).unwrap(),
+        format!("{header}\n{old_lines}")
+    );
+}
+
+#[test]
 fn a_killed_run_finishes_on_a_rerun_without_redoing_its_pairs() {
-    let dir = Scratch::new("batch-killed");
+    let dir = Scratch::new("pair-list-killed");
     let list = written_pairs(&dir, 8);
     let output = dir.join("out.jsonl");
     let args = [
@@ -239,7 +289,7 @@ fn a_killed_run_finishes_on_a_rerun_without_redoing_its_pairs() {
 
 #[test]
 fn a_pair_that_fails_is_a_line_naming_why_and_the_status_says_so() {
-    let dir = Scratch::new("batch-fails");
+    let dir = Scratch::new("pair-list-fails");
     let list = written_pairs(&dir, 2);
     let csv = dir.join("list.csv");
     std::fs::write(
@@ -286,7 +336,7 @@ fn a_pair_that_fails_is_a_line_naming_why_and_the_status_says_so() {
 
 #[test]
 fn errors_in_the_list_name_the_file_the_line_and_the_value() {
-    let dir = Scratch::new("batch-list");
+    let dir = Scratch::new("pair-list-list");
     let cases = [
         (
             "header.csv",
@@ -358,7 +408,7 @@ fn errors_in_the_list_name_the_file_the_line_and_the_value() {
         ]);
         assert!(!out.status.success());
         assert!(
-            stderr(&out).contains("other.jsonl:1: not an output of rgm's batches"),
+            stderr(&out).contains("other.jsonl:1: not an output of rgm's pair lists"),
             "{}",
             stderr(&out)
         );
@@ -371,7 +421,7 @@ fn errors_in_the_list_name_the_file_the_line_and_the_value() {
         "--output",
         list.to_str().unwrap(),
     ]);
-    assert!(stderr(&out).contains("header.csv:1: not an output of rgm's batches"));
+    assert!(stderr(&out).contains("header.csv:1: not an output of rgm's pair lists"));
     assert_eq!(
         std::fs::read_to_string(&list).unwrap(),
         "source,target\na.ply,b.ply\n"
@@ -391,7 +441,7 @@ fn errors_in_the_list_name_the_file_the_line_and_the_value() {
 
 #[test]
 fn a_second_run_on_a_locked_output_is_refused_and_changes_nothing() {
-    let dir = Scratch::new("batch-locked");
+    let dir = Scratch::new("pair-list-locked");
     let list = written_pairs(&dir, 2);
     let output = dir.join("out.jsonl");
     let args = [
@@ -430,7 +480,7 @@ fn a_second_run_on_a_locked_output_is_refused_and_changes_nothing() {
 
 #[test]
 fn a_resume_with_other_settings_is_refused_naming_the_setting() {
-    let dir = Scratch::new("batch-settings");
+    let dir = Scratch::new("pair-list-settings");
     let list = written_pairs(&dir, 1);
     let output = dir.join("out.jsonl");
     let weights = Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -2,8 +2,10 @@
 //! `rgm register --pairs LIST` and Python's `Registrar.register_many`.
 //!
 //! The output file ([`Output`]) is rgm's only when its first line is rgm's header
-//! (`{"rgm_batch": 1, "settings": {…}}`), which records every setting that changes results
-//! ([`settings`]); any other file is never written to. While a run uses it, it holds an
+//! (`{"rgm_many_pairs": 1, "settings": {…}}`), which records every setting that changes results
+//! ([`settings`]); any other file is never written to. (A file of before issue 58, whose
+//! header is `{"rgm_batch": 1, …}` and whose method is named `auto+icp` for `auto+refine`,
+//! resumes too: its header is rewritten as today's, its lines kept as they are.) While a run uses it, it holds an
 //! exclusive lock on it, so a second run on the same file is refused instead of mixing its
 //! lines in. A later run with the same settings keeps the lines of finished pairs and registers
 //! the other pairs; with other settings it is refused, naming the setting. Resuming drops a
@@ -41,12 +43,15 @@ use crate::{Method, MethodName, MethodOptions, Registration};
 /// The version of the output's format, in its header.
 pub const FORMAT: u64 = 1;
 
-/// The header's key that marks a file as rgm's batch output.
-const HEADER_KEY: &str = "rgm_batch";
+/// The header's key that marks a file as the output of rgm's many pairs.
+const HEADER_KEY: &str = "rgm_many_pairs";
 
-/// Why a batch could not run. A pair that fails is a line, not an error.
+/// [`HEADER_KEY`] before issue 58 renamed a pair list's runner (it was `batch`): still read.
+const OLD_HEADER_KEY: &str = "rgm_batch";
+
+/// Why a run of many pairs could not run. A pair that fails is a line, not an error.
 #[derive(Debug, thiserror::Error)]
-pub enum BatchError {
+pub enum PairsError {
     /// A file could not be read or written.
     #[error("{action} {}: {error}", path.display())]
     Io {
@@ -70,7 +75,7 @@ pub enum BatchError {
     Busy { path: PathBuf },
 }
 
-impl BatchError {
+impl PairsError {
     fn io<'a>(action: &'static str, path: &'a Path) -> impl FnOnce(std::io::Error) -> Self + 'a {
         move |error| Self::Io {
             action,
@@ -221,7 +226,7 @@ impl Listed {
 }
 
 /// The object `rgm register --json` prints for `registration` by `method` of clouds of
-/// `points` (source, target); a batch writes it per pair, with the pair's names.
+/// `points` (source, target); a run of many pairs writes it per pair, with the pair's names.
 pub fn result_json(
     method: &Method,
     registration: &Registration,
@@ -266,13 +271,13 @@ pub fn result_json(
 }
 
 /// Every setting of `options` that changes results, as the output's header records them: the
-/// method's name (`method`, with `+icp` when refined), the weights' CRC-32 (the built-in
+/// method's name (`method`, with `+refine` when refined), the weights' CRC-32 (the built-in
 /// model's name and CRC-32 for `rgm` and `auto` without weights) and each option as given
 /// (`null`: the method's default).
 pub fn settings(
     options: &MethodOptions,
     method: &Method,
-) -> Result<Map<String, Value>, BatchError> {
+) -> Result<Map<String, Value>, PairsError> {
     let network = matches!(
         options.method,
         MethodName::Rgm | MethodName::Auto | MethodName::Scene
@@ -280,7 +285,7 @@ pub fn settings(
     let weights = match (&options.weights, network) {
         (_, false) => Value::Null,
         (Some(path), true) => {
-            let bytes = std::fs::read(path).map_err(BatchError::io("reading", path))?;
+            let bytes = std::fs::read(path).map_err(PairsError::io("reading", path))?;
             format!("CRC-32 {:08x}", crc32(&bytes)).into()
         }
         (None, true) => {
@@ -328,7 +333,7 @@ pub fn register_all<I, F>(
     progress: &dyn Progress,
     stop: &AtomicBool,
     each: F,
-) -> Result<Tally, BatchError>
+) -> Result<Tally, PairsError>
 where
     I: Iterator<Item = Job> + Send,
     F: Fn(usize, Result<Registration, String>) + Sync,
@@ -338,7 +343,7 @@ where
         .par_bridge()
         .map_init(
             || method.clone(),
-            |method, job| -> Result<(), BatchError> {
+            |method, job| -> Result<(), PairsError> {
                 let (registered, points) = register_job(method, &job.clouds, progress);
                 let outcome = match &registered {
                     Ok(r) if r.doubt.is_none() => Outcome::Registered,
@@ -356,7 +361,7 @@ where
                     let mut out = out.lock().unwrap_or_else(|p| p.into_inner());
                     out.write_all(format!("{line}\n").as_bytes())
                         .and_then(|()| out.flush())
-                        .map_err(BatchError::io("writing", path))?;
+                        .map_err(PairsError::io("writing", path))?;
                 }
                 tally.lock().unwrap_or_else(|p| p.into_inner()).add(outcome);
                 each(job.index, registered);
@@ -364,7 +369,7 @@ where
                 Ok(())
             },
         )
-        .collect::<Result<(), BatchError>>()?;
+        .collect::<Result<(), PairsError>>()?;
     Ok(tally.into_inner().unwrap_or_else(|p| p.into_inner()))
 }
 
@@ -409,10 +414,10 @@ fn register_job(
 }
 
 /// The pairs of the list file `path` ([`rgm_data::pair_list`]), a repeated pair once (noted).
-pub fn read_list(path: &Path, progress: &dyn Progress) -> Result<Vec<Listed>, BatchError> {
-    let text = std::fs::read_to_string(path).map_err(BatchError::io("reading", path))?;
+pub fn read_list(path: &Path, progress: &dyn Progress) -> Result<Vec<Listed>, PairsError> {
+    let text = std::fs::read_to_string(path).map_err(PairsError::io("reading", path))?;
     let folder = path.parent().unwrap_or(Path::new(""));
-    let named = pair_list::parse(path, &text).map_err(|e| BatchError::List(e.0))?;
+    let named = pair_list::parse(path, &text).map_err(|e| PairsError::List(e.0))?;
     let mut first: HashMap<Key, String> = HashMap::new();
     let mut pairs = Vec::with_capacity(named.len());
     for ListedPair {
@@ -437,7 +442,7 @@ pub fn read_list(path: &Path, progress: &dyn Progress) -> Result<Vec<Listed>, Ba
         });
     }
     if pairs.is_empty() {
-        return Err(BatchError::List(format!(
+        return Err(PairsError::List(format!(
             "{}: no pair listed",
             path.display()
         )));
@@ -475,7 +480,8 @@ mod tests {
     /// A folder for a test's output file `out.jsonl`, the default method's settings and the
     /// header they give.
     fn scratch_output(name: &str) -> (PathBuf, PathBuf, Map<String, Value>, String) {
-        let dir = std::env::temp_dir().join(format!("rgm-batch-{name}-{}", std::process::id()));
+        let dir =
+            std::env::temp_dir().join(format!("rgm-many-pairs-{name}-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let settings = settings(
             &MethodOptions::default(),
@@ -512,7 +518,7 @@ mod tests {
         ));
         assert!(matches!(
             Output::open(&path, &settings, &()),
-            Err(BatchError::Busy { .. })
+            Err(PairsError::Busy { .. })
         ));
         drop(output);
         other.try_lock().unwrap();
@@ -543,6 +549,41 @@ mod tests {
             .unwrap()
             .to_string();
         assert!(error.contains("out.jsonl:3: not text"), "{error}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_file_of_before_issue_58_resumes_and_gets_today_s_header() {
+        let (dir, path, settings, header) = scratch_output("issue58");
+        // The header of then: `rgm_batch`, the default named `auto+icp`.
+        assert_eq!(settings["method"], "auto+refine");
+        let mut then = settings.clone();
+        then["method"] = "auto+icp".into();
+        let old = json!({OLD_HEADER_KEY: FORMAT, "settings": then}).to_string();
+        let done = r#"{"source":"a","target":"b","method":"auto+icp","registered":true}"#;
+        std::fs::write(&path, format!("{old}\n{done}\n")).unwrap();
+        let output = Output::open(&path, &settings, &()).unwrap();
+        let key = ("a".to_string(), "b".to_string());
+        assert_eq!(
+            output.done().get(&key).map(|d| d.outcome),
+            Some(Outcome::Registered)
+        );
+        drop(output);
+        // The header rewritten as today's, the line kept as it was.
+        assert_eq!(
+            std::fs::read_to_string(&path).unwrap(),
+            format!("{header}\n{done}\n")
+        );
+        // Other settings of then are refused as before, naming the setting.
+        then["match_points"] = 64.into();
+        let old = json!({OLD_HEADER_KEY: FORMAT, "settings": then}).to_string();
+        std::fs::write(&path, format!("{old}\n{done}\n")).unwrap();
+        let error = Output::open(&path, &settings, &())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(error.contains("made with match_points 64"), "{error}");
+        assert!(std::fs::read_to_string(&path).unwrap().starts_with(&old));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
