@@ -48,13 +48,12 @@ COMMON="--preset fast --optimizer adam --val-shapes 300 --checkpoint-every 50 --
 #      Retired at 5.39 of its 8 epochs (session 38), on its spent rate (1.2e-5 since epoch 5):
 #      59.7 % alone after epoch 3 (92.0 % refined), 60.7 % after 4; its best is Table 4's model
 #      (`git:d809e8f:runs/unseen-717-drop/best.safetensors`, the manifest's `unseen-717-drop`).
-# 5.   Table 3: a warm restart of the built-in partial model (84.00 % of the 2,468 test pairs alone
-#      in session 38's tables; the bar is 90 %) at lr 1e-4 for 2 epochs, then 2e-5 for one, on
-#      whole clouds: the model's last CPU run (`partial-fast-717`) sat at 84–87 % on validation
-#      for 20 epochs at 1.2e-5, a spent rate. ≈ 7,900 pairs an epoch, 3 epochs ≈ 1.5–2 h. The
-#      A/B: `rgm eval --method rgm --no-refine --split validation --every 8 --threads 2` with the
-#      run's best (`--weights … --preset fast --test-statistics cloud`) against the built-in; the
-#      built-in changes only if the restart wins there.
+# 5.   (Finished, not adopted.) Table 3: `partial-restart`, a warm restart of the built-in partial
+#      model at lr 1e-4 for 2 epochs, then 2e-5 for one, on whole clouds (sessions 40–41). Its
+#      A/B on 990 validation pairs, the network alone: 83.64 % against the built-in's 83.54 %
+#      (18 and 17 pairs only one of them registers), so the built-in stays; its page is
+#      docs/training/partial-restart/, its weights are not kept. Table 3 needs more than a few
+#      CPU epochs of the same model (docs/training/README.md, session 41).
 # 6.   Table 4 again: unseen-717-drop's best restarted at lr 2e-4 (×0.2 at epochs 12 and 17, 20
 #      epochs ≈ 82k pairs, ≈ 4–5 h): its lineage rose ≈ 27 points per e-fold of training pairs
 #      (docs/training/README.md, session 38); 80 % on the unseen test pairs (≈ 12 points below
@@ -62,7 +61,6 @@ COMMON="--preset fast --optimizer adam --val-shapes 300 --checkpoint-every 50 --
 # `init=` names the weights a run starts from; `git:REV:PATH` ones are written out of the
 # history into target/queue-init/ when the run starts (`rgm train` reads --init only then).
 QUEUE=(
-  "partial-restart|3|--setting partial --match-points 0 --batch 32 --lr 1e-4 --epochs 3 --milestones 2 --val-sample spread --precision bf16 init=crates/rgm-model/weights/partial-fast.safetensors"
   "unseen-restart|20|--setting partial --unseen --match-points 0 --batch 32 --lr 2e-4 --epochs 20 --milestones 12,17 --val-sample spread --precision bf16 init=git:d809e8f:runs/unseen-717-drop/best.safetensors"
 )
 # A run whose last 3 validations set neither a new best recall (the network alone, the paper's
