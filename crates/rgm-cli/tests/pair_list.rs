@@ -16,6 +16,14 @@ fn rgm(args: &[&str]) -> Output {
         .expect("the rgm binary runs")
 }
 
+/// `rgm register --pairs LIST OPTIONS… --output OUTPUT`.
+fn register_list(list: &Path, options: &[&str], output: &Path) -> Output {
+    let mut args = vec!["register", "--pairs", list.to_str().unwrap()];
+    args.extend_from_slice(options);
+    args.extend_from_slice(&["--output", output.to_str().unwrap()]);
+    rgm(&args)
+}
+
 fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
@@ -77,13 +85,7 @@ fn every_line_is_what_rgm_register_json_prints_for_its_pair() {
     let dir = Scratch::new("pair-list-same");
     let list = written_pairs(&dir, 3);
     let output = dir.join("out.jsonl");
-    let out = rgm(&[
-        "register",
-        "--pairs",
-        list.to_str().unwrap(),
-        "--output",
-        output.to_str().unwrap(),
-    ]);
+    let out = register_list(&list, &[], &output);
     assert!(out.status.success(), "{}", stderr(&out));
     let found = lines(&output);
     assert_eq!(found.len(), 3);
@@ -128,18 +130,7 @@ fn a_rerun_registers_only_the_pairs_without_a_line_and_never_writes_one_twice() 
     let dir = Scratch::new("pair-list-resume");
     let list = written_pairs(&dir, 6);
     let output = dir.join("out.jsonl");
-    let run = || {
-        rgm(&[
-            "register",
-            "--pairs",
-            list.to_str().unwrap(),
-            "--method",
-            "fgr",
-            "--no-refine",
-            "--output",
-            output.to_str().unwrap(),
-        ])
-    };
+    let run = || register_list(&list, &["--method", "fgr", "--no-refine"], &output);
     let first = run();
     assert!(first.status.success(), "{}", stderr(&first));
     let text = std::fs::read_to_string(&output).unwrap();
@@ -194,17 +185,7 @@ fn an_output_of_before_issue_58_resumes_with_today_s_header() {
     let dir = Scratch::new("pair-list-issue58");
     let list = written_pairs(&dir, 2);
     let output = dir.join("out.jsonl");
-    let run = || {
-        rgm(&[
-            "register",
-            "--pairs",
-            list.to_str().unwrap(),
-            "--method",
-            "fgr",
-            "--output",
-            output.to_str().unwrap(),
-        ])
-    };
+    let run = || register_list(&list, &["--method", "fgr"], &output);
     let first = run();
     assert!(first.status.success(), "{}", stderr(&first));
     let text = std::fs::read_to_string(&output).unwrap();
@@ -397,15 +378,7 @@ fn errors_in_the_list_name_the_file_the_line_and_the_value() {
     ] {
         let output = dir.join("other.jsonl");
         std::fs::write(&output, text).unwrap();
-        let out = rgm(&[
-            "register",
-            "--pairs",
-            list.to_str().unwrap(),
-            "--method",
-            "icp",
-            "--output",
-            output.to_str().unwrap(),
-        ]);
+        let out = register_list(&list, &["--method", "icp"], &output);
         assert!(!out.status.success());
         assert!(
             stderr(&out).contains("other.jsonl:1: not an output of rgm's pair lists"),
@@ -414,13 +387,7 @@ fn errors_in_the_list_name_the_file_the_line_and_the_value() {
         );
         assert_eq!(std::fs::read_to_string(&output).unwrap(), text);
     }
-    let out = rgm(&[
-        "register",
-        "--pairs",
-        list.to_str().unwrap(),
-        "--output",
-        list.to_str().unwrap(),
-    ]);
+    let out = register_list(&list, &[], &list);
     assert!(stderr(&out).contains("header.csv:1: not an output of rgm's pair lists"));
     assert_eq!(
         std::fs::read_to_string(&list).unwrap(),
@@ -486,18 +453,9 @@ fn a_resume_with_other_settings_is_refused_naming_the_setting() {
     let weights = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../rgm-model/tests/fixtures/rgm_tiny_state_dict.safetensors");
     let run = |more: &[&str]| {
-        let mut args = vec![
-            "register",
-            "--pairs",
-            list.to_str().unwrap(),
-            "--method",
-            "rgm",
-            "--no-refine",
-            "--output",
-            output.to_str().unwrap(),
-        ];
-        args.extend_from_slice(more);
-        rgm(&args)
+        let mut options = vec!["--method", "rgm", "--no-refine"];
+        options.extend_from_slice(more);
+        register_list(&list, &options, &output)
     };
     let first = run(&["--match-points", "64", "--passes", "1"]);
     // The header is this test's subject, not the pair's verdict: 64 points unrefined may be
