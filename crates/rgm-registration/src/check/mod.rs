@@ -17,6 +17,6 @@ pub use coincidence::{
     coincidence, sampled_overlap, Check, Coincides, CoincidesAtSpacing, InFrame, Unambiguous,
 };
 pub use judge::{Acceptance, Judge, Scoring};
-pub use overlap::{agree, overlap_score, turned_poses, turned_share};
+pub use overlap::{agree, overlap_score, turned_poses, turned_share, OVERLAP_SAMPLE};
 pub use precise::Precise;
 pub use symmetry::SelfFit;
