@@ -328,7 +328,10 @@ impl Registrar {
         voxel: Option<f64>,
     ) -> PyResult<MergeFields<'py>> {
         if scans.len() < 2 {
-            return Err(value_error(format!("merge needs 2 scans or more, got {}", scans.len())));
+            return Err(value_error(format!(
+                "merge needs 2 scans or more, got {}",
+                scans.len()
+            )));
         }
         let clouds: Vec<PointCloud> = scans
             .iter()
@@ -344,12 +347,18 @@ impl Registrar {
             (merged, clouds)
         })?;
         let merged = merged.map_err(|e| method_error(&name, e))?;
-        let voxel = voxel.or(merged.spacing.first().copied()).unwrap_or(f64::INFINITY);
+        let voxel = voxel
+            .or(merged.spacing.first().copied())
+            .unwrap_or(f64::INFINITY);
         if voxel.is_nan() || voxel <= 0.0 {
             return Err(value_error(format!("voxel must be > 0, got {voxel}")));
         }
         let (model, labels) = merged.model(&clouds, 0, voxel);
-        let poses = merged.poses.iter().map(|p| p.map(|p| matrix_array(py, &p))).collect();
+        let poses = merged
+            .poses
+            .iter()
+            .map(|p| p.map(|p| matrix_array(py, &p)))
+            .collect();
         let labels = numpy::ndarray::Array1::from_iter(labels.iter().map(|&l| l as i64));
         Ok((
             poses,
@@ -427,7 +436,8 @@ impl Registrar {
         let name = self.name();
         let method = &self.copies.prototype;
         let settings = many_pairs::settings(&self.options, method).map_err(pairs_error)?;
-        let output = Arc::new(many_pairs::Output::open(&output, &settings, &()).map_err(pairs_error)?);
+        let output =
+            Arc::new(many_pairs::Output::open(&output, &settings, &()).map_err(pairs_error)?);
         let done = output.done().clone();
         let pulled = Pulled::new(pairs, Some(done));
         let (failed, skipped) = (pulled.error.clone(), pulled.skipped.clone());
@@ -493,7 +503,10 @@ struct Pulled {
 }
 
 impl Pulled {
-    fn new(pairs: Bound<'_, PyIterator>, skip: Option<HashMap<many_pairs::Key, many_pairs::Done>>) -> Self {
+    fn new(
+        pairs: Bound<'_, PyIterator>,
+        skip: Option<HashMap<many_pairs::Key, many_pairs::Done>>,
+    ) -> Self {
         Self {
             pairs: pairs.unbind(),
             next: 0,

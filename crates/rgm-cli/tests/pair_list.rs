@@ -16,12 +16,17 @@ fn rgm(args: &[&str]) -> Output {
         .expect("the rgm binary runs")
 }
 
-/// `rgm register --pairs LIST OPTIONS… --output OUTPUT`.
-fn register_list(list: &Path, options: &[&str], output: &Path) -> Output {
+/// The arguments `register --pairs LIST OPTIONS… --output OUTPUT`.
+fn list_args<'a>(list: &'a Path, options: &[&'a str], output: &'a Path) -> Vec<&'a str> {
     let mut args = vec!["register", "--pairs", list.to_str().unwrap()];
     args.extend_from_slice(options);
     args.extend_from_slice(&["--output", output.to_str().unwrap()]);
-    rgm(&args)
+    args
+}
+
+/// `rgm register --pairs LIST OPTIONS… --output OUTPUT`.
+fn register_list(list: &Path, options: &[&str], output: &Path) -> Output {
+    rgm(&list_args(list, options, output))
 }
 
 fn stderr(out: &Output) -> String {
@@ -221,17 +226,7 @@ fn a_killed_run_finishes_on_a_rerun_without_redoing_its_pairs() {
     let dir = Scratch::new("pair-list-killed");
     let list = written_pairs(&dir, 8);
     let output = dir.join("out.jsonl");
-    let args = [
-        "register",
-        "--pairs",
-        list.to_str().unwrap(),
-        "--method",
-        "fgr",
-        "--workers",
-        "1",
-        "--output",
-        output.to_str().unwrap(),
-    ];
+    let args = list_args(&list, &["--method", "fgr", "--workers", "1"], &output);
     let mut child = Command::new(env!("CARGO_BIN_EXE_rgm"))
         .args(args)
         .stderr(std::process::Stdio::null())
@@ -411,16 +406,7 @@ fn a_second_run_on_a_locked_output_is_refused_and_changes_nothing() {
     let dir = Scratch::new("pair-list-locked");
     let list = written_pairs(&dir, 2);
     let output = dir.join("out.jsonl");
-    let args = [
-        "register",
-        "--pairs",
-        list.to_str().unwrap(),
-        "--method",
-        "fgr",
-        "--no-refine",
-        "--output",
-        output.to_str().unwrap(),
-    ];
+    let args = list_args(&list, &["--method", "fgr", "--no-refine"], &output);
     let first = rgm(&args);
     assert!(first.status.success(), "{}", stderr(&first));
     let before = std::fs::read_to_string(&output).unwrap();
