@@ -228,7 +228,7 @@ fn a_killed_run_finishes_on_a_rerun_without_redoing_its_pairs() {
     let output = dir.join("out.jsonl");
     let args = list_args(&list, &["--method", "fgr", "--workers", "1"], &output);
     let mut child = Command::new(env!("CARGO_BIN_EXE_rgm"))
-        .args(args)
+        .args(&args)
         .stderr(std::process::Stdio::null())
         .spawn()
         .unwrap();
