@@ -13,6 +13,8 @@ use std::sync::{Arc, Mutex, OnceLock};
 use rgm_geom::normals::{estimate_normals, NormalsConfig};
 use rgm_geom::{KnnIndex, PointCloud, RigidTransform, Vector3};
 
+use crate::fit::{score, Score};
+
 /// The next [`Prepared`]'s id: ids are never reused, so a score kept under one cannot be read
 /// back for another cloud that took the first one's place in memory.
 static NEXT_ID: AtomicU64 = AtomicU64::new(0);
@@ -24,8 +26,12 @@ type ScoreKey = (u64, [u64; 12], u64);
 /// Unit normals of a cloud's points, shared by the stages that ask for them. // (N,)
 pub type Normals = Arc<Vec<Vector3<f64>>>;
 
+/// A transform's [`score`] on a pair and its (source, target) index pairs. // (P,)
+pub type PairFit = Arc<(Score, Vec<(usize, usize)>)>;
+
 /// A cloud and what is made of it lazily: its [`KnnIndex`], its normals per
-/// [`NormalsConfig`], and scores of it onto other prepared clouds ([`Prepared::pair_score`]).
+/// [`NormalsConfig`], and scores and fits of it onto other prepared clouds
+/// ([`Prepared::pair_score`], [`Prepared::pair_fit`]).
 #[derive(Debug)]
 pub struct Prepared<'a> {
     cloud: Cow<'a, PointCloud>,
@@ -35,6 +41,8 @@ pub struct Prepared<'a> {
     id: u64,
     /// The pair scores made so far.
     scores: Mutex<Vec<(ScoreKey, f64)>>,
+    /// The pair fits made so far.
+    fits: Mutex<Vec<(ScoreKey, PairFit)>>,
 }
 
 impl<'a> Prepared<'a> {
@@ -46,6 +54,7 @@ impl<'a> Prepared<'a> {
             normals: Mutex::new(Vec::new()),
             id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
             scores: Mutex::new(Vec::new()),
+            fits: Mutex::new(Vec::new()),
         }
     }
 
@@ -90,6 +99,19 @@ impl<'a> Prepared<'a> {
 }
 
 impl Prepared<'_> {
+    /// What a pair's score or fit is kept under.
+    fn key(&self, target: &Prepared, transform: &RigidTransform, length: f64) -> ScoreKey {
+        let mut entries = [0u64; 12];
+        let values = transform
+            .rotation
+            .iter()
+            .chain(transform.translation.iter());
+        for (entry, value) in entries.iter_mut().zip(values) {
+            *entry = value.to_bits();
+        }
+        (target.id, entries, length.to_bits())
+    }
+
     /// The score `make` gives this cloud moved by `transform` onto `target` at `length`, made on
     /// the first ask and kept: the composites nested in a registration (a cascade inside a
     /// thinning inside another cascade) judge the same result on the same pair, and on a dense
@@ -103,26 +125,52 @@ impl Prepared<'_> {
         length: f64,
         make: impl FnOnce() -> f64,
     ) -> f64 {
-        let mut entries = [0u64; 12];
-        let values = transform
-            .rotation
-            .iter()
-            .chain(transform.translation.iter());
-        for (entry, value) in entries.iter_mut().zip(values) {
-            *entry = value.to_bits();
+        kept(&self.scores, self.key(target, transform, length), make)
+    }
+
+    /// [`score`] of this cloud moved by `transform` onto `target` within `max_distance`, with
+    /// its pairs, made on the first ask and kept: each composite nested in a registration
+    /// concludes with its winner's fit on the same pair, and on a dense pair that is a search
+    /// of every source point.
+    pub fn pair_fit(
+        &self,
+        target: &Prepared,
+        transform: &RigidTransform,
+        max_distance: f64,
+    ) -> PairFit {
+        kept(
+            &self.fits,
+            self.key(target, transform, max_distance),
+            || {
+                let mut pairs = Vec::new();
+                let scored = score(
+                    &self.points,
+                    target.index(),
+                    transform,
+                    max_distance,
+                    Some(&mut pairs),
+                );
+                Arc::new((scored, pairs))
+            },
+        )
+    }
+}
+
+/// The value kept in `made` under `key`, or `make`'s, then kept. Made outside the lock, for the
+/// reason [`Prepared::index`] builds outside its cell's.
+fn kept<T: Clone>(made: &Mutex<Vec<(ScoreKey, T)>>, key: ScoreKey, make: impl FnOnce() -> T) -> T {
+    let find = |made: &[(ScoreKey, T)]| made.iter().find(|(k, _)| *k == key).map(|m| m.1.clone());
+    if let Some(value) = find(&made.lock().expect("no panic holds the lock")) {
+        return value;
+    }
+    let value = make();
+    let mut made = made.lock().expect("no panic holds the lock");
+    match find(&made) {
+        Some(raced) => raced,
+        None => {
+            made.push((key, value.clone()));
+            value
         }
-        let key = (target.id, entries, length.to_bits());
-        let kept = |scores: &[(ScoreKey, f64)]| scores.iter().find(|(k, _)| *k == key).map(|s| s.1);
-        if let Some(score) = kept(&self.scores.lock().expect("no panic holds the lock")) {
-            return score;
-        }
-        // Made outside the lock, for the reason `index` builds outside its cell's.
-        let score = make();
-        let mut scores = self.scores.lock().expect("no panic holds the lock");
-        if kept(&scores).is_none() {
-            scores.push((key, score));
-        }
-        score
     }
 }
 
@@ -171,6 +219,31 @@ mod tests {
         };
         assert!(!Arc::ptr_eq(&normals, &prepared.normals(&wide)));
         assert_eq!(prepared.normals.lock().unwrap().len(), 2);
+    }
+
+    #[test]
+    fn a_pair_fit_is_the_score_with_its_pairs_made_once_per_target_transform_and_distance() {
+        let cloud = airplane();
+        let (source, target) = (Prepared::new(&cloud), Prepared::new(&cloud));
+        let shift =
+            RigidTransform::new(rgm_geom::Matrix3::identity(), Vector3::new(0.03, 0.0, 0.0));
+        let fit = source.pair_fit(&target, &shift, 0.02);
+        let mut pairs = Vec::new();
+        let scored = score(
+            &cloud.points,
+            target.index(),
+            &shift,
+            0.02,
+            Some(&mut pairs),
+        );
+        assert_eq!(fit.0, scored);
+        assert_eq!(fit.1, pairs);
+        assert!(scored.inlier_count > 0 && scored.inlier_count < cloud.len());
+        assert!(Arc::ptr_eq(&fit, &source.pair_fit(&target, &shift, 0.02)));
+        // Another distance is another fit.
+        let near = source.pair_fit(&target, &shift, 0.01);
+        assert!(near.0.inlier_count < scored.inlier_count);
+        assert_eq!(source.fits.lock().unwrap().len(), 2);
     }
 
     #[test]

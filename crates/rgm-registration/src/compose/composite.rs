@@ -16,7 +16,7 @@ use rgm_geom::{GeomError, RigidTransform};
 
 use crate::check::{Acceptance, Judge, Scoring};
 use crate::error::AllCandidatesFailed;
-use crate::fit::{score, Fit};
+use crate::fit::Fit;
 use crate::prepared::indexed_pair;
 use crate::registrar::{
     elapsed_ms, Candidate, DynRegistrar, MethodId, Progress, Registrar, Registration,
@@ -213,17 +213,12 @@ pub fn conclude<E: From<AllCandidatesFailed>>(
              the clouds may not overlap, or every method failed on them"
         )
     });
-    let mut correspondences = Vec::new();
-    let scored = score(
-        &judge.source.points,
-        judge.target.index(),
-        &transform,
-        result_distance,
-        Some(&mut correspondences),
-    );
+    let fit = judge
+        .source
+        .pair_fit(judge.target, &transform, result_distance);
     Ok(Registration {
-        result: Fit::scored(transform, iterations, true, scored),
-        correspondences,
+        result: Fit::scored(transform, iterations, true, fit.0),
+        correspondences: fit.1.clone(),
         time_ms: elapsed_ms(start),
         candidates,
         chosen: Some(chosen),
