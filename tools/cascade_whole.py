@@ -4,7 +4,7 @@
 
 Usage: python3 tools/cascade_whole.py SETTING=FILE [SETTING=FILE ...]
 
-With the score threshold and turned-share limit of `ACCEPT` fixed, FGR's result is also taken when
+With the score threshold and turned-share limit of `TUNED.accept` fixed, FGR's result is also taken when
 its overlap at a looser distance (the dump's last columns: 0.03, 0.04, 0.05; the score's own 0.02
 first) reaches W. Printed per (distance, W) and setting: recall, share off by more than 45 degrees,
 candidate time per pair, share of pairs that run the network, and the pairs whose outcome differs

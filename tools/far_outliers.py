@@ -1,5 +1,5 @@
 """How far a ModelNet40 shape's own points lie from its coordinate-wise median, in medians of
-that distance: the margin behind rgm_model::options::FRAME.far_outlier (docs/geom.md, "Far
+that distance: the margin behind rgm_model::policy::TUNED.frame.far_outlier (docs/geom.md, "Far
 outliers"). Plain Python, no NumPy.
 
     python3 tools/far_outliers.py ../shared/data/modelnet40_npy1024 [SHAPES]

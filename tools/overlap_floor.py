@@ -1,5 +1,5 @@
 """The default method's best overlap score against the truth on pairs written by `rgm pairs`:
-the evidence behind rgm_model::options::SCORING.min_overlap (docs/geom.md, "Far outliers and extreme
+the evidence behind rgm_model::policy::TUNED.scoring.min_overlap (docs/geom.md, "Far outliers and extreme
 scales"). Plain Python.
 
     rgm pairs --data DATA --split validation --every 20 --limit 100 --out PAIRS

@@ -47,7 +47,7 @@ use rgm_data::{ModelNet40, PairGenerator, Setting, Split};
 use rgm_geom::frame::Normalisation;
 use rgm_geom::metrics::PairMetrics;
 use rgm_geom::{KnnIndex, PointCloud, RigidTransform};
-use rgm_model::options::FRAME;
+use rgm_model::policy::TUNED;
 use rgm_model::{MethodOptions, Registrar};
 use rgm_registration::check::turned_share;
 use rgm_registration::fit::score;
@@ -410,12 +410,12 @@ fn cascade(
             }
         };
         // FGR's transform in the frame where the default scores it.
-        let frame = Normalisation::of_pair(&pair.source, &pair.target, &FRAME);
-        let s = frame.source(&pair.source.select(&FRAME.near(&pair.source)));
-        let t = frame.target(&pair.target.select(&FRAME.near(&pair.target)));
+        let frame = Normalisation::of_pair(&pair.source, &pair.target, &TUNED.frame);
+        let s = frame.source(&pair.source.select(&TUNED.frame.near(&pair.source)));
+        let t = frame.target(&pair.target.select(&TUNED.frame.near(&pair.target)));
         let (si, ti) = (KnnIndex::new(&s.points), KnnIndex::new(&t.points));
         let fgr = frame.redo(&found.candidates[0].t_target_source);
-        let distance = rgm_model::options::SCORING.overlap_distance;
+        let distance = rgm_model::policy::TUNED.scoring.overlap_distance;
         let turned = turned_share((&s, &si), (&t, &ti), &fgr, distance);
         let loose: Vec<String> = LOOSE_DISTANCES
             .iter()
@@ -586,7 +586,7 @@ impl Variant {
         };
         let accept = match fields.get(3) {
             Some(a) => a.parse::<f64>()?,
-            None => rgm_model::options::ACCEPT.score,
+            None => rgm_model::policy::TUNED.accept.score,
         };
         let mut rgm = rgm_model::weights::builtin_registrar()?;
         rgm.config.passes = passes;
@@ -598,7 +598,7 @@ impl Variant {
         };
         let acceptance = rgm_registration::check::Acceptance {
             score: accept,
-            ..rgm_model::options::ACCEPT
+            ..rgm_model::policy::TUNED.accept
         };
         Ok(Self {
             name: spec.to_string(),

@@ -9,7 +9,7 @@ use pyo3::exceptions::PyOSError;
 use pyo3::prelude::*;
 use pyo3::types::{PyList, PySlice, PyTuple};
 use pyo3::IntoPyObjectExt;
-use rgm_model::options::FRAME;
+use rgm_model::policy::TUNED;
 use rgm_model::Registration;
 use rgm_registration::registrar::Candidate as GeomCandidate;
 use rgm_viz::html::{
@@ -276,7 +276,7 @@ impl RegistrationResult {
             source: &source,
             target: &target,
             t_target_source,
-            inlier_distance: InlierDistance::of_refinement(&source, &target, &FRAME),
+            inlier_distance: InlierDistance::of_refinement(&source, &target, &TUNED.frame),
             notes: ResultNotes::of_registration(&self.method, &registration),
             point_budget: budget,
         };

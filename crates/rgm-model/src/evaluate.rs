@@ -15,7 +15,7 @@ use rgm_registration::compose::Normalised;
 use rgm_registration::refiner::Refiner;
 use rgm_registration::Registrar;
 
-use crate::options::FRAME;
+use crate::policy::TUNED;
 use crate::Method;
 
 mod resumable;
@@ -79,7 +79,7 @@ impl PairRecord {
             return Ok(self.clone());
         }
         let start = Instant::now();
-        let refined = Normalised::new(refiner, FRAME).refine(
+        let refined = Normalised::new(refiner, TUNED.frame).refine(
             &Prepared::new(&pair.source),
             &Prepared::new(&pair.target),
             &self.transform,

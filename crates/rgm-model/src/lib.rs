@@ -20,6 +20,7 @@ pub mod memory;
 pub mod method;
 pub mod network;
 pub mod options;
+pub mod policy;
 pub mod procedure;
 pub mod progress;
 pub mod train;

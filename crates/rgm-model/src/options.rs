@@ -6,22 +6,22 @@
 //!
 //! | name | composition |
 //! |---|---|
-//! | `icp` | `Checked<IcpConfig, InFrame<REFINED_CHECKS>>` (its own refinement, checked in the unit-sphere frame) |
-//! | `fgr`, `fgr+refine` | `Normalised<Checked<FgrConfig, unrefined_checks()>>`, `Normalised<Checked<Refined<FgrConfig>, REFINED_CHECKS>>` |
-//! | `rgm`, `rgm+refine` | [`Normalised`]`<Checked<RgmRegistrar, unrefined_checks()>>`, `Normalised<Checked<Refined<RgmRegistrar>, REFINED_CHECKS>>` |
-//! | `auto` | `Normalised<Checked<Thinned<Cascade { first: FgrConfig, rest: [Normalised<RgmRegistrar>] }>, unrefined_checks()>>` |
-//! | `auto+refine` | `Normalised<Checked<AtResolution<Thinned<Cascade { first: Refined<FgrConfig>, rest: [Refined<Normalised<RgmRegistrar>>] }>, AtSpacing>, REFINED_CHECKS>>` |
+//! | `icp` | `Checked<IcpConfig, InFrame<TUNED.refined_checks()>>` (its own refinement, checked in the unit-sphere frame) |
+//! | `fgr`, `fgr+refine` | `Normalised<Checked<FgrConfig, TUNED.unrefined_checks()>>`, `Normalised<Checked<Refined<FgrConfig>, TUNED.refined_checks()>>` |
+//! | `rgm`, `rgm+refine` | [`Normalised`]`<Checked<RgmRegistrar, TUNED.unrefined_checks()>>`, `Normalised<Checked<Refined<RgmRegistrar>, TUNED.refined_checks()>>` |
+//! | `auto` | `Normalised<Checked<Thinned<Cascade { first: FgrConfig, rest: [Normalised<RgmRegistrar>] }>, TUNED.unrefined_checks()>>` |
+//! | `auto+refine` | `Normalised<Checked<AtResolution<Thinned<Cascade { first: Refined<FgrConfig>, rest: [Refined<Normalised<RgmRegistrar>>] }>, AtSpacing>, TUNED.refined_checks()>>` |
 //!
 //! (`BestOf[first, rest]` in place of the `Cascade` when `accept` takes nothing; inside the
 //! `Normalised`, `UpTo { points: 32, small: TripletConfig, .. }` sends a pair of a few points to
 //! [`rgm_registration::methods::triplets`]; with `+refine`, a pair denser than the training clouds (a scan, a room)
 //! goes through `Cascade { first: the Thinned composite, rest: [Sc2Config] }` judged by
-//! [`SCENE_ACCEPT`]: second-order compatibility on the pair's own FPFH matches,
+//! [`TUNED.scene_accept`](crate::policy::Policy::scene_accept): second-order compatibility on the pair's own FPFH matches,
 //! [`rgm_registration::methods::sc2`], where the object cascade's result does not coincide with the target at
 //! the pair's spacing.)
 //!
 //! [`Checked`] doubts a result whose overlap is not one where the clouds coincide, or that a
-//! rival pose fits nearly as well ([`REFINED_CHECKS`]): refined results, ICP's (refined by its
+//! rival pose fits nearly as well ([`TUNED.refined_checks()`](crate::policy::Policy::refined_checks)): refined results, ICP's (refined by its
 //! nature) and, since issue 59, unrefined ones too (`--no-refine`, the paper's protocol), which
 //! must also lie near where the refinement takes them ([`unrefined_checks`]): an unrefined result
 //! that coincides may still be degrees off.
@@ -40,10 +40,7 @@
 use std::path::PathBuf;
 use std::str::FromStr;
 
-use rgm_geom::frame::FrameRule;
-use rgm_registration::check::{
-    Acceptance, Coincides, CoincidesAtSpacing, InFrame, Precise, Scoring, SelfFit, Unambiguous,
-};
+use rgm_registration::check::{Acceptance, InFrame, Scoring};
 use rgm_registration::compose::{
     AtResolution, BestOf, Cascade, Checked, Named, Normalised, OnFirstUse, Refined, Thinned, UpTo,
 };
@@ -61,6 +58,7 @@ use rgm_nn::Precision;
 use crate::error::MethodError;
 use crate::method::Method;
 use crate::network::{Config, TestStatistics};
+use crate::policy::TUNED;
 use crate::procedure::{self, RgmRegistrar, TRAINING_DENSITY};
 
 /// The name of FGR and RGM as a cascade ([`MethodName::Auto`]).
@@ -114,7 +112,7 @@ impl MethodName {
                  frame) or, short of a whole overlap, fits as well turned about one of the \
                  source's axes, each refined, \
                  and the result that overlaps better: `rgm register`'s default",
-                SCORING.overlap_distance
+                TUNED.scoring.overlap_distance
             ),
             Self::Scene => format!(
                 "auto, but on clouds denser than {} points only its scene stage (second-order \
@@ -157,174 +155,6 @@ impl FromStr for MethodName {
     }
 }
 
-/// The unit-sphere frame the default's methods run in ([`Normalised`]): a point farther from
-/// its cloud's median than 12 times the median distance from it is a far outlier (no ModelNet40
-/// shape has one: `docs/geom.md`, "Far outliers"); a pair within 2 of the origin whose larger
-/// cloud reaches 0.3–1.7 from its centroid is in the frame already and left as it is: a ModelNet40
-/// shape reaches 1, a 70 % crop of it 0.80–1.11 (10th and 90th percentiles over 400 training
-/// shapes), the larger of a partial pair's two crops 0.356–1.424 over all 2,468 test pairs and
-/// 0.347–1.32 over the 1,980 validation pairs (two crops of an elongated shape can both be
-/// short), and the benchmark's pairs (one cloud moved by at most 0.5 per axis, jitter at most
-/// 0.05) lie within 1.95 of the origin. Scaled up into the sphere, a short pair's jitter grew
-/// with it, and the coincidence check doubted 32 of its 37 right results
-/// (`docs/confidence.md`, "Short pairs").
-pub const FRAME: FrameRule = FrameRule {
-    far_outlier: 12.0,
-    within: 2.0,
-    extent: (0.3, 1.7),
-};
-
-/// How the default's composites judge their candidates (unit-sphere units): a point within
-/// 0.02 of the other cloud overlaps it, and a best result overlapping less than 0.1 (fewer than
-/// one point in twenty of each cloud on the other) is reported as not registered; chosen on
-/// validation pairs (`docs/training/README.md`, the default study). The chosen result is scored
-/// at the overlap distance too, or at its refinement's finest ([`scoring`]).
-pub const SCORING: Scoring = Scoring {
-    overlap_distance: 0.02,
-    min_overlap: 0.1,
-    result_distance: 0.02,
-    coincides: None,
-};
-
-/// How close the candidates' transforms on a dense pair's first thinning must be for the next
-/// thinning to be skipped: (degrees, distance in unit-sphere units).
-pub const AGREEMENT: (f64, f64) = (1.0, 0.02);
-
-/// [`SCORING`], when the candidates are refined: the chosen result scored at `refine`'s finest
-/// distance, and a candidate that does not coincide with the other cloud ([`COINCIDES`])
-/// ranked below those that do.
-pub fn scoring(refine: Option<&RefineConfig>) -> Scoring {
-    Scoring {
-        result_distance: refine.map_or(SCORING.result_distance, RefineConfig::finest_distance),
-        coincides: refine.map(|_| COINCIDES),
-        ..SCORING
-    }
-}
-
-/// When `rgm register`'s default takes its cheap candidate (FGR) without running the network
-/// ([`Cascade::accept`](rgm_registration::compose::Cascade::accept)): the cheapest on validation pairs that kept the recall and the share off
-/// by more than 45° of running both within 0.1 points
-/// (`docs/training/default-study/cascade-1980-validation.md`).
-pub const ACCEPT: Acceptance = Acceptance {
-    score: 0.55,
-    turned_share: 0.3,
-    whole: (WHOLE_DISTANCE, WHOLE_OVERLAP),
-    coincides: None,
-};
-
-/// The distance (unit-sphere units) of [`ACCEPT`]'s whole overlap: the bound of the benchmark's
-/// jitter (σ = 0.01 per coordinate, clipped at 0.05), within which a noisy cloud's points still
-/// lie on the other cloud.
-pub const WHOLE_DISTANCE: f64 = 0.05;
-
-/// The least overlap at [`WHOLE_DISTANCE`] (0 to 2) that [`ACCEPT`] takes as whole: the least
-/// that changes no partial validation pair's course, far above any wrong result's
-/// (`docs/training/default-study/cascade-whole-overlap.md`).
-pub const WHOLE_OVERLAP: f64 = 1.98;
-
-/// How a refined result of the default or of `rgm+refine` must coincide with the other cloud where
-/// it overlaps it, in the unit-sphere frame: the least that kept every right result of 198
-/// validation pairs registered and doubted all but a few wrong ones on pairs at 10 % overlap
-/// (`docs/confidence.md`).
-pub const COINCIDES: Coincides = Coincides {
-    near: 0.02,
-    far: 0.08,
-    least: 0.35,
-};
-
-/// The same on a dense pair, in point spacings: midway between the right results of the
-/// Stanford and redkitchen pairs and the wrong ones of part-of-the-whole crops, non-overlapping
-/// scans and slid rooms (`docs/confidence.md`).
-/// It applies to pairs denser than [`TRAINING_DENSITY`] whose points spread over surfaces: a
-/// ratio of the median distance to the 16th nearest neighbour to the nearest's below 5 (2.0–3.5
-/// measured on the Stanford scans, the redkitchen fragments and the merged bunny; 7.5 on both
-/// sweeps of the LiDAR pair, whose points lie along scan lines; `docs/confidence.md`).
-pub const COINCIDES_AT_SPACING: CoincidesAtSpacing = CoincidesAtSpacing {
-    coincides: Coincides {
-        near: 1.5,
-        far: 16.0,
-        least: 0.5,
-    },
-    density: TRAINING_DENSITY,
-    scan_lines: 5.0,
-};
-
-/// How a refined result must coincide: [`COINCIDES`], then [`COINCIDES_AT_SPACING`].
-pub const REFINED_COINCIDES: (Coincides, CoincidesAtSpacing) = (COINCIDES, COINCIDES_AT_SPACING);
-
-/// No rival pose of a refined result may fit nearly as well and coincide: a rival overlapping
-/// at least 0.75 of the result's overlap, midway between the right validation results' rivals
-/// (at most 0.60, one symmetric shape's turned pose aside) and the wrong results' that
-/// [`REFINED_COINCIDES`] left registered (at least 0.89); candidates within 5° and 0.05 are
-/// one pose (`docs/confidence.md`). Overlaps are counted at [`SCORING`]'s distance.
-pub const UNAMBIGUOUS: Unambiguous<(Coincides, CoincidesAtSpacing)> = Unambiguous {
-    share: 0.75,
-    distance: SCORING.overlap_distance,
-    apart: (5.0, 0.05),
-    rivals_pass: REFINED_COINCIDES,
-    self_fit: SELF_FIT,
-};
-
-/// A cloud fits itself turned when 90 % of its points, turned, lie within their distance to
-/// their 4th nearest neighbour of it (about two spacings), looked for beyond the half turns where
-/// two spreads are within 0.8 of each other, on clouds whose neighbourhoods' median flatness is
-/// below 0.1 (surfaces: 0.00–0.04 measured on a cube, a box and ModelNet40's airplane; lattices
-/// 0.13–0.15). A cube of 2,048 points fits itself at 0.94, a 1,024-point one at 0.89 (issue 59,
-/// E4; docs/confidence.md).
-pub const SELF_FIT: SelfFit = SelfFit {
-    within: 1.0,
-    share: 0.9,
-    near_equal: 0.8,
-    flat: 0.1,
-};
-
-/// The type of [`REFINED_CHECKS`].
-pub type RefinedChecks = (
-    (Coincides, CoincidesAtSpacing),
-    Unambiguous<(Coincides, CoincidesAtSpacing)>,
-);
-
-/// The checks of a refined result: [`REFINED_COINCIDES`], then [`UNAMBIGUOUS`].
-pub const REFINED_CHECKS: RefinedChecks = (REFINED_COINCIDES, UNAMBIGUOUS);
-
-/// The type of [`unrefined_checks`].
-pub type UnrefinedChecks = (RefinedChecks, Precise);
-
-/// The checks of an unrefined result (`--no-refine`): [`REFINED_CHECKS`], then [`Precise`]: the
-/// refinement (`RefineConfig::default`, on at most 2,048 points of each cloud) must move it by
-/// less than 5° and 0.05, the 5° at which issue 59 counts a result wrong (E3: 5 of 40 partial
-/// test pairs trusted 5.6–174° off before; docs/confidence.md).
-pub fn unrefined_checks() -> UnrefinedChecks {
-    (
-        REFINED_CHECKS,
-        Precise {
-            refine: RefineConfig::default(),
-            within: (5.0, 0.05),
-            points: 2048,
-        },
-    )
-}
-
-/// When the default takes the object cascade's result on a dense pair without running the
-/// scene stage after it: an overlap score of at least [`ACCEPT`]'s, whatever its
-/// turned share (a room overlaps itself turned about the vertical as a box does, and the
-/// measure on a dense pair costs more than it tells there), and clouds that coincide at their
-/// point spacing ([`COINCIDES_AT_SPACING`]; a room slid along its floor overlaps well).
-pub const SCENE_ACCEPT: Acceptance = Acceptance {
-    score: ACCEPT.score,
-    turned_share: f64::INFINITY,
-    whole: (WHOLE_DISTANCE, f64::INFINITY),
-    coincides: Some(COINCIDES_AT_SPACING),
-};
-
-/// The overlap distance (unit-sphere units) at which the scene stage's cascade judges its
-/// results, a quarter of [`SCORING`]'s: a scene fills the unit sphere with far more detail than
-/// an object. On the LiDAR pair (a 50 m sweep) 0.02 is a metre, within which a 0.2 m slide along
-/// the road overlapped as well as the right pose (1.9806 against 1.9795) and was chosen on 3 of
-/// its 7 turns; at 0.005 the right pose won on all 7, and the redkitchen and Stanford pairs kept
-/// their transforms (docs/baselines.md, "Scenes: the scene stage's judge").
-pub const SCENE_OVERLAP_DISTANCE: f64 = 0.005;
-
 /// The scene stage's global estimator ([`Sc2Config`]): it registered all 12 redkitchen dev
 /// pairs where RANSAC (Open3D's tutorial settings) registered 10 or 11, at any of the seeds,
 /// mates, compatibilities and lengths tried (docs/baselines.md, "Scenes: second-order
@@ -332,17 +162,6 @@ pub const SCENE_OVERLAP_DISTANCE: f64 = 0.005;
 pub fn scene_stage() -> Sc2Config {
     Sc2Config::default()
 }
-
-/// Points matched per cloud with given weights unless `match_points` says otherwise: the paper
-/// trains on 1,024-point clouds, and the network's memory grows with the square of the points.
-pub const WEIGHTS_MATCH_POINTS: usize = 1024;
-
-/// Points the built-in model matches per cloud as the cascade's second stage unless
-/// `match_points` says otherwise. Fewer than its training size, because the network is most of
-/// the cascade's time on the pairs where it runs; chosen on validation pairs as the most points
-/// that keep the default's mean time under Open3D's
-/// (docs/training/default-study/cascade-network-stage.md).
-pub const CASCADE_MATCH_POINTS: usize = 256;
 
 /// A method and its options; `None` leaves an option at the method's own default.
 #[derive(Clone, Debug, PartialEq)]
@@ -358,8 +177,8 @@ pub struct MethodOptions {
     /// weights; the built-in model has its own).
     pub test_statistics: Option<TestStatistics>,
     /// RGM matches on at most this many random points of each cloud; 0: every point. When
-    /// `None`: the built-in model's training size ([`CASCADE_MATCH_POINTS`] in `auto`), or
-    /// [`WEIGHTS_MATCH_POINTS`] with `weights`.
+    /// `None`: the built-in model's training size ([`TUNED.cascade_match_points`](crate::policy::Policy::cascade_match_points) in `auto`), or
+    /// [`TUNED.weights_match_points`](crate::policy::Policy::weights_match_points) with `weights`.
     pub match_points: Option<usize>,
     /// RGM's passes (2 when `None`, as in the paper).
     pub passes: Option<usize>,
@@ -372,7 +191,7 @@ pub struct MethodOptions {
     pub refine: bool,
     /// `auto` takes FGR's result without running the network when it scores at least this
     /// ([`rgm_registration::check::overlap_score`], 0 to 2) and overlaps wholly or does not fit as
-    /// well turned ([`ACCEPT`]); `f64::INFINITY` runs both on every pair.
+    /// well turned ([`TUNED.accept`](crate::policy::Policy::accept)); `f64::INFINITY` runs both on every pair.
     pub accept: f64,
 }
 
@@ -388,7 +207,7 @@ impl Default for MethodOptions {
             passes: None,
             precision: Precision::F32,
             refine: true,
-            accept: ACCEPT.score,
+            accept: TUNED.accept.score,
         }
     }
 }
@@ -406,8 +225,8 @@ impl MethodOptions {
             (MethodName::Icp, _) => Method::new(Checked {
                 inner: IcpConfig::default(),
                 check: InFrame {
-                    check: REFINED_CHECKS,
-                    rule: FRAME,
+                    check: TUNED.refined_checks(),
+                    rule: TUNED.frame,
                 },
             }),
             // FGR's lengths are set for unit-sphere shapes: the pair is moved into that frame
@@ -415,35 +234,35 @@ impl MethodOptions {
             (MethodName::Fgr, None) => Method::new(Normalised::new(
                 Checked {
                     inner: FgrConfig::default(),
-                    check: unrefined_checks(),
+                    check: TUNED.unrefined_checks(),
                 },
-                FRAME,
+                TUNED.frame,
             )),
             (MethodName::Fgr, Some(refine)) => Method::new(Normalised::new(
                 Checked {
                     inner: Refined::new(FgrConfig::default(), refine),
-                    check: REFINED_CHECKS,
+                    check: TUNED.refined_checks(),
                 },
-                FRAME,
+                TUNED.frame,
             )),
             (MethodName::Rgm, None) => Method::new(Normalised::new(
                 Checked {
                     inner: self.build_rgm()?,
-                    check: unrefined_checks(),
+                    check: TUNED.unrefined_checks(),
                 },
-                FRAME,
+                TUNED.frame,
             )),
             (MethodName::Rgm, Some(refine)) => Method::new(Normalised::new(
                 Checked {
                     inner: Refined::new(self.build_rgm()?, refine),
-                    check: REFINED_CHECKS,
+                    check: TUNED.refined_checks(),
                 },
-                FRAME,
+                TUNED.frame,
             )),
             (MethodName::Auto | MethodName::Scene, refine) => {
                 let accept = Acceptance {
                     score: self.accept,
-                    ..ACCEPT
+                    ..TUNED.accept
                 };
                 let dense = match self.method {
                     MethodName::Scene => DenseStage::SceneOnly,
@@ -483,7 +302,7 @@ impl MethodOptions {
             return invalid("passes must be at least 1");
         }
         let cascade = matches!(self.method, MethodName::Auto | MethodName::Scene);
-        if !cascade && self.accept != ACCEPT.score {
+        if !cascade && self.accept != TUNED.accept.score {
             return invalid("accept applies to the auto and scene methods only");
         }
         if self.method == MethodName::Scene && !self.refine {
@@ -500,12 +319,12 @@ impl MethodOptions {
 
     /// The network as the cascade's second stage: one chain (the cascade's overlap score
     /// already judges the result, so cycle consistency between two chains is not needed) and,
-    /// for the built-in model with no `match_points`, [`CASCADE_MATCH_POINTS`] per cloud.
+    /// for the built-in model with no `match_points`, [`TUNED.cascade_match_points`](crate::policy::Policy::cascade_match_points) per cloud.
     fn build_cascade_rgm(&self) -> Result<RgmRegistrar, MethodError> {
         let mut registrar = self.build_rgm()?;
         registrar.config.cycle_consistency = false;
         if self.weights.is_none() && self.match_points.is_none() {
-            registrar.config.match_points = Some(CASCADE_MATCH_POINTS);
+            registrar.config.match_points = Some(TUNED.cascade_match_points);
         }
         Ok(registrar)
     }
@@ -518,7 +337,7 @@ impl MethodOptions {
                 let mut registrar = crate::weights::load_registrar(config, weights)?;
                 registrar.network.featurer.test_statistics =
                     self.test_statistics.unwrap_or_default();
-                registrar.config.match_points = Some(WEIGHTS_MATCH_POINTS);
+                registrar.config.match_points = Some(TUNED.weights_match_points);
                 registrar
             }
             None => crate::weights::builtin_registrar()?,
@@ -538,7 +357,7 @@ impl MethodOptions {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DenseStage {
     /// The object cascade, then the scene stage where the cascade's result is not taken
-    /// ([`SCENE_ACCEPT`]): `rgm register`'s default.
+    /// ([`TUNED.scene_accept`](crate::policy::Policy::scene_accept)): `rgm register`'s default.
     ObjectThenScene,
     /// The scene stage alone: on the Stanford bunny's and dragon's thinned scans, every pair
     /// the cascade trusted in a merge was trusted, the merged scans as accurate, and a pair
@@ -559,9 +378,9 @@ pub fn auto<R>(
 where
     R: Registrar<MethodError> + Clone + Send + Sync + 'static,
 {
-    let rgm = Normalised::new(rgm, FRAME);
+    let rgm = Normalised::new(rgm, TUNED.frame);
     let fgr = FgrConfig::default();
-    let scoring = scoring(refine.as_ref());
+    let scoring = TUNED.scoring_refined(refine.as_ref());
     let candidates: [Box<dyn DynRegistrar<MethodError>>; 2] = match &refine {
         None => [Box::new(fgr), Box::new(rgm)],
         Some(refine) => [
@@ -574,7 +393,7 @@ where
             inner,
             thinnings: vec![Thinning::Voxels, Thinning::Cells],
             density: TRAINING_DENSITY,
-            agreement: AGREEMENT,
+            agreement: TUNED.agreement,
         }
     }
     let [first, second] = candidates;
@@ -596,7 +415,7 @@ where
     let composite: Box<dyn DynRegistrar<MethodError>> = match refine {
         None => Box::new(Checked {
             inner: composite,
-            check: unrefined_checks(),
+            check: TUNED.unrefined_checks(),
         }),
         Some(_) => Box::new(Checked {
             inner: AtResolution {
@@ -611,9 +430,9 @@ where
                             base: AUTO,
                             first: composite,
                             rest: vec![Box::new(scene_stage())],
-                            accept: SCENE_ACCEPT,
+                            accept: TUNED.scene_accept,
                             scoring: Scoring {
-                                overlap_distance: SCENE_OVERLAP_DISTANCE,
+                                overlap_distance: TUNED.scene_overlap_distance,
                                 ..scoring
                             },
                         })
@@ -628,7 +447,7 @@ where
                 },
                 density: TRAINING_DENSITY,
             },
-            check: REFINED_CHECKS,
+            check: TUNED.refined_checks(),
         }),
     };
     // A few markers have no neighbourhoods for features or the network: searched whole.
@@ -645,7 +464,7 @@ where
                 other: composite,
             },
         },
-        FRAME,
+        TUNED.frame,
     ))
 }
 

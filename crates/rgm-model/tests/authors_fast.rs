@@ -10,7 +10,7 @@ use ndarray::Array2;
 use rgm_data::{ModelNet40, PairGenerator, Setting, Split};
 use rgm_geom::{Matrix3, PointCloud, RigidTransform, Vector3};
 use rgm_model::network::{Config, Mode, Rgm, RgmCache};
-use rgm_model::options::FRAME;
+use rgm_model::policy::TUNED;
 use rgm_model::{ProcedureConfig, Registrar, RgmRegistrar};
 use rgm_registration::compose::Normalised;
 use serde::Deserialize;
@@ -142,7 +142,7 @@ fn the_first_pass_gives_the_authors_c_soft() {
 fn the_procedure_gives_the_authors_transforms_and_correspondences() {
     let mut registrar = Normalised::new(
         RgmRegistrar::new(network(), ProcedureConfig::default()),
-        FRAME,
+        TUNED.frame,
     );
     let expected = expected();
     assert_eq!(expected.pairs.len(), 21);

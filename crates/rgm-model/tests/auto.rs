@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use rgm_data::{ModelNet40, PairGenerator, Setting, Split};
 use rgm_geom::{PairMetrics, Point3, PointCloud, RigidTransform};
 use rgm_model::network::{Config, Rgm};
-use rgm_model::options::SCORING;
+use rgm_model::policy::TUNED;
 use rgm_model::{
     Method, MethodError, MethodOptions, ProcedureConfig, Registrar, Registration, RgmRegistrar,
 };
@@ -404,7 +404,7 @@ fn clouds_that_do_not_overlap_are_reported_as_not_registered() {
     let why = found.doubt.expect("not registered");
     assert!(why.contains("overlaps too little"), "{why}");
     let best = found.candidates[found.chosen.unwrap()].score.unwrap();
-    assert!(best < SCORING.min_overlap, "{best}");
+    assert!(best < TUNED.scoring.min_overlap, "{best}");
 }
 
 #[test]

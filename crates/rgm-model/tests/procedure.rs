@@ -15,14 +15,14 @@ use rgm_model::evaluate::evaluate_pair;
 use rgm_model::network::{
     Config, Edges, FeaturerCache, Mode, Rgm, RgmCache, Scoring, TestStatistics,
 };
-use rgm_model::options::FRAME;
+use rgm_model::policy::TUNED;
 use rgm_model::{Method, MethodError, ProcedureConfig, Registrar, RgmRegistrar};
 use rgm_registration::compose::{Normalised, Refined};
 use rgm_registration::methods::refine::{refine, RefineConfig};
 
 /// RGM as `rgm register --method rgm --no-refine` runs it: in the network's frame.
 fn normalised(network: Rgm<f32>, config: ProcedureConfig) -> Normalised<RgmRegistrar> {
-    Normalised::new(RgmRegistrar::new(network, config), FRAME)
+    Normalised::new(RgmRegistrar::new(network, config), TUNED.frame)
 }
 
 fn fixture() -> PathBuf {
@@ -277,7 +277,7 @@ fn benchmark_pairs_are_used_as_they_are() {
             .iter()
             .filter(|&&i| {
                 let pair = generator.test_pair(&shapes, i).unwrap();
-                Normalisation::of_pair(&pair.source, &pair.target, &FRAME).is_identity()
+                Normalisation::of_pair(&pair.source, &pair.target, &TUNED.frame).is_identity()
             })
             .count();
         let share = kept as f64 / indices.len() as f64;
@@ -297,7 +297,7 @@ fn a_pair_at_a_tenth_or_four_times_the_size_reaches_the_network_centred_alike() 
         .map(|&k| {
             let scaled = |c: &PointCloud| PointCloud::new(c.points.iter().map(|p| p * k).collect());
             let (s, t) = (scaled(&source), scaled(&target));
-            let frame = Normalisation::of_pair(&s, &t, &FRAME);
+            let frame = Normalisation::of_pair(&s, &t, &TUNED.frame);
             assert!(!frame.is_identity(), "×{k}");
             (frame.source(&s), frame.target(&t))
         })
@@ -338,7 +338,7 @@ fn normalisation_is_undone_on_the_transform() {
         &vec![1.0; source.len()],
     )
     .unwrap();
-    let frame = Normalisation::of_pair(&big_source, &big_target, &FRAME);
+    let frame = Normalisation::of_pair(&big_source, &big_target, &TUNED.frame);
     assert!(!frame.is_identity());
     let (ns, nt) = (frame.source(&big_source), frame.target(&big_target));
     let farthest = ns.points.iter().chain(&nt.points).map(|p| p.coords.norm());
@@ -353,9 +353,9 @@ fn normalisation_is_undone_on_the_transform() {
 fn far_large_clouds_register_as_their_normalised_copies() {
     let network = Rgm::<f32>::load(Config::tiny(), &fixture()).unwrap();
     let (source, target) = far_and_large(&fixture_pair().0, &fixture_pair().1);
-    let frame = Normalisation::of_pair(&source, &target, &FRAME);
+    let frame = Normalisation::of_pair(&source, &target, &TUNED.frame);
     let (ns, nt) = (frame.source(&source), frame.target(&target));
-    assert!(Normalisation::of_pair(&ns, &nt, &FRAME).is_identity());
+    assert!(Normalisation::of_pair(&ns, &nt, &TUNED.frame).is_identity());
     let config = ProcedureConfig {
         passes: 1,
         cycle_consistency: false,
@@ -391,7 +391,7 @@ fn refinement_starts_from_rgms_transform() {
         .result;
     let mut registrar = Normalised::new(
         Refined::new(RgmRegistrar::new(network, plain), RefineConfig::default()),
-        FRAME,
+        TUNED.frame,
     );
     let both = registrar.register(&source, &target).unwrap().result;
     let expected = refine(
@@ -440,7 +440,7 @@ fn a_record_refined_afterwards_is_what_the_refined_method_records() {
     let record = evaluate_pair(&mut plain_method.clone(), 3, &pair).unwrap();
     let mut refined_method = Method::new(Normalised::new(
         Refined::new(RgmRegistrar::new(network, plain), RefineConfig::default()),
-        FRAME,
+        TUNED.frame,
     ));
     let expected = evaluate_pair(&mut refined_method, 3, &pair).unwrap();
     let refined = record.refined(&pair, &RefineConfig::default()).unwrap();

@@ -5,7 +5,7 @@
 //! Layering rule: rgm-registration builds on rgm-geom only (clouds, transforms, kNN, Kabsch,
 //! normals, FPFH, the unit-sphere frame); it knows nothing about tensors, gradients or networks,
 //! and holds no tuned value of its own (the thresholds are configuration: rgm-model's
-//! `options` gives them). Everything is f64, as in rgm-geom.
+//! `policy::TUNED` gives them; this crate's tests use values of their own). Everything is f64, as in rgm-geom.
 //!
 //! The modules, bottom first, as a registration runs through them:
 //! - [`error`] (what a method fails with), [`fit`] (what a method returns), [`prepared`] (a cloud with its tree and normals, made

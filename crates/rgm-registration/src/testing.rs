@@ -14,8 +14,8 @@ use crate::registrar::{MethodId, Progress, Registrar, Registration};
 use crate::thinning::Density;
 use crate::Prepared;
 
-/// The scoring the default composes its methods with (rgm-model's options): distances in
-/// unit-sphere units.
+/// A scoring for the composites' tests, of the default's values (rgm-model's `policy::TUNED`,
+/// above this crate): distances in unit-sphere units.
 pub const SCORING: Scoring = Scoring {
     overlap_distance: 0.02,
     min_overlap: 0.1,
@@ -23,8 +23,8 @@ pub const SCORING: Scoring = Scoring {
     coincides: None,
 };
 
-/// The frame rule the default composes its methods with (rgm-model's options): ModelNet40's
-/// pairs are in the unit-sphere frame already.
+/// A frame rule for the tests, of the default's values (rgm-model's `policy::TUNED.frame`):
+/// ModelNet40's pairs are in the unit-sphere frame already.
 pub const FRAME: FrameRule = FrameRule {
     far_outlier: 12.0,
     within: 2.0,

@@ -391,7 +391,8 @@ pub(crate) mod tests {
     use super::*;
     use rgm_geom::{Matrix3, Point3};
 
-    /// The default's frame rule (rgm-model's `options::FRAME`).
+    /// A frame rule for the tests, of the default's values (rgm-model's `policy::TUNED.frame`,
+    /// which this crate, on rgm-model's layer, cannot read): the tests need a rule, not those.
     const FRAME: FrameRule = FrameRule {
         far_outlier: 12.0,
         within: 2.0,

@@ -22,7 +22,7 @@ use anyhow::{Context, Result};
 use rgm_cli::TaskBar;
 use rgm_data::{ModelNet40, PairGenerator, Setting, Shape, Split};
 use rgm_model::evaluate::{Resumable, TestPairs};
-use rgm_model::options::FRAME;
+use rgm_model::policy::TUNED;
 use rgm_model::weights::{weights_dir, Manifest, ModelEntry, Variant, WeightsFile};
 use rgm_model::{Method, MethodName, MethodOptions, PairRecord, Registrar};
 use rgm_registration::compose::Normalised;
@@ -389,7 +389,7 @@ fn candidates(set: TestSet, manifest: &Manifest, only: &[String]) -> Result<Vec<
     for entry in models_for(manifest, set).filter(|e| wanted(&e.name)) {
         let method = from_history(entry)?
             .registrar(&weights_dir())
-            .map(|registrar| Method::new(Normalised::new(registrar, FRAME)))
+            .map(|registrar| Method::new(Normalised::new(registrar, TUNED.frame)))
             .with_context(|| format!("loading the model {}", entry.name))?;
         list.push(Candidate {
             name: entry.name.clone(),

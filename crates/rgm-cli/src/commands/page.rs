@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use rgm_geom::{PointCloud, RigidTransform};
-use rgm_model::options::FRAME;
+use rgm_model::policy::TUNED;
 use rgm_viz::html::{InlierDistance, Page, ResultNotes, DEFAULT_POINT_BUDGET};
 
 /// `--html FILE` and `--html-points N`.
@@ -77,7 +77,7 @@ impl HtmlArgs {
             source,
             target,
             t_target_source,
-            inlier_distance: InlierDistance::of_refinement(source, target, &FRAME),
+            inlier_distance: InlierDistance::of_refinement(source, target, &TUNED.frame),
             notes,
             point_budget: self.html_points,
         };

@@ -44,8 +44,11 @@ fn the_default_is_the_built_in_rgm_and_fgr_refined() {
     // As the cascade's second stage: one chain on fewer points, unless the user says.
     let cascade = options.build_cascade_rgm().unwrap().config;
     assert!(builtin.config.cycle_consistency && !cascade.cycle_consistency);
-    assert_eq!(cascade.match_points, Some(CASCADE_MATCH_POINTS));
-    assert_ne!(builtin.config.match_points, Some(CASCADE_MATCH_POINTS));
+    assert_eq!(cascade.match_points, Some(TUNED.cascade_match_points));
+    assert_ne!(
+        builtin.config.match_points,
+        Some(TUNED.cascade_match_points)
+    );
     assert_eq!(cascade.passes, builtin.config.passes);
     let asked = MethodOptions {
         match_points: Some(500),

@@ -19,7 +19,7 @@ use super::Result;
 use crate::evaluate::{evaluate_pair, PairRecord, Summary};
 use crate::method::Method;
 use crate::network::Mode;
-use crate::options::FRAME;
+use crate::policy::TUNED;
 use crate::procedure::{as_rows, ProcedureConfig, RgmRegistrar};
 
 /// The validation result of one epoch.
@@ -136,7 +136,7 @@ impl Trainer {
                             ..ProcedureConfig::default()
                         },
                     ),
-                    FRAME,
+                    TUNED.frame,
                 ));
                 let mut part = ValidationPart::default();
                 for i in (w..total).step_by(workers) {

@@ -456,7 +456,8 @@ mod tests {
     use rgm_geom::testing::airplane;
     use std::time::Instant;
 
-    /// The default's spacing check (rgm-model's `options::COINCIDES_AT_SPACING`).
+    /// A spacing check for the tests, of the default's values (rgm-model's
+    /// `policy::TUNED.coincides_at_spacing`, above this crate).
     const AT_SPACING: CoincidesAtSpacing = CoincidesAtSpacing {
         coincides: Coincides {
             near: 1.5,
@@ -472,8 +473,9 @@ mod tests {
         (cloud, KnnIndex::new(&cloud.points))
     }
 
-    /// The rival check as the options set it but for the coincidence a rival must reach
-    /// (`least`) and the share of a cloud's points that must fit it turned (`self_share`).
+    /// The rival check of the default's values (rgm-model's `policy::TUNED.unambiguous`) but for
+    /// the coincidence a rival must reach (`least`) and the share of a cloud's points that must
+    /// fit it turned (`self_share`).
     fn unambiguous(least: f64, self_share: f64) -> Unambiguous<Coincides> {
         Unambiguous {
             share: 0.75,
