@@ -10,10 +10,14 @@ use std::ops::Deref;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 
+use rgm_geom::cloud::{evenly, median};
 use rgm_geom::normals::{estimate_normals, NormalsConfig};
 use rgm_geom::{KnnIndex, PointCloud, RigidTransform, Vector3};
 
 use crate::fit::{score, Score};
+
+/// Points whose neighbours set a cloud's [`Prepared::spacings`].
+pub const SPACING_SAMPLE: usize = 2000;
 
 /// The next [`Prepared`]'s id: ids are never reused, so a score kept under one cannot be read
 /// back for another cloud that took the first one's place in memory.
@@ -43,6 +47,8 @@ pub struct Prepared<'a> {
     scores: Mutex<Vec<(ScoreKey, f64)>>,
     /// The pair fits made so far.
     fits: Mutex<Vec<(ScoreKey, PairFit)>>,
+    /// [`Prepared::spacings`], once measured.
+    spacings: OnceLock<(f64, f64)>,
 }
 
 impl<'a> Prepared<'a> {
@@ -55,6 +61,7 @@ impl<'a> Prepared<'a> {
             id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
             scores: Mutex::new(Vec::new()),
             fits: Mutex::new(Vec::new()),
+            spacings: OnceLock::new(),
         }
     }
 
@@ -68,6 +75,24 @@ impl<'a> Prepared<'a> {
         // re-entrantly deadlocks. Two stages that race both build it; the first one set is kept.
         let built = KnnIndex::new(&self.cloud.points);
         self.index.get_or_init(|| built)
+    }
+
+    /// The cloud's point spacing: the median distance from a point to its nearest other point
+    /// and to its 16th nearest, over at most [`SPACING_SAMPLE`] points spread evenly (both NaN
+    /// for a cloud of fewer than 17 points); measured on first use, as every check at the
+    /// pair's spacing asks for it (`crate::check::CoincidesAtSpacing`).
+    pub fn spacings(&self) -> (f64, f64) {
+        *self.spacings.get_or_init(|| {
+            let index = self.index();
+            let (first, sixteenth): (Vec<f64>, Vec<f64>) =
+                evenly(&self.cloud.points, SPACING_SAMPLE)
+                    .filter_map(|p| {
+                        let near = index.k_nearest(p, 17);
+                        Some((near.get(1)?.1, near.get(16)?.1))
+                    })
+                    .unzip();
+            (median(first), median(sixteenth))
+        })
     }
 
     /// The cloud with its tree, as the scoring functions take a searched cloud.
@@ -244,6 +269,27 @@ mod tests {
         let near = source.pair_fit(&target, &shift, 0.01);
         assert!(near.0.inlier_count < scored.inlier_count);
         assert_eq!(source.fits.lock().unwrap().len(), 2);
+    }
+
+    #[test]
+    fn the_spacings_are_the_medians_of_the_first_and_sixteenth_neighbours() {
+        // A 50 × 50 grid 0.01 apart: every point's nearest other point is 0.01 away, its 16th
+        // within 0.01·√5 (the ring at √5 is where the 13th to 20th lie), 2·√2 spacings at most.
+        let grid = PointCloud::new(
+            (0..2500)
+                .map(|k| rgm_geom::Point3::new((k / 50) as f64 * 0.01, (k % 50) as f64 * 0.01, 0.0))
+                .collect(),
+        );
+        let prepared = Prepared::new(&grid);
+        let (nearest, sixteenth) = prepared.spacings();
+        assert!((nearest - 0.01).abs() < 1e-12, "{nearest}");
+        assert!(
+            (sixteenth - 0.01 * 5f64.sqrt()).abs() < 1e-12,
+            "{sixteenth}"
+        );
+        // Fewer than 17 points have no 16th neighbour.
+        let few = PointCloud::new(grid.points[..10].to_vec());
+        assert!(Prepared::new(&few).spacings().1.is_nan());
     }
 
     #[test]

@@ -11,11 +11,12 @@
 //! puts a [`Check`] on any registrar. The tuned lengths and shares are configuration, set where
 //! methods are composed.
 
-use rgm_geom::cloud::{evenly, median};
+use rgm_geom::cloud::evenly;
 use rgm_geom::frame::{FrameRule, NearPair, Normalisation};
-use rgm_geom::{KnnIndex, PointCloud, RigidTransform};
+use rgm_geom::{KnnIndex, RigidTransform};
 
 use crate::check::{turned_poses, SelfFit};
+use crate::prepared::{indexed_pair, Prepared};
 use crate::registrar::Registration;
 use crate::thinning::Density;
 
@@ -47,15 +48,20 @@ fn within(
 /// share within `near` (0 when none is within `far`). Measured on at most [`SAMPLE`] points of
 /// each cloud, against the other whole.
 pub fn coincidence(
-    source: (&PointCloud, &KnnIndex),
-    target: (&PointCloud, &KnnIndex),
+    source: &Prepared,
+    target: &Prepared,
     transform: &RigidTransform,
     near: f64,
     far: f64,
 ) -> f64 {
-    let (there_near, there_far, _) = within(&source.0.points, target.1, transform, near, far);
-    let (back_near, back_far, _) =
-        within(&target.0.points, source.1, &transform.inverse(), near, far);
+    let (there_near, there_far, _) = within(&source.points, target.index(), transform, near, far);
+    let (back_near, back_far, _) = within(
+        &target.points,
+        source.index(),
+        &transform.inverse(),
+        near,
+        far,
+    );
     let far_total = there_far + back_far;
     if far_total == 0 {
         return 0.0;
@@ -68,19 +74,14 @@ pub trait Check {
     /// Why `transform` (a pose of `source` on `target`) is not to be trusted, if it is not.
     fn doubt_of(
         &self,
-        source: (&PointCloud, &KnnIndex),
-        target: (&PointCloud, &KnnIndex),
+        source: &Prepared,
+        target: &Prepared,
         transform: &RigidTransform,
     ) -> Option<String>;
 
     /// Why `found` (the registration of `source` onto `target`) is not to be trusted, if it is
     /// not: its transform's doubt, unless the check weighs more of it (its candidates).
-    fn doubt(
-        &self,
-        source: (&PointCloud, &KnnIndex),
-        target: (&PointCloud, &KnnIndex),
-        found: &Registration,
-    ) -> Option<String> {
+    fn doubt(&self, source: &Prepared, target: &Prepared, found: &Registration) -> Option<String> {
         self.doubt_of(source, target, &found.result.t_target_source)
     }
 }
@@ -89,8 +90,8 @@ pub trait Check {
 impl<A: Check, B: Check> Check for (A, B) {
     fn doubt_of(
         &self,
-        source: (&PointCloud, &KnnIndex),
-        target: (&PointCloud, &KnnIndex),
+        source: &Prepared,
+        target: &Prepared,
         transform: &RigidTransform,
     ) -> Option<String> {
         self.0
@@ -98,12 +99,7 @@ impl<A: Check, B: Check> Check for (A, B) {
             .or_else(|| self.1.doubt_of(source, target, transform))
     }
 
-    fn doubt(
-        &self,
-        source: (&PointCloud, &KnnIndex),
-        target: (&PointCloud, &KnnIndex),
-        found: &Registration,
-    ) -> Option<String> {
+    fn doubt(&self, source: &Prepared, target: &Prepared, found: &Registration) -> Option<String> {
         self.0
             .doubt(source, target, found)
             .or_else(|| self.1.doubt(source, target, found))
@@ -121,20 +117,15 @@ pub struct Coincides {
 
 impl Coincides {
     /// Whether the clouds coincide under `transform`: its doubt's opposite, unformatted.
-    pub fn holds(
-        &self,
-        source: (&PointCloud, &KnnIndex),
-        target: (&PointCloud, &KnnIndex),
-        transform: &RigidTransform,
-    ) -> bool {
+    pub fn holds(&self, source: &Prepared, target: &Prepared, transform: &RigidTransform) -> bool {
         self.share_at(source, target, transform, 1.0) >= self.least
     }
 
     /// [`coincidence`] of `transform` at its lengths scaled by `unit`.
     fn share_at(
         &self,
-        source: (&PointCloud, &KnnIndex),
-        target: (&PointCloud, &KnnIndex),
+        source: &Prepared,
+        target: &Prepared,
         transform: &RigidTransform,
         unit: f64,
     ) -> f64 {
@@ -144,8 +135,8 @@ impl Coincides {
     /// Its doubt of `transform`, lengths scaled by `unit` and named `in_units`.
     fn doubt_at(
         &self,
-        source: (&PointCloud, &KnnIndex),
-        target: (&PointCloud, &KnnIndex),
+        source: &Prepared,
+        target: &Prepared,
         transform: &RigidTransform,
         unit: f64,
         in_units: &str,
@@ -166,8 +157,8 @@ impl Coincides {
 impl Check for Coincides {
     fn doubt_of(
         &self,
-        source: (&PointCloud, &KnnIndex),
-        target: (&PointCloud, &KnnIndex),
+        source: &Prepared,
+        target: &Prepared,
         transform: &RigidTransform,
     ) -> Option<String> {
         self.doubt_at(source, target, transform, 1.0, "units")
@@ -190,45 +181,27 @@ pub struct CoincidesAtSpacing {
     pub scan_lines: f64,
 }
 
-/// Points whose neighbours set a cloud's spacing.
-const SPACING_SAMPLE: usize = 2000;
-
-/// `cloud`'s median nearest-neighbour distance, or `None` when its points lie along scan lines
-/// ([`CoincidesAtSpacing::scan_lines`]).
-fn surface_spacing(cloud: &PointCloud, index: &KnnIndex, scan_lines: f64) -> Option<f64> {
-    let (first, sixteenth): (Vec<f64>, Vec<f64>) = evenly(&cloud.points, SPACING_SAMPLE)
-        .filter_map(|p| {
-            let near = index.k_nearest(p, 17);
-            Some((near.get(1)?.1, near.get(16)?.1))
-        })
-        .unzip();
+/// `cloud`'s median nearest-neighbour distance ([`Prepared::spacings`]), or `None` when its
+/// points lie along scan lines ([`CoincidesAtSpacing::scan_lines`]).
+fn surface_spacing(cloud: &Prepared, scan_lines: f64) -> Option<f64> {
     // Both NaN for a cloud of fewer than 17 points, which the comparison then refuses.
-    let (spacing, wide) = (median(first), median(sixteenth));
+    let (spacing, wide) = cloud.spacings();
     (wide < scan_lines * spacing).then_some(spacing)
 }
 
 impl CoincidesAtSpacing {
     /// The pair's spacing, when the check applies to it.
-    fn spacing(
-        &self,
-        source: (&PointCloud, &KnnIndex),
-        target: (&PointCloud, &KnnIndex),
-    ) -> Option<f64> {
-        if !self.density.is_exceeded_by(source.0.len(), target.0.len()) {
+    fn spacing(&self, source: &Prepared, target: &Prepared) -> Option<f64> {
+        if !self.density.is_exceeded_by(source.len(), target.len()) {
             return None;
         }
-        let spacing = |(cloud, index)| surface_spacing(cloud, index, self.scan_lines);
+        let spacing = |cloud| surface_spacing(cloud, self.scan_lines);
         Some(spacing(source)?.max(spacing(target)?))
     }
 
     /// Whether it takes `transform` as coinciding: never where it does not apply, so that a
     /// cascade it judges runs its later candidates there.
-    pub fn takes(
-        &self,
-        source: (&PointCloud, &KnnIndex),
-        target: (&PointCloud, &KnnIndex),
-        transform: &RigidTransform,
-    ) -> bool {
+    pub fn takes(&self, source: &Prepared, target: &Prepared, transform: &RigidTransform) -> bool {
         self.spacing(source, target).is_some_and(|spacing| {
             self.coincides.share_at(source, target, transform, spacing) >= self.coincides.least
         })
@@ -239,8 +212,8 @@ impl Check for CoincidesAtSpacing {
     /// None where it does not apply.
     fn doubt_of(
         &self,
-        source: (&PointCloud, &KnnIndex),
-        target: (&PointCloud, &KnnIndex),
+        source: &Prepared,
+        target: &Prepared,
         transform: &RigidTransform,
     ) -> Option<String> {
         let spacing = self.spacing(source, target)?;
@@ -253,8 +226,8 @@ impl Check for CoincidesAtSpacing {
 /// other, both ways (0 to 2, as [`crate::check::overlap_score`]), measured on at most
 /// [`SAMPLE`] points of each cloud.
 pub fn sampled_overlap(
-    source: (&PointCloud, &KnnIndex),
-    target: (&PointCloud, &KnnIndex),
+    source: &Prepared,
+    target: &Prepared,
     transform: &RigidTransform,
     distance: f64,
 ) -> f64 {
@@ -265,8 +238,8 @@ pub fn sampled_overlap(
 /// cannot bring it there (most rivals of a pose that tells itself fall short after a few
 /// hundred queries of the 8,192).
 fn overlap_reaching(
-    source: (&PointCloud, &KnnIndex),
-    target: (&PointCloud, &KnnIndex),
+    source: &Prepared,
+    target: &Prepared,
     transform: &RigidTransform,
     distance: f64,
     least: f64,
@@ -285,10 +258,10 @@ fn overlap_reaching(
             }
             Some(near as f64 / all.max(1) as f64)
         };
-    let there = share(&source.0.points, target.1, transform, least - 1.0)?;
+    let there = share(&source.points, target.index(), transform, least - 1.0)?;
     let back = share(
-        &target.0.points,
-        source.1,
+        &target.points,
+        source.index(),
         &transform.inverse(),
         least - there,
     )?;
@@ -334,8 +307,8 @@ impl<C: Check> Check for Unambiguous<C> {
     /// The turned poses of `transform` as its rivals.
     fn doubt_of(
         &self,
-        source: (&PointCloud, &KnnIndex),
-        target: (&PointCloud, &KnnIndex),
+        source: &Prepared,
+        target: &Prepared,
         transform: &RigidTransform,
     ) -> Option<String> {
         let own = sampled_overlap(source, target, transform, self.distance);
@@ -344,7 +317,7 @@ impl<C: Check> Check for Unambiguous<C> {
         }
         // A hair below the share, so that rounding never drops a rival that reaches it.
         let least = self.share * own * (1.0 - 1e-9);
-        let rival = turned_poses(source.0, transform).iter().find_map(|turned| {
+        let rival = turned_poses(source, transform).iter().find_map(|turned| {
             let ratio = overlap_reaching(source, target, turned, self.distance, least)? / own;
             (ratio >= self.share && self.rivals_pass.doubt_of(source, target, turned).is_none())
                 .then(|| self.rival_doubt("the result turned about an axis of the source", ratio))
@@ -352,8 +325,8 @@ impl<C: Check> Check for Unambiguous<C> {
         rival.or_else(|| {
             let (which, turn) = [("source", source), ("target", target)]
                 .into_iter()
-                .find_map(|(which, (cloud, index))| {
-                    Some((which, self.self_fit.symmetry(cloud, index)?))
+                .find_map(|(which, cloud)| {
+                    Some((which, self.self_fit.symmetry(cloud, cloud.index())?))
                 })?;
             Some(format!(
                 "the {which} fits itself turned by {:.0}°: every pose turned so fits as well, and \
@@ -364,12 +337,7 @@ impl<C: Check> Check for Unambiguous<C> {
     }
 
     /// The other candidates as rivals too, weighed by the composite's scores.
-    fn doubt(
-        &self,
-        source: (&PointCloud, &KnnIndex),
-        target: (&PointCloud, &KnnIndex),
-        found: &Registration,
-    ) -> Option<String> {
+    fn doubt(&self, source: &Prepared, target: &Prepared, found: &Registration) -> Option<String> {
         let chosen = found.chosen.and_then(|i| found.candidates.get(i));
         let rival = chosen.and_then(|chosen| {
             let score = chosen.score.filter(|&score| score > 0.0)?;
@@ -403,25 +371,26 @@ impl<C: Check> InFrame<C> {
     /// `measure` on the pair moved into its frame, given the frame.
     fn measured<T>(
         &self,
-        source: (&PointCloud, &KnnIndex),
-        target: (&PointCloud, &KnnIndex),
-        measure: impl FnOnce((&PointCloud, &KnnIndex), (&PointCloud, &KnnIndex), &Normalisation) -> T,
+        source: &Prepared,
+        target: &Prepared,
+        measure: impl FnOnce(&Prepared, &Prepared, &Normalisation) -> T,
     ) -> T {
-        let near = NearPair::of(source.0, target.0, &self.rule);
+        let near = NearPair::of(source, target, &self.rule);
         if near.frame.is_identity() {
             return measure(source, target, &near.frame);
         }
         let (fs, ft) = near.moved(); // (N', 3), (M', 3)
-        let (fsi, fti) = rayon::join(|| KnnIndex::new(&fs.points), || KnnIndex::new(&ft.points));
-        measure((&fs, &fsi), (&ft, &fti), &near.frame)
+        let (fs, ft) = (Prepared::new(fs), Prepared::new(ft));
+        indexed_pair(&fs, &ft);
+        measure(&fs, &ft, &near.frame)
     }
 }
 
 impl<C: Check> Check for InFrame<C> {
     fn doubt_of(
         &self,
-        source: (&PointCloud, &KnnIndex),
-        target: (&PointCloud, &KnnIndex),
+        source: &Prepared,
+        target: &Prepared,
         transform: &RigidTransform,
     ) -> Option<String> {
         self.measured(source, target, |fs, ft, frame| {
@@ -430,12 +399,7 @@ impl<C: Check> Check for InFrame<C> {
     }
 
     /// `found` with its result's and candidates' transforms moved into the frame.
-    fn doubt(
-        &self,
-        source: (&PointCloud, &KnnIndex),
-        target: (&PointCloud, &KnnIndex),
-        found: &Registration,
-    ) -> Option<String> {
+    fn doubt(&self, source: &Prepared, target: &Prepared, found: &Registration) -> Option<String> {
         self.measured(source, target, |fs, ft, frame| {
             let mut in_frame = found.clone();
             in_frame.result.t_target_source = frame.redo(&found.result.t_target_source);
@@ -467,11 +431,7 @@ mod tests {
         density: DENSITY,
         scan_lines: 5.0,
     };
-    use rgm_geom::{Matrix3, Point3, Vector3};
-
-    fn indexed(cloud: &PointCloud) -> (&PointCloud, KnnIndex) {
-        (cloud, KnnIndex::new(&cloud.points))
-    }
+    use rgm_geom::{Matrix3, Point3, PointCloud, Vector3};
 
     /// The rival check of the default's values (rgm-model's `policy::TUNED.unambiguous`) but for
     /// the coincidence a rival must reach (`least`) and the share of a cloud's points that must
@@ -500,15 +460,15 @@ mod tests {
     #[test]
     fn a_copy_coincides_and_a_shifted_copy_does_not() {
         let shape = airplane();
-        let (s, si) = indexed(&shape);
-        let same = coincidence((s, &si), (s, &si), &RigidTransform::identity(), 0.02, 0.08);
+        let s = Prepared::new(&shape);
+        let same = coincidence(&s, &s, &RigidTransform::identity(), 0.02, 0.08);
         assert_eq!(same, 1.0);
         let shift =
             RigidTransform::new(rgm_geom::Matrix3::identity(), Vector3::new(0.05, 0.0, 0.0));
-        let shifted = coincidence((s, &si), (s, &si), &shift, 0.02, 0.08);
+        let shifted = coincidence(&s, &s, &shift, 0.02, 0.08);
         assert!(shifted < 0.3, "{shifted}");
         let far = RigidTransform::new(rgm_geom::Matrix3::identity(), Vector3::new(5.0, 0.0, 0.0));
-        assert_eq!(coincidence((s, &si), (s, &si), &far, 0.02, 0.08), 0.0);
+        assert_eq!(coincidence(&s, &s, &far, 0.02, 0.08), 0.0);
     }
 
     /// A dense plane grid, and the same grid slid by 3.3 spacings along itself and lifted by 3
@@ -522,7 +482,7 @@ mod tests {
                 .map(|(i, j)| rgm_geom::Point3::new(i as f64 * unit, j as f64 * unit, 0.0))
                 .collect();
             let plane = PointCloud::new(points);
-            let (p, pi) = indexed(&plane);
+            let p = Prepared::new(&plane);
             let check = AT_SPACING;
             let found = |t: Vector3<f64>| {
                 let transform = RigidTransform::new(rgm_geom::Matrix3::identity(), t * unit);
@@ -535,12 +495,9 @@ mod tests {
                 Registration::single(result, Vec::new(), Instant::now())
             };
             let slid = found(Vector3::new(3.3, 0.0, 0.0));
-            assert_eq!(check.doubt((p, &pi), (p, &pi), &slid), None, "unit {unit}");
+            assert_eq!(check.doubt(&p, &p, &slid), None, "unit {unit}");
             let lifted = found(Vector3::new(0.0, 0.0, 3.0));
-            assert!(
-                check.doubt((p, &pi), (p, &pi), &lifted).is_some(),
-                "unit {unit}"
-            );
+            assert!(check.doubt(&p, &p, &lifted).is_some(), "unit {unit}");
         }
     }
 
@@ -605,17 +562,17 @@ mod tests {
             )
         };
         let surface = grid((0.01, 0.01), (60, 60));
-        let (s, si) = indexed(&surface);
-        let spacing = surface_spacing(s, &si, 5.0).expect("a surface");
+        let s = Prepared::new(&surface);
+        let spacing = surface_spacing(&s, 5.0).expect("a surface");
         assert!((spacing - 0.01).abs() < 1e-9, "{spacing}");
         let lines = grid((0.05, 0.001), (20, 200));
-        let (l, li) = indexed(&lines);
-        assert_eq!(surface_spacing(l, &li, 5.0), None);
+        let l = Prepared::new(&lines);
+        assert_eq!(surface_spacing(&l, 5.0), None);
         let check = AT_SPACING;
         let same = RigidTransform::identity();
-        assert!(check.takes((s, &si), (s, &si), &same));
-        assert!(!check.takes((l, &li), (l, &li), &same));
-        assert_eq!(check.doubt_of((l, &li), (l, &li), &same), None);
+        assert!(check.takes(&s, &s, &same));
+        assert!(!check.takes(&l, &l, &same));
+        assert_eq!(check.doubt_of(&l, &l, &same), None);
     }
 
     /// Issue 44, D1 (`--method icp`): the airplane jittered by 0.01 coincides with itself in
@@ -658,18 +615,14 @@ mod tests {
                 )
             };
             let (source, target) = (place(&jittered), place(&plane));
-            let (s, si) = indexed(&source);
-            let (t, ti) = indexed(&target);
+            let s = Prepared::new(&source);
+            let t = Prepared::new(&target);
             let same = RigidTransform::identity();
             let shifted = RigidTransform::new(Matrix3::identity(), shift * size);
-            assert_eq!(
-                in_frame.doubt_of((s, &si), (t, &ti), &same),
-                None,
-                "size {size}"
-            );
-            assert!(in_frame.doubt_of((s, &si), (t, &ti), &shifted).is_some());
+            assert_eq!(in_frame.doubt_of(&s, &t, &same), None, "size {size}");
+            assert!(in_frame.doubt_of(&s, &t, &shifted).is_some());
             if size > 1.0 {
-                assert!(check.doubt_of((s, &si), (t, &ti), &same).is_some());
+                assert!(check.doubt_of(&s, &t, &same).is_some());
             }
         }
     }
@@ -684,17 +637,15 @@ mod tests {
         let check = unambiguous(0.35, 1.1);
         let same = RigidTransform::identity();
         let boxed = rgm_geom::testing::box_surface(20_000, 7); // dense: a turned copy lies on it
-        let (b, bi) = indexed(&boxed);
-        let doubt = check
-            .doubt_of((b, &bi), (b, &bi), &same)
-            .expect("a box is ambiguous");
+        let b = Prepared::new(&boxed);
+        let doubt = check.doubt_of(&b, &b, &same).expect("a box is ambiguous");
         assert!(
             doubt.starts_with("another pose fits nearly as well"),
             "{doubt}"
         );
         let plane = airplane();
-        let (a, ai) = indexed(&plane);
-        assert_eq!(check.doubt_of((a, &ai), (a, &ai), &same), None);
+        let a = Prepared::new(&plane);
+        assert_eq!(check.doubt_of(&a, &a, &same), None);
 
         let turn = |deg: f64| {
             RigidTransform::new(
@@ -725,12 +676,12 @@ mod tests {
             found
         };
         // A rival half a turn away coincides on the box and not on the airplane.
-        let on_box = |rival, score| check.doubt((b, &bi), (b, &bi), &found(rival, score));
+        let on_box = |rival, score| check.doubt(&b, &b, &found(rival, score));
         let half = turn(180.0);
         assert!(on_box(half, 1.9).unwrap().contains("b's"));
         assert!(on_box(turn(3.0), 1.9).is_none_or(|d| !d.contains("b's")));
         assert!(on_box(half, 1.0).is_none_or(|d| !d.contains("b's")));
-        let on_plane = |rival, score| check.doubt((a, &ai), (a, &ai), &found(rival, score));
+        let on_plane = |rival, score| check.doubt(&a, &a, &found(rival, score));
         assert_eq!(on_plane(half, 1.9), None);
         assert_eq!(on_plane(turn(3.0), 1.9), None);
     }
@@ -745,17 +696,15 @@ mod tests {
         let same = RigidTransform::identity();
         let cube = |seed| rgm_geom::testing::box_surface_of([0.5, 0.5, 0.5], 2048, seed);
         let (source, target) = (cube(1), cube(2));
-        let (s, si) = indexed(&source);
-        let (t, ti) = indexed(&target);
-        let doubt = check
-            .doubt_of((s, &si), (t, &ti), &same)
-            .expect("a cube is ambiguous");
+        let s = Prepared::new(&source);
+        let t = Prepared::new(&target);
+        let doubt = check.doubt_of(&s, &t, &same).expect("a cube is ambiguous");
         assert!(
             doubt.starts_with("the source fits itself turned by"),
             "{doubt}"
         );
         let plane = airplane();
-        let (a, ai) = indexed(&plane);
-        assert_eq!(check.doubt_of((a, &ai), (a, &ai), &same), None);
+        let a = Prepared::new(&plane);
+        assert_eq!(check.doubt_of(&a, &a, &same), None);
     }
 }

@@ -2,7 +2,7 @@
 //! ([`Scoring`], [`Acceptance`]) and the [`Judge`] that scores results on the pair as the
 //! caller gave it.
 
-use rgm_geom::{KnnIndex, PointCloud, RigidTransform};
+use rgm_geom::RigidTransform;
 
 use super::coincidence::{Coincides, CoincidesAtSpacing};
 use super::overlap::{overlap_score, turned_share};
@@ -64,16 +64,24 @@ impl Acceptance {
     pub fn takes(
         &self,
         score: f64,
-        source: (&PointCloud, &KnnIndex),
-        target: (&PointCloud, &KnnIndex),
+        source: &Prepared,
+        target: &Prepared,
         transform: &RigidTransform,
         overlap_distance: f64,
     ) -> bool {
         let (distance, whole) = self.whole;
+        let (searched_source, searched_target) = indexed_pair(source, target);
         score >= self.score
             && (self.turned_share == f64::INFINITY
-                || overlap_score(source, target, transform, distance) >= whole
-                || turned_share(source, target, transform, overlap_distance) <= self.turned_share)
+                || source.pair_score(target, transform, distance, || {
+                    overlap_score(searched_source, searched_target, transform, distance)
+                }) >= whole
+                || turned_share(
+                    searched_source,
+                    searched_target,
+                    transform,
+                    overlap_distance,
+                ) <= self.turned_share)
             && self
                 .coincides
                 .is_none_or(|check| check.takes(source, target, transform))
@@ -123,8 +131,8 @@ impl<'a> Judge<'a> {
     /// Whether `transform` passes the scoring's [`Scoring::coincides`] on the judged pair
     /// (always, when it has none).
     pub fn coincides(&self, transform: &RigidTransform) -> bool {
-        self.scoring.coincides.is_none_or(|check| {
-            check.holds(self.source.indexed(), self.target.indexed(), transform)
-        })
+        self.scoring
+            .coincides
+            .is_none_or(|check| check.holds(self.source, self.target, transform))
     }
 }

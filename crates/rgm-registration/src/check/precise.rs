@@ -4,10 +4,11 @@
 //! it is. The refined pose is not reported: the method's own is, as asked (`--no-refine`).
 
 use rgm_geom::cloud::evenly;
-use rgm_geom::{KnnIndex, PointCloud, RigidTransform};
+use rgm_geom::{PointCloud, RigidTransform};
 
 use crate::check::{agree, Check};
 use crate::methods::refine::{refine, RefineConfig};
+use crate::Prepared;
 
 /// A result is doubted when [`refine`] with `refine`, from it, moves it by `within` (degrees,
 /// distance) or more. Each cloud is refined on at most `points` of its points, spread evenly:
@@ -23,21 +24,16 @@ impl Check for Precise {
     /// None when the refinement cannot run (too few points): it then says nothing of the pose.
     fn doubt_of(
         &self,
-        source: (&PointCloud, &KnnIndex),
-        target: (&PointCloud, &KnnIndex),
+        source: &Prepared,
+        target: &Prepared,
         transform: &RigidTransform,
     ) -> Option<String> {
         let spread = |cloud: &PointCloud| {
             PointCloud::new(evenly(&cloud.points, self.points).copied().collect())
         };
-        let refined = refine(
-            &spread(source.0),
-            &spread(target.0),
-            transform,
-            &self.refine,
-        )
-        .ok()?
-        .t_target_source;
+        let refined = refine(&spread(source), &spread(target), transform, &self.refine)
+            .ok()?
+            .t_target_source;
         (!agree(transform, &refined, self.within)).then(|| {
             format!(
                 "the pose is {:.1}° and {:.3} units from where the clouds fit best (refined from \
@@ -60,7 +56,6 @@ mod tests {
     #[test]
     fn a_pose_degrees_off_is_doubted_and_a_near_one_is_not() {
         let plane = airplane();
-        let index = KnnIndex::new(&plane.points);
         let check = Precise {
             refine: RefineConfig::default(),
             within: (5.0, 0.05),
@@ -72,10 +67,10 @@ mod tests {
                 Vector3::zeros(),
             )
         };
-        let pair = ((&plane, &index), (&plane, &index));
-        assert_eq!(check.doubt_of(pair.0, pair.1, &turned(1.0)), None);
+        let (source, target) = (Prepared::new(&plane), Prepared::new(&plane));
+        assert_eq!(check.doubt_of(&source, &target, &turned(1.0)), None);
         let doubt = check
-            .doubt_of(pair.0, pair.1, &turned(8.0))
+            .doubt_of(&source, &target, &turned(8.0))
             .expect("8° off is doubted");
         assert!(doubt.starts_with("the pose is 8."), "{doubt}");
     }

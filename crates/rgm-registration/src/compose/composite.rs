@@ -17,7 +17,6 @@ use rgm_geom::{GeomError, RigidTransform};
 use crate::check::{Acceptance, Judge, Scoring};
 use crate::error::AllCandidatesFailed;
 use crate::fit::Fit;
-use crate::prepared::indexed_pair;
 use crate::registrar::{
     elapsed_ms, Candidate, DynRegistrar, MethodId, Progress, Registrar, Registration,
 };
@@ -156,7 +155,6 @@ impl Judge<'_> {
     ) -> bool {
         tally.best.as_ref().is_some_and(|best| {
             best.coincides && best.score >= accept.score && {
-                let (source, target) = indexed_pair(source, target);
                 let distance = self.scoring.overlap_distance;
                 accept.takes(best.score, source, target, &best.transform, distance)
             }

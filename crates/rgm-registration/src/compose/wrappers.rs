@@ -338,7 +338,7 @@ impl<E: From<GeomError>, R: Registrar<E>, C: Check> Registrar<E> for Checked<R, 
         let start = Instant::now();
         let mut found = self.inner.register_prepared(source, target, progress)?;
         if found.doubt.is_none() {
-            let (source, target) = indexed_pair(source, target);
+            indexed_pair(source, target);
             found.doubt = self.check.doubt(source, target, &found);
         }
         found.time_ms = elapsed_ms(start);
