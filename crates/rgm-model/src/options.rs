@@ -16,14 +16,14 @@
 //! `Normalised`, `UpTo { points: 32, small: TripletConfig, .. }` sends a pair of a few points to
 //! [`rgm_registration::methods::triplets`]; with `+refine`, a pair denser than the training clouds (a scan, a room)
 //! goes through `Cascade { first: the Thinned composite, rest: [Sc2Config] }` judged by
-//! [`TUNED.scene_accept`](crate::policy::Policy::scene_accept): second-order compatibility on the pair's own FPFH matches,
+//! `TUNED.scene_accept` ([`crate::policy`]): second-order compatibility on the pair's own FPFH matches,
 //! [`rgm_registration::methods::sc2`], where the object cascade's result does not coincide with the target at
 //! the pair's spacing.)
 //!
 //! [`Checked`] doubts a result whose overlap is not one where the clouds coincide, or that a
-//! rival pose fits nearly as well ([`TUNED.refined_checks()`](crate::policy::Policy::refined_checks)): refined results, ICP's (refined by its
+//! rival pose fits nearly as well (`TUNED.refined_checks()`, [`crate::policy`]): refined results, ICP's (refined by its
 //! nature) and, since issue 59, unrefined ones too (`--no-refine`, the paper's protocol), which
-//! must also lie near where the refinement takes them ([`unrefined_checks`]): an unrefined result
+//! must also lie near where the refinement takes them (`TUNED.unrefined_checks()`): an unrefined result
 //! that coincides may still be degrees off.
 //!
 //! `Refined<R>` refines with [`RefineConfig`] (`+refine`); any other [`rgm_registration::refiner::Refiner`]
@@ -169,7 +169,7 @@ pub struct MethodOptions {
     /// The method (FGR and RGM as a cascade by default).
     pub method: MethodName,
     /// RGM weights (for `rgm` and `auto`): a safetensors file with the authors' parameter
-    /// names; `None`: the model built into rgm ([`crate::weights::builtin_method`]).
+    /// names; `None`: the model built into rgm ([`crate::weights::builtin_registrar`]).
     pub weights: Option<PathBuf>,
     /// The network sizes `weights` were trained with ([`Config::preset`]; `paper` when `None`).
     pub preset: Option<String>,
@@ -177,8 +177,8 @@ pub struct MethodOptions {
     /// weights; the built-in model has its own).
     pub test_statistics: Option<TestStatistics>,
     /// RGM matches on at most this many random points of each cloud; 0: every point. When
-    /// `None`: the built-in model's training size ([`TUNED.cascade_match_points`](crate::policy::Policy::cascade_match_points) in `auto`), or
-    /// [`TUNED.weights_match_points`](crate::policy::Policy::weights_match_points) with `weights`.
+    /// `None`: the built-in model's training size (`TUNED.cascade_match_points` in `auto`), or
+    /// `TUNED.weights_match_points` with `weights` ([`crate::policy`]).
     pub match_points: Option<usize>,
     /// RGM's passes (2 when `None`, as in the paper).
     pub passes: Option<usize>,
@@ -186,12 +186,12 @@ pub struct MethodOptions {
     /// AVX-512 BF16 ([`Precision`]).
     pub precision: Precision,
     /// Refine the transform of RGM or FGR (both, for `auto`) with [`rgm_registration::methods::refine`]
-    /// ([`Method::refined`]); on by default, as in `rgm register` (the paper's protocol, and
+    /// ([`Method::is_refined`]); on by default, as in `rgm register` (the paper's protocol, and
     /// `rgm eval`, turn it off). ICP is its own refinement and ignores it.
     pub refine: bool,
     /// `auto` takes FGR's result without running the network when it scores at least this
     /// ([`rgm_registration::check::overlap_score`], 0 to 2) and overlaps wholly or does not fit as
-    /// well turned ([`TUNED.accept`](crate::policy::Policy::accept)); `f64::INFINITY` runs both on every pair.
+    /// well turned (`TUNED.accept`, [`crate::policy`]); `f64::INFINITY` runs both on every pair.
     pub accept: f64,
 }
 
@@ -319,7 +319,7 @@ impl MethodOptions {
 
     /// The network as the cascade's second stage: one chain (the cascade's overlap score
     /// already judges the result, so cycle consistency between two chains is not needed) and,
-    /// for the built-in model with no `match_points`, [`TUNED.cascade_match_points`](crate::policy::Policy::cascade_match_points) per cloud.
+    /// for the built-in model with no `match_points`, `TUNED.cascade_match_points` per cloud.
     fn build_cascade_rgm(&self) -> Result<RgmRegistrar, MethodError> {
         let mut registrar = self.build_rgm()?;
         registrar.config.cycle_consistency = false;
@@ -357,7 +357,7 @@ impl MethodOptions {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DenseStage {
     /// The object cascade, then the scene stage where the cascade's result is not taken
-    /// ([`TUNED.scene_accept`](crate::policy::Policy::scene_accept)): `rgm register`'s default.
+    /// (`TUNED.scene_accept`, [`crate::policy`]): `rgm register`'s default.
     ObjectThenScene,
     /// The scene stage alone: on the Stanford bunny's and dragon's thinned scans, every pair
     /// the cascade trusted in a merge was trusted, the merged scans as accurate, and a pair

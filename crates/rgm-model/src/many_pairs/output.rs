@@ -117,7 +117,7 @@ impl Output {
         &self.path
     }
 
-    /// Where [`register_all`] appends the lines.
+    /// Where [`super::register_all`] appends the lines.
     pub fn lines(&self) -> (&Path, &Mutex<dyn Write + Send + '_>) {
         (&self.path, &self.file)
     }
