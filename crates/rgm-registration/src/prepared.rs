@@ -10,6 +10,7 @@ use std::ops::Deref;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 
+use rayon::prelude::*;
 use rgm_geom::cloud::{evenly, median};
 use rgm_geom::normals::{estimate_normals, NormalsConfig};
 use rgm_geom::{KnnIndex, PointCloud, RigidTransform, Vector3};
@@ -82,17 +83,23 @@ impl<'a> Prepared<'a> {
     /// for a cloud of fewer than 17 points); measured on first use, as every check at the
     /// pair's spacing asks for it (`crate::check::CoincidesAtSpacing`).
     pub fn spacings(&self) -> (f64, f64) {
-        *self.spacings.get_or_init(|| {
-            let index = self.index();
-            let (first, sixteenth): (Vec<f64>, Vec<f64>) =
-                evenly(&self.cloud.points, SPACING_SAMPLE)
-                    .filter_map(|p| {
-                        let near = index.k_nearest(p, 17);
-                        Some((near.get(1)?.1, near.get(16)?.1))
-                    })
-                    .unzip();
-            (median(first), median(sixteenth))
-        })
+        if let Some(&spacings) = self.spacings.get() {
+            return spacings;
+        }
+        // Measured side by side outside the cell, for the reason `index` builds outside its
+        // cell's.
+        let index = self.index();
+        let sample: Vec<_> = evenly(&self.cloud.points, SPACING_SAMPLE).collect(); // (S,)
+        let (first, sixteenth): (Vec<f64>, Vec<f64>) = sample
+            .par_iter()
+            .filter_map(|p| {
+                let near = index.k_nearest(p, 17);
+                Some((near.get(1)?.1, near.get(16)?.1))
+            })
+            .unzip();
+        *self
+            .spacings
+            .get_or_init(|| (median(first), median(sixteenth)))
     }
 
     /// The cloud with its tree, as the scoring functions take a searched cloud.

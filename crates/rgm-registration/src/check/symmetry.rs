@@ -10,6 +10,7 @@
 //! a regular solid is on an axis of 3-, 4- or 5-fold symmetry). [`SelfFit`] tries those turns.
 
 use nalgebra::{Rotation3, Unit, Vector3};
+use rayon::prelude::*;
 use rgm_geom::cloud::{evenly, median};
 use rgm_geom::{KnnIndex, Matrix3, Point3, PointCloud, RigidTransform};
 
@@ -111,8 +112,10 @@ impl SelfFit {
         }
         // Each tried point with how near its turned copy must come: its own neighbours'
         // distance, so that a cloud denser in some parts is measured in each part's spacing.
-        let tried: Vec<(Point3<f64>, f64)> = evenly(&cloud.points, SAMPLE)
-            .map(|p| {
+        let sample: Vec<&Point3<f64>> = evenly(&cloud.points, SAMPLE).collect(); // (S,)
+        let tried: Vec<(Point3<f64>, f64)> = sample
+            .par_iter()
+            .map(|&p| {
                 (
                     *p,
                     self.within * index.k_nearest(p, NEIGHBOURS + 1)[NEIGHBOURS].1,
