@@ -58,10 +58,17 @@ COMMON="--preset fast --optimizer adam --val-shapes 300 --checkpoint-every 50 --
 #      epochs ≈ 82k pairs, ≈ 4–5 h): its lineage rose ≈ 27 points per e-fold of training pairs
 #      (docs/training/README.md, session 38); 80 % on the unseen test pairs (≈ 12 points below
 #      validation) wants ≈ 3× its 177k pairs.
+#      Retired at 7 epochs (session 42): 59.0, 61.0 and 61.0 % alone after epochs 5–7, none
+#      above its 62.3 % at epoch 4, at a rate (2e-4) that no longer moved it; its folder is in the
+#      history at d6b9b96 (epoch 3), its page docs/training/unseen-restart/ has every epoch.
+# 7.   Table 4 again: `unseen-restart-drop`, unseen-restart's best (epoch 2 by the run's rule:
+#      91.3 % refined, 60.0 % alone; in the history at d6b9b96) at the schedule's next rate, a
+#      fifth (4e-5), ×0.2 again at epoch 4, 6 epochs (≈ 24k pairs, ≈ 2–4 h of queue): the drop
+#      of the lineage's last plateau (unseen-717 → unseen-717-drop) added ≈ 3 points alone.
 # `init=` names the weights a run starts from; `git:REV:PATH` ones are written out of the
 # history into target/queue-init/ when the run starts (`rgm train` reads --init only then).
 QUEUE=(
-  "unseen-restart|20|--setting partial --unseen --match-points 0 --batch 32 --lr 2e-4 --epochs 20 --milestones 12,17 --val-sample spread --precision bf16 init=git:d809e8f:runs/unseen-717-drop/best.safetensors"
+  "unseen-restart-drop|6|--setting partial --unseen --match-points 0 --batch 32 --lr 4e-5 --epochs 6 --milestones 4 --val-sample spread --precision bf16 init=git:d6b9b96:runs/unseen-restart/best.safetensors"
 )
 # A run whose last 3 validations set neither a new best recall (the network alone, the paper's
 # metric) nor a new lowest validation loss is flat: the queue stops it, writes runs/NAME/flat,
