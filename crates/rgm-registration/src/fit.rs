@@ -80,7 +80,7 @@ pub fn score(
 /// Points searched per piece of work in [`nearest_each`]: a fixed number, so that the pieces
 /// are the same on any number of threads, and small, so that a cloud of a few hundred points
 /// makes enough pieces for the threads to share evenly.
-const NEAREST_BLOCK: usize = 64;
+pub(crate) const NEAREST_BLOCK: usize = 64;
 
 /// `found[i]`: the nearest point of `target` strictly closer than `max_distance` to
 /// `source[i]` moved by `transform`, as (index, distance). Blocks of points are searched side

@@ -11,12 +11,12 @@
 //! puts a [`Check`] on any registrar. The tuned lengths and shares are configuration, set where
 //! methods are composed.
 
-use rayon::prelude::*;
 use rgm_geom::cloud::evenly;
 use rgm_geom::frame::{FrameRule, NearPair, Normalisation};
-use rgm_geom::{KnnIndex, RigidTransform};
+use rgm_geom::{KnnIndex, Point3, RigidTransform};
 
 use crate::check::{turned_poses, SelfFit};
+use crate::fit::{nearest_each, NEAREST_BLOCK};
 use crate::prepared::{indexed_pair, Prepared};
 use crate::registrar::Registration;
 use crate::thinning::Density;
@@ -25,29 +25,20 @@ use crate::thinning::Density;
 /// scan's 300,000 points.
 const SAMPLE: usize = 4096;
 
-/// Points searched per piece of work in the checks' samples: blocks of them run side by side,
-/// each point's search its own, so every count is the same on any number of threads.
-const BLOCK: usize = 64;
-
 /// Of at most [`SAMPLE`] of `points` moved by `moved`: how many lie within `near` of `onto`,
 /// how many within `far`, and how many were measured.
 fn within(
-    points: &[rgm_geom::Point3<f64>],
+    points: &[Point3<f64>],
     onto: &KnnIndex,
     moved: &RigidTransform,
     near: f64,
     far: f64,
 ) -> (usize, usize, usize) {
-    let sample: Vec<&rgm_geom::Point3<f64>> = evenly(points, SAMPLE).collect(); // (S,)
-    let (within_near, within_far) = sample
-        .par_chunks(BLOCK)
-        .map(|block| {
-            let found = block
-                .iter()
-                .filter_map(|p| onto.nearest_within(&moved.apply(p), far));
-            found.fold((0, 0), |(n, f), (_, d)| (n + usize::from(d < near), f + 1))
-        })
-        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    let sample: Vec<Point3<f64>> = evenly(points, SAMPLE).copied().collect(); // (S,)
+    let mut found = Vec::new(); // (S,)
+    nearest_each(&sample, onto, moved, far, &mut found);
+    let within_far = found.iter().flatten().count();
+    let within_near = found.iter().flatten().filter(|&&(_, d)| d < near).count();
     (within_near, within_far, sample.len())
 }
 
@@ -252,31 +243,25 @@ fn overlap_reaching(
     least: f64,
 ) -> Option<f64> {
     // The share of `points` moved by `moved` within `distance` of `onto`, if it reaches `least`:
-    // measured two blocks at a time, side by side, and given up after the first two blocks
-    // whose misses leave it short (the same answer as point by point, a few queries later).
-    let share =
-        |points: &[rgm_geom::Point3<f64>], onto: &KnnIndex, moved: &RigidTransform, least: f64| {
-            let sample: Vec<&rgm_geom::Point3<f64>> = evenly(points, SAMPLE).collect(); // (S,)
-            let all = sample.len();
-            let needed = least * all.max(1) as f64;
-            let (mut near, mut seen) = (0usize, 0usize);
-            for round in sample.chunks(2 * BLOCK) {
-                near += round
-                    .par_chunks(BLOCK)
-                    .map(|block| {
-                        let moved = block.iter().map(|p| moved.apply(p));
-                        moved
-                            .filter(|p| onto.nearest_within(p, distance).is_some())
-                            .count()
-                    })
-                    .sum::<usize>();
-                seen += round.len();
-                if ((near + all - seen) as f64) < needed {
-                    return None;
-                }
+    // searched two of `nearest_each`'s blocks at a time (side by side), and given up after the
+    // first round whose misses leave it short (the same answer as point by point, a few queries
+    // later).
+    let share = |points: &[Point3<f64>], onto: &KnnIndex, moved: &RigidTransform, least: f64| {
+        let sample: Vec<Point3<f64>> = evenly(points, SAMPLE).copied().collect(); // (S,)
+        let all = sample.len();
+        let needed = least * all.max(1) as f64;
+        let (mut near, mut seen) = (0usize, 0usize);
+        let mut found = Vec::new(); // (R,)
+        for round in sample.chunks(2 * NEAREST_BLOCK) {
+            nearest_each(round, onto, moved, distance, &mut found);
+            near += found.iter().flatten().count();
+            seen += round.len();
+            if ((near + all - seen) as f64) < needed {
+                return None;
             }
-            Some(near as f64 / all.max(1) as f64)
-        };
+        }
+        Some(near as f64 / all.max(1) as f64)
+    };
     let there = share(&source.points, target.index(), transform, least - 1.0)?;
     let back = share(
         &target.points,
