@@ -1,6 +1,7 @@
 //! rgm-geom's and rgm-registration's hot paths at RGM's sizes (N = 717 partial, 1,024 full; K = 20): the kNN graph,
 //! weighted Kabsch, and the classical baselines ICP and FPFH + FGR on a 717-point pair; the
-//! searches of a dense scan pair (40,000 points); and the scene stage's global estimators
+//! searches of a dense scan pair (40,000 points: the nearest within a radius, whether any point
+//! lies within it, the hybrid 30); and the scene stage's global estimators
 //! (RANSAC, SC²) on a 20,000-point room pair.
 //!
 //! Run: `cargo bench -p rgm-benches --bench geom -- --warm-up-time 1 --measurement-time 3`
@@ -166,6 +167,9 @@ fn knn_dense(c: &mut Criterion) {
                 .filter_map(|q| index.nearest_within(q, 0.06))
                 .count()
         })
+    });
+    group.bench_function("any_within", |b| {
+        b.iter(|| queries.iter().filter(|q| index.any_within(q, 0.06)).count())
     });
     group.bench_function("hybrid_30", |b| {
         let mut found = Vec::with_capacity(30);

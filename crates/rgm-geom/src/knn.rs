@@ -118,6 +118,27 @@ impl KnnIndex {
         (i != usize::MAX && d2 < r2).then(|| (i, d2.sqrt()))
     }
 
+    /// Whether some point is strictly closer than `radius` to `query`: the same answer as
+    /// `nearest_within(query, radius).is_some()`, but the search ends at the first such point
+    /// instead of looking on for the nearest (counting overlaps: under a right transform the
+    /// query's own leaf nearly always holds one).
+    pub fn any_within(&self, query: &Point3<f64>, radius: f64) -> bool {
+        let mut any = Any {
+            r2: radius * radius,
+            found: false,
+        };
+        if !self.nodes.is_empty() {
+            self.search(
+                0,
+                &[query.x, query.y, query.z],
+                0.0,
+                &mut [0.0; 3],
+                &mut any,
+            );
+        }
+        any.found
+    }
+
     /// (index, squared distance) of the nearest point with squared distance at most `bound`;
     /// `(usize::MAX, bound)` when there is none.
     fn nearest_squared_below(&self, query: &Point3<f64>, bound: f64) -> (usize, f64) {
@@ -388,6 +409,36 @@ impl Found for Nearest {
     #[inline]
     fn limit(&self) -> f64 {
         self.0 .1
+    }
+}
+
+/// Whether any point has squared distance below `r2`; once one has, every later candidate
+/// and cell is turned away, which ends the search.
+struct Any {
+    r2: f64,
+    found: bool,
+}
+
+impl Found for Any {
+    #[inline]
+    fn offer(&mut self, candidate: (usize, f64)) -> bool {
+        let first = !self.found && candidate.1 < self.r2;
+        self.found |= first;
+        first
+    }
+    #[inline]
+    fn may_improve(&self, cell_d2: f64) -> bool {
+        // `<=`, as `Nearest` prunes with its bound `r2`: the same cells are searched until one
+        // point is found.
+        !self.found && cell_d2 <= self.r2
+    }
+    #[inline]
+    fn limit(&self) -> f64 {
+        if self.found {
+            f64::NEG_INFINITY
+        } else {
+            self.r2
+        }
     }
 }
 

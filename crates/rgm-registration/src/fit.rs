@@ -105,6 +105,51 @@ pub(crate) fn nearest_each(
         });
 }
 
+/// Of `source`'s points moved by `transform`: how many have a point of `target` strictly closer
+/// than `near`, and how many closer than `far` (`near` at most `far`) — the counts
+/// [`nearest_each`] would give, each search ending at the first point it needs
+/// ([`KnnIndex::any_within`]), in its blocks side by side: the same counts on any number of
+/// threads.
+pub(crate) fn count_within(
+    source: &[Point3<f64>],
+    target: &KnnIndex,
+    transform: &RigidTransform,
+    near: f64,
+    far: f64,
+) -> (usize, usize) {
+    let near = near.min(far);
+    source
+        .par_chunks(NEAREST_BLOCK)
+        .map(|points| {
+            let (mut within_near, mut within_far) = (0, 0);
+            for p in points {
+                let moved = transform.apply(p);
+                if target.any_within(&moved, near) {
+                    within_near += 1;
+                    within_far += 1;
+                } else if near < far && target.any_within(&moved, far) {
+                    within_far += 1;
+                }
+            }
+            (within_near, within_far)
+        })
+        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
+}
+
+/// The share of `source`'s points moved by `transform` that have a point of `target` strictly
+/// closer than `distance`: [`score`]'s fitness, counted with [`count_within`]; 0 for no points.
+pub(crate) fn share_within(
+    source: &[Point3<f64>],
+    target: &KnnIndex,
+    transform: &RigidTransform,
+    distance: f64,
+) -> f64 {
+    if source.is_empty() {
+        return 0.0;
+    }
+    count_within(source, target, transform, distance, distance).0 as f64 / source.len() as f64
+}
+
 impl Fit {
     /// A result for `transform` with its Open3D score.
     pub fn scored(
@@ -271,6 +316,29 @@ mod tests {
                 inlier_rmse: 0.0
             }
         );
+    }
+
+    #[test]
+    fn counts_within_are_the_nearest_searches_counts() {
+        // 1,024 jittered points against the airplane: pairs near, far and out of reach.
+        let target = airplane();
+        let mut rng = StdRng::seed_from_u64(11);
+        let g = RigidTransform::random(&mut rng, 20.0, 0.2);
+        let source = moved_and_jittered(&target, &g, &mut rng);
+        let index = KnnIndex::new(&target.points);
+        let mut found = Vec::new();
+        nearest_each(&source.points, &index, &g.inverse(), 0.03, &mut found);
+        let near = found.iter().flatten().filter(|&&(_, d)| d < 0.01).count();
+        let far = found.iter().flatten().count();
+        assert!(0 < near && near < far && far < source.len(), "{near} {far}");
+        let counts = count_within(&source.points, &index, &g.inverse(), 0.01, 0.03);
+        assert_eq!(counts, (near, far));
+        let share = share_within(&source.points, &index, &g.inverse(), 0.03);
+        assert_eq!(
+            share,
+            score(&source.points, &index, &g.inverse(), 0.03, None).fitness
+        );
+        assert_eq!(share_within(&[], &index, &g, 0.03), 0.0);
     }
 
     #[test]

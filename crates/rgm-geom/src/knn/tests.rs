@@ -57,6 +57,11 @@ fn queries_match_brute_force_on_random_clouds() {
                 let expected = (all[0].1 < r).then_some(all[0]);
                 assert_eq!(index.nearest_within(&q, r), expected, "radius {r}");
             }
+            // The nearest's and the fourth's own distances too: a radius at a point itself.
+            for r in [0.02, 0.1, 0.5, all[0].1, all[3].1] {
+                let nearest = index.nearest_within(&q, r);
+                assert_eq!(index.any_within(&q, r), nearest.is_some(), "radius {r}");
+            }
             for k in [1, 7, 20] {
                 assert_eq!(index.k_nearest(&q, k), all[..k].to_vec());
             }
@@ -66,6 +71,31 @@ fn queries_match_brute_force_on_random_clouds() {
             assert_eq!(index.hybrid(&q, 0.3, 10), hybrid);
         }
     }
+}
+
+#[test]
+fn any_within_ends_at_the_first_point_found() {
+    let points = random_cloud(20_000, 12);
+    let index = KnnIndex::new(&points);
+    let offers = |search: &dyn Fn()| {
+        OFFERS.with(|n| n.set(0));
+        search();
+        OFFERS.with(|n| n.get())
+    };
+    let (mut any, mut nearest) = (0, 0);
+    for q in &points[..200] {
+        assert!(index.any_within(q, 0.2));
+        any += offers(&|| assert!(index.any_within(q, 0.2)));
+        nearest += offers(&|| assert!(index.nearest_within(q, 0.2).is_some()));
+    }
+    // Each query finds itself in its own leaf and stops there: one offer each, where the
+    // nearest's search goes on to the points and cells that could still be nearer.
+    assert_eq!(any, 200);
+    assert!(nearest > any, "{nearest} offers");
+    // A query with nothing within reach searches the cells the nearest's search does.
+    let far = Point3::new(3.0, 3.0, 3.0);
+    assert!(!index.any_within(&far, 0.5));
+    assert_eq!(index.nearest_within(&far, 0.5), None);
 }
 
 #[test]

@@ -16,7 +16,7 @@ use rgm_geom::frame::{FrameRule, NearPair, Normalisation};
 use rgm_geom::{KnnIndex, Point3, RigidTransform};
 
 use crate::check::{turned_poses, SelfFit};
-use crate::fit::{nearest_each, NEAREST_BLOCK};
+use crate::fit::{count_within, NEAREST_BLOCK};
 use crate::prepared::{indexed_pair, Prepared};
 use crate::registrar::Registration;
 use crate::thinning::Density;
@@ -35,10 +35,7 @@ fn within(
     far: f64,
 ) -> (usize, usize, usize) {
     let sample: Vec<Point3<f64>> = evenly(points, SAMPLE).copied().collect(); // (S,)
-    let mut found = Vec::new(); // (S,)
-    nearest_each(&sample, onto, moved, far, &mut found);
-    let within_far = found.iter().flatten().count();
-    let within_near = found.iter().flatten().filter(|&&(_, d)| d < near).count();
+    let (within_near, within_far) = count_within(&sample, onto, moved, near, far);
     (within_near, within_far, sample.len())
 }
 
@@ -243,7 +240,7 @@ fn overlap_reaching(
     least: f64,
 ) -> Option<f64> {
     // The share of `points` moved by `moved` within `distance` of `onto`, if it reaches `least`:
-    // searched two of `nearest_each`'s blocks at a time (side by side), and given up after the
+    // counted two of `count_within`'s blocks at a time (side by side), and given up after the
     // first round whose misses leave it short (the same answer as point by point, a few queries
     // later).
     let share = |points: &[Point3<f64>], onto: &KnnIndex, moved: &RigidTransform, least: f64| {
@@ -251,10 +248,8 @@ fn overlap_reaching(
         let all = sample.len();
         let needed = least * all.max(1) as f64;
         let (mut near, mut seen) = (0usize, 0usize);
-        let mut found = Vec::new(); // (R,)
         for round in sample.chunks(2 * NEAREST_BLOCK) {
-            nearest_each(round, onto, moved, distance, &mut found);
-            near += found.iter().flatten().count();
+            near += count_within(round, onto, moved, distance, distance).0;
             seen += round.len();
             if ((near + all - seen) as f64) < needed {
                 return None;

@@ -8,7 +8,7 @@ use rgm_geom::{KnnIndex, Point3, PointCloud, RigidTransform};
 
 use crate::check::symmetry::{principal_axes, turn_about};
 
-use crate::fit::score;
+use crate::fit::share_within;
 
 /// At most this many points of each cloud are counted by [`overlap_score`], at an even stride:
 /// a share measured on 10,000 points is within ±0.01 of the whole cloud's (two standard errors),
@@ -30,10 +30,10 @@ pub fn overlap_score(
 ) -> f64 {
     let share = |points: &[Point3<f64>], onto: &KnnIndex, moved: &RigidTransform| {
         if points.len() <= OVERLAP_SAMPLE {
-            return score(points, onto, moved, distance, None).fitness;
+            return share_within(points, onto, moved, distance);
         }
         let sample: Vec<Point3<f64>> = evenly(points, OVERLAP_SAMPLE).copied().collect(); // (S,)
-        score(&sample, onto, moved, distance, None).fitness
+        share_within(&sample, onto, moved, distance)
     };
     share(&source.0.points, target.1, transform)
         + share(&target.0.points, source.1, &transform.inverse())
