@@ -7,9 +7,9 @@
 //! clouds that do not overlap at all pressed together, a room slid along its floor — the
 //! surfaces cross or graze, and the distances spread evenly up to the loose ones. [`Coincides`]
 //! measures that spread: of the points within `far` of the other cloud (both ways), the share
-//! within `near`; below `least`, the result is doubted ([`Registration::doubt`]). [`Checked`]
-//! puts a [`Check`] on any registrar. The tuned lengths and shares are configuration, set where
-//! methods are composed.
+//! within `near`; below `least`, the result is doubted ([`Registration::doubt`]).
+//! [`Checked`](crate::compose::Checked) puts a [`Check`] on any registrar. The tuned lengths and
+//! shares are configuration, set where methods are composed.
 
 use rgm_geom::cloud::evenly;
 use rgm_geom::frame::{FrameRule, NearPair, Normalisation};
@@ -40,8 +40,8 @@ fn within(
 }
 
 /// Of the points of both clouds that `transform` brings within `far` of the other cloud, the
-/// share within `near` (0 when none is within `far`). Measured on at most [`SAMPLE`] points of
-/// each cloud, against the other whole.
+/// share within `near` (0 when none is within `far`). Measured on at most 4,096 (`SAMPLE`)
+/// points of each cloud, against the other whole.
 pub fn coincidence(
     source: &Prepared,
     target: &Prepared,
@@ -219,7 +219,7 @@ impl Check for CoincidesAtSpacing {
 
 /// The share of the points of each cloud that `transform` brings within `distance` of the
 /// other, both ways (0 to 2, as [`crate::check::overlap_score`]), measured on at most
-/// [`SAMPLE`] points of each cloud.
+/// 4,096 (`SAMPLE`) points of each cloud.
 pub fn sampled_overlap(
     source: &Prepared,
     target: &Prepared,

@@ -58,13 +58,13 @@ const NEIGHBOURS: usize = 4;
 const PLANE_NEIGHBOURS: usize = 8;
 
 /// A cloud fits itself under a turn when at least `share` of its points, turned, lie within
-/// `within` times their local spacing ([`NEIGHBOURS`]) of the cloud: a resampled surface, not
-/// the same points, is what a symmetry gives. Only a surface can: a cloud whose points fill a
-/// volume (a lattice, foliage) has some point near wherever a turn takes its points, so a cloud
-/// fits itself only where the median flatness of its points' neighbourhoods ([`flatness`],
-/// [`PLANE_NEIGHBOURS`]) is below `flat`. Turns are looked for beyond the
-/// principal axes' half turns where two spreads are within `near_equal` of each other (the
-/// smaller over the larger).
+/// `within` times their local spacing (the distance to their 4th nearest other point) of the
+/// cloud: a resampled surface, not the same points, is what a symmetry gives. Only a surface
+/// can: a cloud whose points fill a volume (a lattice, foliage) has some point near wherever a
+/// turn takes its points, so a cloud fits itself only where the median flatness of its points'
+/// neighbourhoods (of each point and its 8 nearest) is below `flat`. Turns are looked for
+/// beyond the principal axes' half turns where two spreads are within `near_equal` of each
+/// other (the smaller over the larger).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SelfFit {
     pub within: f64,
