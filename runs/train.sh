@@ -65,6 +65,8 @@ COMMON="--preset fast --optimizer adam --val-shapes 300 --checkpoint-every 50 --
 #      91.3 % refined, 60.0 % alone; in the history at d6b9b96) at the schedule's next rate, a
 #      fifth (4e-5), ×0.2 again at epoch 4, 6 epochs (≈ 24k pairs, ≈ 2–4 h of queue): the drop
 #      of the lineage's last plateau (unseen-717 → unseen-717-drop) added ≈ 3 points alone.
+#      Session 43: 59.7, 59.3, 60.7, 61.3 % alone after epochs 1–4 (refined 90.7–91.3 %), its
+#      validation loss still falling; snapshot at the end of epoch 4 committed; on to epoch 6.
 # `init=` names the weights a run starts from; `git:REV:PATH` ones are written out of the
 # history into target/queue-init/ when the run starts (`rgm train` reads --init only then).
 QUEUE=(
