@@ -92,7 +92,7 @@ fn any_within_ends_at_the_first_point_found() {
     // nearest's search goes on to the points and cells that could still be nearer.
     assert_eq!(any, 200);
     assert!(nearest > any, "{nearest} offers");
-    // A query with nothing within reach searches the cells the nearest's search does.
+    // With nothing within reach it finds nothing, as the nearest's search does.
     let far = Point3::new(3.0, 3.0, 3.0);
     assert!(!index.any_within(&far, 0.5));
     assert_eq!(index.nearest_within(&far, 0.5), None);
