@@ -127,15 +127,7 @@ impl KnnIndex {
             r2: radius * radius,
             found: false,
         };
-        if !self.nodes.is_empty() {
-            self.search(
-                0,
-                &[query.x, query.y, query.z],
-                0.0,
-                &mut [0.0; 3],
-                &mut any,
-            );
-        }
+        self.search_all(query, &mut any);
         any.found
     }
 
@@ -143,15 +135,7 @@ impl KnnIndex {
     /// `(usize::MAX, bound)` when there is none.
     fn nearest_squared_below(&self, query: &Point3<f64>, bound: f64) -> (usize, f64) {
         let mut best = Nearest((usize::MAX, bound));
-        if !self.nodes.is_empty() {
-            self.search(
-                0,
-                &[query.x, query.y, query.z],
-                0.0,
-                &mut [0.0; 3],
-                &mut best,
-            );
-        }
+        self.search_all(query, &mut best);
         best.0
     }
 
@@ -198,13 +182,7 @@ impl KnnIndex {
         }
         // No more than the points: the buffer's `2k` then neither overflows nor over-allocates.
         let mut best = Best::new(k.min(self.len()), r2, out);
-        self.search(
-            0,
-            &[query.x, query.y, query.z],
-            0.0,
-            &mut [0.0; 3],
-            &mut best,
-        );
+        self.search_all(query, &mut best);
         best.finish();
     }
 
@@ -214,11 +192,8 @@ impl KnnIndex {
         if self.nodes.is_empty() || !(radius > 0.0) {
             return out;
         }
-        self.search(
-            0,
-            &[query.x, query.y, query.z],
-            0.0,
-            &mut [0.0; 3],
+        self.search_all(
+            query,
             &mut Within {
                 r2: radius * radius,
                 out: &mut out,
@@ -236,6 +211,14 @@ impl KnnIndex {
         self.hybrid_squared_into(query, radius, max_nn, &mut out);
         out.iter_mut().for_each(|n| n.1 = n.1.sqrt());
         out
+    }
+
+    /// Offers every point of the tree that could beat `found`'s bound to `found` (none of an
+    /// empty tree): [`Self::search`] from the root.
+    fn search_all<F: Found>(&self, query: &Point3<f64>, found: &mut F) {
+        if !self.nodes.is_empty() {
+            self.search(0, &[query.x, query.y, query.z], 0.0, &mut [0.0; 3], found);
+        }
     }
 
     /// Offers every point of the subtree at `node` that could beat `found`'s bound to `found`.

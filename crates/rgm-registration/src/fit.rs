@@ -318,14 +318,21 @@ mod tests {
         );
     }
 
-    #[test]
-    fn counts_within_are_the_nearest_searches_counts() {
-        // 1,024 jittered points against the airplane: pairs near, far and out of reach.
+    /// The airplane (target, indexed) and a copy of it moved by a pose `g` of up to 20° and
+    /// 0.2 drawn from `seed`, jittered and reversed (source): (target, g, source, index).
+    fn airplane_pair(seed: u64) -> (PointCloud, RigidTransform, PointCloud, KnnIndex) {
         let target = airplane();
-        let mut rng = StdRng::seed_from_u64(11);
+        let mut rng = StdRng::seed_from_u64(seed);
         let g = RigidTransform::random(&mut rng, 20.0, 0.2);
         let source = moved_and_jittered(&target, &g, &mut rng);
         let index = KnnIndex::new(&target.points);
+        (target, g, source, index)
+    }
+
+    #[test]
+    fn counts_within_are_the_nearest_searches_counts() {
+        // 1,024 jittered points against the airplane: pairs near, far and out of reach.
+        let (_, g, source, index) = airplane_pair(11);
         let mut found = Vec::new();
         nearest_each(&source.points, &index, &g.inverse(), 0.03, &mut found);
         let near = found.iter().flatten().filter(|&&(_, d)| d < 0.01).count();
@@ -344,11 +351,7 @@ mod tests {
     #[test]
     fn scores_and_refinements_are_the_same_bits_on_one_and_two_threads() {
         // 1,024 points: several blocks of nearest-point searches, spread over the pool.
-        let target = airplane();
-        let mut rng = StdRng::seed_from_u64(7);
-        let g = RigidTransform::random(&mut rng, 20.0, 0.2);
-        let source = moved_and_jittered(&target, &g, &mut rng);
-        let index = KnnIndex::new(&target.points);
+        let (target, g, source, index) = airplane_pair(7);
         let run = |threads: usize| {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
