@@ -56,6 +56,8 @@ pub struct KnnIndex {
     xyz: [Vec<f64>; 3],
     /// Each point's index in the caller's slice, in tree order. // (N,)
     ids: Vec<u32>,
+    /// Each point's place in tree order, by its index in the caller's slice. // (N,)
+    places: Vec<u32>,
 }
 
 /// What [`KnnIndex::new`] calls with the points of every index it builds, once set.
@@ -85,10 +87,16 @@ impl KnnIndex {
                 coords.push(p[axis]);
             }
         }
+        let ids: Vec<u32> = tree_points.iter().map(|&(_, i)| i).collect();
+        let mut places = vec![0; ids.len()];
+        for (place, &i) in ids.iter().enumerate() {
+            places[i as usize] = place as u32;
+        }
         Self {
             nodes,
             xyz,
-            ids: tree_points.iter().map(|&(_, i)| i).collect(),
+            ids,
+            places,
         }
     }
 
@@ -116,6 +124,33 @@ impl KnnIndex {
         let r2 = radius * radius;
         let (i, d2) = self.nearest_squared_below(query, r2);
         (i != usize::MAX && d2 < r2).then(|| (i, d2.sqrt()))
+    }
+
+    /// [`Self::nearest_within`] of a query near an earlier one whose nearest was point `guess`
+    /// (an iteration of ICP, each point moved a little since the last): the search starts from
+    /// `guess`'s distance instead of `radius`, which prunes most cells at once. The same answer
+    /// as [`Self::nearest_within`], whatever `guess` is.
+    pub fn nearest_within_from(
+        &self,
+        query: &Point3<f64>,
+        radius: f64,
+        guess: usize,
+    ) -> Option<(usize, f64)> {
+        let r2 = radius * radius;
+        let Some(&place) = self.places.get(guess) else {
+            return self.nearest_within(query, radius);
+        };
+        let place = place as usize;
+        let at = [self.xyz[0][place], self.xyz[1][place], self.xyz[2][place]];
+        // The distance as a leaf computes it, so that ties resolve as in a search without it.
+        let guess_d2 = squared_distance(&at, &[query.x, query.y, query.z]);
+        if !(guess_d2 < r2) {
+            return self.nearest_within(query, radius);
+        }
+        let mut best = Nearest((guess, guess_d2));
+        self.search_all(query, &mut best);
+        let (i, d2) = best.0;
+        Some((i, d2.sqrt()))
     }
 
     /// Whether some point is strictly closer than `radius` to `query`: the same answer as
@@ -189,19 +224,25 @@ impl KnnIndex {
     /// Every point strictly closer than `radius` to `query`, sorted by distance, ties by index.
     pub fn within_radius(&self, query: &Point3<f64>, radius: f64) -> Vec<(usize, f64)> {
         let mut out = Vec::new();
-        if self.nodes.is_empty() || !(radius > 0.0) {
-            return out;
-        }
-        self.search_all(
-            query,
-            &mut Within {
-                r2: radius * radius,
-                out: &mut out,
-            },
-        );
+        self.for_each_within(query, radius, |i, d2| out.push((i, d2)));
         sort_by_distance_then_index(&mut out);
         out.iter_mut().for_each(|n| n.1 = n.1.sqrt());
         out
+    }
+
+    /// Calls `visit(index, squared distance)` for every point strictly closer than `radius` to
+    /// `query`, in the order the search meets them (fixed by the query and radius alone),
+    /// without gathering them: for sums over a neighbourhood.
+    pub fn for_each_within(&self, query: &Point3<f64>, radius: f64, visit: impl FnMut(usize, f64)) {
+        if radius > 0.0 {
+            self.search_all(
+                query,
+                &mut Within {
+                    r2: radius * radius,
+                    visit,
+                },
+            );
+        }
     }
 
     /// Open3D's hybrid search (`KDTreeSearchParamHybrid`): the at most `max_nn` nearest points
@@ -487,18 +528,18 @@ impl Found for Best<'_> {
     }
 }
 
-/// Every point with squared distance below `r2`, unsorted.
-struct Within<'a> {
+/// Every point with squared distance below `r2`, handed to `visit` as it is met.
+struct Within<V> {
     r2: f64,
-    out: &'a mut Vec<(usize, f64)>,
+    visit: V,
 }
 
-impl Found for Within<'_> {
+impl<V: FnMut(usize, f64)> Found for Within<V> {
     #[inline]
     fn offer(&mut self, candidate: (usize, f64)) -> bool {
         let near = candidate.1 < self.r2;
         if near {
-            self.out.push(candidate);
+            (self.visit)(candidate.0, candidate.1);
         }
         near
     }

@@ -67,17 +67,102 @@ pub fn normals_from_neighbourhoods(
         .collect()
 }
 
-/// The unit normal at `points[i]` as [`estimate_normals`] finds it, but unoriented (a sign
-/// that point-to-plane fitting does not see): for the few points of a large cloud that need
-/// one. `index` must index `points`.
-pub fn normal_at(
+/// Settings of [`normals_within`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WithinConfig {
+    /// The neighbours of a point are every point strictly within this.
+    pub radius: f64,
+    /// Where fewer than [`MIN_WITHIN`] lie within `radius`, or they lie along a line, the
+    /// point's normal is [`estimate_normals`]' with these settings.
+    pub sparse: NormalsConfig,
+}
+
+/// Fewer neighbours than this within [`WithinConfig::radius`] are too few to fit a plane to.
+pub const MIN_WITHIN: usize = 8;
+
+/// A neighbourhood whose middle spread (eigenvalue) is below this share of its largest lies
+/// along a line (a LiDAR ring within the radius), which leaves its plane's normal free.
+const LINE_LIKE: f64 = 0.1;
+
+/// The unit normals at `points[i]` for each `i` of `which`, unoriented (a sign point-to-plane
+/// fitting does not see), by PCA of every point strictly within `config.radius` of it (Open3D's
+/// `KDTreeSearchParamRadius`): for the few points of a large cloud that need one. The sums run
+/// as the search meets the neighbours, so nothing is gathered, selected or sorted, a fraction
+/// of the cost of the hybrid search of [`estimate_normals`] (30 nearest, sorted). Where the
+/// neighbourhood is sparse or line-like, the point takes the hybrid normal of `config.sparse`
+/// instead. `index` must index `points`. // (W,)
+pub fn normals_within(
     points: &[Point3<f64>],
     index: &KnnIndex,
-    i: usize,
-    config: &NormalsConfig,
-) -> Vector3<f64> {
-    let around = index.hybrid(&points[i], config.radius, config.max_nn);
-    pca_normal(points, &around).unwrap_or_else(Vector3::z)
+    which: &[usize],
+    config: &WithinConfig,
+) -> Vec<Vector3<f64>> {
+    let mut around = Vec::with_capacity(config.sparse.max_nn); // (≤ max_nn,)
+    which
+        .iter()
+        .map(|&i| {
+            let q = points[i];
+            // Sums of d and of d dᵀ's xx, xy, xz, yy, yz, zz over the neighbours, d = p − q:
+            // about the point, so that the covariance does not cancel the cloud's offset away.
+            let mut sums = [0.0; 9];
+            let mut count = 0usize;
+            index.for_each_within(&q, config.radius, |j, _| {
+                let d = points[j] - q;
+                add_moments(&mut sums, [d.x, d.y, d.z]);
+                count += 1;
+            });
+            let cov = covariance(&sums, count.max(1) as f64);
+            let normal = smallest_eigenvector(&cov);
+            let usable = count >= MIN_WITHIN
+                && spans_a_plane(&cov)
+                && normal != Vector3::zeros()
+                && normal.iter().all(|v| v.is_finite());
+            if usable {
+                normal
+            } else {
+                let sparse = &config.sparse;
+                index.hybrid_squared_into(&q, sparse.radius, sparse.max_nn, &mut around);
+                pca_normal(points, &around).unwrap_or_else(Vector3::z)
+            }
+        })
+        .collect()
+}
+
+/// Adds x, y, z, xx, xy, xz, yy, yz, zz of one point to `sums`.
+#[inline]
+fn add_moments(sums: &mut [f64; 9], [x, y, z]: [f64; 3]) {
+    let terms = [x, y, z, x * x, x * y, x * z, y * y, y * z, z * z];
+    for (sum, t) in sums.iter_mut().zip(terms) {
+        *sum += t;
+    }
+}
+
+/// The covariance from the sums of x, y, z, xx, xy, xz, yy, yz, zz over `n` points. // (3, 3)
+fn covariance(sums: &[f64; 9], n: f64) -> Matrix3<f64> {
+    let c = sums.map(|sum| sum / n);
+    let (xx, yy, zz) = (c[3] - c[0] * c[0], c[6] - c[1] * c[1], c[8] - c[2] * c[2]);
+    let (xy, xz, yz) = (c[4] - c[0] * c[1], c[5] - c[0] * c[2], c[7] - c[1] * c[2]);
+    Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz)
+}
+
+/// Whether a covariance's points spread in two directions rather than along a line: its middle
+/// eigenvalue at least [`LINE_LIKE`] of its largest (closed-form eigenvalues of a symmetric 3×3
+/// matrix, the trigonometric solution).
+fn spans_a_plane(cov: &Matrix3<f64>) -> bool {
+    let q = cov.trace() / 3.0;
+    let off = cov[(0, 1)].powi(2) + cov[(0, 2)].powi(2) + cov[(1, 2)].powi(2);
+    let p2 = (0..3).map(|a| (cov[(a, a)] - q).powi(2)).sum::<f64>() + 2.0 * off;
+    let p = (p2 / 6.0).sqrt();
+    if !(p > 0.0) {
+        // A multiple of the identity: spread evenly in every direction, or not at all.
+        return q > 0.0;
+    }
+    let b = (cov - Matrix3::identity() * q) / p;
+    let phi = (b.determinant() / 2.0).clamp(-1.0, 1.0).acos() / 3.0;
+    let largest = q + 2.0 * p * phi.cos();
+    let smallest = q + 2.0 * p * (phi + 2.0 * std::f64::consts::PI / 3.0).cos();
+    let middle = 3.0 * q - largest - smallest;
+    middle >= LINE_LIKE * largest
 }
 
 /// The unit eigenvector of the smallest eigenvalue of the neighbours' covariance; `None` with
@@ -92,18 +177,9 @@ fn pca_normal(points: &[Point3<f64>], neighbours: &[(usize, f64)]) -> Option<Vec
     // Cumulants Σx, Σy, Σz, Σxx, Σxy, Σxz, Σyy, Σyz, Σzz over the neighbours, then means.
     let mut c = [0.0; 9];
     for &(j, _) in neighbours {
-        let [x, y, z] = [points[j].x, points[j].y, points[j].z];
-        let terms = [x, y, z, x * x, x * y, x * z, y * y, y * z, z * z];
-        for (ci, t) in c.iter_mut().zip(terms) {
-            *ci += t;
-        }
+        add_moments(&mut c, [points[j].x, points[j].y, points[j].z]);
     }
-    let k = neighbours.len() as f64;
-    c.iter_mut().for_each(|ci| *ci /= k);
-    let (xx, yy, zz) = (c[3] - c[0] * c[0], c[6] - c[1] * c[1], c[8] - c[2] * c[2]);
-    let (xy, xz, yz) = (c[4] - c[0] * c[1], c[5] - c[0] * c[2], c[7] - c[1] * c[2]);
-    let cov = Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz); // (3, 3)
-    let normal = smallest_eigenvector(&cov);
+    let normal = smallest_eigenvector(&covariance(&c, neighbours.len() as f64));
     (normal != Vector3::zeros() && normal.iter().all(|v| v.is_finite())).then_some(normal)
 }
 
@@ -242,23 +318,103 @@ mod tests {
     use super::*;
     use crate::testing::box_surface;
 
+    /// The angle between two unoriented normals, in degrees.
+    fn apart_deg(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+        a.dot(b).abs().min(1.0).acos().to_degrees()
+    }
+
     #[test]
-    fn a_normal_at_one_point_is_the_estimated_one_up_to_sign() {
-        let cloud = box_surface(2000, 6);
+    fn normals_within_a_radius_are_a_box_faces_axes() {
+        // As `box_faces_get_their_outward_axis`: a point at least 0.1 from every other face
+        // has its face's axis (either sign), from its neighbours within 0.08 (≈ 24), or the
+        // 30 nearest within 0.09 where fewer than 8 lie that near.
+        let cloud = box_surface(3000, 5);
         let index = KnnIndex::new(&cloud.points);
-        let config = NormalsConfig {
-            radius: 0.1,
-            max_nn: 20,
+        let config = WithinConfig {
+            radius: 0.08,
+            sparse: NormalsConfig {
+                radius: 0.09,
+                max_nn: 30,
+            },
         };
-        let normals = estimate_normals(&cloud.points, &index, &config);
-        for i in (0..cloud.len()).step_by(37) {
-            let one = normal_at(&cloud.points, &index, i, &config);
-            assert!(
-                one == normals[i] || one == -normals[i],
-                "{i}: {one} vs {}",
+        let which: Vec<usize> = (0..cloud.len()).collect();
+        let normals = normals_within(&cloud.points, &index, &which, &config);
+        let half = [0.5, 0.3, 0.2];
+        let mut checked = 0;
+        for (p, n) in cloud.points.iter().zip(&normals) {
+            let on: Vec<usize> = (0..3)
+                .filter(|&a| (p[a].abs() - half[a]).abs() < 1e-12)
+                .collect();
+            let interior = (0..3).all(|a| on.contains(&a) || p[a].abs() < half[a] - 0.1);
+            if on.len() == 1 && interior {
+                let mut axis = Vector3::zeros();
+                axis[on[0]] = 1.0;
+                assert!(apart_deg(n, &axis) < 1e-4, "point {p} normal {n}");
+                checked += 1;
+            }
+        }
+        assert!(checked > 300, "only {checked} interior face points");
+        // Alone or among others, a normal is the same to the bit.
+        for i in (0..cloud.len()).step_by(97) {
+            assert_eq!(
+                normals_within(&cloud.points, &index, &[i], &config)[0],
                 normals[i]
             );
         }
+    }
+
+    #[test]
+    fn sparse_or_line_like_neighbourhoods_take_the_hybrid_normal() {
+        // Rings as a LiDAR sweeps them: dense along each line, lines 0.1 apart on one plane
+        // (z = 0, then turned, so that no axis is special). Within 0.05 a point sees only its
+        // own line (its plane's normal is free); the hybrid 60 within 0.5 reach the next lines
+        // and find the plane's.
+        let turn = nalgebra::Rotation3::from_axis_angle(
+            &nalgebra::Unit::new_normalize(Vector3::new(1.0, 2.0, 3.0)),
+            0.7,
+        );
+        let up = turn * Vector3::z();
+        let points: Vec<Point3<f64>> = (0..20)
+            .flat_map(|line| {
+                (0..100).map(move |i| turn * Point3::new(0.01 * i as f64, 0.1 * line as f64, 0.0))
+            })
+            .collect();
+        let index = KnnIndex::new(&points);
+        let sparse = NormalsConfig {
+            radius: 0.5,
+            max_nn: 60,
+        };
+        let which: Vec<usize> = (0..points.len()).step_by(13).collect();
+        for radius in [0.05, 0.015] {
+            // 0.05: line-like; 0.015: 3 neighbours, too few.
+            let config = WithinConfig { radius, sparse };
+            let normals = normals_within(&points, &index, &which, &config);
+            for (&i, n) in which.iter().zip(&normals) {
+                let around = index.hybrid(&points[i], sparse.radius, sparse.max_nn);
+                assert_eq!(Some(*n), pca_normal(&points, &around), "{i} at {radius}");
+                assert!(apart_deg(n, &up) < 1e-4, "{i}: {n}");
+            }
+        }
+        // Within 0.25 a point sees five lines: a plane, fitted from its own neighbours.
+        let config = WithinConfig {
+            radius: 0.25,
+            sparse,
+        };
+        for n in normals_within(&points, &index, &which, &config) {
+            assert!(apart_deg(&n, &up) < 1e-4, "{n}");
+        }
+    }
+
+    #[test]
+    fn a_line_spreads_in_one_direction_a_plane_in_two() {
+        let line = Matrix3::from_diagonal(&Vector3::new(1.0, 1e-4, 0.0));
+        let turned = Matrix3::new(0.5, 0.5, 0.0, 0.5, 0.5, 0.0, 0.0, 0.0, 1e-6);
+        let plane = Matrix3::new(1.0, 0.2, 0.0, 0.2, 0.5, 0.0, 0.0, 0.0, 1e-4);
+        assert!(!spans_a_plane(&line));
+        assert!(!spans_a_plane(&turned));
+        assert!(spans_a_plane(&plane));
+        assert!(spans_a_plane(&Matrix3::identity()));
+        assert!(!spans_a_plane(&Matrix3::zeros()));
     }
 
     #[test]

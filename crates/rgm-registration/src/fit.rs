@@ -83,9 +83,11 @@ pub fn score(
 pub(crate) const NEAREST_BLOCK: usize = 64;
 
 /// `found[i]`: the nearest point of `target` strictly closer than `max_distance` to
-/// `source[i]` moved by `transform`, as (index, distance). Blocks of points are searched side
-/// by side on rayon's pool, each point's search its own, so the result is the same on any
-/// number of threads.
+/// `source[i]` moved by `transform`, as (index, distance). Where `found` holds an answer for
+/// `source` already (an earlier iteration's, under a transform near this one), each search
+/// starts from it ([`KnnIndex::nearest_within_from`]): the same answers, sooner. Blocks of
+/// points are searched side by side on rayon's pool, each point's search its own, so the
+/// result is the same on any number of threads.
 pub(crate) fn nearest_each(
     source: &[Point3<f64>],
     target: &KnnIndex,
@@ -93,14 +95,20 @@ pub(crate) fn nearest_each(
     max_distance: f64,
     found: &mut Vec<Option<(usize, f64)>>, // (N,)
 ) {
-    found.clear();
-    found.resize(source.len(), None);
+    if found.len() != source.len() {
+        found.clear();
+        found.resize(source.len(), None);
+    }
     found
         .par_chunks_mut(NEAREST_BLOCK)
         .zip(source.par_chunks(NEAREST_BLOCK))
         .for_each(|(found, points)| {
             for (nearest, p) in found.iter_mut().zip(points) {
-                *nearest = target.nearest_within(&transform.apply(p), max_distance);
+                let moved = transform.apply(p);
+                *nearest = match *nearest {
+                    Some((guess, _)) => target.nearest_within_from(&moved, max_distance, guess),
+                    None => target.nearest_within(&moved, max_distance),
+                };
             }
         });
 }

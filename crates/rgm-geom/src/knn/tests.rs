@@ -240,3 +240,47 @@ fn k_larger_than_the_cloud_returns_all() {
         brute_force(&points, &q)
     );
 }
+
+#[test]
+fn a_search_from_a_guess_finds_what_one_without_finds() {
+    // The lattice of ties (a guess tied with the answer but of a higher index must lose), then
+    // random points; guesses near and far, tied, beyond the radius and out of range.
+    let lattice: Vec<Point3<f64>> = (0..216)
+        .map(|i| Point3::new((i % 6) as f64, (i / 6 % 6) as f64, (i / 36) as f64) * 0.1)
+        .collect();
+    for points in [lattice, random_cloud(2000, 21)] {
+        let index = KnnIndex::new(&points);
+        let mut cheaper = 0;
+        for (n, q) in random_cloud(60, 22).iter().chain(&points[..40]).enumerate() {
+            let q = q * 0.5;
+            for radius in [0.03, 0.1, 0.3] {
+                let expected = index.nearest_within(&q, radius);
+                let answer = expected.map_or(0, |(i, _)| i);
+                for guess in [
+                    answer,
+                    answer + 1,
+                    answer.saturating_sub(1),
+                    0,
+                    n,
+                    points.len(),
+                ] {
+                    assert_eq!(
+                        index.nearest_within_from(&q, radius, guess),
+                        expected,
+                        "query {n}, radius {radius}, guess {guess}"
+                    );
+                }
+                if expected.is_some() {
+                    let from = offers(|| {
+                        index.nearest_within_from(&q, radius, answer);
+                    });
+                    let without = offers(|| {
+                        index.nearest_within(&q, radius);
+                    });
+                    cheaper += usize::from(from < without);
+                }
+            }
+        }
+        assert!(cheaper > 20, "{cheaper} searches cheaper from their answer");
+    }
+}

@@ -28,7 +28,7 @@ use std::cell::RefCell;
 
 use nalgebra::{Matrix6, Point3, Rotation3, Vector3, Vector6};
 use rayon::prelude::*;
-use rgm_geom::normals::{normal_at, NormalsConfig};
+use rgm_geom::normals::{normals_within, NormalsConfig, WithinConfig};
 use rgm_geom::{GeomError, KnnIndex, PointCloud, Result, RigidTransform};
 
 use crate::fit::{nearest_each, score, Fit};
@@ -213,7 +213,7 @@ struct PlaneFit<'a> {
 enum TargetNormals<'a> {
     Given(&'a [Vector3<f64>]), // (M,)
     Lazy {
-        config: NormalsConfig,
+        config: WithinConfig,
         cache: RefCell<Vec<Option<Vector3<f64>>>>, // (M,)
     },
 }
@@ -251,8 +251,10 @@ struct StageOutcome {
 }
 
 impl<'a> PlaneFit<'a> {
-    /// The clouds with the target's normals estimated when first needed, from the nearest
-    /// neighbours at the target's own density (a radius of 8 point spacings).
+    /// The clouds with the target's normals estimated when first needed, from the neighbours
+    /// within 3.6 point spacings (≈ 30 on a scan, as many as Open3D's tutorial takes; the
+    /// radius chosen on the Stanford scans, docs/baselines.md); where those are sparse or lie
+    /// along a line, from the 30 nearest within 8 spacings.
     fn at_spacing(
         source: &'a PointCloud,
         target: &'a PointCloud,
@@ -264,9 +266,12 @@ impl<'a> PlaneFit<'a> {
             target,
             index,
             normals: TargetNormals::Lazy {
-                config: NormalsConfig {
-                    radius: 8.0 * spacing,
-                    ..NormalsConfig::default()
+                config: WithinConfig {
+                    radius: 3.6 * spacing,
+                    sparse: NormalsConfig {
+                        radius: 8.0 * spacing,
+                        ..NormalsConfig::default()
+                    },
                 },
                 cache: RefCell::new(vec![None; target.len()]),
             },
@@ -277,8 +282,11 @@ impl<'a> PlaneFit<'a> {
     fn normal(&self, j: usize) -> Vector3<f64> {
         match &self.normals {
             TargetNormals::Given(normals) => normals[j],
-            TargetNormals::Lazy { config, cache } => *cache.borrow_mut()[j]
-                .get_or_insert_with(|| normal_at(&self.target.points, self.index, j, config)),
+            TargetNormals::Lazy { config, cache } => {
+                *cache.borrow_mut()[j].get_or_insert_with(|| {
+                    normals_within(&self.target.points, self.index, &[j], config)[0]
+                })
+            }
         }
     }
 
@@ -292,12 +300,14 @@ impl<'a> PlaneFit<'a> {
         let mut missing: Vec<usize> = js.filter(|&j| cache[j].is_none()).collect();
         missing.sort_unstable();
         missing.dedup();
+        // Pieces of a few hundred: enough for the threads, few enough to gather.
+        const PIECE: usize = 256;
         let (points, index) = (&self.target.points, self.index);
-        let normals: Vec<Vector3<f64>> = missing
-            .par_iter()
-            .map(|&j| normal_at(points, index, j, config))
+        let normals: Vec<Vec<Vector3<f64>>> = missing
+            .par_chunks(PIECE)
+            .map(|piece| normals_within(points, index, piece, config))
             .collect();
-        for (j, normal) in missing.into_iter().zip(normals) {
+        for (j, normal) in missing.into_iter().zip(normals.into_iter().flatten()) {
             cache[j] = Some(normal);
         }
     }
@@ -361,22 +371,28 @@ impl<'a> PlaneFit<'a> {
     }
 
     /// The median absolute point-to-plane residual of the source's points under `transform`
-    /// that have a target point within `max_distance`; `None` when none has.
-    fn median_residual(&self, transform: &RigidTransform, max_distance: f64) -> Option<f64> {
-        let mut nearest = Vec::new(); // (N,)
+    /// that have a target point within `max_distance`; `None` when none has. `scratch` holds
+    /// the buffers of the stages run before (their last correspondences start the searches).
+    fn median_residual(
+        &self,
+        transform: &RigidTransform,
+        max_distance: f64,
+        scratch: &mut PlaneScratch,
+    ) -> Option<f64> {
+        let nearest = &mut scratch.nearest;
         nearest_each(
             &self.source.points,
             self.index,
             transform,
             max_distance,
-            &mut nearest,
+            nearest,
         );
         self.compute_normals(nearest.iter().filter_map(|&found| Some(found?.0)));
         let mut residuals: Vec<f64> = self
             .source
             .points
             .iter()
-            .zip(&nearest)
+            .zip(nearest.iter())
             .filter_map(|(p, &found)| {
                 let (j, _) = found?;
                 Some(
@@ -497,7 +513,7 @@ pub fn refine_at_resolution(
             return Ok((transform, iterations));
         }
     }
-    if let Some(median) = plane.median_residual(&transform, finest) {
+    if let Some(median) = plane.median_residual(&transform, finest, &mut scratch) {
         stage.residual_gate = Some(config.noise_sigmas * 1.4826 * median);
         iterations += plane.run(&stage, &mut transform, &mut scratch).iterations;
     }
@@ -516,7 +532,11 @@ pub fn median_plane_residual(
     max_distance: f64,
     spacing: f64,
 ) -> Option<f64> {
-    PlaneFit::at_spacing(source, target, index, spacing).median_residual(transform, max_distance)
+    PlaneFit::at_spacing(source, target, index, spacing).median_residual(
+        transform,
+        max_distance,
+        &mut PlaneScratch::default(),
+    )
 }
 
 /// The rigid step minimising the linearised point-to-plane residuals of `pairs`
