@@ -334,6 +334,49 @@ impl KnnIndex {
     }
 }
 
+/// [`KnnIndex::nearest_within`] answered from `around` alone, where that is proof enough:
+/// `around` holds every point strictly within `reach` of `points[centre]` (as
+/// [`KnnIndex::for_each_within`] meets them), `points` being the indexed points. Every point
+/// within `reach − |query − centre|` of `query` is then among them, so a nearest found within
+/// that is the index's, to the bit, ties included; and so is "none within `radius`" when
+/// `radius` is within it too: `Some(answer)`. `None` when `around` cannot tell (the query has
+/// moved too far from the centre): search the index then. A few distances instead of a walk
+/// down the tree, for queries that move a little from one search to the next (ICP's).
+pub fn nearest_among(
+    points: &[Point3<f64>],
+    around: &[u32],
+    centre: usize,
+    reach: f64,
+    query: &Point3<f64>,
+    radius: f64,
+) -> Option<Option<(usize, f64)>> {
+    let q = [query.x, query.y, query.z];
+    let coords = |i: usize| [points[i].x, points[i].y, points[i].z];
+    let step = squared_distance(&coords(centre), &q).sqrt();
+    // A hair inside the proof, so that rounding cannot let a point at its edge slip out.
+    let proof = (reach - step) * (1.0 - 1e-9);
+    if !(proof > 0.0) {
+        return None;
+    }
+    let mut best = (usize::MAX, f64::INFINITY);
+    for &j in around {
+        // The distance as a leaf computes it, so that answers and ties are the search's.
+        let candidate = (j as usize, squared_distance(&coords(j as usize), &q));
+        if is_before(candidate, best) {
+            best = candidate;
+        }
+    }
+    let (r2, proof2) = (radius * radius, proof * proof);
+    if best.1 < r2 && best.1 < proof2 {
+        Some(Some((best.0, best.1.sqrt())))
+    } else if r2 <= proof2 {
+        // Every point strictly within `radius` is among `around`, and none is.
+        Some(None)
+    } else {
+        None
+    }
+}
+
 /// The hybrid neighbourhoods of many query points, stored flat: query q's neighbours, sorted by
 /// distance then index, with *squared* distances.
 #[derive(Clone, Debug, Default)]

@@ -31,7 +31,7 @@ pub mod testing;
 pub use cloud::{length, PointCloud};
 pub use error::{GeomError, Result};
 pub use kabsch::kabsch;
-pub use knn::{knn_graph, KnnIndex, Neighbourhoods};
+pub use knn::{knn_graph, nearest_among, KnnIndex, Neighbourhoods};
 pub use metrics::{MetricsSummary, PairMetrics};
 pub use transform::RigidTransform;
 

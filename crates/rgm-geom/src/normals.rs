@@ -85,47 +85,60 @@ pub const MIN_WITHIN: usize = 8;
 const LINE_LIKE: f64 = 0.1;
 
 /// The unit normals at `points[i]` for each `i` of `which`, unoriented (a sign point-to-plane
-/// fitting does not see), by PCA of every point strictly within `config.radius` of it (Open3D's
-/// `KDTreeSearchParamRadius`): for the few points of a large cloud that need one. The sums run
-/// as the search meets the neighbours, so nothing is gathered, selected or sorted, a fraction
-/// of the cost of the hybrid search of [`estimate_normals`] (30 nearest, sorted). Where the
-/// neighbourhood is sparse or line-like, the point takes the hybrid normal of `config.sparse`
-/// instead. `index` must index `points`. // (W,)
+/// fitting does not see), each by [`normal_from_around`] of every point strictly within
+/// `config.radius` of it: for the few points of a large cloud that need one, at a fraction of
+/// the cost of the hybrid search of [`estimate_normals`] (30 nearest, sorted). `index` must
+/// index `points`. // (W,)
 pub fn normals_within(
     points: &[Point3<f64>],
     index: &KnnIndex,
     which: &[usize],
     config: &WithinConfig,
 ) -> Vec<Vector3<f64>> {
-    let mut around = Vec::with_capacity(config.sparse.max_nn); // (≤ max_nn,)
+    let mut around = Vec::new(); // (≤ the most points within the radius,)
     which
         .iter()
         .map(|&i| {
-            let q = points[i];
-            // Sums of d and of d dᵀ's xx, xy, xz, yy, yz, zz over the neighbours, d = p − q:
-            // about the point, so that the covariance does not cancel the cloud's offset away.
-            let mut sums = [0.0; 9];
-            let mut count = 0usize;
-            index.for_each_within(&q, config.radius, |j, _| {
-                let d = points[j] - q;
-                add_moments(&mut sums, [d.x, d.y, d.z]);
-                count += 1;
-            });
-            let cov = covariance(&sums, count.max(1) as f64);
-            let normal = smallest_eigenvector(&cov);
-            let usable = count >= MIN_WITHIN
-                && spans_a_plane(&cov)
-                && normal != Vector3::zeros()
-                && normal.iter().all(|v| v.is_finite());
-            if usable {
-                normal
-            } else {
-                let sparse = &config.sparse;
-                index.hybrid_squared_into(&q, sparse.radius, sparse.max_nn, &mut around);
-                pca_normal(points, &around).unwrap_or_else(Vector3::z)
-            }
+            around.clear();
+            index.for_each_within(&points[i], config.radius, |j, _| around.push(j as u32));
+            normal_from_around(points, index, i, &around, config)
         })
         .collect()
+}
+
+/// The unit normal at `points[i]`, unoriented, by PCA of `around`: every point strictly within
+/// `config.radius` of it (Open3D's `KDTreeSearchParamRadius`, as
+/// [`KnnIndex::for_each_within`] meets them: the same order, so the same bits, wherever the
+/// list comes from). Where those are fewer than [`MIN_WITHIN`] or lie along a line, the hybrid
+/// normal of `config.sparse` instead. `index` must index `points`.
+pub fn normal_from_around(
+    points: &[Point3<f64>],
+    index: &KnnIndex,
+    i: usize,
+    around: &[u32],
+    config: &WithinConfig,
+) -> Vector3<f64> {
+    let q = points[i];
+    // Sums of d and of d dᵀ's xx, xy, xz, yy, yz, zz over the neighbours, d = p − q: about the
+    // point, so that the covariance does not cancel the cloud's offset away.
+    let mut sums = [0.0; 9];
+    for &j in around {
+        let d = points[j as usize] - q;
+        add_moments(&mut sums, [d.x, d.y, d.z]);
+    }
+    let cov = covariance(&sums, around.len().max(1) as f64);
+    let normal = smallest_eigenvector(&cov);
+    let usable = around.len() >= MIN_WITHIN
+        && spans_a_plane(&cov)
+        && normal != Vector3::zeros()
+        && normal.iter().all(|v| v.is_finite());
+    if usable {
+        normal
+    } else {
+        let sparse = &config.sparse;
+        let hybrid = index.hybrid(&q, sparse.radius, sparse.max_nn);
+        pca_normal(points, &hybrid).unwrap_or_else(Vector3::z)
+    }
 }
 
 /// Adds x, y, z, xx, xy, xz, yy, yz, zz of one point to `sums`.

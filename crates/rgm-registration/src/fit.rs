@@ -85,15 +85,41 @@ pub(crate) const NEAREST_BLOCK: usize = 64;
 /// `found[i]`: the nearest point of `target` strictly closer than `max_distance` to
 /// `source[i]` moved by `transform`, as (index, distance). Where `found` holds an answer for
 /// `source` already (an earlier iteration's, under a transform near this one), each search
-/// starts from it ([`KnnIndex::nearest_within_from`]): the same answers, sooner. Blocks of
-/// points are searched side by side on rayon's pool, each point's search its own, so the
-/// result is the same on any number of threads.
+/// starts from it ([`KnnIndex::nearest_within_from`]): the same answers, sooner.
 pub(crate) fn nearest_each(
     source: &[Point3<f64>],
     target: &KnnIndex,
     transform: &RigidTransform,
     max_distance: f64,
     found: &mut Vec<Option<(usize, f64)>>, // (N,)
+) {
+    nearest_each_by(source, transform, found, |moved, earlier| {
+        search_from(target, moved, max_distance, earlier)
+    });
+}
+
+/// [`KnnIndex::nearest_within`], from an earlier answer where there is one.
+pub(crate) fn search_from(
+    target: &KnnIndex,
+    query: &Point3<f64>,
+    max_distance: f64,
+    earlier: Option<(usize, f64)>,
+) -> Option<(usize, f64)> {
+    match earlier {
+        Some((guess, _)) => target.nearest_within_from(query, max_distance, guess),
+        None => target.nearest_within(query, max_distance),
+    }
+}
+
+/// `found[i] = nearest(moved, earlier)` for each point of `source` moved by `transform`, where
+/// `earlier` is `found[i]` as it was when `found` held an answer for each point already (else
+/// `None`). Blocks of points are searched side by side on rayon's pool, each point's search its
+/// own, so the result is the same on any number of threads.
+pub(crate) fn nearest_each_by(
+    source: &[Point3<f64>],
+    transform: &RigidTransform,
+    found: &mut Vec<Option<(usize, f64)>>, // (N,)
+    nearest: impl Fn(&Point3<f64>, Option<(usize, f64)>) -> Option<(usize, f64)> + Sync,
 ) {
     if found.len() != source.len() {
         found.clear();
@@ -103,12 +129,8 @@ pub(crate) fn nearest_each(
         .par_chunks_mut(NEAREST_BLOCK)
         .zip(source.par_chunks(NEAREST_BLOCK))
         .for_each(|(found, points)| {
-            for (nearest, p) in found.iter_mut().zip(points) {
-                let moved = transform.apply(p);
-                *nearest = match *nearest {
-                    Some((guess, _)) => target.nearest_within_from(&moved, max_distance, guess),
-                    None => target.nearest_within(&moved, max_distance),
-                };
+            for (answer, p) in found.iter_mut().zip(points) {
+                *answer = nearest(&transform.apply(p), *answer);
             }
         });
 }

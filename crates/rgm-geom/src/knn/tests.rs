@@ -1,5 +1,6 @@
 use super::*;
 use crate::testing::uniform_cube;
+use nalgebra::Vector3;
 use rand::{rngs::StdRng, SeedableRng};
 
 fn random_cloud(n: usize, seed: u64) -> Vec<Point3<f64>> {
@@ -282,5 +283,41 @@ fn a_search_from_a_guess_finds_what_one_without_finds() {
             }
         }
         assert!(cheaper > 20, "{cheaper} searches cheaper from their answer");
+    }
+}
+
+#[test]
+fn nearest_among_a_centres_neighbours_is_the_search_s_answer_or_none() {
+    // The lattice of ties, then random points; queries moved from a centre by up to the reach.
+    let lattice: Vec<Point3<f64>> = (0..216)
+        .map(|i| Point3::new((i % 6) as f64, (i / 6 % 6) as f64, (i / 36) as f64) * 0.1)
+        .collect();
+    for (points, reach) in [(lattice, 0.25), (random_cloud(3000, 31), 0.1)] {
+        let index = KnnIndex::new(&points);
+        let mut rng = StdRng::seed_from_u64(32);
+        let (mut proved, mut none_proved) = (0, 0);
+        for centre in (0..points.len()).step_by(7) {
+            let mut around = Vec::new();
+            index.for_each_within(&points[centre], reach, |i, _| around.push(i as u32));
+            for step in [0.0, 0.01, 0.05, 0.1, 0.3] {
+                let shift: Vector3<f64> = uniform_cube(1, &mut rng)[0].coords * step;
+                let q = points[centre] + shift;
+                for radius in [0.02, 0.05, 0.5] {
+                    let expected = index.nearest_within(&q, radius);
+                    match nearest_among(&points, &around, centre, reach, &q, radius) {
+                        Some(answer) => {
+                            assert_eq!(answer, expected, "centre {centre}, step {step}");
+                            proved += 1;
+                            none_proved += usize::from(answer.is_none());
+                        }
+                        None => assert!(step > 0.0, "centre {centre}: no proof at the centre"),
+                    }
+                }
+            }
+        }
+        assert!(
+            proved > 300 && none_proved > 10,
+            "{proved} proved, {none_proved} of none"
+        );
     }
 }

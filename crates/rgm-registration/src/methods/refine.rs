@@ -25,13 +25,14 @@
 
 use std::borrow::Cow;
 use std::cell::RefCell;
+use std::ops::Range;
 
 use nalgebra::{Matrix6, Point3, Rotation3, Vector3, Vector6};
 use rayon::prelude::*;
-use rgm_geom::normals::{normals_within, NormalsConfig, WithinConfig};
-use rgm_geom::{GeomError, KnnIndex, PointCloud, Result, RigidTransform};
+use rgm_geom::normals::{normal_from_around, NormalsConfig, WithinConfig};
+use rgm_geom::{nearest_among, GeomError, KnnIndex, PointCloud, Result, RigidTransform};
 
-use crate::fit::{nearest_each, score, Fit};
+use crate::fit::{nearest_each, nearest_each_by, score, search_from, Fit};
 use crate::methods::icp::{self, check_clouds, IcpConfig};
 use crate::Prepared;
 
@@ -214,8 +215,19 @@ enum TargetNormals<'a> {
     Given(&'a [Vector3<f64>]), // (M,)
     Lazy {
         config: WithinConfig,
-        cache: RefCell<Vec<Option<Vector3<f64>>>>, // (M,)
+        cache: RefCell<Around>,
     },
+}
+
+/// What the lazy normals learnt of the target's points: each one's normal and its neighbours
+/// within the normals' radius. A source point paired with a target point in one iteration is
+/// paired near it in the next, so those neighbours answer its next search
+/// ([`rgm_geom::nearest_among`]) without the tree.
+struct Around {
+    /// Each target point's normal and where its neighbours lie in `lists`, once computed.
+    known: Vec<Option<(Vector3<f64>, Range<u32>)>>, // (M,)
+    /// The neighbour lists, one after another. // (Σ neighbours,)
+    lists: Vec<u32>,
 }
 
 /// The buffers of point-to-plane stages, reused from one iteration to the next.
@@ -273,7 +285,10 @@ impl<'a> PlaneFit<'a> {
                         ..NormalsConfig::default()
                     },
                 },
-                cache: RefCell::new(vec![None; target.len()]),
+                cache: RefCell::new(Around {
+                    known: vec![None; target.len()],
+                    lists: Vec::new(),
+                }),
             },
         }
     }
@@ -282,33 +297,96 @@ impl<'a> PlaneFit<'a> {
     fn normal(&self, j: usize) -> Vector3<f64> {
         match &self.normals {
             TargetNormals::Given(normals) => normals[j],
-            TargetNormals::Lazy { config, cache } => {
-                *cache.borrow_mut()[j].get_or_insert_with(|| {
-                    normals_within(&self.target.points, self.index, &[j], config)[0]
-                })
+            TargetNormals::Lazy { cache, .. } => {
+                if cache.borrow().known[j].is_none() {
+                    self.compute_normals(std::iter::once(j));
+                }
+                let known = &cache.borrow().known[j];
+                known
+                    .as_ref()
+                    .map_or_else(Vector3::z, |(normal, _)| *normal)
             }
         }
     }
 
-    /// Computes side by side the lazy normals of the target points `js` that are not known
-    /// yet: the same values [`PlaneFit::normal`] would compute one by one.
+    /// Each source point's nearest target point strictly within `max_distance` under
+    /// `transform` ([`nearest_each`]), a point paired before searched among its earlier
+    /// partner's neighbours where they prove the answer.
+    fn nearest_each(
+        &self,
+        transform: &RigidTransform,
+        max_distance: f64,
+        found: &mut Vec<Option<(usize, f64)>>, // (N,)
+    ) {
+        let TargetNormals::Lazy { config, cache } = &self.normals else {
+            nearest_each(
+                &self.source.points,
+                self.index,
+                transform,
+                max_distance,
+                found,
+            );
+            return;
+        };
+        let around = cache.borrow();
+        let (known, lists) = (&around.known, &around.lists);
+        let (points, index) = (&self.target.points, self.index);
+        nearest_each_by(&self.source.points, transform, found, |moved, earlier| {
+            earlier
+                .and_then(|(partner, _)| {
+                    let (_, list) = known[partner].as_ref()?;
+                    let list = &lists[list.start as usize..list.end as usize];
+                    nearest_among(points, list, partner, config.radius, moved, max_distance)
+                })
+                .unwrap_or_else(|| search_from(index, moved, max_distance, earlier))
+        });
+    }
+
+    /// Computes side by side the lazy normals (and neighbour lists) of the target points `js`
+    /// that are not known yet.
     fn compute_normals(&self, js: impl Iterator<Item = usize>) {
         let TargetNormals::Lazy { config, cache } = &self.normals else {
             return;
         };
-        let mut cache = cache.borrow_mut();
-        let mut missing: Vec<usize> = js.filter(|&j| cache[j].is_none()).collect();
+        let mut around = cache.borrow_mut();
+        let mut missing: Vec<usize> = js.filter(|&j| around.known[j].is_none()).collect();
         missing.sort_unstable();
         missing.dedup();
         // Pieces of a few hundred: enough for the threads, few enough to gather.
         const PIECE: usize = 256;
         let (points, index) = (&self.target.points, self.index);
-        let normals: Vec<Vec<Vector3<f64>>> = missing
+        // Per piece: the normals, the neighbour lists one after another, where each ends.
+        type Piece = (Vec<Vector3<f64>>, Vec<u32>, Vec<usize>);
+        let pieces: Vec<Piece> = missing
             .par_chunks(PIECE)
-            .map(|piece| normals_within(points, index, piece, config))
+            .map(|piece| {
+                let mut lists = Vec::new();
+                let mut ends = Vec::with_capacity(piece.len());
+                let normals = piece
+                    .iter()
+                    .map(|&j| {
+                        let start = lists.len();
+                        index.for_each_within(&points[j], config.radius, |i, _| {
+                            lists.push(i as u32)
+                        });
+                        ends.push(lists.len());
+                        normal_from_around(points, index, j, &lists[start..], config)
+                    })
+                    .collect();
+                (normals, lists, ends)
+            })
             .collect();
-        for (j, normal) in missing.into_iter().zip(normals.into_iter().flatten()) {
-            cache[j] = Some(normal);
+        let mut missing = missing.into_iter();
+        for (normals, lists, ends) in pieces {
+            let base = around.lists.len();
+            around.lists.extend_from_slice(&lists);
+            let mut start = base;
+            // The piece's own first: a zip that ends on it takes nothing more from `missing`.
+            for ((normal, end), j) in normals.into_iter().zip(ends).zip(missing.by_ref()) {
+                let range = start as u32..(base + end) as u32;
+                around.known[j] = Some((normal, range));
+                start = base + end;
+            }
         }
     }
 
@@ -332,8 +410,7 @@ impl<'a> PlaneFit<'a> {
         for _ in 0..stage.iterations {
             moved.clear();
             moved.extend(self.source.points.iter().map(|p| transform.apply(p)));
-            let source = &self.source.points;
-            nearest_each(source, self.index, transform, stage.max_distance, nearest);
+            self.nearest_each(transform, stage.max_distance, nearest);
             pairs.clear();
             if stage.residual_gate.is_some() {
                 self.compute_normals(nearest.iter().filter_map(|&found| Some(found?.0)));
@@ -380,13 +457,7 @@ impl<'a> PlaneFit<'a> {
         scratch: &mut PlaneScratch,
     ) -> Option<f64> {
         let nearest = &mut scratch.nearest;
-        nearest_each(
-            &self.source.points,
-            self.index,
-            transform,
-            max_distance,
-            nearest,
-        );
+        self.nearest_each(transform, max_distance, nearest);
         self.compute_normals(nearest.iter().filter_map(|&found| Some(found?.0)));
         let mut residuals: Vec<f64> = self
             .source
