@@ -93,7 +93,9 @@ pub(crate) fn nearest_each(
     max_distance: f64,
     found: &mut Vec<Option<(usize, f64)>>, // (N,)
 ) {
-    nearest_each_by(source, transform, found, |moved, earlier| {
+    // No state of its own: a slice of nothing, which allocates nothing.
+    let mut none = vec![(); source.len()];
+    nearest_each_by(source, transform, found, &mut none, |moved, earlier, _| {
         search_from(target, moved, max_distance, earlier)
     });
 }
@@ -111,15 +113,17 @@ pub(crate) fn search_from(
     }
 }
 
-/// `found[i] = nearest(moved, earlier)` for each point of `source` moved by `transform`, where
-/// `earlier` is `found[i]` as it was when `found` held an answer for each point already (else
-/// `None`). Blocks of points are searched side by side on rayon's pool, each point's search its
-/// own, so the result is the same on any number of threads.
-pub(crate) fn nearest_each_by(
+/// `found[i] = nearest(moved, earlier, &mut state[i])` for each point of `source` moved by
+/// `transform`, where `earlier` is `found[i]` as it was when `found` held an answer for each
+/// point already (else `None`), and `state[i]` is the point's own (`state` as long as
+/// `source`). Blocks of points are searched side by side on rayon's pool, each point's search
+/// its own, so the result is the same on any number of threads.
+pub(crate) fn nearest_each_by<S: Send>(
     source: &[Point3<f64>],
     transform: &RigidTransform,
     found: &mut Vec<Option<(usize, f64)>>, // (N,)
-    nearest: impl Fn(&Point3<f64>, Option<(usize, f64)>) -> Option<(usize, f64)> + Sync,
+    state: &mut [S],                       // (N,)
+    nearest: impl Fn(&Point3<f64>, Option<(usize, f64)>, &mut S) -> Option<(usize, f64)> + Sync,
 ) {
     if found.len() != source.len() {
         found.clear();
@@ -127,10 +131,11 @@ pub(crate) fn nearest_each_by(
     }
     found
         .par_chunks_mut(NEAREST_BLOCK)
+        .zip(state.par_chunks_mut(NEAREST_BLOCK))
         .zip(source.par_chunks(NEAREST_BLOCK))
-        .for_each(|(found, points)| {
-            for (answer, p) in found.iter_mut().zip(points) {
-                *answer = nearest(&transform.apply(p), *answer);
+        .for_each(|((found, state), points)| {
+            for ((answer, state), p) in found.iter_mut().zip(state).zip(points) {
+                *answer = nearest(&transform.apply(p), *answer, state);
             }
         });
 }

@@ -32,7 +32,7 @@ use rayon::prelude::*;
 use rgm_geom::normals::{normal_from_around, NormalsConfig, WithinConfig};
 use rgm_geom::{nearest_among, GeomError, KnnIndex, PointCloud, Result, RigidTransform};
 
-use crate::fit::{nearest_each, nearest_each_by, score, search_from, Fit};
+use crate::fit::{nearest_each_by, score, search_from, Fit};
 use crate::methods::icp::{self, check_clouds, IcpConfig};
 use crate::Prepared;
 
@@ -234,8 +234,18 @@ struct Around {
 #[derive(Default)]
 struct PlaneScratch {
     moved: Vec<Point3<f64>>, // (N,) the source under the current transform
-    nearest: Vec<Option<(usize, f64)>>, // (N,) each moved point's nearest target point
+    nearest: Correspondences,
     pairs: Vec<(usize, usize, f64)>, // (P,) i, j, distance
+}
+
+/// What the last search of each source point found, to start the next from.
+#[derive(Default)]
+struct Correspondences {
+    /// Each moved point's nearest target point. // (N,)
+    found: Vec<Option<(usize, f64)>>,
+    /// Where a point without one was last searched, and how far from there no target point
+    /// lies. // (N,)
+    clear: Vec<Option<(Point3<f64>, f64)>>,
 }
 
 /// One point-to-plane stage.
@@ -310,35 +320,56 @@ impl<'a> PlaneFit<'a> {
     }
 
     /// Each source point's nearest target point strictly within `max_distance` under
-    /// `transform` ([`nearest_each`]), a point paired before searched among its earlier
-    /// partner's neighbours where they prove the answer.
+    /// `transform` ([`crate::fit::nearest_each`]'s answers): a point paired before searched among its earlier
+    /// partner's neighbours where they prove the answer, and a point with no target point
+    /// near where it was last searched answered "none" while it has not moved out of that
+    /// clearance (most of a partial overlap's points, every iteration after the first).
     fn nearest_each(
         &self,
         transform: &RigidTransform,
         max_distance: f64,
-        found: &mut Vec<Option<(usize, f64)>>, // (N,)
+        scratch: &mut Correspondences,
     ) {
-        let TargetNormals::Lazy { config, cache } = &self.normals else {
-            nearest_each(
-                &self.source.points,
-                self.index,
-                transform,
-                max_distance,
-                found,
-            );
-            return;
+        let Correspondences { found, clear } = scratch;
+        if clear.len() != self.source.len() {
+            found.clear();
+            clear.clear();
+            clear.resize(self.source.len(), None);
+        }
+        let borrowed = match &self.normals {
+            TargetNormals::Lazy { config, cache } => Some((config.radius, cache.borrow())),
+            TargetNormals::Given(_) => None,
         };
-        let around = cache.borrow();
-        let (known, lists) = (&around.known, &around.lists);
+        // The borrow's contents, which the threads may share (the borrow itself stays here).
+        let lazy = borrowed.as_ref().map(|(reach, around)| (*reach, &**around));
         let (points, index) = (&self.target.points, self.index);
-        nearest_each_by(&self.source.points, transform, found, |moved, earlier| {
-            earlier
-                .and_then(|(partner, _)| {
-                    let (_, list) = known[partner].as_ref()?;
-                    let list = &lists[list.start as usize..list.end as usize];
-                    nearest_among(points, list, partner, config.radius, moved, max_distance)
-                })
-                .unwrap_or_else(|| search_from(index, moved, max_distance, earlier))
+        let among = |partner: usize, moved: &Point3<f64>| {
+            let (reach, around) = lazy?;
+            let (_, list) = around.known[partner].as_ref()?;
+            let list = &around.lists[list.start as usize..list.end as usize];
+            nearest_among(points, list, partner, reach, moved, max_distance)
+        };
+        let source = &self.source.points;
+        nearest_each_by(source, transform, found, clear, |moved, earlier, clear| {
+            if let Some((at, gap)) = *clear {
+                // Nothing lies within `gap` of `at`, so nothing within `gap − |moved − at|` of
+                // `moved` (a hair less, for rounding).
+                if (gap - (moved - at).norm()) * (1.0 - 1e-9) >= max_distance {
+                    return None;
+                }
+            }
+            if let Some(answer) = earlier.and_then(|(partner, _)| among(partner, moved)) {
+                return answer;
+            }
+            let answer = search_from(index, moved, max_distance, earlier);
+            // A miss is searched again twice as far, so that the next iterations can tell it
+            // from its clearance.
+            *clear = answer.is_none().then(|| {
+                let wide = 2.0 * max_distance;
+                let gap = index.nearest_within(moved, wide).map_or(wide, |(_, d)| d);
+                (*moved, gap)
+            });
+            answer
         });
     }
 
@@ -411,6 +442,7 @@ impl<'a> PlaneFit<'a> {
             moved.clear();
             moved.extend(self.source.points.iter().map(|p| transform.apply(p)));
             self.nearest_each(transform, stage.max_distance, nearest);
+            let nearest = &nearest.found;
             pairs.clear();
             if stage.residual_gate.is_some() {
                 self.compute_normals(nearest.iter().filter_map(|&found| Some(found?.0)));
@@ -456,8 +488,8 @@ impl<'a> PlaneFit<'a> {
         max_distance: f64,
         scratch: &mut PlaneScratch,
     ) -> Option<f64> {
-        let nearest = &mut scratch.nearest;
-        self.nearest_each(transform, max_distance, nearest);
+        self.nearest_each(transform, max_distance, &mut scratch.nearest);
+        let nearest = &scratch.nearest.found;
         self.compute_normals(nearest.iter().filter_map(|&found| Some(found?.0)));
         let mut residuals: Vec<f64> = self
             .source
@@ -593,7 +625,7 @@ pub fn refine_at_resolution(
 
 /// The median absolute point-to-plane residual of `source`'s points moved by `transform` that
 /// have a point of `target` within `max_distance` (`index` indexes `target`), the normals
-/// estimated at 8 × `spacing` as [`refine_at_resolution`] estimates them; `None` when no point
+/// estimated from `spacing` as [`refine_at_resolution`] estimates them; `None` when no point
 /// has. How well a refined scan lies on the others ([`crate::multiway`]).
 pub fn median_plane_residual(
     source: &PointCloud,
@@ -644,6 +676,7 @@ fn point_to_plane_step(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fit::nearest_each;
     use rand::{rngs::StdRng, SeedableRng};
     use rand_distr::{Distribution, Normal};
     use rgm_geom::euler::rotation_xyz_intrinsic;
@@ -895,5 +928,48 @@ mod tests {
         ] {
             assert_eq!(current_name(old), now, "{old}");
         }
+    }
+
+    #[test]
+    fn a_plane_fit_s_searches_answer_what_a_fresh_search_answers() {
+        // A partial overlap: the source cut to 70 % and moved a little each iteration, so that
+        // searches start from earlier partners' neighbours and from earlier misses' clearances.
+        let target = box_surface(6000, 41);
+        let source = cropped_and_jittered(&box_surface(6000, 42), Vector3::new(0.3, 0.8, 0.5), 43);
+        let index = KnnIndex::new(&target.points);
+        let plane = PlaneFit::at_spacing(&source, &target, &index, 0.012);
+        let mut scratch = PlaneScratch::default();
+        let mut rng = StdRng::seed_from_u64(44);
+        let (mut misses, mut fresh) = (0, Vec::new());
+        for (step, max_distance) in [0.05, 0.05, 0.03, 0.03, 0.02, 0.02, 0.02]
+            .iter()
+            .enumerate()
+        {
+            let nudge = RigidTransform::random(&mut rng, 0.3, 0.004);
+            let transform = nudge.compose(&RigidTransform::random(
+                &mut StdRng::seed_from_u64(45),
+                3.0,
+                0.02,
+            ));
+            plane.nearest_each(&transform, *max_distance, &mut scratch.nearest);
+            nearest_each(
+                &source.points,
+                &index,
+                &transform,
+                *max_distance,
+                &mut fresh,
+            );
+            assert_eq!(scratch.nearest.found, fresh, "iteration {step}");
+            fresh.clear();
+            misses += scratch.nearest.found.iter().filter(|f| f.is_none()).count();
+            plane.compute_normals(
+                scratch
+                    .nearest
+                    .found
+                    .iter()
+                    .filter_map(|f| Some(f.as_ref()?.0)),
+            );
+        }
+        assert!(misses > 1000, "{misses} misses");
     }
 }
