@@ -1,7 +1,7 @@
 //! rgm-geom's and rgm-registration's hot paths at RGM's sizes (N = 717 partial, 1,024 full; K = 20): the kNN graph,
 //! weighted Kabsch, and the classical baselines ICP and FPFH + FGR on a 717-point pair; the
 //! searches of a dense scan pair (40,000 points: the nearest within a radius, whether any point
-//! lies within it, the hybrid 30); and the scene stage's global estimators
+//! lies within it, the hybrid 30, the refinement's normals); and the scene stage's global estimators
 //! (RANSAC, SC²) on a 20,000-point room pair.
 //!
 //! Run: `cargo bench -p rgm-benches --bench geom -- --warm-up-time 1 --measurement-time 3`
@@ -10,7 +10,7 @@ use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use rand::{rngs::StdRng, SeedableRng};
 use rgm_benches::{unit_ball_points, SIZES};
 use rgm_geom::fpfh::{features, FpfhConfig};
-use rgm_geom::normals::NormalsConfig;
+use rgm_geom::normals::{normals_within, NormalsConfig, WithinConfig};
 use rgm_geom::testing::room_points;
 use rgm_geom::{kabsch, knn_graph, KnnIndex, Point3, PointCloud, RigidTransform, Vector3};
 use rgm_registration::methods::{fgr, icp, ransac, refine, sc2};
@@ -151,8 +151,9 @@ fn registration(c: &mut Criterion) {
 /// The searches a dense scan pair spends most of its time in (issue 57): each of 40,000 points
 /// of one sampling of a room corner (its spacing ≈ 1.5 cm) moved by 1 cm, its nearest point of
 /// another sampling within 6 cm (the refinement's correspondences and the judges' overlap
-/// scores), and its 30 nearest within 12 cm (the normals of the refinement at the scans'
-/// resolution).
+/// scores), and its 30 nearest within 12 cm (Open3D's hybrid neighbourhood, FPFH's normals);
+/// and the normals of the refinement at the scans' resolution of the other sampling's own
+/// points, from every neighbour within 5.4 cm (3.6 spacings, `normals_within`).
 fn knn_dense(c: &mut Criterion) {
     let target = room_points(40_000, 2);
     let index = KnnIndex::new(&target);
@@ -181,6 +182,17 @@ fn knn_dense(c: &mut Criterion) {
             }
             total
         })
+    });
+    group.bench_function("normals_within_3_6_spacings", |b| {
+        let which: Vec<usize> = (0..target.len()).collect();
+        let config = WithinConfig {
+            radius: 0.054,
+            sparse: NormalsConfig {
+                radius: 0.12,
+                max_nn: 30,
+            },
+        };
+        b.iter(|| normals_within(&target, &index, &which, &config))
     });
     group.finish();
 }
