@@ -77,6 +77,8 @@ COMMON="--preset fast --optimizer adam --val-shapes 300 --checkpoint-every 50 --
 #      plateaued in 7 epochs (2e-4) and the spent drops. Its schedule is made for several
 #      sessions of queue; the queue's flat rule (3 validations with neither a new best recall
 #      nor a lower loss) stops it if that lever is gone too.
+#      Session 44: 59.0, 60.7, 61.3 % alone after epochs 1–3 (91.3–91.7 % refined), each a new
+#      best and a new lowest validation loss; snapshot at epoch 3 and 50 batches.
 # `init=` names the weights a run starts from; `git:REV:PATH` ones are written out of the
 # history into target/queue-init/ when the run starts (`rgm train` reads --init only then).
 QUEUE=(
