@@ -113,7 +113,7 @@ impl KnnIndex {
     /// The nearest point to `query`: (index, distance); the lowest index among equally near
     /// points. An empty index answers `(usize::MAX, f64::INFINITY)`.
     pub fn nearest(&self, query: &Point3<f64>) -> (usize, f64) {
-        let (i, d2) = self.nearest_squared_below(query, f64::INFINITY);
+        let (i, d2) = self.nearest_from(query, (usize::MAX, f64::INFINITY));
         (i, d2.sqrt())
     }
 
@@ -122,7 +122,7 @@ impl KnnIndex {
     /// (ICP's correspondence search).
     pub fn nearest_within(&self, query: &Point3<f64>, radius: f64) -> Option<(usize, f64)> {
         let r2 = radius * radius;
-        let (i, d2) = self.nearest_squared_below(query, r2);
+        let (i, d2) = self.nearest_from(query, (usize::MAX, r2));
         (i != usize::MAX && d2 < r2).then(|| (i, d2.sqrt()))
     }
 
@@ -137,20 +137,27 @@ impl KnnIndex {
         guess: usize,
     ) -> Option<(usize, f64)> {
         let r2 = radius * radius;
-        let Some(&place) = self.places.get(guess) else {
-            return self.nearest_within(query, radius);
-        };
-        let place = place as usize;
-        let at = [self.xyz[0][place], self.xyz[1][place], self.xyz[2][place]];
         // The distance as a leaf computes it, so that ties resolve as in a search without it.
-        let guess_d2 = squared_distance(&at, &[query.x, query.y, query.z]);
-        if !(guess_d2 < r2) {
-            return self.nearest_within(query, radius);
-        }
-        let mut best = Nearest((guess, guess_d2));
+        let start = self
+            .places
+            .get(guess)
+            .map(|&place| {
+                let at = [0, 1, 2].map(|axis| self.xyz[axis][place as usize]);
+                (guess, squared_distance(&at, &[query.x, query.y, query.z]))
+            })
+            .filter(|&(_, d2)| d2 < r2)
+            .unwrap_or((usize::MAX, r2));
+        let (i, d2) = self.nearest_from(query, start);
+        (i != usize::MAX && d2 < r2).then(|| (i, d2.sqrt()))
+    }
+
+    /// (index, squared distance) of the first point by (squared distance, index) that comes no
+    /// later than `start` (a point of the index with its squared distance, or `(usize::MAX,
+    /// bound)`); `start` itself when none does.
+    fn nearest_from(&self, query: &Point3<f64>, start: (usize, f64)) -> (usize, f64) {
+        let mut best = Nearest(start);
         self.search_all(query, &mut best);
-        let (i, d2) = best.0;
-        Some((i, d2.sqrt()))
+        best.0
     }
 
     /// Whether some point is strictly closer than `radius` to `query`: the same answer as
@@ -164,14 +171,6 @@ impl KnnIndex {
         };
         self.search_all(query, &mut any);
         any.found
-    }
-
-    /// (index, squared distance) of the nearest point with squared distance at most `bound`;
-    /// `(usize::MAX, bound)` when there is none.
-    fn nearest_squared_below(&self, query: &Point3<f64>, bound: f64) -> (usize, f64) {
-        let mut best = Nearest((usize::MAX, bound));
-        self.search_all(query, &mut best);
-        best.0
     }
 
     /// The `k` nearest points to `query` (fewer when the index has fewer), sorted by distance,

@@ -127,18 +127,19 @@ pub fn normal_from_around(
         add_moments(&mut sums, [d.x, d.y, d.z]);
     }
     let cov = covariance(&sums, around.len().max(1) as f64);
-    let normal = smallest_eigenvector(&cov);
-    let usable = around.len() >= MIN_WITHIN
-        && spans_a_plane(&cov)
-        && normal != Vector3::zeros()
-        && normal.iter().all(|v| v.is_finite());
-    if usable {
-        normal
-    } else {
+    let own = (around.len() >= MIN_WITHIN && spans_a_plane(&cov))
+        .then(|| unit_normal(smallest_eigenvector(&cov)))
+        .flatten();
+    own.unwrap_or_else(|| {
         let sparse = &config.sparse;
         let hybrid = index.hybrid(&q, sparse.radius, sparse.max_nn);
         pca_normal(points, &hybrid).unwrap_or_else(Vector3::z)
-    }
+    })
+}
+
+/// `normal` where it is one: not zero (a zero covariance's) and finite.
+fn unit_normal(normal: Vector3<f64>) -> Option<Vector3<f64>> {
+    (normal != Vector3::zeros() && normal.iter().all(|v| v.is_finite())).then_some(normal)
 }
 
 /// Adds x, y, z, xx, xy, xz, yy, yz, zz of one point to `sums`.
@@ -192,8 +193,10 @@ fn pca_normal(points: &[Point3<f64>], neighbours: &[(usize, f64)]) -> Option<Vec
     for &(j, _) in neighbours {
         add_moments(&mut c, [points[j].x, points[j].y, points[j].z]);
     }
-    let normal = smallest_eigenvector(&covariance(&c, neighbours.len() as f64));
-    (normal != Vector3::zeros() && normal.iter().all(|v| v.is_finite())).then_some(normal)
+    unit_normal(smallest_eigenvector(&covariance(
+        &c,
+        neighbours.len() as f64,
+    )))
 }
 
 /// `a · b`, summed x, y, z in that order.

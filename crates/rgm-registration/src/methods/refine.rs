@@ -312,18 +312,16 @@ impl<'a> PlaneFit<'a> {
                     self.compute_normals(std::iter::once(j));
                 }
                 let known = &cache.borrow().known[j];
-                known
-                    .as_ref()
-                    .map_or_else(Vector3::z, |(normal, _)| *normal)
+                known.as_ref().expect("computed just above").0
             }
         }
     }
 
     /// Each source point's nearest target point strictly within `max_distance` under
-    /// `transform` ([`crate::fit::nearest_each`]'s answers): a point paired before searched among its earlier
-    /// partner's neighbours where they prove the answer, and a point with no target point
-    /// near where it was last searched answered "none" while it has not moved out of that
-    /// clearance (most of a partial overlap's points, every iteration after the first).
+    /// `transform` ([`crate::fit::nearest_each`]'s answers): a point paired before searched
+    /// among its earlier partner's neighbours where they prove the answer, and a point with no
+    /// target point near where it was last searched answered "none" while it has not moved out
+    /// of that clearance (most of a partial overlap's points, every iteration after the first).
     fn nearest_each(
         &self,
         transform: &RigidTransform,
