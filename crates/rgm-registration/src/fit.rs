@@ -186,6 +186,20 @@ pub(crate) fn share_within(
 }
 
 impl Fit {
+    /// A result for `transform` not scored: no inliers, fitness and RMSE 0 (what
+    /// [`crate::Registrar::register_unscored`] may hand back, its caller scoring a transform of
+    /// its own).
+    pub fn unscored(t_target_source: RigidTransform, iterations: usize, converged: bool) -> Self {
+        Self {
+            t_target_source,
+            iterations,
+            converged,
+            inlier_count: 0,
+            fitness: 0.0,
+            inlier_rmse: 0.0,
+        }
+    }
+
     /// A result for `transform` with its Open3D score.
     pub fn scored(
         t_target_source: RigidTransform,

@@ -15,8 +15,6 @@ use rgm_geom::cloud::{evenly, median};
 use rgm_geom::normals::{estimate_normals, NormalsConfig};
 use rgm_geom::{KnnIndex, PointCloud, RigidTransform, Vector3};
 
-use crate::fit::{score, Score};
-
 /// Points whose neighbours set a cloud's [`Prepared::spacings`].
 pub const SPACING_SAMPLE: usize = 2000;
 
@@ -31,12 +29,8 @@ type ScoreKey = (u64, [u64; 12], u64);
 /// Unit normals of a cloud's points, shared by the stages that ask for them. // (N,)
 pub type Normals = Arc<Vec<Vector3<f64>>>;
 
-/// A transform's [`score`] on a pair and its (source, target) index pairs. // (P,)
-pub type PairFit = Arc<(Score, Vec<(usize, usize)>)>;
-
 /// A cloud and what is made of it lazily: its [`KnnIndex`], its normals per
-/// [`NormalsConfig`], and scores and fits of it onto other prepared clouds
-/// ([`Prepared::pair_score`], [`Prepared::pair_fit`]).
+/// [`NormalsConfig`], and scores of it onto other prepared clouds ([`Prepared::pair_score`]).
 #[derive(Debug)]
 pub struct Prepared<'a> {
     cloud: Cow<'a, PointCloud>,
@@ -46,8 +40,6 @@ pub struct Prepared<'a> {
     id: u64,
     /// The pair scores made so far.
     scores: Mutex<Vec<(ScoreKey, f64)>>,
-    /// The pair fits made so far.
-    fits: Mutex<Vec<(ScoreKey, PairFit)>>,
     /// [`Prepared::spacings`], once measured.
     spacings: OnceLock<(f64, f64)>,
 }
@@ -61,7 +53,6 @@ impl<'a> Prepared<'a> {
             normals: Mutex::new(Vec::new()),
             id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
             scores: Mutex::new(Vec::new()),
-            fits: Mutex::new(Vec::new()),
             spacings: OnceLock::new(),
         }
     }
@@ -131,7 +122,7 @@ impl<'a> Prepared<'a> {
 }
 
 impl Prepared<'_> {
-    /// What a pair's score or fit is kept under.
+    /// What a pair's score is kept under.
     fn key(&self, target: &Prepared, transform: &RigidTransform, length: f64) -> ScoreKey {
         let mut entries = [0u64; 12];
         let values = transform
@@ -158,33 +149,6 @@ impl Prepared<'_> {
         make: impl FnOnce() -> f64,
     ) -> f64 {
         kept(&self.scores, self.key(target, transform, length), make)
-    }
-
-    /// [`score`] of this cloud moved by `transform` onto `target` within `max_distance`, with
-    /// its pairs, made on the first ask and kept: each composite nested in a registration
-    /// concludes with its winner's fit on the same pair, and on a dense pair that is a search
-    /// of every source point.
-    pub fn pair_fit(
-        &self,
-        target: &Prepared,
-        transform: &RigidTransform,
-        max_distance: f64,
-    ) -> PairFit {
-        kept(
-            &self.fits,
-            self.key(target, transform, max_distance),
-            || {
-                let mut pairs = Vec::new();
-                let scored = score(
-                    &self.points,
-                    target.index(),
-                    transform,
-                    max_distance,
-                    Some(&mut pairs),
-                );
-                Arc::new((scored, pairs))
-            },
-        )
     }
 }
 
@@ -251,31 +215,6 @@ mod tests {
         };
         assert!(!Arc::ptr_eq(&normals, &prepared.normals(&wide)));
         assert_eq!(prepared.normals.lock().unwrap().len(), 2);
-    }
-
-    #[test]
-    fn a_pair_fit_is_the_score_with_its_pairs_made_once_per_target_transform_and_distance() {
-        let cloud = airplane();
-        let (source, target) = (Prepared::new(&cloud), Prepared::new(&cloud));
-        let shift =
-            RigidTransform::new(rgm_geom::Matrix3::identity(), Vector3::new(0.03, 0.0, 0.0));
-        let fit = source.pair_fit(&target, &shift, 0.02);
-        let mut pairs = Vec::new();
-        let scored = score(
-            &cloud.points,
-            target.index(),
-            &shift,
-            0.02,
-            Some(&mut pairs),
-        );
-        assert_eq!(fit.0, scored);
-        assert_eq!(fit.1, pairs);
-        assert!(scored.inlier_count > 0 && scored.inlier_count < cloud.len());
-        assert!(Arc::ptr_eq(&fit, &source.pair_fit(&target, &shift, 0.02)));
-        // Another distance is another fit.
-        let near = source.pair_fit(&target, &shift, 0.01);
-        assert!(near.0.inlier_count < scored.inlier_count);
-        assert_eq!(source.fits.lock().unwrap().len(), 2);
     }
 
     #[test]

@@ -117,6 +117,31 @@ impl Registration {
         }
     }
 
+    /// This registration with its fit scored: the source points its transform brings within
+    /// `max_distance` of `target` ([`score`]) and their pairs, its iterations and convergence
+    /// kept.
+    pub fn fitted_within(self, source: &Prepared, target: &Prepared, max_distance: f64) -> Self {
+        let mut correspondences = Vec::new();
+        let transform = self.result.t_target_source;
+        let scored = score(
+            &source.points,
+            target.index(),
+            &transform,
+            max_distance,
+            Some(&mut correspondences),
+        );
+        Self {
+            result: Fit::scored(
+                transform,
+                self.result.iterations,
+                self.result.converged,
+                scored,
+            ),
+            correspondences,
+            ..self
+        }
+    }
+
     /// A single method's registration, timed from `start`.
     pub fn single(result: Fit, correspondences: Vec<(usize, usize)>, start: Instant) -> Self {
         Self {
@@ -165,6 +190,20 @@ pub trait Registrar<E> {
         target: &Prepared,
         progress: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E>;
+
+    /// [`Self::register_prepared`] for a caller that reads only the transform, iterations,
+    /// candidates and doubt, and scores a transform of its own (a refinement after it, a
+    /// composite judging its candidates): a composite then leaves its fit unscored
+    /// ([`Fit::unscored`], no correspondences), for on a dense pair that fit is a search of every
+    /// source point. Any other method registers in full.
+    fn register_unscored(
+        &mut self,
+        source: &Prepared,
+        target: &Prepared,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        self.register_prepared(source, target, progress)
+    }
 
     /// Registers `source` onto `target`, telling `progress` where it is.
     fn register_with_progress(
@@ -219,5 +258,14 @@ impl<E> Registrar<E> for Box<dyn DynRegistrar<E>> {
         progress: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
         (**self).register_prepared(source, target, progress)
+    }
+
+    fn register_unscored(
+        &mut self,
+        source: &Prepared,
+        target: &Prepared,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        (**self).register_unscored(source, target, progress)
     }
 }

@@ -1,5 +1,6 @@
 //! Shapes shared by the tests of several modules.
 
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -74,13 +75,14 @@ pub fn assert_registers_a_room_at_any_scale(register: impl Fn(&PointCloud, &Poin
     assert!(angle < 1e-3, "{angle}° between the scales");
 }
 
-/// A method that answers every pair with one transform (a shift along x), and records the
-/// sizes of the pairs it was given.
+/// A method that answers every pair with one transform (a shift along x), unscored, and records
+/// the sizes of the pairs it was given and which calls asked for a scored registration.
 #[derive(Clone)]
 pub struct Fixed {
     pub name: &'static str,
     pub transform: RigidTransform,
     seen: Arc<Mutex<Vec<(usize, usize)>>>,
+    scored: Arc<AtomicUsize>,
 }
 
 impl Fixed {
@@ -89,12 +91,19 @@ impl Fixed {
             name,
             transform: RigidTransform::new(Matrix3::identity(), Vector3::new(shift, 0.0, 0.0)),
             seen: Default::default(),
+            scored: Default::default(),
         }
     }
 
     /// How many pairs it registered.
     pub fn calls(&self) -> usize {
         self.seen.lock().unwrap().len()
+    }
+
+    /// How many of its calls were [`Registrar::register_prepared`]'s, not
+    /// [`Registrar::register_unscored`]'s.
+    pub fn scored_calls(&self) -> usize {
+        self.scored.load(Ordering::Relaxed)
     }
 
     /// The (source, target) sizes of the pairs it registered, in order.
@@ -112,17 +121,20 @@ impl<E: From<GeomError>> Registrar<E> for Fixed {
         &mut self,
         source: &Prepared,
         target: &Prepared,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        self.scored.fetch_add(1, Ordering::Relaxed);
+        self.register_unscored(source, target, progress)
+    }
+
+    fn register_unscored(
+        &mut self,
+        source: &Prepared,
+        target: &Prepared,
         _: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
         self.seen.lock().unwrap().push((source.len(), target.len()));
-        let result = Fit {
-            t_target_source: self.transform,
-            iterations: 0,
-            converged: true,
-            inlier_count: 0,
-            fitness: 0.0,
-            inlier_rmse: 0.0,
-        };
+        let result = Fit::unscored(self.transform, 0, true);
         Ok(Registration::single(result, Vec::new(), Instant::now()))
     }
 }

@@ -87,7 +87,7 @@ impl Tally {
             .par_iter_mut()
             .map(|candidate| {
                 let start = Instant::now();
-                let outcome = candidate.register_prepared(source, target, &mut |_| {});
+                let outcome = candidate.register_unscored(source, target, &mut |_| {});
                 (outcome, elapsed_ms(start))
             })
             .collect();
@@ -175,21 +175,18 @@ fn composite_id<'c, E: 'c>(
     }
 }
 
-/// The registration of a composite's `outcome` on the judged pair: the best candidate (`best`:
-/// its index among `candidates`), scored at the judge's [`Scoring::result_distance`] with its
-/// correspondences; doubted when it overlaps less than [`Scoring::min_overlap`]; an error when
-/// every candidate failed.
+/// The registration of a composite's `outcome` on the judged pair, unscored
+/// ([`Registrar::register_unscored`]; [`Registration::fitted_within`] scores it at the judge's
+/// [`Scoring::result_distance`]): the best candidate (`best`: its index among `candidates`);
+/// doubted when it overlaps less than [`Scoring::min_overlap`]; an error when every candidate
+/// failed.
 pub fn conclude<E: From<AllCandidatesFailed>>(
     judge: &Judge,
     candidates: Vec<Candidate>,
     best: Option<(usize, usize)>,
     start: Instant,
 ) -> Result<Registration, E> {
-    let Scoring {
-        min_overlap,
-        result_distance,
-        ..
-    } = judge.scoring;
+    let min_overlap = judge.scoring.min_overlap;
     let Some((chosen, iterations)) = best else {
         let why: Vec<String> = candidates
             .iter()
@@ -211,12 +208,9 @@ pub fn conclude<E: From<AllCandidatesFailed>>(
              the clouds may not overlap, or every method failed on them"
         )
     });
-    let fit = judge
-        .source
-        .pair_fit(judge.target, &transform, result_distance);
     Ok(Registration {
-        result: Fit::scored(transform, iterations, true, fit.0),
-        correspondences: fit.1.clone(),
+        result: Fit::unscored(transform, iterations, true),
+        correspondences: Vec::new(),
         time_ms: elapsed_ms(start),
         candidates,
         chosen: Some(chosen),
@@ -224,7 +218,7 @@ pub fn conclude<E: From<AllCandidatesFailed>>(
     })
 }
 
-/// `composite` on the pair as given, judged there.
+/// `composite` on the pair as given, judged there, unscored.
 fn register_composite<E: From<GeomError> + From<AllCandidatesFailed>>(
     composite: &mut impl Composite<E>,
     source: &Prepared,
@@ -234,6 +228,18 @@ fn register_composite<E: From<GeomError> + From<AllCandidatesFailed>>(
     let judge = Judge::new(source, target, composite.scoring());
     let outcome = composite.run_judged(source, target, &judge);
     conclude(&judge, outcome.candidates, outcome.best, start)
+}
+
+/// `composite` on the pair as given, judged there, its fit scored at its
+/// [`Scoring::result_distance`] (a composite's [`Registrar::register_prepared`]).
+fn register_scored<E: From<GeomError> + From<AllCandidatesFailed>>(
+    composite: &mut impl Composite<E>,
+    source: &Prepared,
+    target: &Prepared,
+) -> Result<Registration, E> {
+    let distance = composite.scoring().result_distance;
+    let found = composite.register_unscored(source, target, &mut |_| {})?;
+    Ok(found.fitted_within(source, target, distance))
 }
 
 /// Every candidate on the pair, side by side, the best by [`crate::check::overlap_score`] returned (ties to
@@ -278,6 +284,15 @@ impl<E: From<GeomError> + From<AllCandidatesFailed> + ToString + Send> Registrar
     }
 
     fn register_prepared(
+        &mut self,
+        source: &Prepared,
+        target: &Prepared,
+        _: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        register_scored(self, source, target)
+    }
+
+    fn register_unscored(
         &mut self,
         source: &Prepared,
         target: &Prepared,
@@ -343,6 +358,15 @@ impl<E: From<GeomError> + From<AllCandidatesFailed> + ToString + Send> Registrar
         target: &Prepared,
         _: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
+        register_scored(self, source, target)
+    }
+
+    fn register_unscored(
+        &mut self,
+        source: &Prepared,
+        target: &Prepared,
+        _: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
         register_composite(self, source, target)
     }
 }
@@ -397,7 +421,22 @@ mod tests {
         // The tie goes to the earlier of the two right ones.
         assert_eq!(found.chosen, Some(1));
         assert_eq!(found.result.inlier_count, 10);
+        assert_eq!(found.correspondences.len(), 10);
         assert_eq!((wrong.calls(), right.calls(), also.calls()), (1, 1, 1));
+        // The candidates ran unscored: only the winner's fit is scored, by the composite.
+        assert_eq!(right.scored_calls(), 0);
+        // Unscored, the same choice without its fit.
+        let (s, t) = (Prepared::new(&line), Prepared::new(&line));
+        let unscored =
+            Registrar::<RegistrationError>::register_unscored(&mut best_of, &s, &t, &mut |_| {})
+                .unwrap();
+        assert_eq!(unscored.chosen, Some(1));
+        assert_eq!(
+            unscored.result.t_target_source,
+            found.result.t_target_source
+        );
+        assert_eq!(unscored.result.inlier_count, 0);
+        assert!(unscored.correspondences.is_empty());
         assert!(found.doubt.is_none());
         // Only the wrong one: a result that overlaps nothing is doubted, not dropped.
         best_of.candidates.truncate(1);

@@ -36,7 +36,19 @@ where
         self.inner.id()
     }
 
+    /// Scored at the composite's [`crate::check::Scoring::result_distance`].
     fn register_prepared(
+        &mut self,
+        source: &Prepared,
+        target: &Prepared,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        let distance = self.inner.scoring().result_distance;
+        let found = self.register_unscored(source, target, progress)?;
+        Ok(found.fitted_within(source, target, distance))
+    }
+
+    fn register_unscored(
         &mut self,
         source: &Prepared,
         target: &Prepared,

@@ -175,10 +175,11 @@ impl<E: From<GeomError>, R: Registrar<E>, F: Refiner> Registrar<E> for AtResolut
         progress: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
         let start = Instant::now();
-        let found = self.inner.register_prepared(source, target, progress)?;
         if !self.density.is_exceeded_by(source.len(), target.len()) {
-            return Ok(found);
+            return self.inner.register_prepared(source, target, progress);
         }
+        // The refinement scores its own transform.
+        let found = self.inner.register_unscored(source, target, progress)?;
         let fine = self
             .refiner
             .refine(source, target, &found.result.t_target_source)?;
@@ -217,10 +218,32 @@ impl<E, S: Registrar<E>, R: Registrar<E>> Registrar<E> for UpTo<S, R> {
         target: &Prepared,
         progress: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
+        self.one_for(source, target)
+            .register_prepared(source, target, progress)
+    }
+
+    fn register_unscored(
+        &mut self,
+        source: &Prepared,
+        target: &Prepared,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        self.one_for(source, target)
+            .register_unscored(source, target, progress)
+    }
+}
+
+impl<S, R> UpTo<S, R> {
+    /// `small` or `other`, whichever registers this pair.
+    fn one_for<E>(&mut self, source: &Prepared, target: &Prepared) -> &mut dyn Registrar<E>
+    where
+        S: Registrar<E>,
+        R: Registrar<E>,
+    {
         if source.len().max(target.len()) <= self.points {
-            self.small.register_prepared(source, target, progress)
+            &mut self.small
         } else {
-            self.other.register_prepared(source, target, progress)
+            &mut self.other
         }
     }
 }
@@ -351,9 +374,11 @@ mod tests {
     use super::*;
     use crate::methods::fgr::FgrConfig;
     use crate::methods::icp::IcpConfig;
+    use crate::methods::refine::RefineConfig;
     use crate::registrar::DynRegistrar;
-    use crate::testing::FRAME;
-    use rgm_geom::testing::airplane;
+    use crate::testing::{Fixed, DENSITY, FRAME};
+    use crate::RegistrationError;
+    use rgm_geom::testing::{airplane, box_surface};
     use rgm_geom::{Point3, Vector3};
 
     /// 200 points on a twisted curve, and the same points moved by 5° and 0.02.
@@ -436,6 +461,27 @@ mod tests {
         // The same methods on the pair they register are not doubted.
         let found = Registrar::<GeomError>::register(&mut refined, &source, &target).unwrap();
         assert!(found.doubt.is_none(), "{:?}", found.doubt);
+    }
+
+    #[test]
+    fn at_resolution_asks_a_dense_pair_s_inner_method_for_its_transform_alone() {
+        let fixed = Fixed::new("fixed", 0.0);
+        let mut at_resolution = AtResolution {
+            inner: fixed.clone(),
+            refiner: RefineConfig::default(),
+            density: DENSITY,
+        };
+        // Dense: the refinement scores its own transform, so the inner one is not scored.
+        let dense = box_surface(3000, 1);
+        let found =
+            Registrar::<RegistrationError>::register(&mut at_resolution, &dense, &dense).unwrap();
+        assert_eq!((fixed.calls(), fixed.scored_calls()), (1, 0));
+        assert_eq!(found.result.inlier_count, 3000);
+        assert_eq!(found.correspondences.len(), 3000);
+        // No denser than `density`: returned as the inner method scored it.
+        let sparse = box_surface(500, 2);
+        Registrar::<RegistrationError>::register(&mut at_resolution, &sparse, &sparse).unwrap();
+        assert_eq!((fixed.calls(), fixed.scored_calls()), (2, 1));
     }
 
     #[test]
