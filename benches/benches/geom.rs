@@ -13,7 +13,8 @@ use rgm_geom::fpfh::{features, FpfhConfig};
 use rgm_geom::normals::{normals_within, NormalsConfig, WithinConfig};
 use rgm_geom::testing::room_points;
 use rgm_geom::{kabsch, knn_graph, KnnIndex, Point3, PointCloud, RigidTransform, Vector3};
-use rgm_registration::methods::{fgr, icp, ransac, refine, sc2};
+use rgm_registration::methods::fgr::{self, FgrConfig};
+use rgm_registration::methods::{icp, ransac, refine, sc2};
 
 const K: usize = 20;
 
@@ -215,6 +216,28 @@ fn scene(c: &mut Criterion) {
     group.finish();
 }
 
+/// FGR's and the scene stage's mutual matching of FPFH features, brute force, at the scene
+/// stage's most points (5,000 per cloud; the features of two samplings of one room).
+fn feature_matching(c: &mut Criterion) {
+    let of = |seed| {
+        let cloud = PointCloud::new(room_points(5000, seed));
+        let config = FgrConfig::default();
+        features(
+            &cloud.points,
+            &KnnIndex::new(&cloud.points),
+            &config.normals,
+            &config.fpfh,
+        )
+    };
+    let (source, target) = (of(1), of(2));
+    let mut group = c.benchmark_group("fpfh_matching");
+    group.sample_size(10);
+    group.bench_function("mutual_5000", |b| {
+        b.iter(|| fgr::mutual_matches(&source, &target))
+    });
+    group.finish();
+}
+
 criterion_group!(
     benches,
     knn,
@@ -222,6 +245,7 @@ criterion_group!(
     knn_dense,
     kabsch_717,
     registration,
-    scene
+    scene,
+    feature_matching
 );
 criterion_main!(benches);

@@ -361,10 +361,28 @@ fn nearest_in_block(
     cols_best: &mut [Nearest],
 ) {
     #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx512f") {
+        // SAFETY: the CPU has AVX-512F.
+        return unsafe { nearest_in_block_avx512(first, rows, tiles, rows_best, cols_best) };
+    }
+    #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2.
         return unsafe { nearest_in_block_avx2(first, rows, tiles, rows_best, cols_best) };
     }
+    nearest_in_block_any(first, rows, tiles, rows_best, cols_best)
+}
+
+/// [`nearest_in_block`] compiled with AVX-512: a tile's eight lanes in one register.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn nearest_in_block_avx512(
+    first: usize,
+    rows: &[Fpfh],
+    tiles: &[FeatureTile],
+    rows_best: &mut [Nearest],
+    cols_best: &mut [Nearest],
+) {
     nearest_in_block_any(first, rows, tiles, rows_best, cols_best)
 }
 
