@@ -1,21 +1,21 @@
 #!/usr/bin/env bash
 # Two builds of rgm and Open3D 0.20 in one run, one thread each, pinned to one core: the Stanford
-# pairs (two rounds, each method alternating), the redkitchen and LiDAR pairs of
+# pairs (ROUNDS rounds, default two, each method alternating), the redkitchen and LiDAR pairs of
 # tools/scenes/benchmark.sh, and Open3D's scene pipeline (docs/baselines.md, issue 57).
-#   bash tools/baselines/same_run.sh BEFORE_RGM AFTER_RGM [OUT]
+#   [ROUNDS=2] bash tools/baselines/same_run.sh BEFORE_RGM AFTER_RGM [OUT]
 # Stop other jobs first (the training queue: kill -STOP its pids; kill -CONT after). Needs
 # open3d==0.20.0 (and libusb-1.0-0). The summary's "per-pair min" is each pair's faster of the
-# two rounds, averaged: a shared machine's stalls fall out of it.
+# ROUNDS rounds, averaged: a shared machine's stalls fall out of it.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 before=$1 after=$2 out=${3:-/tmp/rgm-same-run}
-core=${CORE:-1}
+core=${CORE:-1} rounds=${ROUNDS:-2}
 export OPENBLAS_NUM_THREADS=1 RAYON_NUM_THREADS=1 OMP_NUM_THREADS=1
 folders=(../shared/data/stanford/bunny ../shared/data/stanford/dragon_stand)
 mkdir -p "$out"
 echo "# $(date -u +%FT%TZ) $(lscpu | sed -n 's/^Model name: *//p')"
 "$after" pairs --scans "${folders[@]}" --out "$out/pairs" >/dev/null 2>&1
-for round in 1 2; do
+for round in $(seq "$rounds"); do
   for build in before after; do
     rgm=${!build}
     taskset -c "$core" "$rgm" eval --scans "${folders[@]}" --method auto --refine --workers 1 \
@@ -38,17 +38,17 @@ taskset -c "$core" python3 tools/scenes/open3d_scenes.py 2>/dev/null | tail -n 1
   sed "s/^/open3d redkitchen: /"
 taskset -c "$core" python3 tools/scenes/open3d_scenes.py --scenes target/scenes/lidar 2>/dev/null |
   tail -n 1 | sed "s/^/open3d lidar: /"
-python3 - "$out" <<'EOF'
+python3 - "$out" "$rounds" <<'EOF'
 import json, statistics, sys
-out = sys.argv[1]
+out, rounds = sys.argv[1], range(1, int(sys.argv[2]) + 1)
 times = {}
 for build in ("before", "after"):
-    for r in (1, 2):
+    for r in rounds:
         for folder in json.load(open(f"{out}/scans-{build}-{r}.json"))["folders"]:
             for p in folder["pairs"]:
                 times.setdefault((build, folder["scans"]), {}).setdefault(p["index"], []).append(p["time_ms"])
 for name in ("bunny", "dragon_stand"):
-    for r in (1, 2):
+    for r in rounds:
         for i, p in enumerate(json.load(open(f"{out}/open3d-{name}-{r}.json"))["pairs"]):
             times.setdefault(("open3d", name), {}).setdefault(i, []).append(p["time_ms"])
 for name in ("bunny", "dragon_stand"):
