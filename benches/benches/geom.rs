@@ -216,6 +216,27 @@ fn scene(c: &mut Criterion) {
     group.finish();
 }
 
+/// Farthest-point sampling of 1,024 of 40,000 points (the thinning by cells of a dense pair):
+/// a room's random sampling in the order drawn, and the same points in scan-like strips (sorted
+/// by 5 cm bands of x, then y), whose runs of consecutive points lie close together.
+fn farthest_points(c: &mut Criterion) {
+    let random = PointCloud::new(room_points(40_000, 2));
+    let mut strips = random.points.clone();
+    strips.sort_by(|a, b| {
+        ((a.x * 20.0).floor())
+            .total_cmp(&(b.x * 20.0).floor())
+            .then(a.y.total_cmp(&b.y))
+    });
+    let strips = PointCloud::new(strips);
+    let mut group = c.benchmark_group("farthest_points_40k");
+    group.sample_size(10);
+    group.bench_function("random_order", |b| {
+        b.iter(|| random.farthest_point_indices(1024))
+    });
+    group.bench_function("strips", |b| b.iter(|| strips.farthest_point_indices(1024)));
+    group.finish();
+}
+
 /// FGR's and the scene stage's mutual matching of FPFH features, brute force, at the scene
 /// stage's most points (5,000 per cloud; the features of two samplings of one room).
 fn feature_matching(c: &mut Criterion) {
@@ -246,6 +267,7 @@ criterion_group!(
     kabsch_717,
     registration,
     scene,
-    feature_matching
+    feature_matching,
+    farthest_points
 );
 criterion_main!(benches);

@@ -101,20 +101,54 @@ impl PointCloud {
         // then the first point at the largest distance.
         let axis = |a: usize| -> Vec<f64> { self.points.iter().map(|p| p[a]).collect() };
         let axes = [axis(0), axis(1), axis(2)]; // (3, N)
+                                                // Runs of consecutive points with their bounding boxes and largest distance: a pick no
+                                                // nearer to a run's box than that distance lowers none of its points' (the box's
+                                                // distance, summed as a point's is, is never above any of them), so the run is
+                                                // skipped, and the picks are those of a pass over every point.
+        let mut runs: Vec<FarthestRun> = (0..n)
+            .step_by(FARTHEST_RUN)
+            .map(|start| {
+                let end = (start + FARTHEST_RUN).min(n);
+                let (lo, hi) = bounds(self.points[start..end].iter().copied());
+                FarthestRun {
+                    start,
+                    end,
+                    lo: lo.into(),
+                    hi: hi.into(),
+                    largest: f64::INFINITY,
+                }
+            })
+            .collect();
         let mut picked = Vec::with_capacity(count);
         let mut nearest = vec![f64::INFINITY; n]; // (N,) squared distance to the picked points
         let mut next = 0;
         while picked.len() < count {
             picked.push(next);
             let p = [axes[0][next], axes[1][next], axes[2][next]];
-            let farthest = nearer_to(&mut nearest, &axes, p);
+            for run in &mut runs {
+                if box_squared_distance(p, run.lo, run.hi) >= run.largest {
+                    continue;
+                }
+                let (start, end) = (run.start, run.end);
+                let coordinates = [0, 1, 2].map(|a| &axes[a][start..end]);
+                run.largest = nearer_to(&mut nearest[start..end], coordinates, p);
+            }
+            let farthest = runs
+                .iter()
+                .fold(0.0, |m, run| if run.largest > m { run.largest } else { m });
             if farthest <= 0.0 {
                 break;
             }
-            next = nearest
+            // The first run holding the largest distance holds its first point.
+            let run = runs
                 .iter()
-                .position(|&d| d == farthest)
-                .expect("the largest distance is one of them");
+                .find(|run| run.largest == farthest)
+                .expect("the largest distance is a run's");
+            next = run.start
+                + nearest[run.start..run.end]
+                    .iter()
+                    .position(|&d| d == farthest)
+                    .expect("a run's largest distance is one of its points'");
         }
         picked
     }
@@ -220,9 +254,40 @@ impl From<Vec<Point3<f64>>> for PointCloud {
     }
 }
 
+/// Points per run of [`PointCloud::farthest_point_indices`]: a scan's consecutive points lie
+/// close together, so a run's box is small and most picks pass it by.
+const FARTHEST_RUN: usize = 128;
+
+/// Consecutive points `start..end` of a cloud, their bounding box, and the largest of their
+/// squared distances to the points picked so far.
+struct FarthestRun {
+    start: usize,
+    end: usize,
+    lo: [f64; 3],
+    hi: [f64; 3],
+    largest: f64,
+}
+
+/// The squared distance from `p` to the box `lo`..`hi`, summed as [`nearer_to`] sums a point's:
+/// each axis's gap is never above that axis's difference to a point of the box (rounding is
+/// monotonic), and so the sum is never above the point's.
+fn box_squared_distance(p: [f64; 3], lo: [f64; 3], hi: [f64; 3]) -> f64 {
+    let gap = |a: usize| {
+        if p[a] < lo[a] {
+            lo[a] - p[a]
+        } else if p[a] > hi[a] {
+            p[a] - hi[a]
+        } else {
+            0.0
+        }
+    };
+    let (gx, gy, gz) = (gap(0), gap(1), gap(2));
+    gx * gx + gy * gy + gz * gz
+}
+
 /// Lowers each of `nearest` (N,) to the squared distance from its point (`axes`: (3, N)) to
 /// `p` where that is nearer, and returns the largest result.
-fn nearer_to(nearest: &mut [f64], axes: &[Vec<f64>; 3], p: [f64; 3]) -> f64 {
+fn nearer_to(nearest: &mut [f64], axes: [&[f64]; 3], p: [f64; 3]) -> f64 {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2.
@@ -234,13 +299,13 @@ fn nearer_to(nearest: &mut [f64], axes: &[Vec<f64>; 3], p: [f64; 3]) -> f64 {
 /// [`nearer_to`] compiled with AVX2: the same operations (never fused), wider vectors.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn nearer_to_avx2(nearest: &mut [f64], axes: &[Vec<f64>; 3], p: [f64; 3]) -> f64 {
+unsafe fn nearer_to_avx2(nearest: &mut [f64], axes: [&[f64]; 3], p: [f64; 3]) -> f64 {
     nearer_to_any(nearest, axes, p)
 }
 
 /// [`nearer_to`] for any CPU: eight points a step, each lane keeping its own largest.
 #[inline(always)]
-fn nearer_to_any(nearest: &mut [f64], [xs, ys, zs]: &[Vec<f64>; 3], [px, py, pz]: [f64; 3]) -> f64 {
+fn nearer_to_any(nearest: &mut [f64], [xs, ys, zs]: [&[f64]; 3], [px, py, pz]: [f64; 3]) -> f64 {
     const LANES: usize = 8;
     let step = |d: &mut f64, x: f64, y: f64, z: f64, largest: &mut f64| {
         let (dx, dy, dz) = (x - px, y - py, z - pz);
@@ -376,16 +441,23 @@ mod tests {
 
     #[test]
     fn farthest_point_sampling_picks_what_its_definition_picks() {
-        // The definition point by point, with nalgebra's squared norm, on a cloud of 1,003
-        // points (not a multiple of the vector width) with repeats: the same picks.
+        // The definition point by point, with nalgebra's squared norm: the same picks on a
+        // cloud of 1,003 random points (not a multiple of the vector width) with repeats, and on
+        // a 70 × 70 lattice in scan order, whose runs of points lie close together (most picks
+        // skip most runs) and whose distances tie everywhere.
         use rand::{Rng, SeedableRng};
         let mut rng = rand::rngs::StdRng::seed_from_u64(3);
         let mut points: Vec<Point3<f64>> = (0..1000)
             .map(|_| Point3::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), 0.5))
             .collect();
         points.extend_from_slice(&points.clone()[..3]);
-        let cloud = PointCloud::new(points);
-        let defined = |count: usize| {
+        let random = PointCloud::new(points);
+        let lattice = PointCloud::new(
+            (0..4900)
+                .map(|k| Point3::new((k / 70) as f64 * 0.1, (k % 70) as f64 * 0.1, 0.3))
+                .collect(),
+        );
+        let defined = |cloud: &PointCloud, count: usize| {
             let mut picked = vec![];
             let mut nearest = vec![f64::INFINITY; cloud.len()];
             let mut next = 0;
@@ -405,12 +477,18 @@ mod tests {
             }
             picked
         };
-        for count in [1, 64, 999, 1002] {
-            assert_eq!(
-                cloud.farthest_point_indices(count),
-                defined(count),
-                "{count}"
-            );
+        for (cloud, counts) in [
+            (&random, [1, 64, 999, 1002]),
+            (&lattice, [2, 100, 1024, 4899]),
+        ] {
+            for count in counts {
+                assert_eq!(
+                    cloud.farthest_point_indices(count),
+                    defined(cloud, count),
+                    "{} points, {count} picked",
+                    cloud.len()
+                );
+            }
         }
     }
 
