@@ -97,14 +97,15 @@ impl PointCloud {
         if n <= count {
             return (0..n).collect();
         }
-        // One axis at a time, so that the pass over the points vectorises; the farthest is
-        // then the first point at the largest distance.
+        // Runs of consecutive points with their bounding boxes and largest distance: a pick no
+        // nearer to a run's box than that distance lowers none of its points' (the box's
+        // distance, summed as a point's is, is never above any of them), so the run is
+        // skipped, and the picks are those of a pass over every point.
+        //
+        // One axis at a time, so that the pass over a run vectorises; the farthest is then the
+        // first point at the largest distance.
         let axis = |a: usize| -> Vec<f64> { self.points.iter().map(|p| p[a]).collect() };
         let axes = [axis(0), axis(1), axis(2)]; // (3, N)
-                                                // Runs of consecutive points with their bounding boxes and largest distance: a pick no
-                                                // nearer to a run's box than that distance lowers none of its points' (the box's
-                                                // distance, summed as a point's is, is never above any of them), so the run is
-                                                // skipped, and the picks are those of a pass over every point.
         let mut runs: Vec<FarthestRun> = (0..n)
             .step_by(FARTHEST_RUN)
             .map(|start| {
