@@ -13,7 +13,7 @@ use std::time::Instant;
 
 use rgm_geom::{PointCloud, RigidTransform};
 
-use crate::fit::{score, Fit};
+use crate::fit::{score, Fit, Score};
 use crate::Prepared;
 
 /// What users call a method: its base name and the refiner its transform went through, spelled
@@ -96,14 +96,8 @@ impl Registration {
         max_distance: f64,
         start: Instant,
     ) -> Self {
-        let mut correspondences = Vec::new();
-        score(
-            &source.points,
-            target.index(),
-            &result.t_target_source,
-            max_distance,
-            Some(&mut correspondences),
-        );
+        let (_, correspondences) =
+            pairs_within(source, target, &result.t_target_source, max_distance);
         let doubt = (correspondences.len() < MIN_CORRESPONDENCES).then(|| {
             format!(
                 "{} source points lie within {max_distance} of the target under the result \
@@ -120,23 +114,17 @@ impl Registration {
     /// This registration with its fit scored: the source points its transform brings within
     /// `max_distance` of `target` ([`score`]) and their pairs, its iterations and convergence
     /// kept.
-    pub fn fitted_within(self, source: &Prepared, target: &Prepared, max_distance: f64) -> Self {
-        let mut correspondences = Vec::new();
-        let transform = self.result.t_target_source;
-        let scored = score(
-            &source.points,
-            target.index(),
-            &transform,
-            max_distance,
-            Some(&mut correspondences),
-        );
+    pub fn fitted_within(self, source: &PointCloud, target: &Prepared, max_distance: f64) -> Self {
+        let Fit {
+            t_target_source,
+            iterations,
+            converged,
+            ..
+        } = self.result;
+        let (scored, correspondences) =
+            pairs_within(source, target, &t_target_source, max_distance);
         Self {
-            result: Fit::scored(
-                transform,
-                self.result.iterations,
-                self.result.converged,
-                scored,
-            ),
+            result: Fit::scored(t_target_source, iterations, converged, scored),
             correspondences,
             ..self
         }
@@ -153,6 +141,25 @@ impl Registration {
             doubt: None,
         }
     }
+}
+
+/// [`score`] of `source` moved by `transform` onto `target` within `max_distance`, with the
+/// (source, target) index pairs behind it. // (P,)
+fn pairs_within(
+    source: &PointCloud,
+    target: &Prepared,
+    transform: &RigidTransform,
+    max_distance: f64,
+) -> (Score, Vec<(usize, usize)>) {
+    let mut pairs = Vec::new();
+    let scored = score(
+        &source.points,
+        target.index(),
+        transform,
+        max_distance,
+        Some(&mut pairs),
+    );
+    (scored, pairs)
 }
 
 /// The fewest correspondences of a credible single method's result: fewer do not pin down a
