@@ -230,6 +230,29 @@ struct Around {
     lists: Vec<u32>,
 }
 
+/// The target normals known so far, which the threads share: all of them, or the lazy ones
+/// computed ([`PlaneFit::compute_normals`]) before they are read.
+#[derive(Clone, Copy)]
+enum KnownNormals<'b> {
+    Given(&'b [Vector3<f64>]), // (M,)
+    Lazy(&'b Around),
+}
+
+impl KnownNormals<'_> {
+    /// The normal of target point `j`, which must be known.
+    fn get(self, j: usize) -> Vector3<f64> {
+        match self {
+            Self::Given(normals) => normals[j],
+            Self::Lazy(around) => {
+                let (normal, _) = around.known[j]
+                    .as_ref()
+                    .expect("computed before it is read");
+                *normal
+            }
+        }
+    }
+}
+
 /// The buffers of point-to-plane stages, reused from one iteration to the next.
 #[derive(Default)]
 struct PlaneScratch {
@@ -303,17 +326,11 @@ impl<'a> PlaneFit<'a> {
         }
     }
 
-    /// The normal of target point `j`.
-    fn normal(&self, j: usize) -> Vector3<f64> {
+    /// Runs `read` on the target normals known so far.
+    fn known<T>(&self, read: impl FnOnce(KnownNormals<'_>) -> T) -> T {
         match &self.normals {
-            TargetNormals::Given(normals) => normals[j],
-            TargetNormals::Lazy { cache, .. } => {
-                if cache.borrow().known[j].is_none() {
-                    self.compute_normals(std::iter::once(j));
-                }
-                let known = &cache.borrow().known[j];
-                known.as_ref().expect("computed just above").0
-            }
+            TargetNormals::Given(normals) => read(KnownNormals::Given(normals)),
+            TargetNormals::Lazy { cache, .. } => read(KnownNormals::Lazy(&cache.borrow())),
         }
     }
 
@@ -373,13 +390,14 @@ impl<'a> PlaneFit<'a> {
 
     /// Computes side by side the lazy normals (and neighbour lists) of the target points `js`
     /// that are not known yet.
-    fn compute_normals(&self, js: impl Iterator<Item = usize>) {
+    fn compute_normals(&self, js: impl ParallelIterator<Item = usize>) {
         let TargetNormals::Lazy { config, cache } = &self.normals else {
             return;
         };
         let mut around = cache.borrow_mut();
-        let mut missing: Vec<usize> = js.filter(|&j| around.known[j].is_none()).collect();
-        missing.sort_unstable();
+        let known = &around.known;
+        let mut missing: Vec<usize> = js.filter(|&j| known[j].is_none()).collect();
+        missing.par_sort_unstable();
         missing.dedup();
         // Pieces of a few hundred: enough for the threads, few enough to gather.
         const PIECE: usize = 256;
@@ -438,23 +456,27 @@ impl<'a> PlaneFit<'a> {
         } = scratch;
         for _ in 0..stage.iterations {
             moved.clear();
-            moved.extend(self.source.points.iter().map(|p| transform.apply(p)));
+            moved.par_extend(self.source.points.par_iter().map(|p| transform.apply(p)));
             self.nearest_each(transform, stage.max_distance, nearest);
             let nearest = &nearest.found;
             pairs.clear();
             if stage.residual_gate.is_some() {
-                self.compute_normals(nearest.iter().filter_map(|&found| Some(found?.0)));
+                self.compute_normals(nearest.par_iter().filter_map(|&found| Some(found?.0)));
             }
-            pairs.extend(nearest.iter().enumerate().filter_map(|(i, &found)| {
-                let (j, d) = found?;
-                let within = stage.residual_gate.is_none_or(|gate| {
-                    (self.target.points[j] - moved[i])
-                        .dot(&self.normal(j))
-                        .abs()
-                        <= gate
-                });
-                within.then_some((i, j, d))
-            }));
+            self.known(|normals| {
+                let within = |i: usize, j: usize| {
+                    stage.residual_gate.is_none_or(|gate| {
+                        (self.target.points[j] - moved[i])
+                            .dot(&normals.get(j))
+                            .abs()
+                            <= gate
+                    })
+                };
+                pairs.par_extend(nearest.par_iter().enumerate().filter_map(|(i, &found)| {
+                    let (j, d) = found?;
+                    within(i, j).then_some((i, j, d))
+                }));
+            });
             let keep = ((pairs.len() as f64 * stage.trim).ceil() as usize).min(pairs.len());
             if keep < 6 {
                 outcome.solvable = false;
@@ -464,8 +486,9 @@ impl<'a> PlaneFit<'a> {
                 pairs.select_nth_unstable_by(keep - 1, |a, b| a.2.total_cmp(&b.2));
                 pairs.truncate(keep);
             }
-            self.compute_normals(pairs.iter().map(|&(_, j, _)| j));
-            let step = point_to_plane_step(moved, self.target, |j| self.normal(j), pairs);
+            self.compute_normals(pairs.par_iter().map(|&(_, j, _)| j));
+            let step =
+                self.known(|normals| point_to_plane_step(moved, self.target, normals, pairs));
             *transform = step.compose(transform);
             outcome.iterations += 1;
             let angle = step.rotation_angle_deg().to_radians();
@@ -488,21 +511,22 @@ impl<'a> PlaneFit<'a> {
     ) -> Option<f64> {
         self.nearest_each(transform, max_distance, &mut scratch.nearest);
         let nearest = &scratch.nearest.found;
-        self.compute_normals(nearest.iter().filter_map(|&found| Some(found?.0)));
-        let mut residuals: Vec<f64> = self
-            .source
-            .points
-            .iter()
-            .zip(nearest.iter())
-            .filter_map(|(p, &found)| {
-                let (j, _) = found?;
-                Some(
-                    (self.target.points[j] - transform.apply(p))
-                        .dot(&self.normal(j))
-                        .abs(),
-                )
-            })
-            .collect();
+        self.compute_normals(nearest.par_iter().filter_map(|&found| Some(found?.0)));
+        let mut residuals: Vec<f64> = self.known(|normals| {
+            self.source
+                .points
+                .par_iter()
+                .zip(nearest.par_iter())
+                .filter_map(|(p, &found)| {
+                    let (j, _) = found?;
+                    Some(
+                        (self.target.points[j] - transform.apply(p))
+                            .dot(&normals.get(j))
+                            .abs(),
+                    )
+                })
+                .collect()
+        });
         if residuals.is_empty() {
             return None;
         }
@@ -640,25 +664,50 @@ pub fn median_plane_residual(
     )
 }
 
+/// Pairs per block of [`point_to_plane_step`]'s sums: each block is summed in order and the
+/// blocks' sums are added in order, so the step is the same on any number of threads (and, for
+/// up to this many pairs, the plain sum in order).
+const STEP_BLOCK: usize = 4096;
+
 /// The rigid step minimising the linearised point-to-plane residuals of `pairs`
-/// (moved source index, target index, distance). The normal equations are damped by 1e-9 of
-/// their mean diagonal, so that directions the pairs do not constrain (a plane slides in itself)
-/// get no motion instead of a singular solve.
+/// (moved source index, target index, distance), whose target normals must be known. The
+/// normal equations are damped by 1e-9 of their mean diagonal, so that directions the pairs do
+/// not constrain (a plane slides in itself) get no motion instead of a singular solve.
 fn point_to_plane_step(
     moved: &[Point3<f64>],
     target: &PointCloud,
-    normal: impl Fn(usize) -> Vector3<f64>,
+    normals: KnownNormals<'_>,
     pairs: &[(usize, usize, f64)],
 ) -> RigidTransform {
-    let mut ata = Matrix6::<f64>::zeros();
-    let mut atb = Vector6::<f64>::zeros();
-    for &(i, j, _) in pairs {
-        let p = moved[i];
-        let n = normal(j);
-        let c = p.coords.cross(&n);
-        let row = Vector6::new(c.x, c.y, c.z, n.x, n.y, n.z);
-        ata += row * row.transpose();
-        atb += row * (target.points[j] - p).dot(&n);
+    let blocks: Vec<(Matrix6<f64>, Vector6<f64>)> = pairs
+        .par_chunks(STEP_BLOCK)
+        .map(|block| {
+            let mut ata = Matrix6::<f64>::zeros(); // its upper triangle
+            let mut atb = Vector6::<f64>::zeros();
+            for &(i, j, _) in block {
+                let p = moved[i];
+                let n = normals.get(j);
+                let c = p.coords.cross(&n);
+                let row = Vector6::new(c.x, c.y, c.z, n.x, n.y, n.z);
+                for col in 0..6 {
+                    for r in 0..=col {
+                        ata[(r, col)] += row[r] * row[col];
+                    }
+                }
+                atb += row * (target.points[j] - p).dot(&n);
+            }
+            (ata, atb)
+        })
+        .collect();
+    let (mut ata, atb) = blocks
+        .into_iter()
+        .reduce(|(ata, atb), (block_ata, block_atb)| (ata + block_ata, atb + block_atb))
+        .unwrap_or_default();
+    // The lower triangle mirrors the upper: the same products, summed in the same order.
+    for col in 0..6 {
+        for r in col + 1..6 {
+            ata[(r, col)] = ata[(col, r)];
+        }
     }
     let damping = 1e-9 * ata.trace() / 6.0 + f64::MIN_POSITIVE;
     for k in 0..6 {
@@ -929,6 +978,67 @@ mod tests {
     }
 
     #[test]
+    fn the_plane_step_sums_by_blocks_the_same_on_any_number_of_threads() {
+        // Pairs of points near a slanted plane and their normals, in a random order.
+        let mut rng = StdRng::seed_from_u64(46);
+        let noise = Normal::new(0.0f64, 0.01).expect("a valid σ");
+        let n = 3 * STEP_BLOCK + 123;
+        let normal = Vector3::new(0.3, -0.2, 0.9).normalize();
+        let mut sample = || {
+            Vector3::new(
+                noise.sample(&mut rng),
+                noise.sample(&mut rng),
+                noise.sample(&mut rng),
+            )
+        };
+        let target = PointCloud::new((0..n).map(|_| Point3::from(sample() * 50.0)).collect());
+        let moved: Vec<Point3<f64>> = target.points.iter().map(|q| q + sample()).collect();
+        let normals: Vec<Vector3<f64>> = (0..n).map(|_| (normal + sample()).normalize()).collect();
+        let pairs: Vec<(usize, usize, f64)> = (0..n).map(|i| (i, (i * 7919) % n, 0.0)).collect();
+        // The normal equations summed pair after pair, each product of the full 6 × 6 matrix.
+        let plain = |pairs: &[(usize, usize, f64)]| {
+            let (mut ata, mut atb) = (Matrix6::<f64>::zeros(), Vector6::<f64>::zeros());
+            for &(i, j, _) in pairs {
+                let (p, n) = (moved[i], normals[j]);
+                let c = p.coords.cross(&n);
+                let row = Vector6::new(c.x, c.y, c.z, n.x, n.y, n.z);
+                ata += row * row.transpose();
+                atb += row * (target.points[j] - p).dot(&n);
+            }
+            let damping = 1e-9 * ata.trace() / 6.0 + f64::MIN_POSITIVE;
+            for k in 0..6 {
+                ata[(k, k)] += damping;
+            }
+            let x = ata.cholesky().unwrap().solve(&atb);
+            let rotation = Rotation3::new(Vector3::new(x[0], x[1], x[2]));
+            RigidTransform::new(rotation.into_inner(), Vector3::new(x[3], x[4], x[5]))
+        };
+        let step = |threads: usize, pairs: &[(usize, usize, f64)]| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                point_to_plane_step(&moved, &target, KnownNormals::Given(&normals), pairs)
+            })
+        };
+        // One block: the plain sum, bit for bit.
+        let one_block = &pairs[..STEP_BLOCK];
+        assert_eq!(step(1, one_block), plain(one_block));
+        assert_eq!(step(2, one_block), plain(one_block));
+        // Four blocks: the same bits on one thread and on three, and the plain sum to rounding.
+        let blocks = step(1, &pairs);
+        assert_eq!(blocks, step(3, &pairs));
+        let difference = plain(&pairs).inverse().compose(&blocks);
+        assert!(difference.rotation_angle_deg() < 1e-9, "{difference:?}");
+        assert!(difference.translation.norm() < 1e-10, "{difference:?}");
+        assert!(
+            blocks.rotation_angle_deg() > 1e-3,
+            "the step must move: {blocks:?}"
+        );
+    }
+
+    #[test]
     fn a_plane_fit_s_searches_answer_what_a_fresh_search_answers() {
         // A partial overlap: the source cut to 70 % and moved a little each iteration, so that
         // searches start from earlier partners' neighbours and from earlier misses' clearances.
@@ -964,7 +1074,7 @@ mod tests {
                 scratch
                     .nearest
                     .found
-                    .iter()
+                    .par_iter()
                     .filter_map(|f| Some(f.as_ref()?.0)),
             );
         }
