@@ -190,23 +190,104 @@ impl PointCloud {
     /// One point per occupied cube of side `voxel` (cubes aligned on the origin): the mean of
     /// the cube's points, as Open3D's `voxel_down_sample`; in the order the cubes are first met.
     pub fn voxel_downsampled(&self, voxel: f64) -> Self {
-        // Fx hashing: the voxels' order (of first points) does not depend on the hasher.
-        let mut index = rustc_hash::FxHashMap::default();
-        let mut sums: Vec<(Vector3<f64>, usize)> = Vec::new(); // (V,) sum and count per voxel
-        for p in &self.points {
-            let key = p.coords.map(|v| (v / voxel).floor() as i64);
-            let slot = *index.entry((key.x, key.y, key.z)).or_insert_with(|| {
-                sums.push((Vector3::zeros(), 0));
-                sums.len() - 1
+        Cubes::of(self, voxel).means(|_| true)
+    }
+
+    /// [`PointCloud::voxel_downsampled`] without the cubes that hold only stray points
+    /// ([`PointCloud::non_stray_indices`]): the same means of the cubes kept, in the same order.
+    pub fn voxel_downsampled_without_strays(&self, voxel: f64, share: f64) -> Self {
+        let cubes = Cubes::of(self, voxel);
+        let kept = cubes.kept(share);
+        cubes.means(|cube| kept[cube])
+    }
+
+    /// The indices, in order, of the points that are not strays at the scale of cubes of side
+    /// `voxel`. A cube is sparse when it holds fewer than `share` of the points of a typical
+    /// point's cube (the cube of the median point, the points ordered by their cube's count);
+    /// a point is a stray when its cube and the 26 around it are all sparse. A scanner's
+    /// spurious returns scattered through an object's box lie alone in their cubes, while a
+    /// surface's cubes hold many and a surface's edge lies beside its dense cubes. What a
+    /// thinning keeps of the strays, farthest-point sampling picks first.
+    pub fn non_stray_indices(&self, voxel: f64, share: f64) -> Vec<usize> {
+        let cubes = Cubes::of(self, voxel);
+        let kept = cubes.kept(share);
+        (0..self.len())
+            .filter(|&i| kept[cubes.of_point[i]])
+            .collect()
+    }
+}
+
+/// A cloud's occupied cubes of one side, aligned on the origin, in the order first met.
+struct Cubes {
+    /// Each cube's integer coordinates. // (V,)
+    keys: Vec<[i64; 3]>,
+    /// The cube of each key.
+    cube_of: rustc_hash::FxHashMap<[i64; 3], usize>,
+    /// The sum of each cube's points and their count. // (V,)
+    sums: Vec<(Vector3<f64>, usize)>,
+    /// The cube of each point. // (N,)
+    of_point: Vec<usize>,
+}
+
+impl Cubes {
+    fn of(cloud: &PointCloud, side: f64) -> Self {
+        // Fx hashing: the cubes' order (of first points) does not depend on the hasher.
+        let mut cubes = Self {
+            keys: Vec::new(),
+            cube_of: rustc_hash::FxHashMap::default(),
+            sums: Vec::new(),
+            of_point: Vec::with_capacity(cloud.len()),
+        };
+        for p in &cloud.points {
+            let key = p.coords.map(|v| (v / side).floor() as i64).into();
+            let cube = *cubes.cube_of.entry(key).or_insert_with(|| {
+                cubes.keys.push(key);
+                cubes.sums.push((Vector3::zeros(), 0));
+                cubes.sums.len() - 1
             });
-            sums[slot].0 += p.coords;
-            sums[slot].1 += 1;
+            cubes.sums[cube].0 += p.coords;
+            cubes.sums[cube].1 += 1;
+            cubes.of_point.push(cube);
         }
-        Self::new(
-            sums.into_iter()
-                .map(|(sum, n)| Point3::from(sum / n as f64))
+        cubes
+    }
+
+    /// The mean of each cube that `keep` keeps, in order.
+    fn means(&self, keep: impl Fn(usize) -> bool) -> PointCloud {
+        let means = self.sums.iter().enumerate().filter(|&(cube, _)| keep(cube));
+        PointCloud::new(
+            means
+                .map(|(_, &(sum, n))| Point3::from(sum / n as f64))
                 .collect(),
         )
+    }
+
+    /// Whether each cube holds points that are not strays ([`PointCloud::non_stray_indices`]).
+    fn kept(&self, share: f64) -> Vec<bool> {
+        let mut counts: Vec<usize> = self.sums.iter().map(|&(_, n)| n).collect(); // (V,)
+        counts.sort_unstable();
+        let points = self.of_point.len();
+        let mut seen = 0;
+        let typical = counts
+            .into_iter()
+            .find(|&n| {
+                seen += n;
+                2 * seen >= points
+            })
+            .unwrap_or(0);
+        let dense = |cube: usize| self.sums[cube].1 as f64 >= share * typical as f64;
+        let around = |[x, y, z]: [i64; 3]| {
+            (-1..=1).flat_map(move |dx| {
+                (-1..=1).flat_map(move |dy| (-1..=1).map(move |dz| [x + dx, y + dy, z + dz]))
+            })
+        };
+        (0..self.keys.len())
+            .map(|cube| {
+                dense(cube)
+                    || around(self.keys[cube])
+                        .any(|key| self.cube_of.get(&key).is_some_and(|&c| dense(c)))
+            })
+            .collect()
     }
 }
 
@@ -420,6 +501,42 @@ mod tests {
         assert_eq!(d.points[2], Point3::new(-0.2, 0.0, 0.0));
         // The same cubes, each kept as its first point.
         assert_eq!(c.voxel_firsts(0.5), vec![0, 2, 3]);
+    }
+
+    #[test]
+    fn strays_are_the_points_of_sparse_cubes_away_from_dense_ones() {
+        // A square of 100 × 100 points 0.01 apart: cubes of 0.1 hold 100 points each.
+        let mut points: Vec<Point3<f64>> = (0..100)
+            .flat_map(|i| {
+                (0..100).map(move |j| {
+                    Point3::new(0.005 + 0.01 * i as f64, 0.005 + 0.01 * j as f64, 0.05)
+                })
+            })
+            .collect();
+        // Its edge: a point alone in its cube, beside a dense one.
+        points.push(Point3::new(1.005, 0.5, 0.05));
+        let kept: Vec<usize> = (0..points.len()).collect();
+        // Strays, alone or in pairs in their cubes, at least two cubes above the square.
+        for k in 0..10 {
+            points.push(Point3::new(
+                0.05 + 0.1 * k as f64,
+                0.35,
+                0.25 + 0.1 * (k % 3) as f64,
+            ));
+        }
+        points.push(Point3::new(0.06, 0.36, 0.26));
+        let cloud = PointCloud::new(points);
+        assert_eq!(cloud.non_stray_indices(0.1, 0.2), kept);
+        assert_eq!(
+            cloud.voxel_downsampled_without_strays(0.1, 0.2),
+            cloud.select(&kept).voxel_downsampled(0.1)
+        );
+        // At share 0 every cube is dense.
+        assert_eq!(cloud.non_stray_indices(0.1, 0.0).len(), cloud.len());
+        assert_eq!(
+            cloud.voxel_downsampled_without_strays(0.1, 0.0),
+            cloud.voxel_downsampled(0.1)
+        );
     }
 
     #[test]

@@ -3,6 +3,8 @@
 //! thinnings of a dense pair). The density is configuration: the caller that composes the methods
 //! knows what they were tuned on.
 
+use std::borrow::Cow;
+
 use rgm_geom::PointCloud;
 
 /// The density methods were tuned at: a cloud of more than `points` points is denser, and is
@@ -46,19 +48,75 @@ impl Thinning {
     }
 }
 
-/// `cloud` thinned `how` to `density`; `None` when it has no more points (it is used as it is).
+/// A cube of [`Density::voxel`] holding less than this share of the points of a typical
+/// point's cube is sparse, and the points of sparse cubes away from dense ones are strays,
+/// which both thinnings leave out ([`PointCloud::non_stray_indices`]): a dense scan's edges
+/// stay; 20 % of its points scattered through its box go (docs/baselines.md, "Stray points").
+pub const STRAY_SHARE: f64 = 0.2;
+
+/// `cloud` thinned `how` to `density` without its stray points; `None` when it has no more points (it is used as it is).
 pub fn thinned(cloud: &PointCloud, how: Thinning, density: Density) -> Option<PointCloud> {
     if cloud.len() <= density.points {
         return None;
     }
     Some(match how {
         Thinning::Voxels => {
-            let averaged = cloud.voxel_downsampled(density.voxel);
+            let averaged = cloud.voxel_downsampled_without_strays(density.voxel, STRAY_SHARE);
             averaged.select(&averaged.farthest_point_indices(density.points))
         }
         Thinning::Cells => {
+            let kept = cloud.non_stray_indices(density.voxel, STRAY_SHARE);
+            let cloud = if kept.len() < cloud.len() {
+                Cow::Owned(cloud.select(&kept))
+            } else {
+                Cow::Borrowed(cloud)
+            };
             let seeds = cloud.select(&cloud.farthest_point_indices(density.points));
             cloud.cell_means(&seeds.points)
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Point3, Vector3};
+    use rand::{rngs::StdRng, Rng, SeedableRng};
+
+    #[test]
+    fn both_thinnings_leave_out_the_strays_scattered_through_a_dense_scan_s_box() {
+        // A square of 200 × 200 points in z = 0 (about 25 in a cube of the thinning's voxel) and 20 % as many strays through its box.
+        let mut rng = StdRng::seed_from_u64(3);
+        let mut points: Vec<Point3<f64>> = (0..200)
+            .flat_map(|i| {
+                (0..200).map(move |j| {
+                    Point3::new(-0.7 + 0.007 * i as f64, -0.7 + 0.007 * j as f64, 0.0)
+                })
+            })
+            .collect();
+        for _ in 0..points.len() / 5 {
+            points.push(Point3::from(Vector3::from_fn(|_, _| {
+                rng.gen_range(-0.7..0.7)
+            })));
+        }
+        let cloud = PointCloud::new(points);
+        let density = Density {
+            points: 1024,
+            voxel: 0.035,
+        };
+        let off_the_square = |c: &PointCloud| {
+            c.points
+                .iter()
+                .filter(|p| p.z.abs() > 2.0 * density.voxel)
+                .count()
+        };
+        // Without the strays left out, most of the farthest points are strays.
+        let unfiltered = cloud.voxel_downsampled(density.voxel);
+        assert!(off_the_square(&unfiltered.select(&unfiltered.farthest_point_indices(1024))) > 500);
+        for how in [Thinning::Voxels, Thinning::Cells] {
+            let thin = thinned(&cloud, how, density).expect("a dense cloud");
+            assert!(thin.len() > 900, "{how:?}: {}", thin.len());
+            assert_eq!(off_the_square(&thin), 0, "{how:?}");
+        }
+    }
 }
