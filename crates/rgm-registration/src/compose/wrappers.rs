@@ -183,17 +183,40 @@ impl<E: From<GeomError>, R: Registrar<E>, F: Refiner> Registrar<E> for AtResolut
         let fine = self
             .refiner
             .refine(source, target, &found.result.t_target_source)?;
-        Ok(Registration {
-            result: Fit {
-                iterations: found.result.iterations + fine.result.iterations,
-                converged: found.result.converged && fine.result.converged,
-                ..fine.result
-            },
-            correspondences: fine.correspondences,
-            time_ms: elapsed_ms(start),
-            doubt: found.doubt.or(fine.doubt),
-            ..found
-        })
+        Ok(completed(found, fine, start))
+    }
+
+    fn register_unscored(
+        &mut self,
+        source: &Prepared,
+        target: &Prepared,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        let start = Instant::now();
+        if !self.density.is_exceeded_by(source.len(), target.len()) {
+            return self.inner.register_unscored(source, target, progress);
+        }
+        let found = self.inner.register_unscored(source, target, progress)?;
+        let fine = self
+            .refiner
+            .refine_unscored(source, target, &found.result.t_target_source)?;
+        Ok(completed(found, fine, start))
+    }
+}
+
+/// What `found` became once refined to `fine`: `fine`'s fit and correspondences, the
+/// iterations of both, converged when both did, begun at `start`.
+fn completed(found: Registration, fine: Registration, start: Instant) -> Registration {
+    Registration {
+        result: Fit {
+            iterations: found.result.iterations + fine.result.iterations,
+            converged: found.result.converged && fine.result.converged,
+            ..fine.result
+        },
+        correspondences: fine.correspondences,
+        time_ms: elapsed_ms(start),
+        doubt: found.doubt.or(fine.doubt),
+        ..found
     }
 }
 
@@ -374,7 +397,8 @@ mod tests {
     use super::*;
     use crate::methods::fgr::FgrConfig;
     use crate::methods::icp::IcpConfig;
-    use crate::methods::refine::RefineConfig;
+    use crate::methods::refine::{RefineConfig, ResolutionConfig};
+    use crate::refiner::AtSpacing;
     use crate::registrar::DynRegistrar;
     use crate::testing::{Fixed, DENSITY, FRAME};
     use crate::RegistrationError;
@@ -482,6 +506,58 @@ mod tests {
         let sparse = box_surface(500, 2);
         Registrar::<RegistrationError>::register(&mut at_resolution, &sparse, &sparse).unwrap();
         assert_eq!((fixed.calls(), fixed.scored_calls()), (2, 1));
+    }
+
+    #[test]
+    fn at_resolution_unscored_refines_alike_without_the_score() {
+        // A dense pair 2° and 0.01 apart, found by a method that answers the identity.
+        let target = box_surface(3000, 1);
+        let pose = RigidTransform::new(
+            rgm_geom::euler::rotation_xyz_intrinsic(0.0, 0.0, 2f64.to_radians()),
+            Vector3::new(0.01, 0.0, 0.0),
+        );
+        let source = target.transformed(&pose.inverse());
+        let fixed = Fixed::new("fixed", 0.0);
+        let mut at_resolution = AtResolution {
+            inner: fixed.clone(),
+            refiner: AtSpacing {
+                coarser_than: 1.0,
+                scoring_distance: 0.02,
+                config: ResolutionConfig::default(),
+            },
+            density: DENSITY,
+        };
+        let (source, target) = (Prepared::new(source), Prepared::new(target));
+        let scored = Registrar::<RegistrationError>::register_prepared(
+            &mut at_resolution,
+            &source,
+            &target,
+            &mut |_| {},
+        )
+        .unwrap();
+        let unscored = Registrar::<RegistrationError>::register_unscored(
+            &mut at_resolution,
+            &source,
+            &target,
+            &mut |_| {},
+        )
+        .unwrap();
+        // The inner method asked for its transform alone both times.
+        assert_eq!((fixed.calls(), fixed.scored_calls()), (2, 0));
+        let error = pose.inverse().compose(&scored.result.t_target_source);
+        assert!(error.rotation_angle_deg() < 0.05, "{error:?}");
+        assert_eq!(scored.result.inlier_count, 3000);
+        // The same refinement, and no score.
+        assert_eq!(
+            unscored.result.t_target_source,
+            scored.result.t_target_source
+        );
+        assert_eq!(unscored.result.iterations, scored.result.iterations);
+        assert_eq!(
+            (unscored.result.inlier_count, unscored.result.fitness),
+            (0, 0.0)
+        );
+        assert!(unscored.correspondences.is_empty());
     }
 
     #[test]
