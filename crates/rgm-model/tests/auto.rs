@@ -220,7 +220,10 @@ fn a_dense_pair_whose_methods_agree_is_thinned_once_and_refined_at_its_resolutio
     assert!(scores[chosen] > 1.9, "{scores:?}");
     // Each candidate was refined on the dense clouds before the cascade judged it: the result
     // is the winner's as it was judged.
-    assert_eq!(found.result.t_target_source, found.candidates[chosen].t_target_source);
+    assert_eq!(
+        found.result.t_target_source,
+        found.candidates[chosen].t_target_source
+    );
     let metrics = metrics_against_truth(&found, &pair);
     assert!(metrics.recall, "{metrics:?}");
 }

@@ -149,16 +149,16 @@ impl Refiner for AtSpacing {
         initial: &RigidTransform,
     ) -> Result<Registration> {
         let start = Instant::now();
-        let (transform, iterations) = self.at_resolution(source, target, initial)?;
+        let refined = self.refine_unscored(source, target, initial)?.result;
         let mut correspondences = Vec::new();
         let scored = score(
             &source.points,
             target.index(),
-            &transform,
+            &refined.t_target_source,
             self.scoring_distance,
             Some(&mut correspondences),
         );
-        let result = Fit::scored(transform, iterations, true, scored);
+        let result = Fit::scored(refined.t_target_source, refined.iterations, true, scored);
         Ok(Registration::single(result, correspondences, start))
     }
 
@@ -169,28 +169,16 @@ impl Refiner for AtSpacing {
         initial: &RigidTransform,
     ) -> Result<Registration> {
         let start = Instant::now();
-        let (transform, iterations) = self.at_resolution(source, target, initial)?;
-        let result = Fit::unscored(transform, iterations, true);
-        Ok(Registration::single(result, Vec::new(), start))
-    }
-}
-
-impl AtSpacing {
-    /// The refined transform and the iterations it took.
-    fn at_resolution(
-        &self,
-        source: &Prepared,
-        target: &Prepared,
-        initial: &RigidTransform,
-    ) -> Result<(RigidTransform, usize)> {
-        refine::refine_at_resolution(
+        let (transform, iterations) = refine::refine_at_resolution(
             source,
             target,
             target.index(),
             initial,
             self.coarser_than,
             &self.config,
-        )
+        )?;
+        let result = Fit::unscored(transform, iterations, true);
+        Ok(Registration::single(result, Vec::new(), start))
     }
 }
 

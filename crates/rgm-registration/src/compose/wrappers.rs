@@ -174,16 +174,7 @@ impl<E: From<GeomError>, R: Registrar<E>, F: Refiner> Registrar<E> for AtResolut
         target: &Prepared,
         progress: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
-        let start = Instant::now();
-        if !self.density.is_exceeded_by(source.len(), target.len()) {
-            return self.inner.register_prepared(source, target, progress);
-        }
-        // The refinement scores its own transform.
-        let found = self.inner.register_unscored(source, target, progress)?;
-        let fine = self
-            .refiner
-            .refine(source, target, &found.result.t_target_source)?;
-        Ok(completed(found, fine, start))
+        self.register_refined(source, target, progress, true)
     }
 
     fn register_unscored(
@@ -192,31 +183,49 @@ impl<E: From<GeomError>, R: Registrar<E>, F: Refiner> Registrar<E> for AtResolut
         target: &Prepared,
         progress: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
-        let start = Instant::now();
-        if !self.density.is_exceeded_by(source.len(), target.len()) {
-            return self.inner.register_unscored(source, target, progress);
-        }
-        let found = self.inner.register_unscored(source, target, progress)?;
-        let fine = self
-            .refiner
-            .refine_unscored(source, target, &found.result.t_target_source)?;
-        Ok(completed(found, fine, start))
+        self.register_refined(source, target, progress, false)
     }
 }
 
-/// What `found` became once refined to `fine`: `fine`'s fit and correspondences, the
-/// iterations of both, converged when both did, begun at `start`.
-fn completed(found: Registration, fine: Registration, start: Instant) -> Registration {
-    Registration {
-        result: Fit {
-            iterations: found.result.iterations + fine.result.iterations,
-            converged: found.result.converged && fine.result.converged,
-            ..fine.result
-        },
-        correspondences: fine.correspondences,
-        time_ms: elapsed_ms(start),
-        doubt: found.doubt.or(fine.doubt),
-        ..found
+impl<R, F: Refiner> AtResolution<R, F> {
+    /// `inner`'s registration, refined on a dense pair: scored by the refinement when `scored`
+    /// (the inner transform is never scored there), unscored otherwise.
+    fn register_refined<E: From<GeomError>>(
+        &mut self,
+        source: &Prepared,
+        target: &Prepared,
+        progress: &mut dyn FnMut(Progress),
+        scored: bool,
+    ) -> Result<Registration, E>
+    where
+        R: Registrar<E>,
+    {
+        let start = Instant::now();
+        if !self.density.is_exceeded_by(source.len(), target.len()) {
+            return if scored {
+                self.inner.register_prepared(source, target, progress)
+            } else {
+                self.inner.register_unscored(source, target, progress)
+            };
+        }
+        let found = self.inner.register_unscored(source, target, progress)?;
+        let initial = &found.result.t_target_source;
+        let fine = if scored {
+            self.refiner.refine(source, target, initial)?
+        } else {
+            self.refiner.refine_unscored(source, target, initial)?
+        };
+        Ok(Registration {
+            result: Fit {
+                iterations: found.result.iterations + fine.result.iterations,
+                converged: found.result.converged && fine.result.converged,
+                ..fine.result
+            },
+            correspondences: fine.correspondences,
+            time_ms: elapsed_ms(start),
+            doubt: found.doubt.or(fine.doubt),
+            ..found
+        })
     }
 }
 
