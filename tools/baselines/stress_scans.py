@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """The Stanford scan pairs made unlike the dev set, to see how rgm (and Open3D) hold up on data the
-project does not have (docs/baselines.md, "Stray points").
+project does not have (docs/baselines.md, "Data unlike the dev set").
 
     rgm pairs --scans ../shared/data/stanford/bunny ../shared/data/stanford/dragon_stand --out PAIRS
     python3 tools/baselines/stress_scans.py RGM [RGM ...] --pairs PAIRS --out DIR [--variants V ...] [--open3d]

@@ -417,27 +417,8 @@ where
             inner: composite,
             check: TUNED.unrefined_checks(),
         }),
-        Some(_) => {
-            // On a pair denser than the training clouds each stage's result is refined at the
-            // clouds' own spacing before it is judged: what the thinned pair's refinement leaves
-            // (≈ 1° on a scan a quarter as dense as the Stanford ones) is then no reason to
-            // doubt a right pose, and the scene stage runs where the object cascade's pose is
-            // wrong, not where it is coarse (docs/baselines.md, "Stray points; each stage
-            // refined before it is judged").
-            let at_resolution = |inner: Box<dyn DynRegistrar<MethodError>>| AtResolution {
-                inner,
-                refiner: AtSpacing {
-                    coarser_than: scoring.result_distance,
-                    scoring_distance: scoring.result_distance,
-                    config: ResolutionConfig::default(),
-                },
-                density: TRAINING_DENSITY,
-            };
-            let scene: Box<dyn DynRegistrar<MethodError>> = Box::new(at_resolution(Box::new(
-                scene_stage(),
-            )
-                as Box<dyn DynRegistrar<_>>));
-            Box::new(Checked {
+        Some(_) => Box::new(Checked {
+            inner: AtResolution {
                 // A pair denser than the training clouds may be a scene: the object cascade
                 // first, the scene stage on the pair's own features where its result is not
                 // taken.
@@ -447,8 +428,8 @@ where
                     other: match dense {
                         DenseStage::ObjectThenScene => Box::new(Cascade {
                             base: AUTO,
-                            first: Box::new(at_resolution(composite)),
-                            rest: vec![scene],
+                            first: composite,
+                            rest: vec![Box::new(scene_stage())],
                             accept: TUNED.scene_accept,
                             scoring: Scoring {
                                 overlap_distance: TUNED.scene_overlap_distance,
@@ -456,12 +437,18 @@ where
                             },
                         })
                             as Box<dyn DynRegistrar<MethodError>>,
-                        DenseStage::SceneOnly => scene,
+                        DenseStage::SceneOnly => Box::new(scene_stage()),
                     },
                 },
-                check: TUNED.refined_checks(),
-            })
-        }
+                refiner: AtSpacing {
+                    coarser_than: scoring.result_distance,
+                    scoring_distance: scoring.result_distance,
+                    config: ResolutionConfig::default(),
+                },
+                density: TRAINING_DENSITY,
+            },
+            check: TUNED.refined_checks(),
+        }),
     };
     // A few markers have no neighbourhoods for features or the network: searched whole.
     let triplets = TripletConfig::default();

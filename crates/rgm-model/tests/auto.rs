@@ -218,12 +218,11 @@ fn a_dense_pair_whose_methods_agree_is_thinned_once_and_refined_at_its_resolutio
     assert!(scores.iter().all(|&s| s <= scores[chosen]), "{scores:?}");
     // Scored on the dense clouds: the right transform overlaps nearly every point both ways.
     assert!(scores[chosen] > 1.9, "{scores:?}");
-    // Each candidate was refined on the dense clouds before the cascade judged it: the result
-    // is the winner's as it was judged.
-    assert_eq!(
-        found.result.t_target_source,
-        found.candidates[chosen].t_target_source
-    );
+    // The winner, refined further on the dense clouds: moved, but by little.
+    let result = found.result.t_target_source;
+    let winner = found.candidates[chosen].t_target_source;
+    assert_ne!(result, winner);
+    assert!(winner.inverse().compose(&result).rotation_angle_deg() < 1.0);
     let metrics = metrics_against_truth(&found, &pair);
     assert!(metrics.recall, "{metrics:?}");
 }

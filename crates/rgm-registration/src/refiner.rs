@@ -30,18 +30,6 @@ pub trait Refiner: Send + Sync {
         target: &Prepared,
         initial: &RigidTransform,
     ) -> Result<Registration>;
-
-    /// [`Refiner::refine`]'s transform, iterations and convergence, for a caller that scores
-    /// the transform its own way ([`crate::registrar::Registrar::register_unscored`]); a
-    /// refiner whose score costs a search of every point skips it here.
-    fn refine_unscored(
-        &self,
-        source: &Prepared,
-        target: &Prepared,
-        initial: &RigidTransform,
-    ) -> Result<Registration> {
-        self.refine(source, target, initial)
-    }
 }
 
 impl<F: Refiner + ?Sized> Refiner for &F {
@@ -56,15 +44,6 @@ impl<F: Refiner + ?Sized> Refiner for &F {
         initial: &RigidTransform,
     ) -> Result<Registration> {
         (**self).refine(source, target, initial)
-    }
-
-    fn refine_unscored(
-        &self,
-        source: &Prepared,
-        target: &Prepared,
-        initial: &RigidTransform,
-    ) -> Result<Registration> {
-        (**self).refine_unscored(source, target, initial)
     }
 }
 
@@ -149,36 +128,25 @@ impl Refiner for AtSpacing {
         initial: &RigidTransform,
     ) -> Result<Registration> {
         let start = Instant::now();
-        let refined = self.refine_unscored(source, target, initial)?.result;
-        let mut correspondences = Vec::new();
-        let scored = score(
-            &source.points,
-            target.index(),
-            &refined.t_target_source,
-            self.scoring_distance,
-            Some(&mut correspondences),
-        );
-        let result = Fit::scored(refined.t_target_source, refined.iterations, true, scored);
-        Ok(Registration::single(result, correspondences, start))
-    }
-
-    fn refine_unscored(
-        &self,
-        source: &Prepared,
-        target: &Prepared,
-        initial: &RigidTransform,
-    ) -> Result<Registration> {
-        let start = Instant::now();
+        let index = target.index();
         let (transform, iterations) = refine::refine_at_resolution(
             source,
             target,
-            target.index(),
+            index,
             initial,
             self.coarser_than,
             &self.config,
         )?;
-        let result = Fit::unscored(transform, iterations, true);
-        Ok(Registration::single(result, Vec::new(), start))
+        let mut correspondences = Vec::new();
+        let scored = score(
+            &source.points,
+            index,
+            &transform,
+            self.scoring_distance,
+            Some(&mut correspondences),
+        );
+        let result = Fit::scored(transform, iterations, true, scored);
+        Ok(Registration::single(result, correspondences, start))
     }
 }
 

@@ -51,7 +51,8 @@ impl Thinning {
 /// A cube of [`Density::voxel`] holding less than this share of the points of a typical
 /// point's cube is sparse, and the points of sparse cubes away from dense ones are strays,
 /// which both thinnings leave out ([`PointCloud::non_stray_indices`]): a dense scan's edges
-/// stay; 20 % of its points scattered through its box go (docs/baselines.md, "Stray points").
+/// stay; 20 % of its points scattered through its box go (docs/baselines.md, "Data unlike the
+/// dev set").
 pub const STRAY_SHARE: f64 = 0.2;
 
 /// `cloud` thinned `how` to `density` without its stray points; `None` when it has no more points (it is used as it is).

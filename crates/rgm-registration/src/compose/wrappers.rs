@@ -174,47 +174,15 @@ impl<E: From<GeomError>, R: Registrar<E>, F: Refiner> Registrar<E> for AtResolut
         target: &Prepared,
         progress: &mut dyn FnMut(Progress),
     ) -> Result<Registration, E> {
-        self.register_refined(source, target, progress, true)
-    }
-
-    fn register_unscored(
-        &mut self,
-        source: &Prepared,
-        target: &Prepared,
-        progress: &mut dyn FnMut(Progress),
-    ) -> Result<Registration, E> {
-        self.register_refined(source, target, progress, false)
-    }
-}
-
-impl<R, F: Refiner> AtResolution<R, F> {
-    /// `inner`'s registration, refined on a dense pair: scored by the refinement when `scored`
-    /// (the inner transform is never scored there), unscored otherwise.
-    fn register_refined<E: From<GeomError>>(
-        &mut self,
-        source: &Prepared,
-        target: &Prepared,
-        progress: &mut dyn FnMut(Progress),
-        scored: bool,
-    ) -> Result<Registration, E>
-    where
-        R: Registrar<E>,
-    {
         let start = Instant::now();
         if !self.density.is_exceeded_by(source.len(), target.len()) {
-            return if scored {
-                self.inner.register_prepared(source, target, progress)
-            } else {
-                self.inner.register_unscored(source, target, progress)
-            };
+            return self.inner.register_prepared(source, target, progress);
         }
+        // The refinement scores its own transform.
         let found = self.inner.register_unscored(source, target, progress)?;
-        let initial = &found.result.t_target_source;
-        let fine = if scored {
-            self.refiner.refine(source, target, initial)?
-        } else {
-            self.refiner.refine_unscored(source, target, initial)?
-        };
+        let fine = self
+            .refiner
+            .refine(source, target, &found.result.t_target_source)?;
         Ok(Registration {
             result: Fit {
                 iterations: found.result.iterations + fine.result.iterations,
@@ -406,8 +374,7 @@ mod tests {
     use super::*;
     use crate::methods::fgr::FgrConfig;
     use crate::methods::icp::IcpConfig;
-    use crate::methods::refine::{RefineConfig, ResolutionConfig};
-    use crate::refiner::AtSpacing;
+    use crate::methods::refine::RefineConfig;
     use crate::registrar::DynRegistrar;
     use crate::testing::{Fixed, DENSITY, FRAME};
     use crate::RegistrationError;
@@ -515,58 +482,6 @@ mod tests {
         let sparse = box_surface(500, 2);
         Registrar::<RegistrationError>::register(&mut at_resolution, &sparse, &sparse).unwrap();
         assert_eq!((fixed.calls(), fixed.scored_calls()), (2, 1));
-    }
-
-    #[test]
-    fn at_resolution_unscored_refines_alike_without_the_score() {
-        // A dense pair 2° and 0.01 apart, found by a method that answers the identity.
-        let target = box_surface(3000, 1);
-        let pose = RigidTransform::new(
-            rgm_geom::euler::rotation_xyz_intrinsic(0.0, 0.0, 2f64.to_radians()),
-            Vector3::new(0.01, 0.0, 0.0),
-        );
-        let source = target.transformed(&pose.inverse());
-        let fixed = Fixed::new("fixed", 0.0);
-        let mut at_resolution = AtResolution {
-            inner: fixed.clone(),
-            refiner: AtSpacing {
-                coarser_than: 1.0,
-                scoring_distance: 0.02,
-                config: ResolutionConfig::default(),
-            },
-            density: DENSITY,
-        };
-        let (source, target) = (Prepared::new(source), Prepared::new(target));
-        let scored = Registrar::<RegistrationError>::register_prepared(
-            &mut at_resolution,
-            &source,
-            &target,
-            &mut |_| {},
-        )
-        .unwrap();
-        let unscored = Registrar::<RegistrationError>::register_unscored(
-            &mut at_resolution,
-            &source,
-            &target,
-            &mut |_| {},
-        )
-        .unwrap();
-        // The inner method asked for its transform alone both times.
-        assert_eq!((fixed.calls(), fixed.scored_calls()), (2, 0));
-        let error = pose.inverse().compose(&scored.result.t_target_source);
-        assert!(error.rotation_angle_deg() < 0.05, "{error:?}");
-        assert_eq!(scored.result.inlier_count, 3000);
-        // The same refinement, and no score.
-        assert_eq!(
-            unscored.result.t_target_source,
-            scored.result.t_target_source
-        );
-        assert_eq!(unscored.result.iterations, scored.result.iterations);
-        assert_eq!(
-            (unscored.result.inlier_count, unscored.result.fitness),
-            (0, 0.0)
-        );
-        assert!(unscored.correspondences.is_empty());
     }
 
     #[test]
