@@ -39,10 +39,11 @@ def test_a_fork_pool_after_a_registration_registers(airplane):
 
 def test_ctrl_c_interrupts_a_registration_at_once(airplane, ctrl_c):
     # Case 11: KeyboardInterrupt came only when the call ended (21.6 s later). A dense pair
-    # (1,000 copies of each point, jittered) keeps the default method busy for seconds; Ctrl-C
-    # 0.2 s into it ends the call long before the registration would have.
+    # (2,000 copies of each point, jittered: 1,000 were done in under a second on two cores)
+    # keeps the default method busy for seconds; Ctrl-C 0.2 s into it ends the call long before
+    # the registration would have.
     rng = np.random.default_rng(0)
-    dense = np.repeat(airplane.astype(np.float64), 1000, axis=0) + rng.normal(0, 0.003, (1000 * len(airplane), 3))
+    dense = np.repeat(airplane.astype(np.float64), 2000, axis=0) + rng.normal(0, 0.003, (2000 * len(airplane), 3))
     target = moved(dense, KNOWN)
     registrar = rgm.Registrar()
     start = time.perf_counter()
