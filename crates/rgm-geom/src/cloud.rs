@@ -211,35 +211,35 @@ impl PointCloud {
     pub fn non_stray_indices(&self, voxel: f64, share: f64) -> Vec<usize> {
         let cubes = Cubes::of(self, voxel);
         let kept = cubes.kept(share);
+        let kept_point = |p: &Point3<f64>| kept[cubes.cube_of[&cubes.key(p)]];
         (0..self.len())
-            .filter(|&i| kept[cubes.of_point[i]])
+            .filter(|&i| kept_point(&self.points[i]))
             .collect()
     }
 }
 
 /// A cloud's occupied cubes of one side, aligned on the origin, in the order first met.
 struct Cubes {
+    side: f64,
     /// Each cube's integer coordinates. // (V,)
     keys: Vec<[i64; 3]>,
     /// The cube of each key.
     cube_of: rustc_hash::FxHashMap<[i64; 3], usize>,
     /// The sum of each cube's points and their count. // (V,)
     sums: Vec<(Vector3<f64>, usize)>,
-    /// The cube of each point. // (N,)
-    of_point: Vec<usize>,
 }
 
 impl Cubes {
     fn of(cloud: &PointCloud, side: f64) -> Self {
         // Fx hashing: the cubes' order (of first points) does not depend on the hasher.
         let mut cubes = Self {
+            side,
             keys: Vec::new(),
             cube_of: rustc_hash::FxHashMap::default(),
             sums: Vec::new(),
-            of_point: Vec::with_capacity(cloud.len()),
         };
         for p in &cloud.points {
-            let key = p.coords.map(|v| (v / side).floor() as i64).into();
+            let key = cubes.key(p);
             let cube = *cubes.cube_of.entry(key).or_insert_with(|| {
                 cubes.keys.push(key);
                 cubes.sums.push((Vector3::zeros(), 0));
@@ -247,9 +247,13 @@ impl Cubes {
             });
             cubes.sums[cube].0 += p.coords;
             cubes.sums[cube].1 += 1;
-            cubes.of_point.push(cube);
         }
         cubes
+    }
+
+    /// The integer coordinates of the cube that holds `p`.
+    fn key(&self, p: &Point3<f64>) -> [i64; 3] {
+        p.coords.map(|v| (v / self.side).floor() as i64).into()
     }
 
     /// The mean of each cube that `keep` keeps, in order.
@@ -266,7 +270,7 @@ impl Cubes {
     fn kept(&self, share: f64) -> Vec<bool> {
         let mut counts: Vec<usize> = self.sums.iter().map(|&(_, n)| n).collect(); // (V,)
         counts.sort_unstable();
-        let points = self.of_point.len();
+        let points: usize = self.sums.iter().map(|&(_, n)| n).sum();
         let mut seen = 0;
         let typical = counts
             .into_iter()

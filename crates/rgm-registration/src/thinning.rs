@@ -55,7 +55,8 @@ impl Thinning {
 /// dev set").
 pub const STRAY_SHARE: f64 = 0.2;
 
-/// `cloud` thinned `how` to `density` without its stray points; `None` when it has no more points (it is used as it is).
+/// `cloud` thinned `how` to `density` without its stray points; `None` when it has no more
+/// points (it is used as it is).
 pub fn thinned(cloud: &PointCloud, how: Thinning, density: Density) -> Option<PointCloud> {
     if cloud.len() <= density.points {
         return None;
@@ -86,7 +87,8 @@ mod tests {
 
     #[test]
     fn both_thinnings_leave_out_the_strays_scattered_through_a_dense_scan_s_box() {
-        // A square of 200 × 200 points in z = 0 (about 25 in a cube of the thinning's voxel) and 20 % as many strays through its box.
+        // A square of 200 × 200 points in z = 0 (about 25 in a cube of the thinning's voxel)
+        // and 20 % as many strays through its box.
         let mut rng = StdRng::seed_from_u64(3);
         let mut points: Vec<Point3<f64>> = (0..200)
             .flat_map(|i| {
