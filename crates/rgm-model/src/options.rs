@@ -15,10 +15,10 @@
 //! (`BestOf[first, rest]` in place of the `Cascade` when `accept` takes nothing; inside the
 //! `Normalised`, `UpTo { points: 32, small: TripletConfig, .. }` sends a pair of a few points to
 //! [`rgm_registration::methods::triplets`]; with `+refine`, a pair denser than the training clouds (a scan, a room)
-//! goes through `Cascade { first: the Thinned composite, rest: [Sc2Config] }` judged by
-//! `TUNED.scene_accept` ([`crate::policy`]): second-order compatibility on the pair's own FPFH matches,
-//! [`rgm_registration::methods::sc2`], where the object cascade's result does not coincide with the target at
-//! the pair's spacing.)
+//! goes through `Cascade { first: RefinedWhereNear<the Thinned composite, AtSpacing>, rest: [Sc2Config] }`
+//! judged by `TUNED.scene_accept` ([`crate::policy`]): second-order compatibility on the pair's own FPFH
+//! matches, [`rgm_registration::methods::sc2`], where the object cascade's result does not coincide with the
+//! target at the pair's spacing once refined there (when it nearly coincides, `TUNED.scene_refine_near`).)
 //!
 //! [`Checked`] doubts a result whose overlap is not one where the clouds coincide, or that a
 //! rival pose fits nearly as well (`TUNED.refined_checks()`, [`crate::policy`]): refined results, ICP's (refined by its
@@ -42,7 +42,8 @@ use std::str::FromStr;
 
 use rgm_registration::check::{Acceptance, InFrame, Scoring};
 use rgm_registration::compose::{
-    AtResolution, BestOf, Cascade, Checked, Named, Normalised, OnFirstUse, Refined, Thinned, UpTo,
+    AtResolution, BestOf, Cascade, Checked, Named, Normalised, OnFirstUse, Refined,
+    RefinedWhereNear, Thinned, UpTo,
 };
 use rgm_registration::methods::fgr::{self, FgrConfig};
 use rgm_registration::methods::icp::{self, IcpConfig};
@@ -412,6 +413,11 @@ where
             scoring,
         }))
     };
+    let at_spacing = AtSpacing {
+        coarser_than: scoring.result_distance,
+        scoring_distance: scoring.result_distance,
+        config: ResolutionConfig::default(),
+    };
     let composite: Box<dyn DynRegistrar<MethodError>> = match refine {
         None => Box::new(Checked {
             inner: composite,
@@ -428,7 +434,11 @@ where
                     other: match dense {
                         DenseStage::ObjectThenScene => Box::new(Cascade {
                             base: AUTO,
-                            first: composite,
+                            first: Box::new(RefinedWhereNear {
+                                inner: composite,
+                                refiner: at_spacing.clone(),
+                                near: TUNED.scene_refine_near,
+                            }),
                             rest: vec![Box::new(scene_stage())],
                             accept: TUNED.scene_accept,
                             scoring: Scoring {
@@ -440,11 +450,7 @@ where
                         DenseStage::SceneOnly => Box::new(scene_stage()),
                     },
                 },
-                refiner: AtSpacing {
-                    coarser_than: scoring.result_distance,
-                    scoring_distance: scoring.result_distance,
-                    config: ResolutionConfig::default(),
-                },
+                refiner: at_spacing,
                 density: TRAINING_DENSITY,
             },
             check: TUNED.refined_checks(),

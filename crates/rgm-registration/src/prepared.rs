@@ -15,6 +15,8 @@ use rgm_geom::cloud::{evenly, median};
 use rgm_geom::normals::{estimate_normals, NormalsConfig};
 use rgm_geom::{KnnIndex, PointCloud, RigidTransform, Vector3};
 
+use crate::fit::Fit;
+
 /// Points whose neighbours set a cloud's [`Prepared::spacings`].
 pub const SPACING_SAMPLE: usize = 2000;
 
@@ -26,11 +28,15 @@ static NEXT_ID: AtomicU64 = AtomicU64::new(0);
 /// length (each as bits: only the same arithmetic's inputs find it).
 type ScoreKey = (u64, [u64; 12], u64);
 
+/// A refinement's fit and its (source, target) pairs ([`Prepared::refinement`]).
+pub type Refinement = (Fit, Vec<(usize, usize)>);
+
 /// Unit normals of a cloud's points, shared by the stages that ask for them. // (N,)
 pub type Normals = Arc<Vec<Vector3<f64>>>;
 
 /// A cloud and what is made of it lazily: its [`KnnIndex`], its normals per
-/// [`NormalsConfig`], and scores of it onto other prepared clouds ([`Prepared::pair_score`]).
+/// [`NormalsConfig`], and scores and refinements of it onto other prepared clouds
+/// ([`Prepared::pair_score`], [`Prepared::refinement`]).
 #[derive(Debug)]
 pub struct Prepared<'a> {
     cloud: Cow<'a, PointCloud>,
@@ -40,6 +46,8 @@ pub struct Prepared<'a> {
     id: u64,
     /// The pair scores made so far.
     scores: Mutex<Vec<(ScoreKey, f64)>>,
+    /// The refinements made so far, each under its start and under its result.
+    refinements: Mutex<Vec<(ScoreKey, Refinement)>>,
     /// [`Prepared::spacings`], once measured.
     spacings: OnceLock<(f64, f64)>,
 }
@@ -53,6 +61,7 @@ impl<'a> Prepared<'a> {
             normals: Mutex::new(Vec::new()),
             id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
             scores: Mutex::new(Vec::new()),
+            refinements: Mutex::new(Vec::new()),
             spacings: OnceLock::new(),
         }
     }
@@ -150,6 +159,44 @@ impl Prepared<'_> {
     ) -> f64 {
         kept(&self.scores, self.key(target, transform, length), make)
     }
+
+    /// The refinement `make` makes of this cloud moved by `initial` onto `target` (its fit
+    /// scored at `length`, and the pairs behind it), made on the first ask and kept under
+    /// `initial`, and under its own transform with no iteration: a stage refined at the pair's
+    /// resolution before a cascade judged it is found there again by the refinement of the
+    /// cascade's winner, which then costs nothing. `make` must be one function of those three
+    /// for every caller (the refinement at the pair's spacing, `crate::refiner::AtSpacing`); a
+    /// failed one is not kept.
+    pub fn refinement<E>(
+        &self,
+        target: &Prepared,
+        initial: &RigidTransform,
+        length: f64,
+        make: impl FnOnce() -> Result<Refinement, E>,
+    ) -> Result<Refinement, E> {
+        let key = self.key(target, initial, length);
+        let refinements = &self.refinements;
+        let find = |key: &ScoreKey| {
+            let made = refinements.lock().expect("no panic holds the lock");
+            made.iter().find(|(k, _)| k == key).map(|m| m.1.clone())
+        };
+        if let Some(made) = find(&key) {
+            return Ok(made);
+        }
+        let (fit, pairs) = make()?;
+        let reached = self.key(target, &fit.t_target_source, length);
+        let there = Fit {
+            iterations: 0,
+            ..fit
+        };
+        let mut made = refinements.lock().expect("no panic holds the lock");
+        for (key, fit) in [(key, fit), (reached, there)] {
+            if !made.iter().any(|(k, _)| *k == key) {
+                made.push((key, (fit, pairs.clone())));
+            }
+        }
+        Ok((fit, pairs))
+    }
 }
 
 /// The value kept in `made` under `key`, or `make`'s, then kept. Made outside the lock, for the
@@ -236,6 +283,45 @@ mod tests {
         // Fewer than 17 points have no 16th neighbour.
         let few = PointCloud::new(grid.points[..10].to_vec());
         assert!(Prepared::new(&few).spacings().1.is_nan());
+    }
+
+    #[test]
+    fn a_refinement_is_made_once_and_found_again_under_its_result_with_no_iteration() {
+        let cloud = airplane();
+        let (source, target) = (Prepared::new(&cloud), Prepared::new(&cloud));
+        let start = RigidTransform::new(rgm_geom::Matrix3::identity(), Vector3::new(0.1, 0.0, 0.0));
+        let reached =
+            RigidTransform::new(rgm_geom::Matrix3::identity(), Vector3::new(0.001, 0.0, 0.0));
+        let made = std::cell::Cell::new(0);
+        let refine = |from: &RigidTransform, fails: bool| {
+            source.refinement(&target, from, 0.5, || {
+                made.set(made.get() + 1);
+                if fails {
+                    return Err("failed");
+                }
+                Ok((Fit::unscored(reached, 7, true), vec![(1, 2)]))
+            })
+        };
+        // A failed refinement is not kept.
+        assert_eq!(refine(&start, true), Err("failed"));
+        let (fit, pairs) = refine(&start, false).unwrap();
+        assert_eq!(
+            (fit.t_target_source, fit.iterations, pairs),
+            (reached, 7, vec![(1, 2)])
+        );
+        assert_eq!(refine(&start, false).unwrap().0.iterations, 7);
+        let (again, pairs) = refine(&reached, false).unwrap();
+        assert_eq!((again.t_target_source, again.iterations), (reached, 0));
+        assert_eq!(pairs, vec![(1, 2)]);
+        assert_eq!(made.get(), 2);
+        // At another length it is another refinement.
+        source
+            .refinement(&target, &start, 0.25, || {
+                made.set(made.get() + 1);
+                Ok::<_, ()>((Fit::unscored(start, 0, true), Vec::new()))
+            })
+            .unwrap();
+        assert_eq!(made.get(), 3);
     }
 
     #[test]

@@ -105,7 +105,9 @@ impl Refiner for IcpConfig {
 
 /// Point-to-plane stages at the clouds' own point spacing ([`refine::refine_at_resolution`]),
 /// finer than `coarser_than` (the finest distance a coarser refinement already ran at), scored
-/// at `scoring_distance`. It does not tell convergence: its result says `converged`.
+/// at `scoring_distance`. It does not tell convergence: its result says `converged`. Its results
+/// are kept with the clouds ([`Prepared::refinement`]): a transform it reached is not refined
+/// again in the same registration.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AtSpacing {
     pub coarser_than: f64,
@@ -128,24 +130,28 @@ impl Refiner for AtSpacing {
         initial: &RigidTransform,
     ) -> Result<Registration> {
         let start = Instant::now();
-        let index = target.index();
-        let (transform, iterations) = refine::refine_at_resolution(
-            source,
-            target,
-            index,
-            initial,
-            self.coarser_than,
-            &self.config,
-        )?;
-        let mut correspondences = Vec::new();
-        let scored = score(
-            &source.points,
-            index,
-            &transform,
-            self.scoring_distance,
-            Some(&mut correspondences),
-        );
-        let result = Fit::scored(transform, iterations, true, scored);
+        let (result, correspondences) =
+            source.refinement(target, initial, self.scoring_distance, || {
+                let index = target.index();
+                let (transform, iterations) = refine::refine_at_resolution(
+                    source,
+                    target,
+                    index,
+                    initial,
+                    self.coarser_than,
+                    &self.config,
+                )?;
+                let mut correspondences = Vec::new();
+                let scored = score(
+                    &source.points,
+                    index,
+                    &transform,
+                    self.scoring_distance,
+                    Some(&mut correspondences),
+                );
+                let result = Fit::scored(transform, iterations, true, scored);
+                Ok::<_, rgm_geom::GeomError>((result, correspondences))
+            })?;
         Ok(Registration::single(result, correspondences, start))
     }
 }

@@ -1,5 +1,5 @@
 //! Methods made of methods, which know nothing of what they wrap: the wrappers ([`Refined`],
-//! [`Normalised`], [`AtResolution`], [`UpTo`], [`OnFirstUse`], [`Checked`]) and the composites,
+//! [`Normalised`], [`AtResolution`], [`RefinedWhereNear`], [`UpTo`], [`OnFirstUse`], [`Checked`]) and the composites,
 //! which run candidate methods and keep the result their [`crate::check::Judge`] scores best
 //! ([`BestOf`], [`Cascade`], and [`Thinned`] on several thinnings of a dense pair).
 //!
@@ -12,4 +12,6 @@ mod wrappers;
 
 pub use composite::{conclude, BestOf, Cascade, Composite, Outcome};
 pub use thinned::Thinned;
-pub use wrappers::{AtResolution, Checked, Named, Normalised, OnFirstUse, Refined, UpTo};
+pub use wrappers::{
+    AtResolution, Checked, Named, Normalised, OnFirstUse, Refined, RefinedWhereNear, UpTo,
+};

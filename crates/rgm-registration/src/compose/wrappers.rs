@@ -1,7 +1,8 @@
 //! The wrappers that compose registrars without knowing what they wrap: [`Refined`] (its
 //! transform improved by a [`Refiner`]), [`Normalised`] (the pair centred and scaled into the
 //! unit-sphere frame, for a registrar or a refiner), [`AtResolution`] (a last refinement of a
-//! dense pair only, at its own point spacing), [`UpTo`] (a method of its own for tiny clouds),
+//! dense pair only, at its own point spacing), [`RefinedWhereNear`] (that refinement before a
+//! cascade judges a nearly right result), [`UpTo`] (a method of its own for tiny clouds),
 //! [`OnFirstUse`] (a method made only when a pair needs it) and [`Named`] (a composition under
 //! the name users chose it by).
 
@@ -12,7 +13,7 @@ use std::time::Instant;
 use rgm_geom::frame::{FrameRule, NearPair, Normalisation};
 use rgm_geom::{GeomError, PointCloud, RigidTransform};
 
-use crate::check::Check;
+use crate::check::{Check, CoincidesAtSpacing};
 use crate::fit::Fit;
 use crate::methods::refine::RefineConfig;
 use crate::prepared::{indexed_pair, Prepared};
@@ -180,20 +181,103 @@ impl<E: From<GeomError>, R: Registrar<E>, F: Refiner> Registrar<E> for AtResolut
         }
         // The refinement scores its own transform.
         let found = self.inner.register_unscored(source, target, progress)?;
-        let fine = self
-            .refiner
-            .refine(source, target, &found.result.t_target_source)?;
-        Ok(Registration {
-            result: Fit {
-                iterations: found.result.iterations + fine.result.iterations,
-                converged: found.result.converged && fine.result.converged,
-                ..fine.result
-            },
-            correspondences: fine.correspondences,
-            time_ms: elapsed_ms(start),
-            doubt: found.doubt.or(fine.doubt),
-            ..found
-        })
+        Ok(refined_further(
+            &self.refiner,
+            found,
+            source,
+            target,
+            start,
+        )?)
+    }
+}
+
+/// `found` refined by `refiner` from its transform, its candidates and doubt kept, its
+/// iterations added up, timed from `start`.
+fn refined_further<F: Refiner>(
+    refiner: &F,
+    found: Registration,
+    source: &Prepared,
+    target: &Prepared,
+    start: Instant,
+) -> rgm_geom::Result<Registration> {
+    let fine = refiner.refine(source, target, &found.result.t_target_source)?;
+    Ok(Registration {
+        result: Fit {
+            iterations: found.result.iterations + fine.result.iterations,
+            converged: found.result.converged && fine.result.converged,
+            ..fine.result
+        },
+        correspondences: fine.correspondences,
+        time_ms: elapsed_ms(start),
+        doubt: found.doubt.or(fine.doubt),
+        ..found
+    })
+}
+
+/// `inner`, then `refiner` from its transform only where `near` takes it (a pose that nearly
+/// coincides with the target at the pair's point spacing); named as `inner`. A cascade that asks
+/// a result to coincide at a finer spacing than a coarse refinement reaches (a dense scan's)
+/// then judges a nearly right result at the pair's resolution, while a pose far from the truth
+/// (a room's wrong pose; any pose of scan-line sweeps, which `near` never takes) costs no
+/// refinement before it is turned down. With [`AtSpacing`] as the refiner, an [`AtResolution`]
+/// around the cascade finds the winner refined already ([`Prepared::refinement`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RefinedWhereNear<R, F = AtSpacing> {
+    pub inner: R,
+    pub refiner: F,
+    pub near: CoincidesAtSpacing,
+}
+
+impl<R, F: Refiner> RefinedWhereNear<R, F> {
+    /// `found` refined when `near` takes it, as it was otherwise.
+    fn refined_if_near<E: From<GeomError>>(
+        &self,
+        found: Registration,
+        source: &Prepared,
+        target: &Prepared,
+        start: Instant,
+    ) -> Result<Registration, E> {
+        if !self
+            .near
+            .takes(source, target, &found.result.t_target_source)
+        {
+            return Ok(found);
+        }
+        Ok(refined_further(
+            &self.refiner,
+            found,
+            source,
+            target,
+            start,
+        )?)
+    }
+}
+
+impl<E: From<GeomError>, R: Registrar<E>, F: Refiner> Registrar<E> for RefinedWhereNear<R, F> {
+    fn id(&self) -> MethodId {
+        self.inner.id()
+    }
+
+    fn register_prepared(
+        &mut self,
+        source: &Prepared,
+        target: &Prepared,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        let start = Instant::now();
+        let found = self.inner.register_prepared(source, target, progress)?;
+        self.refined_if_near(found, source, target, start)
+    }
+
+    fn register_unscored(
+        &mut self,
+        source: &Prepared,
+        target: &Prepared,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Registration, E> {
+        let start = Instant::now();
+        let found = self.inner.register_unscored(source, target, progress)?;
+        self.refined_if_near(found, source, target, start)
     }
 }
 
@@ -372,14 +456,15 @@ impl<E: From<GeomError>, R: Registrar<E>, C: Check> Registrar<E> for Checked<R, 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::check::Coincides;
     use crate::methods::fgr::FgrConfig;
     use crate::methods::icp::IcpConfig;
-    use crate::methods::refine::RefineConfig;
+    use crate::methods::refine::{RefineConfig, ResolutionConfig};
     use crate::registrar::DynRegistrar;
     use crate::testing::{Fixed, DENSITY, FRAME};
     use crate::RegistrationError;
     use rgm_geom::testing::{airplane, box_surface};
-    use rgm_geom::{Point3, Vector3};
+    use rgm_geom::{Matrix3, Point3, Vector3};
 
     /// 200 points on a twisted curve, and the same points moved by 5° and 0.02.
     fn curve_pair() -> (PointCloud, PointCloud) {
@@ -461,6 +546,76 @@ mod tests {
         // The same methods on the pair they register are not doubted.
         let found = Registrar::<GeomError>::register(&mut refined, &source, &target).unwrap();
         assert!(found.doubt.is_none(), "{:?}", found.doubt);
+    }
+
+    #[test]
+    fn only_a_nearly_coinciding_result_is_refined_first_and_the_refinement_after_keeps_it() {
+        // 8,000 points on a box (spacing ≈ 0.008): a result 0.015 off along the diagonal lies
+        // about a spacing off every face, one 0.2 off about 14.
+        let dense = box_surface(8000, 3);
+        let at_spacing = AtSpacing {
+            coarser_than: 0.05,
+            scoring_distance: 0.02,
+            config: ResolutionConfig::default(),
+        };
+        let near = CoincidesAtSpacing {
+            coincides: Coincides {
+                near: 4.0,
+                far: 16.0,
+                least: 0.5,
+            },
+            density: DENSITY,
+            scan_lines: 5.0,
+        };
+        let diagonal = Vector3::new(1.0, 1.0, 1.0).normalize();
+        for (shift, is_near) in [(0.015, true), (0.2, false)] {
+            let off = RigidTransform::new(Matrix3::identity(), diagonal * shift);
+            let mut fixed = Fixed::new("fixed", 0.0);
+            fixed.transform = off;
+            let mut first = RefinedWhereNear {
+                inner: fixed,
+                refiner: at_spacing.clone(),
+                near,
+            };
+            let (source, target) = (Prepared::new(&dense), Prepared::new(&dense));
+            let found = Registrar::<RegistrationError>::register_unscored(
+                &mut first,
+                &source,
+                &target,
+                &mut |_| {},
+            )
+            .unwrap();
+            // What the refinement alone makes of the result, on a pair of its own.
+            let (alone_source, alone_target) = (Prepared::new(&dense), Prepared::new(&dense));
+            let alone = at_spacing
+                .refine(&alone_source, &alone_target, &off)
+                .unwrap();
+            let t = found.result.t_target_source;
+            if is_near {
+                assert_eq!(t, alone.result.t_target_source, "{shift}");
+                assert!(t.translation.norm() < 1e-3, "{shift}: {t:?}");
+                assert_eq!(found.result.iterations, alone.result.iterations);
+            } else {
+                assert_eq!(t, off, "{shift}");
+                assert_eq!(found.result.iterations, 0);
+            }
+            // Around it, the winner is refined once: a refined one is kept as it was, with no
+            // further iteration.
+            let mut around = AtResolution {
+                inner: first,
+                refiner: at_spacing.clone(),
+                density: DENSITY,
+            };
+            let (source, target) = (Prepared::new(&dense), Prepared::new(&dense));
+            let last = Registrar::<RegistrationError>::register(&mut around, &source, &target)
+                .unwrap()
+                .result;
+            assert_eq!(
+                last.t_target_source, alone.result.t_target_source,
+                "{shift}"
+            );
+            assert_eq!(last.iterations, alone.result.iterations, "{shift}");
+        }
     }
 
     #[test]
