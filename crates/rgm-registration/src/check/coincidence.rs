@@ -186,7 +186,7 @@ fn surface_spacing(cloud: &Prepared, scan_lines: f64) -> Option<f64> {
 
 impl CoincidesAtSpacing {
     /// The pair's spacing, when the check applies to it.
-    fn spacing(&self, source: &Prepared, target: &Prepared) -> Option<f64> {
+    pub fn spacing(&self, source: &Prepared, target: &Prepared) -> Option<f64> {
         if !self.density.is_exceeded_by(source.len(), target.len()) {
             return None;
         }

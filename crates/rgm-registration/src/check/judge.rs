@@ -44,7 +44,9 @@ pub struct Acceptance {
     pub whole: (f64, f64),
     /// A check the result must pass too (the coincidence of a dense pair at its point
     /// spacing): a result that overlaps enough without coinciding is not taken, and the later
-    /// candidates run.
+    /// candidates run. Where it applies, the score is measured no finer than its near distance:
+    /// under a right pose a point lies up to about a spacing from the other cloud's nearest, so
+    /// a pair sparser than the overlap distance would otherwise count its overlap short.
     pub coincides: Option<CoincidesAtSpacing>,
 }
 
@@ -71,7 +73,15 @@ impl Acceptance {
     ) -> bool {
         let (distance, whole) = self.whole;
         let (searched_source, searched_target) = indexed_pair(source, target);
-        score >= self.score
+        let at_spacing = self.coincides.and_then(|check| {
+            let near = check.coincides.near * check.spacing(source, target)?;
+            (near > overlap_distance).then(|| {
+                source.pair_score(target, transform, near, || {
+                    overlap_score(searched_source, searched_target, transform, near)
+                })
+            })
+        });
+        at_spacing.unwrap_or(score) >= self.score
             && (self.turned_share == f64::INFINITY
                 || source.pair_score(target, transform, distance, || {
                     overlap_score(searched_source, searched_target, transform, distance)
@@ -134,5 +144,43 @@ impl<'a> Judge<'a> {
         self.scoring
             .coincides
             .is_none_or(|check| check.holds(self.source, self.target, transform))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::DENSITY;
+    use rgm_geom::testing::box_surface;
+
+    #[test]
+    fn a_dense_pair_s_overlap_is_measured_no_finer_than_its_spacing() {
+        // Two samplings of one box, 8,000 points each (spacing ≈ 0.008): under the identity a
+        // point lies about a spacing from the other sampling's nearest, beyond 0.002 nearly
+        // always.
+        let (a, b) = (box_surface(8000, 1), box_surface(8000, 2));
+        let (source, target) = (Prepared::new(&a), Prepared::new(&b));
+        let identity = RigidTransform::identity();
+        let fine = 0.002;
+        let (searched_source, searched_target) = indexed_pair(&source, &target);
+        let score = overlap_score(searched_source, searched_target, &identity, fine);
+        assert!(score < 0.2, "{score}");
+        let at_spacing = CoincidesAtSpacing {
+            coincides: Coincides {
+                near: 1.5,
+                far: 16.0,
+                least: 0.5,
+            },
+            density: DENSITY,
+            scan_lines: 5.0,
+        };
+        let accept = |coincides| Acceptance {
+            score: 1.5,
+            turned_share: f64::INFINITY,
+            whole: (fine, f64::INFINITY),
+            coincides,
+        };
+        assert!(accept(Some(at_spacing)).takes(score, &source, &target, &identity, fine));
+        assert!(!accept(None).takes(score, &source, &target, &identity, fine));
     }
 }

@@ -154,7 +154,7 @@ impl Judge<'_> {
         target: &Prepared,
     ) -> bool {
         tally.best.as_ref().is_some_and(|best| {
-            best.coincides && best.score >= accept.score && {
+            best.coincides && {
                 let distance = self.scoring.overlap_distance;
                 accept.takes(best.score, source, target, &best.transform, distance)
             }
