@@ -195,27 +195,37 @@ impl PointCloud {
 
     /// [`PointCloud::voxel_downsampled`] without the cubes that hold only stray points
     /// ([`PointCloud::non_stray_indices`]): the same means of the cubes kept, in the same order.
-    pub fn voxel_downsampled_without_strays(&self, voxel: f64, share: f64) -> Self {
+    pub fn voxel_downsampled_without_strays(&self, voxel: f64, strays: &Strays) -> Self {
         let cubes = Cubes::of(self, voxel);
-        let kept = cubes.kept(share);
+        let kept = cubes.kept(self, strays);
         cubes.means(|cube| kept[cube])
     }
 
     /// The indices, in order, of the points that are not strays at the scale of cubes of side
-    /// `voxel`. A cube is sparse when it holds fewer than `share` of the points of a typical
-    /// point's cube (the cube of the median point, the points ordered by their cube's count);
-    /// a point is a stray when its cube and the 26 around it are all sparse. A scanner's
-    /// spurious returns scattered through an object's box lie alone in their cubes, while a
-    /// surface's cubes hold many and a surface's edge lies beside its dense cubes. What a
-    /// thinning keeps of the strays, farthest-point sampling picks first.
-    pub fn non_stray_indices(&self, voxel: f64, share: f64) -> Vec<usize> {
+    /// `voxel` by `strays`' rule ([`Strays`]). What a thinning keeps of the strays,
+    /// farthest-point sampling picks first.
+    pub fn non_stray_indices(&self, voxel: f64, strays: &Strays) -> Vec<usize> {
         let cubes = Cubes::of(self, voxel);
-        let kept = cubes.kept(share);
+        let kept = cubes.kept(self, strays);
         let kept_point = |p: &Point3<f64>| kept[cubes.cube_of[&cubes.key(p)]];
         (0..self.len())
             .filter(|&i| kept_point(&self.points[i]))
             .collect()
     }
+}
+
+/// Which points of a cloud are strays, at the scale of cubes of one side
+/// ([`PointCloud::non_stray_indices`]). A cube is sparse when it holds fewer than `share` of the
+/// points of a typical point's cube (the cube of the median point, the points ordered by their
+/// cube's count); the points of a sparse cube whose 26 neighbours are all sparse too are strays
+/// when none of them has two other points within `alone` of the side. A scanner's spurious returns
+/// scattered through an object's box lie alone, while a surface's cubes hold many points, a
+/// surface's edge lies beside its dense cubes, and a LiDAR sweep's far rings, sparse beside its
+/// near ones, hold their points close together along each ring.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Strays {
+    pub share: f64,
+    pub alone: f64,
 }
 
 /// A cloud's occupied cubes of one side, aligned on the origin, in the order first met.
@@ -266,8 +276,9 @@ impl Cubes {
         )
     }
 
-    /// Whether each cube holds points that are not strays ([`PointCloud::non_stray_indices`]).
-    fn kept(&self, share: f64) -> Vec<bool> {
+    /// Whether each cube holds points that are not strays ([`Strays`]); `cloud` is the cloud
+    /// the cubes were made of.
+    fn kept(&self, cloud: &PointCloud, strays: &Strays) -> Vec<bool> {
         let mut counts: Vec<usize> = self.sums.iter().map(|&(_, n)| n).collect(); // (V,)
         counts.sort_unstable();
         let points: usize = self.sums.iter().map(|&(_, n)| n).sum();
@@ -279,19 +290,71 @@ impl Cubes {
                 2 * seen >= points
             })
             .unwrap_or(0);
-        let dense = |cube: usize| self.sums[cube].1 as f64 >= share * typical as f64;
+        let dense = |cube: usize| self.sums[cube].1 as f64 >= strays.share * typical as f64;
         let around = |[x, y, z]: [i64; 3]| {
             (-1..=1).flat_map(move |dx| {
                 (-1..=1).flat_map(move |dy| (-1..=1).map(move |dz| [x + dx, y + dy, z + dz]))
             })
         };
-        (0..self.keys.len())
-            .map(|cube| {
-                dense(cube)
-                    || around(self.keys[cube])
-                        .any(|key| self.cube_of.get(&key).is_some_and(|&c| dense(c)))
-            })
-            .collect()
+        let around_cubes =
+            |cube: usize| around(self.keys[cube]).filter_map(|key| self.cube_of.get(&key).copied());
+        let mut kept: Vec<bool> = (0..self.keys.len())
+            .map(|cube| dense(cube) || around_cubes(cube).any(dense))
+            .collect(); // (V,)
+        if kept.iter().all(|&k| k) {
+            return kept;
+        }
+        // A sparse region's cube stays when one of its points has two others near it (a ring's
+        // neighbours on either side of it; two strays may lie close by chance, three seldom).
+        // The reach is within a side, so the 27 cubes around a point hold every point in it.
+        let members = self.members(cloud);
+        let reach = (strays.alone * self.side).powi(2);
+        let between_two = |i: u32, cube: usize| {
+            let p = cloud.points[i as usize];
+            around_cubes(cube)
+                .flat_map(|other| members.of(other))
+                .filter(|&&j| j != i && (cloud.points[j as usize] - p).norm_squared() < reach)
+                .nth(1)
+                .is_some()
+        };
+        for (cube, kept) in kept.iter_mut().enumerate() {
+            if !*kept {
+                *kept = members.of(cube).iter().any(|&i| between_two(i, cube));
+            }
+        }
+        kept
+    }
+
+    /// The points of each cube of `cloud` (the cloud they were made of).
+    fn members(&self, cloud: &PointCloud) -> Members {
+        let mut starts = Vec::with_capacity(self.sums.len() + 1); // (V + 1,)
+        let mut total = 0;
+        starts.push(0);
+        for &(_, n) in &self.sums {
+            total += n;
+            starts.push(total);
+        }
+        let mut next = starts.clone(); // (V + 1,)
+        let mut order = vec![0u32; total]; // (N,)
+        for (i, p) in cloud.points.iter().enumerate() {
+            let cube = self.cube_of[&self.key(p)];
+            order[next[cube]] = i as u32;
+            next[cube] += 1;
+        }
+        Members { starts, order }
+    }
+}
+
+/// The points of each cube ([`Cubes::members`]): one list of point indices ordered by cube.
+struct Members {
+    /// Where each cube's points start in `order`, and where the last cube's end. // (V + 1,)
+    starts: Vec<usize>,
+    order: Vec<u32>, // (N,)
+}
+
+impl Members {
+    fn of(&self, cube: usize) -> &[u32] {
+        &self.order[self.starts[cube]..self.starts[cube + 1]]
     }
 }
 
@@ -507,8 +570,13 @@ mod tests {
         assert_eq!(c.voxel_firsts(0.5), vec![0, 2, 3]);
     }
 
+    const STRAYS: Strays = Strays {
+        share: 0.2,
+        alone: 0.1,
+    };
+
     #[test]
-    fn strays_are_the_points_of_sparse_cubes_away_from_dense_ones() {
+    fn strays_are_the_lone_points_of_sparse_cubes_away_from_dense_ones() {
         // A square of 100 × 100 points 0.01 apart: cubes of 0.1 hold 100 points each.
         let mut points: Vec<Point3<f64>> = (0..100)
             .flat_map(|i| {
@@ -519,8 +587,12 @@ mod tests {
             .collect();
         // Its edge: a point alone in its cube, beside a dense one.
         points.push(Point3::new(1.005, 0.5, 0.05));
+        // A line well above it, 0.008 apart (a LiDAR's far ring): its cubes are sparse, 12 or
+        // 13 points each, but its points lie close together.
+        points.extend((0..125).map(|k| Point3::new(0.004 + 0.008 * k as f64, 0.75, 0.55)));
         let kept: Vec<usize> = (0..points.len()).collect();
-        // Strays, alone or in pairs in their cubes, at least two cubes above the square.
+        // Strays, alone or close together in their cubes, at least two cubes from the square
+        // and the line.
         for k in 0..10 {
             points.push(Point3::new(
                 0.05 + 0.1 * k as f64,
@@ -529,16 +601,31 @@ mod tests {
             ));
         }
         points.push(Point3::new(0.06, 0.36, 0.26));
+        // A third one beside the first: it has two others within 0.17 of a side.
+        points.push(Point3::new(0.04, 0.34, 0.24));
         let cloud = PointCloud::new(points);
-        assert_eq!(cloud.non_stray_indices(0.1, 0.2), kept);
+        assert_eq!(cloud.non_stray_indices(0.1, &STRAYS), kept);
         assert_eq!(
-            cloud.voxel_downsampled_without_strays(0.1, 0.2),
+            cloud.voxel_downsampled_without_strays(0.1, &STRAYS),
             cloud.select(&kept).voxel_downsampled(0.1)
         );
+        // With a reach of 0.2 of a side, the cube of the three close strays is kept, the lone
+        // ones are not.
+        let wider = Strays {
+            alone: 0.2,
+            ..STRAYS
+        };
+        let mut with_three = kept.clone();
+        with_three.extend([kept.len(), kept.len() + 10, kept.len() + 11]);
+        assert_eq!(cloud.non_stray_indices(0.1, &wider), with_three);
         // At share 0 every cube is dense.
-        assert_eq!(cloud.non_stray_indices(0.1, 0.0).len(), cloud.len());
+        let none = Strays {
+            share: 0.0,
+            ..STRAYS
+        };
+        assert_eq!(cloud.non_stray_indices(0.1, &none).len(), cloud.len());
         assert_eq!(
-            cloud.voxel_downsampled_without_strays(0.1, 0.0),
+            cloud.voxel_downsampled_without_strays(0.1, &none),
             cloud.voxel_downsampled(0.1)
         );
     }

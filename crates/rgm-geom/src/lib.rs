@@ -28,7 +28,7 @@ pub mod transform;
 #[cfg(any(test, feature = "testing"))]
 pub mod testing;
 
-pub use cloud::{length, PointCloud};
+pub use cloud::{length, PointCloud, Strays};
 pub use error::{GeomError, Result};
 pub use kabsch::kabsch;
 pub use knn::{knn_graph, nearest_among, KnnIndex, Neighbourhoods};
