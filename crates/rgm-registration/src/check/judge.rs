@@ -4,7 +4,7 @@
 
 use rgm_geom::RigidTransform;
 
-use super::coincidence::{Coincides, CoincidesAtSpacing};
+use super::coincidence::{sampled_overlap, Coincides, CoincidesAtSpacing};
 use super::overlap::{overlap_score, turned_share};
 use crate::prepared::{indexed_pair, Prepared};
 
@@ -44,9 +44,10 @@ pub struct Acceptance {
     pub whole: (f64, f64),
     /// A check the result must pass too (the coincidence of a dense pair at its point
     /// spacing): a result that overlaps enough without coinciding is not taken, and the later
-    /// candidates run. Where it applies, the score is measured no finer than its near distance:
-    /// under a right pose a point lies up to about a spacing from the other cloud's nearest, so
-    /// a pair sparser than the overlap distance would otherwise count its overlap short.
+    /// candidates run. Where it applies, the score is measured no finer than its near distance
+    /// ([`sampled_overlap`]): under a right pose a point lies up to about a spacing from the
+    /// other cloud's nearest, so a pair sparser than the overlap distance would otherwise count
+    /// its overlap short.
     pub coincides: Option<CoincidesAtSpacing>,
 }
 
@@ -73,13 +74,11 @@ impl Acceptance {
     ) -> bool {
         let (distance, whole) = self.whole;
         let (searched_source, searched_target) = indexed_pair(source, target);
+        // Measured on a sample of each cloud, as the coincidence is: on a dense pair the whole
+        // clouds' score is a search of every point.
         let at_spacing = self.coincides.and_then(|check| {
             let near = check.coincides.near * check.spacing(source, target)?;
-            (near > overlap_distance).then(|| {
-                source.pair_score(target, transform, near, || {
-                    overlap_score(searched_source, searched_target, transform, near)
-                })
-            })
+            (near > overlap_distance).then(|| sampled_overlap(source, target, transform, near))
         });
         at_spacing.unwrap_or(score) >= self.score
             && (self.turned_share == f64::INFINITY
