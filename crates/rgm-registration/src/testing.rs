@@ -9,7 +9,7 @@ use rgm_geom::frame::FrameRule;
 use rgm_geom::testing::room;
 use rgm_geom::{GeomError, PointCloud, RigidTransform};
 
-use crate::check::Scoring;
+use crate::check::{Coincides, CoincidesAtSpacing, Scoring};
 use crate::fit::Fit;
 use crate::registrar::{MethodId, Progress, Registrar, Registration};
 use crate::thinning::Density;
@@ -36,6 +36,18 @@ pub const FRAME: FrameRule = FrameRule {
 pub const DENSITY: Density = Density {
     points: 1024,
     voxel: 0.035,
+};
+
+/// A spacing check for the tests, of the default's values (rgm-model's
+/// `policy::TUNED.coincides_at_spacing`, above this crate).
+pub const AT_SPACING: CoincidesAtSpacing = CoincidesAtSpacing {
+    coincides: Coincides {
+        near: 1.5,
+        far: 16.0,
+        least: 0.5,
+    },
+    density: DENSITY,
+    scan_lines: 5.0,
 };
 
 /// A pose far from the identity (a large turn about no axis in particular, a shift of 2.4), for

@@ -415,21 +415,10 @@ mod tests {
     use super::*;
     use crate::compose::Checked;
     use crate::registrar::Registrar;
-    use crate::testing::{Fixed, DENSITY};
+    use crate::testing::{Fixed, AT_SPACING};
     use rgm_geom::testing::airplane;
     use std::time::Instant;
 
-    /// A spacing check for the tests, of the default's values (rgm-model's
-    /// `policy::TUNED.coincides_at_spacing`, above this crate).
-    const AT_SPACING: CoincidesAtSpacing = CoincidesAtSpacing {
-        coincides: Coincides {
-            near: 1.5,
-            far: 16.0,
-            least: 0.5,
-        },
-        density: DENSITY,
-        scan_lines: 5.0,
-    };
     use rgm_geom::{Matrix3, Point3, PointCloud, Vector3};
 
     /// The rival check of the default's values (rgm-model's `policy::TUNED.unambiguous`) but for

@@ -149,7 +149,7 @@ impl<'a> Judge<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testing::DENSITY;
+    use crate::testing::AT_SPACING;
     use rgm_geom::testing::box_surface;
 
     #[test]
@@ -164,22 +164,13 @@ mod tests {
         let (searched_source, searched_target) = indexed_pair(&source, &target);
         let score = overlap_score(searched_source, searched_target, &identity, fine);
         assert!(score < 0.2, "{score}");
-        let at_spacing = CoincidesAtSpacing {
-            coincides: Coincides {
-                near: 1.5,
-                far: 16.0,
-                least: 0.5,
-            },
-            density: DENSITY,
-            scan_lines: 5.0,
-        };
         let accept = |coincides| Acceptance {
             score: 1.5,
             turned_share: f64::INFINITY,
             whole: (fine, f64::INFINITY),
             coincides,
         };
-        assert!(accept(Some(at_spacing)).takes(score, &source, &target, &identity, fine));
+        assert!(accept(Some(AT_SPACING)).takes(score, &source, &target, &identity, fine));
         assert!(!accept(None).takes(score, &source, &target, &identity, fine));
     }
 }

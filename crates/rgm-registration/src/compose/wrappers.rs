@@ -461,7 +461,7 @@ mod tests {
     use crate::methods::icp::IcpConfig;
     use crate::methods::refine::{RefineConfig, ResolutionConfig};
     use crate::registrar::DynRegistrar;
-    use crate::testing::{Fixed, DENSITY, FRAME};
+    use crate::testing::{Fixed, AT_SPACING, DENSITY, FRAME};
     use crate::RegistrationError;
     use rgm_geom::testing::{airplane, box_surface};
     use rgm_geom::{Matrix3, Point3, Vector3};
@@ -561,11 +561,9 @@ mod tests {
         let near = CoincidesAtSpacing {
             coincides: Coincides {
                 near: 4.0,
-                far: 16.0,
-                least: 0.5,
+                ..AT_SPACING.coincides
             },
-            density: DENSITY,
-            scan_lines: 5.0,
+            ..AT_SPACING
         };
         let diagonal = Vector3::new(1.0, 1.0, 1.0).normalize();
         for (shift, is_near) in [(0.015, true), (0.2, false)] {
