@@ -224,7 +224,10 @@ impl PointCloud {
 /// near ones, hold their points close together along each ring.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Strays {
+    /// Of a typical point's cube's count: below it a cube is sparse.
     pub share: f64,
+    /// Of the cube's side, at most 1 (the 27 cubes around a point hold every point that near):
+    /// within it a point has company.
     pub alone: f64,
 }
 
@@ -309,11 +312,11 @@ impl Cubes {
         // The reach is within a side, so the 27 cubes around a point hold every point in it.
         let members = self.members(cloud);
         let reach = (strays.alone * self.side).powi(2);
-        let between_two = |i: u32, cube: usize| {
-            let p = cloud.points[i as usize];
+        let between_two = |i: usize, cube: usize| {
+            let p = cloud.points[i];
             around_cubes(cube)
                 .flat_map(|other| members.of(other))
-                .filter(|&&j| j != i && (cloud.points[j as usize] - p).norm_squared() < reach)
+                .filter(|&&j| j != i && (cloud.points[j] - p).norm_squared() < reach)
                 .nth(1)
                 .is_some()
         };
@@ -335,10 +338,10 @@ impl Cubes {
             starts.push(total);
         }
         let mut next = starts.clone(); // (V + 1,)
-        let mut order = vec![0u32; total]; // (N,)
+        let mut order = vec![0; total]; // (N,)
         for (i, p) in cloud.points.iter().enumerate() {
             let cube = self.cube_of[&self.key(p)];
-            order[next[cube]] = i as u32;
+            order[next[cube]] = i;
             next[cube] += 1;
         }
         Members { starts, order }
@@ -349,11 +352,11 @@ impl Cubes {
 struct Members {
     /// Where each cube's points start in `order`, and where the last cube's end. // (V + 1,)
     starts: Vec<usize>,
-    order: Vec<u32>, // (N,)
+    order: Vec<usize>, // (N,)
 }
 
 impl Members {
-    fn of(&self, cube: usize) -> &[u32] {
+    fn of(&self, cube: usize) -> &[usize] {
         &self.order[self.starts[cube]..self.starts[cube + 1]]
     }
 }
