@@ -79,10 +79,20 @@ COMMON="--preset fast --optimizer adam --val-shapes 300 --checkpoint-every 50 --
 #      nor a lower loss) stops it if that lever is gone too.
 #      Session 44: 59.0, 60.7, 61.3 % alone after epochs 1–3 (91.3–91.7 % refined), each a new
 #      best and a new lowest validation loss; snapshot at epoch 3 and 50 batches.
+#      Sessions 45–47: the best alone 65.0 % at epoch 10, the lowest loss 2.1719 at epoch 9;
+#      epochs 11–12 64.0 and 61.7 % (loss 2.1834, 2.2058): one more validation without either
+#      and the flat rule stops it.
+# 9.   Table 4 again, when unseen-long is flat: `unseen-long-drop`, unseen-long's weights 50
+#      batches after its best alone (epoch 10; committed at a9638b4, the nearest kept: a run keeps
+#      its best by refined recall, here epoch 7) at a fifth of its rate (2e-5), ×0.2 at epoch 4,
+#      6 epochs (≈ 25k pairs, ≈ 4 h of queue): the drop of the lineage's first plateau added
+#      ≈ 3 points alone (unseen-717 → unseen-717-drop), and the rate is otherwise spent only at
+#      epoch 30, 18 epochs away.
 # `init=` names the weights a run starts from; `git:REV:PATH` ones are written out of the
 # history into target/queue-init/ when the run starts (`rgm train` reads --init only then).
 QUEUE=(
   "unseen-long|40|--setting partial --unseen --match-points 0 --batch 32 --lr 1e-4 --epochs 40 --milestones 30,36 --val-sample spread --precision bf16 init=git:e0fc74d:runs/unseen-restart-drop/best.safetensors"
+  "unseen-long-drop|6|--setting partial --unseen --match-points 0 --batch 32 --lr 2e-5 --epochs 6 --milestones 4 --val-sample spread --precision bf16 init=git:a9638b4:runs/unseen-long/last.safetensors"
 )
 # A run whose last 3 validations set neither a new best recall (the network alone, the paper's
 # metric) nor a new lowest validation loss is flat: the queue stops it, writes runs/NAME/flat,
