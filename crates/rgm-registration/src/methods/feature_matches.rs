@@ -22,6 +22,7 @@ use crate::methods::fgr::{mutual_matches, nearest_matches};
 use crate::methods::icp::check_clouds;
 use crate::methods::refine::{median_spacing, refine_at_resolution, ResolutionConfig};
 use crate::registrar::{MethodId, Registration};
+use crate::thinning::STRAYS;
 use crate::Prepared;
 
 /// Steps 1–4 of the module. Lengths are in point spacings of the thinned pair. The defaults are
@@ -256,7 +257,8 @@ pub(crate) fn inliers_of<'a>(
 }
 
 /// Both clouds voxel-averaged with one voxel, the finest of a ladder that leaves at most
-/// `max_points` in each; `None` for a pair already that small.
+/// `max_points` in each, without their strays ([`STRAYS`]: a scanner's spurious returns would
+/// take cubes, and features, of their own); `None` for a pair already that small.
 fn thinned_pair(
     source: &PointCloud,
     target: &PointCloud,
@@ -279,13 +281,49 @@ fn thinned_pair(
     let mut voxel = extent / (max_points as f64).sqrt() / 1.25;
     loop {
         let (s, t) = rayon::join(
-            || source.voxel_downsampled(voxel),
-            || target.voxel_downsampled(voxel),
+            || source.voxel_downsampled_without_strays(voxel, &STRAYS),
+            || target.voxel_downsampled_without_strays(voxel, &STRAYS),
         );
         let most = s.len().max(t.len());
         if most <= max_points {
             return Some((s, t));
         }
         voxel *= (most as f64 / max_points as f64).sqrt().max(1.05);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{rngs::StdRng, Rng, SeedableRng};
+
+    #[test]
+    fn the_pair_is_thinned_without_the_strays_scattered_through_its_box() {
+        // A square of 200 × 200 points in z = 0, and 5 % as many strays through a box reaching
+        // 0.5 above and below it.
+        let mut rng = StdRng::seed_from_u64(5);
+        let mut points: Vec<Point3<f64>> = (0..200)
+            .flat_map(|i| {
+                (0..200).map(move |j| Point3::new(0.005 * i as f64, 0.005 * j as f64, 0.0))
+            })
+            .collect();
+        for _ in 0..points.len() / 20 {
+            points.push(Point3::new(
+                rng.gen_range(0.0..1.0),
+                rng.gen_range(0.0..1.0),
+                rng.gen_range(-0.5..0.5),
+            ));
+        }
+        let cloud = PointCloud::new(points);
+        let (source, target) = thinned_pair(&cloud, &cloud, 2000).unwrap();
+        assert_eq!(source, target);
+        assert!(
+            source.len() > 1000 && source.len() <= 2000,
+            "{}",
+            source.len()
+        );
+        // Only strays beside the square's cubes may stay, within a few voxels of it.
+        let off = source.points.iter().filter(|p| p.z.abs() > 0.1).count();
+        assert_eq!(off, 0);
     }
 }
