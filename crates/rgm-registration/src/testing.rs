@@ -4,7 +4,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, Point3, Vector3};
+use rand::{rngs::StdRng, Rng, SeedableRng};
 use rgm_geom::frame::FrameRule;
 use rgm_geom::testing::room;
 use rgm_geom::{GeomError, PointCloud, RigidTransform};
@@ -149,4 +150,23 @@ impl<E: From<GeomError>> Registrar<E> for Fixed {
         let result = Fit::unscored(self.transform, 0, true);
         Ok(Registration::single(result, Vec::new(), Instant::now()))
     }
+}
+
+/// A square of `per_side` × `per_side` points `side / per_side` apart in z = 0, from `-side / 2`
+/// on each axis, and `strays` points uniform in the cube of side `side` around the origin,
+/// reproducible from `seed`: a dense scan with a scanner's spurious returns.
+pub fn square_with_strays(side: f64, per_side: usize, strays: usize, seed: u64) -> PointCloud {
+    let step = side / per_side as f64;
+    let half = side / 2.0;
+    let mut points: Vec<Point3<f64>> = (0..per_side)
+        .flat_map(|i| {
+            (0..per_side)
+                .map(move |j| Point3::new(-half + step * i as f64, -half + step * j as f64, 0.0))
+        })
+        .collect();
+    let mut rng = StdRng::seed_from_u64(seed);
+    points.extend(
+        (0..strays).map(|_| Point3::from(Vector3::from_fn(|_, _| rng.gen_range(-half..half)))),
+    );
+    PointCloud::new(points)
 }

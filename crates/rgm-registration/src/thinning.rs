@@ -86,27 +86,13 @@ pub fn thinned(cloud: &PointCloud, how: Thinning, density: Density) -> Option<Po
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{Point3, Vector3};
-    use rand::{rngs::StdRng, Rng, SeedableRng};
+    use crate::testing::square_with_strays;
 
     #[test]
     fn both_thinnings_leave_out_the_strays_scattered_through_a_dense_scan_s_box() {
         // A square of 200 × 200 points in z = 0 (about 25 in a cube of the thinning's voxel)
         // and 20 % as many strays through its box.
-        let mut rng = StdRng::seed_from_u64(3);
-        let mut points: Vec<Point3<f64>> = (0..200)
-            .flat_map(|i| {
-                (0..200).map(move |j| {
-                    Point3::new(-0.7 + 0.007 * i as f64, -0.7 + 0.007 * j as f64, 0.0)
-                })
-            })
-            .collect();
-        for _ in 0..points.len() / 5 {
-            points.push(Point3::from(Vector3::from_fn(|_, _| {
-                rng.gen_range(-0.7..0.7)
-            })));
-        }
-        let cloud = PointCloud::new(points);
+        let cloud = square_with_strays(1.4, 200, 8000, 3);
         let density = Density {
             points: 1024,
             voxel: 0.035,

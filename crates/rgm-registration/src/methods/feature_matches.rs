@@ -295,26 +295,12 @@ fn thinned_pair(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::{rngs::StdRng, Rng, SeedableRng};
+    use crate::testing::square_with_strays;
 
     #[test]
     fn the_pair_is_thinned_without_the_strays_scattered_through_its_box() {
-        // A square of 200 × 200 points in z = 0, and 5 % as many strays through a box reaching
-        // 0.5 above and below it.
-        let mut rng = StdRng::seed_from_u64(5);
-        let mut points: Vec<Point3<f64>> = (0..200)
-            .flat_map(|i| {
-                (0..200).map(move |j| Point3::new(0.005 * i as f64, 0.005 * j as f64, 0.0))
-            })
-            .collect();
-        for _ in 0..points.len() / 20 {
-            points.push(Point3::new(
-                rng.gen_range(0.0..1.0),
-                rng.gen_range(0.0..1.0),
-                rng.gen_range(-0.5..0.5),
-            ));
-        }
-        let cloud = PointCloud::new(points);
+        // A square of 200 × 200 points in z = 0, and 5 % as many strays through its box.
+        let cloud = square_with_strays(1.0, 200, 2000, 5);
         let (source, target) = thinned_pair(&cloud, &cloud, 2000).unwrap();
         assert_eq!(source, target);
         assert!(
