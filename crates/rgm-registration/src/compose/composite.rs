@@ -178,12 +178,15 @@ fn composite_id<'c, E: 'c>(
 /// The registration of a composite's `outcome` on the judged pair, unscored
 /// ([`Registrar::register_unscored`]; [`Registration::fitted_within`] scores it at the judge's
 /// [`Scoring::result_distance`]): the best candidate (`best`: its index among `candidates`);
-/// doubted when it overlaps less than [`Scoring::min_overlap`]; an error when every candidate
-/// failed.
+/// doubted when it overlaps less than [`Scoring::min_overlap`], unless an acceptance took it
+/// (`settled`: it overlapped enough where the acceptance measures, which on a pair sparser than
+/// the overlap distance is a looser distance, [`Acceptance::coincides`]); an error when every
+/// candidate failed.
 pub fn conclude<E: From<AllCandidatesFailed>>(
     judge: &Judge,
     candidates: Vec<Candidate>,
     best: Option<(usize, usize)>,
+    settled: bool,
     start: Instant,
 ) -> Result<Registration, E> {
     let min_overlap = judge.scoring.min_overlap;
@@ -196,7 +199,7 @@ pub fn conclude<E: From<AllCandidatesFailed>>(
     };
     let winner = &candidates[chosen];
     let (transform, value) = (winner.t_target_source, winner.score.unwrap_or(0.0));
-    let doubt = (value < min_overlap).then(|| {
+    let doubt = (!settled && value < min_overlap).then(|| {
         let method = &winner.method;
         // As many decimals as show the score below the bound (0.0996 is not "0.100 < 0.1").
         let shown = (3..17)
@@ -227,7 +230,13 @@ fn register_composite<E: From<GeomError> + From<AllCandidatesFailed>>(
     let start = Instant::now();
     let judge = Judge::new(source, target, composite.scoring());
     let outcome = composite.run_judged(source, target, &judge);
-    conclude(&judge, outcome.candidates, outcome.best, start)
+    conclude(
+        &judge,
+        outcome.candidates,
+        outcome.best,
+        outcome.settled,
+        start,
+    )
 }
 
 /// `composite` on the pair as given, judged there, its fit scored at its
@@ -514,6 +523,37 @@ mod tests {
         assert_eq!((found.candidates.len(), found.chosen), (1, Some(0)));
         let found = run(&near, &wrong, whole_at(SCORING.overlap_distance));
         assert_eq!(found.candidates.len(), 2);
+    }
+
+    #[test]
+    fn a_result_an_acceptance_took_is_not_doubted_for_its_overlap() {
+        let cloud = PointCloud::new(vec![Point3::origin(); 4]);
+        let prepared = Prepared::new(&cloud);
+        let judge = Judge::new(&prepared, &prepared, SCORING);
+        let candidate = Candidate {
+            method: "sparse".into(),
+            t_target_source: RigidTransform::identity(),
+            score: Some(0.05),
+            failure: None,
+            time_ms: 0.0,
+        };
+        let conclude = |settled| {
+            conclude::<RegistrationError>(
+                &judge,
+                vec![candidate.clone()],
+                Some((0, 0)),
+                settled,
+                Instant::now(),
+            )
+            .unwrap()
+        };
+        // Below the least overlap (0.1) at the judge's distance: doubted, unless an acceptance
+        // (which may measure at a looser distance on a sparse pair) took it.
+        assert!(conclude(false)
+            .doubt
+            .unwrap()
+            .contains("overlaps too little"));
+        assert_eq!(conclude(true).doubt, None);
     }
 
     #[test]

@@ -65,6 +65,7 @@ where
         let mut candidates = Vec::new();
         // (score, transform, iterations, index in `candidates`) of the best so far.
         let mut best: Option<(f64, RigidTransform, usize, usize)> = None;
+        let mut settled = false;
         for &how in thinnings {
             // A cloud no denser than `density` is used as it is, its tree shared.
             let thin = |cloud: &Prepared| thinned(cloud, how, self.density).map(Prepared::new);
@@ -96,12 +97,13 @@ where
                 c
             }));
             let agreeing = |t| agree(&found[0], t, self.agreement);
-            if outcome.settled || found.len() > 1 && found[1..].iter().all(agreeing) {
+            settled = outcome.settled;
+            if settled || found.len() > 1 && found[1..].iter().all(agreeing) {
                 break;
             }
         }
         let chosen = best.map(|(_, _, iterations, index)| (index, iterations));
-        conclude(&judge, candidates, chosen, start)
+        conclude(&judge, candidates, chosen, settled, start)
     }
 }
 
