@@ -16,7 +16,8 @@ pub struct Scoring {
     /// Within it a moved point counts as overlapping the other cloud ([`overlap_score`]).
     pub overlap_distance: f64,
     /// The least [`overlap_score`] of a credible result: below it the pair is reported as not
-    /// registered ([`crate::Registration::doubt`]) rather than with a transform nothing supports.
+    /// registered ([`crate::Registration::doubt`]) rather than with a transform nothing supports,
+    /// unless an acceptance took the result ([`crate::compose::conclude`]).
     pub min_overlap: f64,
     /// The distance at which the chosen result is scored and its correspondences found.
     pub result_distance: f64,
