@@ -181,25 +181,19 @@ impl<E: From<GeomError>, R: Registrar<E>, F: Refiner> Registrar<E> for AtResolut
         }
         // The refinement scores its own transform.
         let found = self.inner.register_unscored(source, target, progress)?;
-        Ok(refined_further(
-            &self.refiner,
-            found,
-            source,
-            target,
-            start,
-        )?)
+        refined_further(&self.refiner, found, source, target, start)
     }
 }
 
 /// `found` refined by `refiner` from its transform, its candidates and doubt kept, its
 /// iterations added up, timed from `start`.
-fn refined_further<F: Refiner>(
+fn refined_further<E: From<GeomError>, F: Refiner>(
     refiner: &F,
     found: Registration,
     source: &Prepared,
     target: &Prepared,
     start: Instant,
-) -> rgm_geom::Result<Registration> {
+) -> Result<Registration, E> {
     let fine = refiner.refine(source, target, &found.result.t_target_source)?;
     Ok(Registration {
         result: Fit {
@@ -243,13 +237,7 @@ impl<R, F: Refiner> RefinedWhereNear<R, F> {
         {
             return Ok(found);
         }
-        Ok(refined_further(
-            &self.refiner,
-            found,
-            source,
-            target,
-            start,
-        )?)
+        refined_further(&self.refiner, found, source, target, start)
     }
 }
 
