@@ -137,6 +137,7 @@ impl Refiner for AtSpacing {
                     source,
                     target,
                     index,
+                    target.spacings().0,
                     initial,
                     self.coarser_than,
                     &self.config,

@@ -21,9 +21,9 @@ use crate::fit::{score, Fit};
 use crate::methods::fgr::{mutual_matches, nearest_matches};
 use crate::methods::icp::check_clouds;
 use crate::methods::refine::{median_spacing, refine_at_resolution, ResolutionConfig};
+use crate::prepared::{Prepared, SPACING_SAMPLE};
 use crate::registrar::{MethodId, Registration};
 use crate::thinning::STRAYS;
-use crate::Prepared;
 
 /// Steps 1–4 of the module. Lengths are in point spacings of the thinned pair. The defaults are
 /// Open3D's tutorial lengths (normals at 2 voxels, FPFH at 5, inliers within 1.5) with its
@@ -43,8 +43,6 @@ pub struct MatchingConfig {
     /// Match only mutual nearest features (default false: each source point's nearest target
     /// feature, as Open3D's tutorial; the mutual filter leaves too few right matches on rooms).
     pub mutual: bool,
-    /// Points sampled to measure the spacing (default 2,000).
-    pub spacing_sample: usize,
     /// The final point-to-plane stages on the thinned pair, from the estimate
     /// ([`refine_at_resolution`], in the thinned target's spacings; default 4, 2).
     pub refinement: ResolutionConfig,
@@ -58,7 +56,6 @@ impl Default for MatchingConfig {
             feature_spacings: 25.0 / 3.0,
             inlier_spacings: 2.5,
             mutual: false,
-            spacing_sample: 2000,
             refinement: ResolutionConfig::default(),
         }
     }
@@ -142,9 +139,9 @@ pub(crate) fn register_matched(
     };
     let (source_index, target_index) =
         rayon::join(|| small_source.index(), || small_target.index());
-    let spacing = median_spacing(&small_source.points, source_index, config.spacing_sample).max(
-        median_spacing(&small_target.points, target_index, config.spacing_sample),
-    );
+    let target_spacing = median_spacing(&small_target.points, target_index, SPACING_SAMPLE);
+    let spacing =
+        median_spacing(&small_source.points, source_index, SPACING_SAMPLE).max(target_spacing);
     if !(spacing > 0.0) {
         return Err(GeomError::Degenerate {
             op,
@@ -193,6 +190,7 @@ pub(crate) fn register_matched(
         small_source,
         small_target,
         target_index,
+        target_spacing,
         &found.t_target_source,
         f64::INFINITY,
         &config.refinement,

@@ -566,8 +566,6 @@ pub struct ResolutionConfig {
     /// (default 5e-2, for a cloud within distance 1 of the origin; tried against 1e-2 on the
     /// scans, `docs/baselines.md`, "The cascade").
     pub negligible: f64,
-    /// Points sampled to measure the spacing (default 2,000).
-    pub spacing_sample: usize,
     /// Most source points fitted, taken at an even stride (default 30,000: the fewest that kept
     /// the scans' median errors, `docs/baselines.md`, "The cascade").
     pub max_source_points: usize,
@@ -586,7 +584,6 @@ impl Default for ResolutionConfig {
             noise_sigmas: 3.0,
             iterations: 30,
             negligible: 5e-2,
-            spacing_sample: 2000,
             max_source_points: 30_000,
             max_coarse_points: 5_000,
         }
@@ -597,18 +594,20 @@ impl Default for ResolutionConfig {
 /// [`ResolutionConfig::spacings`] times the target's point spacing, the last one at the noise.
 /// Only the stages finer than `coarser_than` run (a coarse refinement already ran down to that
 /// distance; on clouds as sparse as ModelNet40's none is finer, and the transform is returned
-/// unchanged). `index` must index `target`. Returns the transform and the iterations run.
+/// unchanged). `index` must index `target`, and `spacing` be its point spacing (its
+/// [`median_spacing`] over 2,000 points, as [`crate::Prepared::spacings`] measures it too).
+/// Returns the transform and the iterations run.
 pub fn refine_at_resolution(
     source: &PointCloud,
     target: &PointCloud,
     index: &KnnIndex,
+    spacing: f64,
     initial: &RigidTransform,
     coarser_than: f64,
     config: &ResolutionConfig,
 ) -> Result<(RigidTransform, usize)> {
     const OP: &str = "refine::refine_at_resolution";
     check_clouds(OP, source, target)?;
-    let spacing = median_spacing(&target.points, index, config.spacing_sample);
     let distances: Vec<f64> = config
         .spacings
         .iter()
@@ -883,6 +882,7 @@ mod tests {
             &source,
             &target,
             &index,
+            spacing,
             &start,
             0.03,
             &ResolutionConfig::default(),
@@ -900,7 +900,7 @@ mod tests {
             ..ResolutionConfig::default()
         };
         let (found, _) =
-            refine_at_resolution(&source, &target, &index, &start, 0.03, &few).unwrap();
+            refine_at_resolution(&source, &target, &index, spacing, &start, 0.03, &few).unwrap();
         let (angle, shift) = error(&found, &truth);
         assert!(
             angle < 0.03 && shift < 3e-4,
@@ -913,7 +913,7 @@ mod tests {
             ..ResolutionConfig::default()
         };
         let (found, _) =
-            refine_at_resolution(&source, &target, &index, &start, 0.03, &coarse).unwrap();
+            refine_at_resolution(&source, &target, &index, spacing, &start, 0.03, &coarse).unwrap();
         let (angle, shift) = error(&found, &truth);
         assert!(
             angle < 0.005 && shift < 2e-5,
@@ -928,6 +928,7 @@ mod tests {
             &sparse,
             &sparse,
             &sparse_index,
+            median_spacing(&sparse.points, &sparse_index, 2000),
             &nudged,
             0.03,
             &ResolutionConfig::default(),

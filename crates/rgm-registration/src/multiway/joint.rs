@@ -14,7 +14,10 @@
 use rayon::prelude::*;
 use rgm_geom::{KnnIndex, PointCloud, Result, RigidTransform};
 
-use crate::methods::refine::{median_plane_residual, refine_at_resolution, ResolutionConfig};
+use crate::methods::refine::{
+    median_plane_residual, median_spacing, refine_at_resolution, ResolutionConfig,
+};
+use crate::prepared::SPACING_SAMPLE;
 
 /// Settings of [`refine_jointly`].
 #[derive(Clone, Debug, PartialEq)]
@@ -103,6 +106,7 @@ pub fn refine_jointly(
                 &scans[s],
                 &union,
                 &index,
+                median_spacing(&union.points, &index, SPACING_SAMPLE),
                 &pose,
                 f64::INFINITY,
                 &config.resolution,

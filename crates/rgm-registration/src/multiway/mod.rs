@@ -32,6 +32,7 @@ use rgm_geom::{GeomError, KnnIndex, Point3, PointCloud, RigidTransform};
 use rgm_geom::cloud::{bounds, median};
 
 use crate::methods::refine::median_spacing;
+use crate::prepared::SPACING_SAMPLE;
 use crate::{DynRegistrar, Prepared};
 pub use graph::{Edge, EdgeStatus, Tolerance};
 pub use joint::JointConfig;
@@ -162,7 +163,7 @@ where
     // (S,) each scan's median nearest-neighbour distance
     let spacings: Vec<f64> = scans
         .iter()
-        .map(|scan| median_spacing(&scan.points, &KnnIndex::new(&scan.points), 2000))
+        .map(|scan| median_spacing(&scan.points, &KnnIndex::new(&scan.points), SPACING_SAMPLE))
         .collect();
     // The pairs on thinned scans: the joint refinement brings back the scans' own resolution.
     let thinned = |s: usize| config.pair_spacings > 1.0 && spacings[s] > 0.0;
