@@ -894,31 +894,27 @@ mod tests {
             "error {angle:.4}°, {shift:.2e}"
         );
         assert!(iterations >= 3, "{iterations}");
-        // A tenth of the source, at an even stride, pins the fit down as well.
+        // A tenth of the source, at an even stride, pins the fit down as well. Stages before
+        // the finest on 20 points only bring the pose near; the finest and the last, on every
+        // sampled point, fit it as precisely (20 points alone: 0.07°, 2e-4).
         let few = ResolutionConfig {
             max_source_points: 2000,
             ..ResolutionConfig::default()
         };
-        let (found, _) =
-            refine_at_resolution(&source, &target, &index, spacing, &start, 0.03, &few).unwrap();
-        let (angle, shift) = error(&found, &truth);
-        assert!(
-            angle < 0.03 && shift < 3e-4,
-            "error with 2,000 points {angle:.4}°, {shift:.2e}"
-        );
-        // Stages before the finest on 20 points only bring the pose near; the finest and the
-        // last, on every sampled point, fit it as precisely (20 points alone: 0.07°, 2e-4).
         let coarse = ResolutionConfig {
             max_coarse_points: 20,
             ..ResolutionConfig::default()
         };
-        let (found, _) =
-            refine_at_resolution(&source, &target, &index, spacing, &start, 0.03, &coarse).unwrap();
-        let (angle, shift) = error(&found, &truth);
-        assert!(
-            angle < 0.005 && shift < 2e-5,
-            "error after 20-point coarse stages {angle:.4}°, {shift:.2e}"
-        );
+        for (config, bounds) in [(few, (0.03, 3e-4)), (coarse, (0.005, 2e-5))] {
+            let (found, _) =
+                refine_at_resolution(&source, &target, &index, spacing, &start, 0.03, &config)
+                    .unwrap();
+            let (angle, shift) = error(&found, &truth);
+            assert!(
+                angle < bounds.0 && shift < bounds.1,
+                "error {angle:.4}°, {shift:.2e} with {config:?}"
+            );
+        }
         // Clouds as sparse as ModelNet40's have no stage finer than the coarse ones: unchanged.
         let sparse = box_surface(300, 3);
         let sparse_index = KnnIndex::new(&sparse.points);
