@@ -88,6 +88,12 @@ fn snapshot(folder: &Path, finished: bool, committed: &Committed) -> Result<()> 
         Ok(file) => Some(file),
     };
     let last = folder.join("last.safetensors");
+    if !last.is_file() {
+        // A retired run whose weights left the tree (the history holds them): its log and
+        // state are all there is to commit.
+        println!("{}: no weights in the tree, left as it is", folder.display());
+        return Ok(());
+    }
     let best = folder.join("best.safetensors");
     let same = best.is_file() && fs::read(&last)? == fs::read(&best)?;
     round_weights(&last, committed)?;
@@ -279,6 +285,17 @@ mod tests {
             before,
             (bytes("last.safetensors"), bytes("last.optim.safetensors"))
         );
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_retired_run_without_weights_is_left_as_it_is() {
+        let dir = run_folder("retired");
+        for file in ["last.safetensors", "best.safetensors"] {
+            fs::remove_file(dir.join(file)).unwrap();
+        }
+        snapshot(&dir, true, &Committed::read().unwrap()).unwrap();
+        assert!(dir.join("last.optim.safetensors").exists());
         fs::remove_dir_all(&dir).unwrap();
     }
 
