@@ -91,7 +91,10 @@ fn snapshot(folder: &Path, finished: bool, committed: &Committed) -> Result<()> 
     if !last.is_file() {
         // A retired run whose weights left the tree (the history holds them): its log and
         // state are all there is to commit.
-        println!("{}: no weights in the tree, left as it is", folder.display());
+        println!(
+            "{}: no weights in the tree, left as it is",
+            folder.display()
+        );
         return Ok(());
     }
     let best = folder.join("best.safetensors");
