@@ -595,7 +595,8 @@ impl Default for ResolutionConfig {
 /// Only the stages finer than `coarser_than` run (a coarse refinement already ran down to that
 /// distance; on clouds as sparse as ModelNet40's none is finer, and the transform is returned
 /// unchanged). `index` must index `target`, and `spacing` be its point spacing (its
-/// [`median_spacing`] over 2,000 points, as [`crate::Prepared::spacings`] measures it too).
+/// [`median_spacing`] over [`crate::prepared::SPACING_SAMPLE`] points, the first of
+/// [`crate::Prepared::spacings`]).
 /// Returns the transform and the iterations run.
 pub fn refine_at_resolution(
     source: &PointCloud,
