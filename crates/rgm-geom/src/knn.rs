@@ -6,8 +6,8 @@
 //! coordinate — routine in real clouds with duplicated points. Splitting at the median by
 //! count keeps this tree balanced whatever the duplicates.
 //!
-//! The file is long because its unit tests sit beside the code they check (as everywhere in
-//! rgm); the code itself is one job, kept in one place.
+//! The file is long because the tree's build, its one search and the four ways a search keeps
+//! what it finds (nearest, any, best k, every one within) are one job, kept in one place.
 
 use std::sync::OnceLock;
 
@@ -19,10 +19,23 @@ use crate::{GeomError, Result};
 /// Most points in a leaf.
 const LEAF_SIZE: usize = 12;
 
-/// A node of the tree: a leaf owns a range of the reordered points; a split has every point
+/// A node of the tree with the tight box of its points: a search skips every node whose box
+/// lies beyond its bound. A scan's points lie on surfaces, so a box is far smaller than the
+/// cell a split leaves it (Arya & Mount's incremental cell distance, which this replaced,
+/// visited the cells' empty space too).
+#[derive(Clone, Debug)]
+struct Node {
+    /// Least coordinate of the node's points on each axis.
+    lo: [f64; 3],
+    /// Greatest coordinate of the node's points on each axis.
+    hi: [f64; 3],
+    kind: Kind,
+}
+
+/// What a node holds: a leaf owns a range of the reordered points; a split has every point
 /// of `left` with `coord[axis] <= value` and every point of `right` with `coord[axis] >= value`.
 #[derive(Clone, Debug)]
-enum Node {
+enum Kind {
     Leaf {
         start: u32,
         end: u32,
@@ -256,24 +269,22 @@ impl KnnIndex {
     /// Offers every point of the tree that could beat `found`'s bound to `found` (none of an
     /// empty tree): [`Self::search`] from the root.
     fn search_all<F: Found>(&self, query: &Point3<f64>, found: &mut F) {
-        if !self.nodes.is_empty() {
-            self.search(0, &[query.x, query.y, query.z], 0.0, &mut [0.0; 3], found);
+        let q = [query.x, query.y, query.z];
+        if let Some(root) = self.nodes.first() {
+            if found.may_improve(box_squared_distance(root, &q)) {
+                self.search(0, &q, found);
+            }
         }
     }
 
-    /// Offers every point of the subtree at `node` that could beat `found`'s bound to `found`.
-    /// `rd` is the squared distance from `q` to the node's cell and `off` its per-axis offsets
-    /// (Arya & Mount's incremental distance).
-    fn search<F: Found>(
-        &self,
-        node: usize,
-        q: &[f64; 3],
-        rd: f64,
-        off: &mut [f64; 3],
-        found: &mut F,
-    ) {
-        match self.nodes[node] {
-            Node::Leaf { start, end } => {
+    /// Offers every point of the subtree at `node` that could beat `found`'s bound to `found`,
+    /// the child on the query's side of the split first (whatever the boxes: a visit's order
+    /// is then the query's alone, and so are sums over [`Self::for_each_within`]).
+    fn search<F: Found>(&self, node: usize, q: &[f64; 3], found: &mut F) {
+        match self.nodes[node].kind {
+            Kind::Leaf { start, end } => {
+                #[cfg(test)]
+                LEAVES.with(|n| n.set(n.get() + 1));
                 let (start, end) = (start as usize, end as usize);
                 let mut d2 = [0.0; LEAF_SIZE];
                 leaf_squared_distances(
@@ -295,7 +306,7 @@ impl KnnIndex {
                     }
                 }
             }
-            Node::Same { start, end } => {
+            Kind::Same { start, end } => {
                 let (start, end) = (start as usize, end as usize);
                 let p = [self.xyz[0][start], self.xyz[1][start], self.xyz[2][start]];
                 let d2 = squared_distance(&p, q);
@@ -307,26 +318,21 @@ impl KnnIndex {
                     }
                 }
             }
-            Node::Split {
+            Kind::Split {
                 axis,
                 value,
                 left,
                 right,
             } => {
-                let axis = axis as usize;
-                let diff = q[axis] - value;
-                let (near, far) = if diff < 0.0 {
+                let (near, far) = if q[axis as usize] < value {
                     (left, right)
                 } else {
                     (right, left)
                 };
-                self.search(near as usize, q, rd, off, found);
-                let old = off[axis];
-                let far_rd = rd - old * old + diff * diff;
-                if found.may_improve(far_rd) {
-                    off[axis] = diff;
-                    self.search(far as usize, q, far_rd, off, found);
-                    off[axis] = old;
+                for child in [near as usize, far as usize] {
+                    if found.may_improve(box_squared_distance(&self.nodes[child], q)) {
+                        self.search(child, q, found);
+                    }
                 }
             }
         }
@@ -615,14 +621,6 @@ fn build(
     side_by_side_from: usize,
 ) -> u32 {
     let id = nodes.len() as u32;
-    if points.len() <= LEAF_SIZE {
-        nodes.push(Node::Leaf {
-            start: offset as u32,
-            end: (offset + points.len()) as u32,
-        });
-        return id;
-    }
-    // Split the widest axis at the median by count.
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
     for (p, _) in points.iter() {
@@ -631,21 +629,25 @@ fn build(
             hi[a] = hi[a].max(p[a]);
         }
     }
+    let (start, end) = (offset as u32, (offset + points.len()) as u32);
+    let node = |kind| Node { lo, hi, kind };
+    if points.len() <= LEAF_SIZE {
+        nodes.push(node(Kind::Leaf { start, end }));
+        return id;
+    }
+    // Split the widest axis at the median by count.
     let axis = (0..3)
         .max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b])))
         .unwrap_or(0);
     if hi[axis] - lo[axis] == 0.0 {
         points.sort_unstable_by_key(|&(_, i)| i);
-        nodes.push(Node::Same {
-            start: offset as u32,
-            end: (offset + points.len()) as u32,
-        });
+        nodes.push(node(Kind::Same { start, end }));
         return id;
     }
     let mid = points.len() / 2;
     points.select_nth_unstable_by(mid, |a, b| a.0[axis].total_cmp(&b.0[axis]));
     let value = points[mid].0[axis];
-    nodes.push(Node::Leaf { start: 0, end: 0 }); // placeholder, replaced below
+    nodes.push(node(Kind::Leaf { start, end })); // a placeholder, made the split below
     let side_by_side = points.len() >= side_by_side_from;
     let (left_points, right_points) = points.split_at_mut(mid);
     let (left, right) = if side_by_side {
@@ -669,7 +671,7 @@ fn build(
             build(nodes, right_points, offset + mid, side_by_side_from),
         )
     };
-    nodes[id as usize] = Node::Split {
+    nodes[id as usize].kind = Kind::Split {
         axis: axis as u8,
         value,
         left,
@@ -685,27 +687,33 @@ const SIDE_BY_SIDE_POINTS: usize = 8192;
 /// returns its root's index there.
 fn append_shifted(nodes: &mut Vec<Node>, subtree: Vec<Node>) -> u32 {
     let base = nodes.len() as u32;
-    nodes.extend(subtree.into_iter().map(|node| match node {
-        Node::Split {
-            axis,
-            value,
-            left,
-            right,
-        } => Node::Split {
-            axis,
-            value,
-            left: left + base,
-            right: right + base,
-        },
-        leaf => leaf,
+    nodes.extend(subtree.into_iter().map(|mut node| {
+        if let Kind::Split { left, right, .. } = &mut node.kind {
+            *left += base;
+            *right += base;
+        }
+        node
     }));
     base
+}
+
+/// The squared distance from `q` to `node`'s box, summed x, y, z as [`squared_distance`] sums:
+/// never more than that of any of the node's points, to the last bit (each gap is at most the
+/// point's, and rounding keeps the order), so a search that skips the box skips no point it
+/// would have taken.
+#[inline]
+fn box_squared_distance(node: &Node, q: &[f64; 3]) -> f64 {
+    let gap = |a: usize| (node.lo[a] - q[a]).max(q[a] - node.hi[a]).max(0.0);
+    let d = [gap(0), gap(1), gap(2)];
+    d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
 }
 
 #[cfg(test)]
 thread_local! {
     /// The candidates this thread's searches offered: what a search costs, for the tests.
     static OFFERS: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+    /// The leaves this thread's searches visited.
+    static LEAVES: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
 }
 
 /// `|p − q|²`, summed x, y, z in that order (every query reports bit-identical distances).

@@ -99,6 +99,37 @@ fn any_within_ends_at_the_first_point_found() {
     assert_eq!(index.nearest_within(&far, 0.5), None);
 }
 
+/// Points on a surface fill little of the cells a split leaves: a search prunes by each node's
+/// tight box, so a query farther than its radius from a plane of points visits no leaf, and
+/// one just above it only the leaves under it.
+#[test]
+fn a_search_skips_the_space_around_a_surface() {
+    // A 100 × 100 grid at spacing 0.01 on z = 0.
+    let points: Vec<_> = (0..10_000)
+        .map(|i| Point3::new((i % 100) as f64 * 0.01, (i / 100) as f64 * 0.01, 0.0))
+        .collect();
+    let index = KnnIndex::new(&points);
+    let leaves = |search: &dyn Fn()| {
+        LEAVES.with(|n| n.set(0));
+        search();
+        LEAVES.with(|n| n.get())
+    };
+    let above = Point3::new(0.503, 0.497, 0.3);
+    assert_eq!(leaves(&|| assert!(!index.any_within(&above, 0.2))), 0);
+    assert_eq!(
+        leaves(&|| assert_eq!(index.nearest_within(&above, 0.2), None)),
+        0
+    );
+    // 0.05 above the grid point (0.5, 0.5): the nearest within 0.1, from the few leaves whose
+    // boxes reach that far.
+    let near = Point3::new(0.5, 0.5, 0.05);
+    let visited = leaves(&|| {
+        let (i, d) = index.nearest_within(&near, 0.1).unwrap();
+        assert_eq!((i, d), (50 * 100 + 50, 0.05));
+    });
+    assert!((1..=4).contains(&visited), "{visited} leaves");
+}
+
 #[test]
 fn many_identical_points_do_not_panic_and_ties_go_by_index() {
     let mut points = vec![Point3::new(0.5, -0.25, 0.125); 200];
