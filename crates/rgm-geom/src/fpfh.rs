@@ -136,15 +136,20 @@ fn alpha_bin(y: f64, x: f64) -> usize {
     // NaN for two zeros, and where x or y is NaN made so (`min` and `max` pass a NaN over):
     // libm below.
     let a = ax.min(ay) / ax.max(ay) + (x + y) * 0.0;
+    // P(s) by Estrin's scheme: a chain of four steps where Horner's has eight (the pairs'
+    // work overlaps only so far; the chain is what each pair waits on).
     let s = a * a;
-    let turned = a * P.iter().rev().fold(0.0, |acc, &c| acc * s + c);
+    let (s2, s4) = (s * s, s * s * (s * s));
+    let low = (P[0] + P[1] * s) + s2 * (P[2] + P[3] * s);
+    let high = (P[4] + P[5] * s) + s2 * (P[6] + P[7] * s);
+    let turned = a * (low + s4 * high);
     // The octant and the half-plane without branches (the signs are a coin toss each pair):
     // π/2 − angle where |y| > |x|, π − that where x < 0, negated where y is.
     let steep = (ay > ax) as u8 as f64;
     let turned = turned + steep * (FRAC_PI_2 - 2.0 * turned);
     let back = x.is_sign_negative() as u8 as f64;
     let angle = (turned + back * (PI - 2.0 * turned)).copysign(y);
-    let place = BINS as f64 * (angle + PI) / (2.0 * PI);
+    let place = (angle + PI) * (BINS as f64 / (2.0 * PI));
     // The cast truncates (a libm `floor` call is costly) and takes a NaN to 0, its fraction
     // staying NaN.
     let below = place as usize;
