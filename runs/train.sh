@@ -98,12 +98,14 @@ COMMON="--preset fast --optimizer adam --val-shapes 300 --checkpoint-every 50 --
 #      epoch at 2e-5 (2.1654 → 2.1570), while 1e-4 had gone flat: the lineage still learns at this
 #      rate, and many more pairs at it are the CPU's one lever left for the table. The flat rule
 #      stops it when that lever is gone too.
+#      Its best checkpoint by the network's own recall (`--best-by alone`, session 49, taken from
+#      the next resume on): Table 4 scores the network alone.
 # `init=` names the weights a run starts from; `git:REV:PATH` ones are written out of the
 # history into target/queue-init/ when the run starts (`rgm train` reads --init only then).
 QUEUE=(
   "unseen-long|40|--setting partial --unseen --match-points 0 --batch 32 --lr 1e-4 --epochs 40 --milestones 30,36 --val-sample spread --precision bf16 init=git:e0fc74d:runs/unseen-restart-drop/best.safetensors"
   "unseen-long-drop|4|--setting partial --unseen --match-points 0 --batch 32 --lr 2e-5 --epochs 6 --milestones 4 --val-sample spread --precision bf16 init=git:a9638b4:runs/unseen-long/last.safetensors"
-  "unseen-steady|20|--setting partial --unseen --match-points 0 --batch 32 --lr 2e-5 --epochs 20 --milestones 16 --val-sample spread --precision bf16 init=git:5f2b5fe:runs/unseen-long-drop/last.safetensors"
+  "unseen-steady|20|--setting partial --unseen --match-points 0 --batch 32 --lr 2e-5 --epochs 20 --milestones 16 --val-sample spread --best-by alone --precision bf16 init=git:5f2b5fe:runs/unseen-long-drop/last.safetensors"
 )
 # A run whose last 3 validations set neither a new best recall (the network alone, the paper's
 # metric) nor a new lowest validation loss is flat: the queue stops it, writes runs/NAME/flat,

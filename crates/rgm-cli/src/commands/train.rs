@@ -7,7 +7,7 @@ use anyhow::{Context, Result};
 use rgm_data::{ModelNet40, Setting};
 use rgm_model::network::{Config, TestStatistics};
 use rgm_model::train::{
-    Event, LogRecord, OptimizerKind, TrainConfig, Trainer, ValSample, DEFAULT_PRESET,
+    BestBy, Event, LogRecord, OptimizerKind, TrainConfig, Trainer, ValSample, DEFAULT_PRESET,
 };
 use rgm_model::weights::Variant;
 
@@ -94,6 +94,11 @@ pub struct Args {
     /// validation on the new sample then becomes the best.
     #[arg(long, value_enum, default_value_t = defaults().val_sample)]
     val_sample: ValSample,
+    /// Which validation figure picks best.safetensors: refined (the recall after ICP, then the
+    /// network's own: the model a registration refines) or alone (the network's own recall,
+    /// what the paper's tables score). May change when resuming.
+    #[arg(long, value_enum, default_value_t = defaults().best_by)]
+    best_by: BestBy,
     /// Worker threads (default: one per core).
     #[arg(long, value_name = "N")]
     workers: Option<usize>,
@@ -141,6 +146,7 @@ impl Args {
             train_shapes: self.train_shapes,
             val_shapes: self.val_shapes,
             val_sample: self.val_sample,
+            best_by: self.best_by,
             workers,
             checkpoint_every: self.checkpoint_every,
             seed: self.seed,

@@ -78,6 +78,11 @@ pub struct TrainConfig {
     /// the first ones.
     #[serde(default)]
     pub val_sample: ValSample,
+    /// Which validation figure picks the run's best checkpoint. Only which checkpoint is kept
+    /// depends on it: it may change on resume. Runs saved before the field picked by
+    /// [`BestBy::Refined`].
+    #[serde(default)]
+    pub best_by: BestBy,
     /// Threads, each working on its own pairs of a batch.
     pub workers: usize,
     /// Save `last.*` every this many batches.
@@ -137,6 +142,7 @@ impl TrainConfig {
             train_shapes: None,
             val_shapes: None,
             val_sample: ValSample::Spread,
+            best_by: BestBy::Refined,
             workers: 2,
             checkpoint_every: 50,
             seed: 0,
@@ -195,13 +201,15 @@ impl TrainConfig {
     }
 
     /// Whether a run saved with `saved` can go on under `self`: everything equal but the
-    /// number of epochs (a run may be extended) and what only validation or speed depends on
-    /// (batch-norm statistics at validation, its sample, the products' precision).
+    /// number of epochs (a run may be extended) and what only validation, the kept best or
+    /// speed depends on (batch-norm statistics at validation, its sample, the figure that picks
+    /// the best, the products' precision).
     pub(super) fn same_run(&self, saved: &Self) -> bool {
         Self {
             epochs: saved.epochs,
             test_statistics: saved.test_statistics,
             val_sample: saved.val_sample,
+            best_by: saved.best_by,
             precision: saved.precision,
             ..self.clone()
         } == *saved
@@ -220,6 +228,20 @@ pub enum ValSample {
     First,
     /// N shapes spread evenly over the split (every category when N ≥ 40).
     Spread,
+}
+
+/// The validation figure that picks a run's best checkpoint (ties go to the lower loss).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "lowercase")]
+pub enum BestBy {
+    /// The recall after refinement, then the network's own: the model a registration refines
+    /// (the shipped one's use).
+    #[default]
+    Refined,
+    /// The network's own recall, what the paper's tables score: a checkpoint a few points
+    /// better alone may register one pair fewer once refined.
+    Alone,
 }
 
 impl ValSample {

@@ -45,7 +45,7 @@ mod tests;
 mod trainer;
 pub mod validation;
 
-pub use config::{OptimizerKind, TrainConfig, ValSample, DEFAULT_PRESET};
+pub use config::{BestBy, OptimizerKind, TrainConfig, ValSample, DEFAULT_PRESET};
 pub use trainer::Trainer;
 pub use validation::{Refinement, Validation};
 

@@ -228,7 +228,10 @@ impl Trainer {
                 total: val.len(),
             });
             self.state.seconds += clock.elapsed().as_secs_f64();
-            let new_best = self.state.best.is_none_or(|best| result.beats(&best));
+            let new_best = self
+                .state
+                .best
+                .is_none_or(|best| result.beats(&best, self.config.best_by));
             if new_best {
                 self.state.best = Some(result);
             }

@@ -13,7 +13,7 @@ use rgm_registration::compose::Normalised;
 use rgm_registration::methods::refine::{refine, RefineConfig};
 use serde::{Deserialize, Serialize};
 
-use super::config::ValSample;
+use super::config::{BestBy, ValSample};
 use super::trainer::{ground_truth, Trainer};
 use super::Result;
 use crate::evaluate::{evaluate_pair, PairRecord, Summary};
@@ -67,21 +67,19 @@ pub enum Refinement {
 }
 
 impl Validation {
-    /// Whether `self` beats `other`: higher recall after refinement, then higher recall, then
-    /// lower loss; recall after refinement counts only when both were refined alike (a new
-    /// refinement must not make a newer checkpoint look better). A validation on another
-    /// sample of shapes than `other`'s always beats it: the two are not comparable, and `self`
-    /// is on the sample the run validates on now.
-    pub(super) fn beats(&self, other: &Self) -> bool {
+    /// Whether `self` beats `other` by `by`'s figure: by [`BestBy::Refined`], higher recall
+    /// after refinement, then higher recall, then lower loss, recall after refinement counting
+    /// only when both were refined alike (a new refinement must not make a newer checkpoint
+    /// look better); by [`BestBy::Alone`], higher recall, then lower loss. A validation on
+    /// another sample of shapes than `other`'s always beats it: the two are not comparable, and
+    /// `self` is on the sample the run validates on now.
+    pub(super) fn beats(&self, other: &Self, by: BestBy) -> bool {
         if self.sample != other.sample {
             return true;
         }
-        let refined = |v: &Self| {
-            if self.refined_with == other.refined_with {
-                v.recall_refined
-            } else {
-                0.0
-            }
+        let refined = |v: &Self| match by {
+            BestBy::Refined if self.refined_with == other.refined_with => v.recall_refined,
+            _ => 0.0,
         };
         (refined(self), self.recall, -self.loss) > (refined(other), other.recall, -other.loss)
     }
