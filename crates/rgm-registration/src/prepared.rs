@@ -46,6 +46,8 @@ pub struct Prepared<'a> {
     id: u64,
     /// The pair scores made so far.
     scores: Mutex<Vec<(ScoreKey, f64)>>,
+    /// The coincidences made so far, under the key at their near length and their far one.
+    coincidences: Mutex<Vec<((ScoreKey, u64), f64)>>,
     /// The refinements made so far, each under its start and under its result.
     refinements: Mutex<Vec<(ScoreKey, Refinement)>>,
     /// [`Prepared::spacings`], once measured.
@@ -61,6 +63,7 @@ impl<'a> Prepared<'a> {
             normals: Mutex::new(Vec::new()),
             id: NEXT_ID.fetch_add(1, Ordering::Relaxed),
             scores: Mutex::new(Vec::new()),
+            coincidences: Mutex::new(Vec::new()),
             refinements: Mutex::new(Vec::new()),
             spacings: OnceLock::new(),
         }
@@ -160,6 +163,21 @@ impl Prepared<'_> {
         kept(&self.scores, self.key(target, transform, length), make)
     }
 
+    /// The coincidence `make` gives this cloud moved by `transform` onto `target` at lengths
+    /// `near` and `far`, made on the first ask and kept: a cascade's judge, its acceptance and
+    /// the checks of the registration's result ask it of the same result. `make` must be one
+    /// function of those four for every caller ([`crate::check::coincidence`]).
+    pub fn coincidence(
+        &self,
+        target: &Prepared,
+        transform: &RigidTransform,
+        (near, far): (f64, f64),
+        make: impl FnOnce() -> f64,
+    ) -> f64 {
+        let key = (self.key(target, transform, near), far.to_bits());
+        kept(&self.coincidences, key, make)
+    }
+
     /// The refinement `make` makes of this cloud moved by `initial` onto `target` (its fit
     /// scored at `length`, and the pairs behind it), made on the first ask and kept under
     /// `initial`, and under its own transform with no iteration: a stage refined at the pair's
@@ -201,8 +219,8 @@ impl Prepared<'_> {
 
 /// The value kept in `made` under `key`, or `make`'s, then kept. Made outside the lock, for the
 /// reason [`Prepared::index`] builds outside its cell's.
-fn kept<T: Clone>(made: &Mutex<Vec<(ScoreKey, T)>>, key: ScoreKey, make: impl FnOnce() -> T) -> T {
-    let find = |made: &[(ScoreKey, T)]| made.iter().find(|(k, _)| *k == key).map(|m| m.1.clone());
+fn kept<K: PartialEq, T: Clone>(made: &Mutex<Vec<(K, T)>>, key: K, make: impl FnOnce() -> T) -> T {
+    let find = |made: &[(K, T)]| made.iter().find(|(k, _)| *k == key).map(|m| m.1.clone());
     if let Some(value) = find(&made.lock().expect("no panic holds the lock")) {
         return value;
     }
@@ -348,5 +366,26 @@ mod tests {
         score(&target, &RigidTransform::identity(), 0.5);
         score(&target, &shift, 0.25);
         assert_eq!(made.get(), 4);
+    }
+
+    #[test]
+    fn a_coincidence_is_made_once_per_target_transform_and_lengths() {
+        let cloud = airplane();
+        let (source, target) = (Prepared::new(&cloud), Prepared::new(&cloud));
+        let made = std::cell::Cell::new(0);
+        let coincidence = |t: &RigidTransform, lengths: (f64, f64)| {
+            source.coincidence(&target, t, lengths, || {
+                made.set(made.get() + 1);
+                lengths.0 / lengths.1
+            })
+        };
+        let identity = RigidTransform::identity();
+        assert_eq!(coincidence(&identity, (0.02, 0.08)), 0.25);
+        assert_eq!(coincidence(&identity, (0.02, 0.08)), 0.25);
+        assert_eq!(made.get(), 1);
+        // Another far length, or a pair score at the near one, is another value.
+        assert_eq!(coincidence(&identity, (0.02, 0.04)), 0.5);
+        assert_eq!(source.pair_score(&target, &identity, 0.02, || 7.0), 7.0);
+        assert_eq!(made.get(), 2);
     }
 }

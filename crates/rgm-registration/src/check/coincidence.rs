@@ -41,7 +41,8 @@ fn within(
 
 /// Of the points of both clouds that `transform` brings within `far` of the other cloud, the
 /// share within `near` (0 when none is within `far`). Measured on at most 4,096 (`SAMPLE`)
-/// points of each cloud, against the other whole.
+/// points of each cloud, against the other whole; once per registration for each transform and
+/// lengths ([`Prepared::coincidence`]).
 pub fn coincidence(
     source: &Prepared,
     target: &Prepared,
@@ -49,19 +50,22 @@ pub fn coincidence(
     near: f64,
     far: f64,
 ) -> f64 {
-    let (there_near, there_far, _) = within(&source.points, target.index(), transform, near, far);
-    let (back_near, back_far, _) = within(
-        &target.points,
-        source.index(),
-        &transform.inverse(),
-        near,
-        far,
-    );
-    let far_total = there_far + back_far;
-    if far_total == 0 {
-        return 0.0;
-    }
-    (there_near + back_near) as f64 / far_total as f64
+    source.coincidence(target, transform, (near, far), || {
+        let (there_near, there_far, _) =
+            within(&source.points, target.index(), transform, near, far);
+        let (back_near, back_far, _) = within(
+            &target.points,
+            source.index(),
+            &transform.inverse(),
+            near,
+            far,
+        );
+        let far_total = there_far + back_far;
+        if far_total == 0 {
+            return 0.0;
+        }
+        (there_near + back_near) as f64 / far_total as f64
+    })
 }
 
 /// A ground-truth-free test of a registration, made after it.
