@@ -21,8 +21,8 @@ const LEAF_SIZE: usize = 12;
 
 /// A node of the tree with the tight box of its points: a search skips every node whose box
 /// lies beyond its bound. A scan's points lie on surfaces, so a box is far smaller than the
-/// cell a split leaves it (Arya & Mount's incremental cell distance, which this replaced,
-/// visited the cells' empty space too).
+/// cell a split leaves it, and a query off the surface (a point moved by a wrong pose) is
+/// turned away by the boxes where the cells' empty space would let it in.
 #[derive(Clone, Debug)]
 struct Node {
     /// Least coordinate of the node's points on each axis.
