@@ -540,7 +540,7 @@ impl<'a> Best<'a> {
     fn cut(&mut self) {
         if self.buf.len() > self.k {
             self.buf
-                .select_nth_unstable_by(self.k - 1, by_distance_then_index);
+                .select_nth_unstable_by_key(self.k - 1, distance_then_index);
             self.buf.truncate(self.k);
         }
     }
@@ -548,8 +548,15 @@ impl<'a> Best<'a> {
     /// The `k` first, sorted.
     fn finish(mut self) {
         self.cut();
-        self.buf.sort_unstable_by(by_distance_then_index);
+        self.buf.sort_unstable_by_key(distance_then_index);
     }
+}
+
+/// The order of [`by_distance_then_index`] as a key, for a squared distance that is neither
+/// negative nor NaN (every one [`Best`] takes): such a float's bits order as its value.
+#[inline]
+fn distance_then_index(&(i, d2): &(usize, f64)) -> (u64, usize) {
+    (d2.to_bits(), i)
 }
 
 impl Found for Best<'_> {
