@@ -7,7 +7,7 @@
 //! is the file `cloud_bin_k` (3DMatch's name) or `k`, with any extension [`crate::io`] reads
 //! (`.ply`, `.ply.gz`, `.pcd`, `.las`, …).
 //!
-//! Success is the 3DMatch criterion ([`ScenePair::errors`]): a rotation error below 15° and a
+//! Success is the 3DMatch criterion ([`LoadedScenePair::errors`]): a rotation error below 15° and a
 //! translation error below 0.3 m. A [`Turn`] makes a pair harder by turning its source by a
 //! known rotation about its centroid (a global method must find any rotation; the published
 //! pairs are 4–39° apart).

@@ -10,7 +10,7 @@
 //! of the axis's extent.
 //!
 //! The crate allocates some buffers from sizes in the file; those sizes are checked against the
-//! file's length first ([`check_sizes`]), so a small file cannot ask for gigabytes. The points
+//! file's length first (`check_sizes`), so a small file cannot ask for gigabytes. The points
 //! a file declares are checked against the memory this process may take
 //! ([`super::check_points_fit`]), not against a ratio to its length: LASzip stores a stack of
 //! identical points in a fraction of a bit each.

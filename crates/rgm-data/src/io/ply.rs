@@ -565,12 +565,12 @@ pub(crate) fn float32_suffices(cloud: &PointCloud) -> bool {
 }
 
 /// Writes a binary little-endian PLY with float32 x, y, z, or double where float32 would move
-/// the points by more than [`FLOAT32_LOSS`] of the cloud's size.
+/// the points by more than `FLOAT32_LOSS` (a millionth) of the cloud's size.
 pub fn write(out: &mut impl Write, cloud: &PointCloud) -> std::io::Result<()> {
     write_labelled(out, cloud, None)
 }
 
-/// [`write`], each point followed by a `uint` property `name` from `labels` (`rgm merge`'s
+/// [`fn@write`], each point followed by a `uint` property `name` from `labels` (`rgm merge`'s
 /// scan index) when given. // labels: (N,)
 pub fn write_labelled(
     out: &mut (impl Write + ?Sized),

@@ -55,7 +55,7 @@ struct Strided<P> {
 
 /// `c = alpha · a · b + beta · c` in f32, `a`: (M, K), `b`: (K, N), `c`: (M, N), any strides;
 /// `beta = 0` ignores what `c` held. Panics if the shapes disagree or the processor lacks
-/// AVX-512 ([`available`]).
+/// AVX-512 (`available`).
 pub fn f32_mat_mul(
     alpha: f32,
     a: ArrayView2<'_, f32>,
@@ -67,7 +67,7 @@ pub fn f32_mat_mul(
 }
 
 /// `c = a · b` finished by `then` in the product's write-back (see [`Then`]): the values
-/// [`super::then_by_passes`] gives, bit for bit, without its passes over C. Panics as
+/// `then_by_passes` gives, bit for bit, without its passes over C. Panics as
 /// [`f32_mat_mul`], or if `then`'s bias or `y` does not match C.
 pub fn f32_mat_mul_then(
     a: ArrayView2<'_, f32>,

@@ -61,7 +61,7 @@ impl Kernel {
     }
 }
 
-/// The name of the kernel [`Kernel::new`] picks here: "amx", "avx512_bf16", or `None`.
+/// The name of the kernel `Kernel::new` picks here: "amx", "avx512_bf16", or `None`.
 pub fn backend() -> Option<&'static str> {
     if amx_available() {
         Some("amx")

@@ -9,7 +9,7 @@
 //! thread by default), in three steps:
 //! 1. pack A (M, K) into 32-row strips, each a run of 32 × 32 slices along K (2 KiB, two tiles);
 //! 2. pack B (K, N) into 32-column strips, each a run of 32 × 32 slices along K in the VNNI
-//!    pairs layout that `tdpbf16ps` and `vdpbf16ps` read (see [`kernels`]); M, N and K are
+//!    pairs layout that `tdpbf16ps` and `vdpbf16ps` read (see `kernels`); M, N and K are
 //!    padded with zeros to multiples of 32, so edges need no special kernel;
 //! 3. for each column panel of B small enough to stay in L2 (≤ 256 KiB), for each A strip (at
 //!    most 32 KiB for K ≤ 512: it stays in L1 across the panel), multiply the strip by each B
@@ -63,7 +63,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 /// achieved FLOP/s is measured by (`benches/examples/speed.rs`; 2 FLOPs a multiply-add).
 static MULTIPLY_ADDS: AtomicU64 = AtomicU64::new(0);
 
-/// The multiply-adds of every matrix product so far (see [`MULTIPLY_ADDS`]).
+/// The multiply-adds of every matrix product so far (see `MULTIPLY_ADDS`).
 pub fn multiply_adds() -> u64 {
     MULTIPLY_ADDS.load(Ordering::Relaxed)
 }
@@ -96,7 +96,7 @@ pub fn mat_mul<T, S1, S2, S3>(
 
 /// `c = a · b` finished as `then` says, in `compute`'s precision for f32; what `c` held is
 /// ignored. Where the f32 product runs on AVX-512 the bias, the ReLU and ReLU's backward are
-/// applied in the product's write-back, bit for bit what [`then_by_passes`] gives with passes
+/// applied in the product's write-back, bit for bit what `then_by_passes` gives with passes
 /// over C. Panics if the shapes disagree.
 pub fn mat_mul_then<T, S1, S2, S3>(
     a: &ArrayBase<S1, Ix2>,
