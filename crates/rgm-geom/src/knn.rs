@@ -552,13 +552,6 @@ impl<'a> Best<'a> {
     }
 }
 
-/// The order of [`by_distance_then_index`] as a key, for a squared distance that is neither
-/// negative nor NaN (every one [`Best`] takes): such a float's bits order as its value.
-#[inline]
-fn distance_then_index(&(i, d2): &(usize, f64)) -> (u64, usize) {
-    (d2.to_bits(), i)
-}
-
 impl Found for Best<'_> {
     #[inline]
     fn offer(&mut self, candidate: (usize, f64)) -> bool {
@@ -749,15 +742,16 @@ fn is_before(a: (usize, f64), b: (usize, f64)) -> bool {
     a.1 < b.1 || (a.1 == b.1 && a.0 < b.0)
 }
 
-/// The order of results as a comparison: by distance, ties by index.
+/// The order of results as a key: by distance, ties by index. Every distance a search keeps is
+/// a sum of squares, never negative nor NaN, and such a float's bits order as its value.
 #[inline]
-fn by_distance_then_index(a: &(usize, f64), b: &(usize, f64)) -> std::cmp::Ordering {
-    a.1.total_cmp(&b.1).then(a.0.cmp(&b.0))
+fn distance_then_index(&(i, d2): &(usize, f64)) -> (u64, usize) {
+    (d2.to_bits(), i)
 }
 
-/// Sorts (index, distance) pairs by distance, ties by index.
+/// Sorts (index, squared distance) pairs by distance, ties by index.
 fn sort_by_distance_then_index(items: &mut [(usize, f64)]) {
-    items.sort_unstable_by(by_distance_then_index);
+    items.sort_unstable_by_key(distance_then_index);
 }
 
 /// The (N, K) kNN graph of a cloud, flat row-major: row i lists the K nearest points of point i,
