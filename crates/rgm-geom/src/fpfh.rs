@@ -109,16 +109,29 @@ fn dot(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
 /// libm `floor` call is costly).
 #[inline]
 fn bin(value: f64, lo: f64, width: f64) -> usize {
-    ((BINS as f64 * (value - lo) / width) as usize).min(BINS - 1)
+    bin_at(bin_place(value, lo, width))
 }
 
-/// `bin(y.atan2(x), −π, 2π)`, α's bin, without libm's atan2 (a quarter of FPFH's time) where a
-/// polynomial arctangent proves it: that is within 4.4e-8 rad of the angle (and so within
-/// 7.7e-8 of its place among the bins), and where it lies more than 1e-6 from a bin's edge the
-/// bin is the one libm's angle falls in, to the last bit of the features. Within 1e-6 of an
-/// edge (about two pairs in a million), for both zeros and for NaN, libm decides.
-#[inline]
-fn alpha_bin(y: f64, x: f64) -> usize {
+/// Where `value` lies among the bins of [`bin`] (bin k spans [k, k + 1)).
+#[inline(always)]
+fn bin_place(value: f64, lo: f64, width: f64) -> f64 {
+    BINS as f64 * (value - lo) / width
+}
+
+/// The bin of a place: the cast truncates towards zero and saturates at 0 (a NaN too), the
+/// last bin takes what lies beyond it.
+#[inline(always)]
+fn bin_at(place: f64) -> usize {
+    (place as usize).min(BINS - 1)
+}
+
+/// Where atan2(y, x) lies among α's bins (bin k spans [k, k + 1)), from a polynomial
+/// arctangent instead of libm's atan2 (a quarter of FPFH's time): within 4.4e-8 rad of the
+/// angle, and so within 7.7e-8 of its place, which [`alpha_bin_at`] turns into libm's bin to
+/// the last bit of the features. Branch-free, so that [`add_pairs`] computes it for several
+/// pairs at once.
+#[inline(always)]
+fn alpha_place(y: f64, x: f64) -> f64 {
     use std::f64::consts::{FRAC_PI_2, PI};
     // atan(a) ≈ a·P(a²) on [0, 1]: least squares at Chebyshev nodes, weighted towards the
     // largest error; 4.31e-8 at most on a grid of 2·10⁷ points (`docs/speed.md`).
@@ -134,10 +147,9 @@ fn alpha_bin(y: f64, x: f64) -> usize {
     ];
     let (ax, ay) = (x.abs(), y.abs());
     // NaN for two zeros, and where x or y is NaN made so (`min` and `max` pass a NaN over):
-    // libm below.
+    // libm decides those ([`alpha_bin_at`]).
     let a = ax.min(ay) / ax.max(ay) + (x + y) * 0.0;
-    // P(s) by Estrin's scheme: a chain of four steps where Horner's has eight (the pairs'
-    // work overlaps only so far; the chain is what each pair waits on).
+    // P(s) by Estrin's scheme: a chain of four steps where Horner's has eight.
     let s = a * a;
     let (s2, s4) = (s * s, s * s * (s * s));
     let low = (P[0] + P[1] * s) + s2 * (P[2] + P[3] * s);
@@ -145,11 +157,19 @@ fn alpha_bin(y: f64, x: f64) -> usize {
     let turned = a * (low + s4 * high);
     // The octant and the half-plane without branches (the signs are a coin toss each pair):
     // π/2 − angle where |y| > |x|, π − that where x < 0, negated where y is.
-    let steep = (ay > ax) as u8 as f64;
+    let steep = if ay > ax { 1.0 } else { 0.0 };
     let turned = turned + steep * (FRAC_PI_2 - 2.0 * turned);
-    let back = x.is_sign_negative() as u8 as f64;
+    let back = if x.is_sign_negative() { 1.0 } else { 0.0 };
     let angle = (turned + back * (PI - 2.0 * turned)).copysign(y);
-    let place = (angle + PI) * (BINS as f64 / (2.0 * PI));
+    (angle + PI) * (BINS as f64 / (2.0 * PI))
+}
+
+/// α's bin, `bin(y.atan2(x), −π, 2π)`, from its [`alpha_place`] where that lies more than
+/// 1e-6 from a bin's edge (the bin libm's angle falls in); nearer (about two pairs in a
+/// million), for both zeros and for NaN, from libm's atan2.
+#[inline]
+fn alpha_bin_at(place: f64, y: f64, x: f64) -> usize {
+    use std::f64::consts::PI;
     // The cast truncates (a libm `floor` call is costly) and takes a NaN to 0, its fraction
     // staying NaN.
     let below = place as usize;
@@ -159,6 +179,133 @@ fn alpha_bin(y: f64, x: f64) -> usize {
     } else {
         bin(y.atan2(x), -PI, 2.0 * PI)
     }
+}
+
+/// Pairs whose features [`add_pairs`] computes side by side: one AVX-512 register of f64.
+const LANES: usize = 8;
+
+/// Adds `increment` to the three bins of the pair features of (p1, n1) with each of
+/// `neighbours` (indices into `points` and `normals`) in `hist`: [`LANES`] pairs at a time, each
+/// lane doing [`pair_terms`]' operations in its order (never fused), so that every bin is the
+/// one [`pair_features`] gives. The order the pairs are added in does not matter: every
+/// addition adds the same `increment`.
+fn add_pairs(
+    hist: &mut Fpfh,
+    (p1, n1): (&Point3<f64>, &Vector3<f64>),
+    neighbours: &[(usize, f64)],
+    (points, normals): (&[Point3<f64>], &[Vector3<f64>]),
+    increment: f64,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx512f") {
+        // SAFETY: the CPU has AVX-512F.
+        return unsafe {
+            add_pairs_avx512(hist, (p1, n1), neighbours, (points, normals), increment)
+        };
+    }
+    add_pairs_any(hist, (p1, n1), neighbours, (points, normals), increment)
+}
+
+/// [`add_pairs`] compiled with AVX-512: the same operations, eight lanes wide.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn add_pairs_avx512(
+    hist: &mut Fpfh,
+    centre: (&Point3<f64>, &Vector3<f64>),
+    neighbours: &[(usize, f64)],
+    cloud: (&[Point3<f64>], &[Vector3<f64>]),
+    increment: f64,
+) {
+    add_pairs_any(hist, centre, neighbours, cloud, increment)
+}
+
+/// [`add_pairs`] for any CPU.
+#[inline(always)]
+fn add_pairs_any(
+    hist: &mut Fpfh,
+    (p1, n1): (&Point3<f64>, &Vector3<f64>),
+    neighbours: &[(usize, f64)],
+    (points, normals): (&[Point3<f64>], &[Vector3<f64>]),
+    increment: f64,
+) {
+    for chunk in neighbours.chunks(LANES) {
+        // The neighbours' points and normals by axis; a lane past the chunk's end holds the
+        // centre itself (its terms are zero, and it is not added). // (3, LANES) each
+        let mut p = [[p1.x; LANES], [p1.y; LANES], [p1.z; LANES]];
+        let mut n = [[n1.x; LANES], [n1.y; LANES], [n1.z; LANES]];
+        for (k, &(j, _)) in chunk.iter().enumerate() {
+            for axis in 0..3 {
+                p[axis][k] = points[j][axis];
+                n[axis][k] = normals[j][axis];
+            }
+        }
+        let [alpha_sine, alpha_cosine, phi, theta] = pair_terms_lanes((p1, n1), &p, &n);
+        let mut places = [[0.0; LANES]; 3];
+        for k in 0..LANES {
+            places[0][k] = alpha_place(alpha_sine[k], alpha_cosine[k]);
+            places[1][k] = bin_place(phi[k], -1.0, 2.0);
+            places[2][k] = bin_place(theta[k], -1.0, 2.0);
+        }
+        for k in 0..chunk.len() {
+            hist[alpha_bin_at(places[0][k], alpha_sine[k], alpha_cosine[k])] += increment;
+            hist[BINS + bin_at(places[1][k])] += increment;
+            hist[2 * BINS + bin_at(places[2][k])] += increment;
+        }
+    }
+}
+
+/// [`pair_terms`]' `[w·n, u·n, φ, θ]` of (p1, n1) with each lane's point and normal, by the same
+/// operations in the same order, the branches taken as selections. // (4, LANES)
+#[inline(always)]
+fn pair_terms_lanes(
+    (p1, n1): (&Point3<f64>, &Vector3<f64>),
+    p: &[[f64; LANES]; 3],
+    n: &[[f64; LANES]; 3],
+) -> [[f64; LANES]; 4] {
+    let mut out = [[0.0; LANES]; 4];
+    for k in 0..LANES {
+        let n2 = [n[0][k], n[1][k], n[2][k]];
+        let dp = [p[0][k] - p1.x, p[1][k] - p1.y, p[2][k] - p1.z];
+        let d = (dp[0] * dp[0] + dp[1] * dp[1] + dp[2] * dp[2]).sqrt();
+        let angle1 = (n1.x * dp[0] + n1.y * dp[1] + n1.z * dp[2]) / d;
+        let angle2 = (n2[0] * dp[0] + n2[1] * dp[1] + n2[2] * dp[2]) / d;
+        let swap = angle1.abs() < angle2.abs();
+        let pick = |a: f64, b: f64| if swap { a } else { b };
+        let dp = [
+            pick(-dp[0], dp[0]),
+            pick(-dp[1], dp[1]),
+            pick(-dp[2], dp[2]),
+        ];
+        let u = [pick(n2[0], n1.x), pick(n2[1], n1.y), pick(n2[2], n1.z)];
+        let other = [pick(n1.x, n2[0]), pick(n1.y, n2[1]), pick(n1.z, n2[2])];
+        let theta = pick(-angle2, angle1);
+        let v = cross(&dp, &u);
+        let v_norm = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        let v = [v[0] / v_norm, v[1] / v_norm, v[2] / v_norm];
+        let w = cross(&u, &v);
+        let terms = [
+            w[0] * other[0] + w[1] * other[1] + w[2] * other[2],
+            u[0] * other[0] + u[1] * other[1] + u[2] * other[2],
+            v[0] * other[0] + v[1] * other[1] + v[2] * other[2],
+            theta,
+        ];
+        // Coinciding points, or a line along the first normal: all zero, as in `pair_terms`.
+        let zero = d == 0.0 || v_norm == 0.0;
+        for (o, t) in out.iter_mut().zip(terms) {
+            o[k] = if zero { 0.0 } else { t };
+        }
+    }
+    out
+}
+
+/// `a × b`, each component as nalgebra's `cross` computes it.
+#[inline(always)]
+fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 /// FPFH features of a bare cloud (`index` must index `points`): normals by
@@ -207,13 +354,13 @@ fn fpfh_from_neighbourhoods(
             return;
         }
         let increment = 100.0 / (nb.len() - 1) as f64;
-        for &(j, _) in &nb[1..] {
-            let [alpha_sine, alpha_cosine, phi, theta, _] =
-                pair_terms(&points[i], &normals[i], &points[j], &normals[j]);
-            hist[alpha_bin(alpha_sine, alpha_cosine)] += increment;
-            hist[BINS + bin(phi, -1.0, 2.0)] += increment;
-            hist[2 * BINS + bin(theta, -1.0, 2.0)] += increment;
-        }
+        add_pairs(
+            hist,
+            (&points[i], &normals[i]),
+            &nb[1..],
+            (points, normals),
+            increment,
+        );
     });
 
     let mut fpfh = vec![[0.0; FPFH_LEN]; n]; // (N, 33)
@@ -288,320 +435,4 @@ fn weigh_neighbours_any(out: &mut Fpfh, own: &Fpfh, neighbours: &[(usize, f64)],
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn pair_features_by_hand() {
-        // p1 at the origin with normal +z, p2 at (1, 0, 0) with normal +x.
-        // dp = (1,0,0): angle1 = n1·dp = 0, angle2 = 1 → acos 0 = π/2 > acos 1 = 0: swap.
-        // u = n2 = +x, dp = (−1,0,0), θ = −angle2 = −1; v = dp × u = 0 → all zero.
-        let o = Point3::origin();
-        let x = Point3::new(1.0, 0.0, 0.0);
-        assert_eq!(
-            pair_features(&o, &Vector3::z(), &x, &Vector3::x()),
-            [0.0; 4]
-        );
-        // Normals +z and +y, dp = (1,0,0): angle1 = angle2 = 0, no swap; u = +z, θ = 0,
-        // v = dp × u = (1,0,0)×(0,0,1) = (0,−1,0), w = u × v = (0,0,1)×(0,−1,0) = (1,0,0).
-        // φ = v·n2 = −1, α = atan2(w·n2, u·n2) = atan2(0, 0) = 0, d = 1.
-        assert_eq!(
-            pair_features(&o, &Vector3::z(), &x, &Vector3::y()),
-            [0.0, -1.0, 0.0, 1.0]
-        );
-        // Normals +z and (0, 1, 1)/√2 at distance 2: no swap (angles 0 and 0);
-        // φ = v·n2 = −1/√2, α = atan2(w·n2, u·n2) = atan2(0, 1/√2) = 0.
-        let n2 = Vector3::new(0.0, 1.0, 1.0).normalize();
-        let f = pair_features(&o, &Vector3::z(), &Point3::new(2.0, 0.0, 0.0), &n2);
-        assert!(
-            (f[1] + 0.5f64.sqrt()).abs() < 1e-15 && f[0] == 0.0 && f[2] == 0.0 && f[3] == 2.0,
-            "{f:?}"
-        );
-        // Normals +z and −z: no swap, v = (0,−1,0), w = (1,0,0), φ = 0, α = atan2(0, −1) = π.
-        let f = pair_features(&o, &Vector3::z(), &x, &(-Vector3::z()));
-        assert!(
-            (f[0] - std::f64::consts::PI).abs() < 1e-15 && f[1] == 0.0,
-            "{f:?}"
-        );
-        // Coincident points: zero.
-        assert_eq!(
-            pair_features(&o, &Vector3::z(), &o, &Vector3::y()),
-            [0.0; 4]
-        );
-    }
-
-    #[test]
-    fn pair_features_do_not_depend_on_the_order() {
-        let (p1, p2) = (Point3::new(0.1, 0.2, 0.3), Point3::new(0.5, -0.1, 0.2));
-        let (n1, n2) = (
-            Vector3::new(0.2, 0.9, 0.1).normalize(),
-            Vector3::new(-0.5, 0.3, 0.8).normalize(),
-        );
-        let a = pair_features(&p1, &n1, &p2, &n2);
-        let b = pair_features(&p2, &n2, &p1, &n1);
-        for (x, y) in a.iter().zip(&b) {
-            assert!((x - y).abs() < 1e-12, "{a:?} vs {b:?}");
-        }
-    }
-
-    #[test]
-    fn bins_split_the_range_in_eleven_and_clamp() {
-        assert_eq!(bin(-1.0, -1.0, 2.0), 0);
-        assert_eq!(bin(1.0, -1.0, 2.0), 10);
-        assert_eq!(bin(0.0, -1.0, 2.0), 5);
-        assert_eq!(bin(-1.0 + 2.0 / 11.0 - 1e-9, -1.0, 2.0), 0);
-        assert_eq!(bin(-1.0 + 2.0 / 11.0 + 1e-9, -1.0, 2.0), 1);
-        assert_eq!(
-            bin(
-                -std::f64::consts::PI,
-                -std::f64::consts::PI,
-                2.0 * std::f64::consts::PI
-            ),
-            0
-        );
-        assert_eq!(
-            bin(
-                std::f64::consts::PI,
-                -std::f64::consts::PI,
-                2.0 * std::f64::consts::PI
-            ),
-            10
-        );
-    }
-
-    /// The polynomial's bins are libm's: on a million random directions, on directions a
-    /// hair either side of every bin edge, and on the zeros' and NaN's.
-    #[test]
-    fn alpha_bins_are_those_of_libms_atan2() {
-        use rand::{rngs::StdRng, Rng, SeedableRng};
-        use std::f64::consts::PI;
-        let libm = |y: f64, x: f64| bin(y.atan2(x), -PI, 2.0 * PI);
-        let mut rng = StdRng::seed_from_u64(7);
-        for _ in 0..1_000_000 {
-            let (y, x) = (rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0));
-            assert_eq!(alpha_bin(y, x), libm(y, x), "atan2({y}, {x})");
-        }
-        for edge in 0..=BINS {
-            let at = -PI + 2.0 * PI * edge as f64 / BINS as f64;
-            for off in [0.0, 1e-15, 1e-12, 1e-9, 1e-7, 5e-7, 1e-6, 2e-6, 1e-5] {
-                for angle in [at - off, at + off] {
-                    let length = rng.gen_range(0.1..1.0);
-                    let (y, x) = (length * angle.sin(), length * angle.cos());
-                    assert_eq!(alpha_bin(y, x), libm(y, x), "atan2({y}, {x})");
-                }
-            }
-        }
-        for (y, x) in [
-            (0.0, 0.0),
-            (-0.0, 0.0),
-            (0.0, -0.0),
-            (-0.0, -0.0),
-            (0.0, -1.0),
-        ]
-        .into_iter()
-        .chain([(-0.0, -1.0), (0.5, f64::NAN), (f64::NAN, 0.5)])
-        {
-            assert_eq!(alpha_bin(y, x), libm(y, x), "atan2({y}, {x})");
-        }
-    }
-
-    #[test]
-    fn three_points_by_hand() {
-        // Three points on the x axis, 1 apart, normals +z, radius 1.5: the ends see only the
-        // middle. Every pair, either direction, has α = φ = θ = 0 (v = ∓y, w = ±x, n2 = +z), so
-        // bin 5 of each block. SPFH: 100 at bins 5, 16, 27 for every point (an end: one pair of
-        // +100; the middle: two of +50). FPFH: the neighbours' SPFHs weighted by 1/1², each
-        // block rescaled to 100, plus the own 100 → 200 at bins 5, 16, 27 for every point.
-        let points = vec![
-            Point3::new(0.0, 0.0, 0.0),
-            Point3::new(1.0, 0.0, 0.0),
-            Point3::new(2.0, 0.0, 0.0),
-        ];
-        let normals = vec![Vector3::z(); 3];
-        let config = FpfhConfig {
-            radius: 1.5,
-            max_nn: 100,
-        };
-        let f = compute_fpfh(&points, &normals, &KnnIndex::new(&points), &config);
-        for feature in &f {
-            for (c, v) in feature.iter().enumerate() {
-                let expected = if c % BINS == 5 { 200.0 } else { 0.0 };
-                assert!((v - expected).abs() < 1e-12, "bin {c}: {v}");
-            }
-        }
-    }
-
-    /// Pinned from Open3D 0.20 on ModelNet40 `airplane_0627`, normals as in
-    /// `normals::tests::normals_match_open3d`. On that shape all 1,024 features agree with
-    /// Open3D's bit for bit (checked against the full array); three are pinned:
-    ///
-    /// ```python
-    /// f = o3d.pipelines.registration.compute_fpfh_feature(pcd, o3d.geometry.KDTreeSearchParamHybrid(radius=0.4, max_nn=100))
-    /// np.asarray(f.data).T[[0, 2, 500]]
-    /// ```
-    #[test]
-    fn features_match_open3d() {
-        let cloud = crate::testing::airplane();
-        let f = features(
-            &cloud.points,
-            &KnnIndex::new(&cloud.points),
-            &NormalsConfig::default(),
-            &FpfhConfig::default(),
-        );
-        let pinned: [(usize, [f64; 33]); 3] = [
-            (
-                0,
-                [
-                    8.8848057954148,
-                    16.547166721833257,
-                    13.548610693741033,
-                    15.412833186237904,
-                    28.156744002453046,
-                    44.33389746245699,
-                    24.46009754770327,
-                    21.89519059932341,
-                    14.240524337787551,
-                    6.281950432485925,
-                    6.238179220562577,
-                    34.651038608212424,
-                    21.080500139720016,
-                    16.371082937158562,
-                    22.69462674181578,
-                    23.84562397712242,
-                    24.942413617853994,
-                    18.11662441901884,
-                    15.553120479879016,
-                    8.657395634162508,
-                    8.677736285418915,
-                    5.409837159637393,
-                    13.327774515907588,
-                    22.607298225610784,
-                    29.8741421988707,
-                    24.700521007671313,
-                    12.552800783686685,
-                    1.2939132736241332,
-                    8.695210919267126,
-                    14.385621074617367,
-                    15.168534767226,
-                    36.406813619950086,
-                    20.987369613568212,
-                ],
-            ),
-            (
-                2,
-                [
-                    7.055836172733404,
-                    21.01895107880684,
-                    2.961751619088029,
-                    1.441664595946302,
-                    6.20663579187719,
-                    40.18215665634877,
-                    42.278356720166926,
-                    22.830854160685917,
-                    28.219137127909573,
-                    24.033237595369734,
-                    3.7714184810674025,
-                    5.159091501217923,
-                    17.043120792245993,
-                    23.443138026531955,
-                    31.00511176500745,
-                    20.22971238997926,
-                    21.81774088197744,
-                    13.298720409404812,
-                    24.08450726771084,
-                    17.777776233168886,
-                    17.496056792967707,
-                    8.645023939787656,
-                    37.98156035690336,
-                    36.940088403829094,
-                    29.378943188852034,
-                    30.65998927718544,
-                    28.469593485773466,
-                    17.655797716293584,
-                    4.92282130282062,
-                    3.5763644372324337,
-                    3.886398519026251,
-                    4.295958021499601,
-                    2.232485290584233,
-                ],
-            ),
-            (
-                500,
-                [
-                    16.69849196277767,
-                    3.5856227217027223,
-                    15.090409822193003,
-                    5.515576056527119,
-                    10.276730046743094,
-                    67.55232907243109,
-                    9.447361865009638,
-                    14.626577251138706,
-                    21.309424740365067,
-                    9.388155826034488,
-                    26.509320635077493,
-                    53.78067478799315,
-                    10.416708971814023,
-                    2.661529064577639,
-                    6.017929503269723,
-                    27.106659502124447,
-                    38.3511947117924,
-                    32.1847564843135,
-                    6.356419319103762,
-                    5.709976963782962,
-                    6.716235910754604,
-                    10.697914780473864,
-                    10.327353774709692,
-                    8.005411884058566,
-                    18.604473705105317,
-                    22.009276340434738,
-                    30.743884174794275,
-                    12.350140142043337,
-                    33.047015566212146,
-                    30.137720900890717,
-                    13.975275265592684,
-                    12.660175097372276,
-                    8.139273148786272,
-                ],
-            ),
-        ];
-        for (i, expected) in pinned {
-            for (c, (got, want)) in f[i].iter().zip(&expected).enumerate() {
-                assert!(
-                    (got - want).abs() < 1e-12,
-                    "point {i} bin {c}: {got} vs {want}"
-                );
-            }
-        }
-    }
-
-    #[test]
-    fn features_are_invariant_to_rigid_motion() {
-        use crate::testing::box_surface;
-        use crate::RigidTransform;
-        use rand::{rngs::StdRng, SeedableRng};
-        let cloud = box_surface(400, 6);
-        let pose = RigidTransform::random(&mut StdRng::seed_from_u64(3), 45.0, 0.5);
-        let moved = cloud.transformed(&pose);
-        let of = |c: &crate::PointCloud| {
-            features(
-                &c.points,
-                &KnnIndex::new(&c.points),
-                &NormalsConfig::default(),
-                &FpfhConfig::default(),
-            )
-        };
-        let (a, b) = (of(&cloud), of(&moved));
-        let mut max_diff: f64 = 0.0;
-        for (x, y) in a.iter().zip(&b) {
-            assert!(
-                (x.iter().sum::<f64>() - 600.0).abs() < 1e-9,
-                "each block sums to 200"
-            );
-            for (u, v) in x.iter().zip(y) {
-                max_diff = max_diff.max((u - v).abs());
-            }
-        }
-        // Bins may flip for values on a bin edge; that moves at most a few percent.
-        assert!(max_diff < 5.0, "max difference {max_diff}");
-    }
-}
+mod tests;
