@@ -90,7 +90,7 @@ impl KnnIndex {
             hook(points);
         }
         let mut tree_points = tree_points(points);
-        let mut nodes = Vec::with_capacity(2 * points.len() / LEAF_SIZE + 1);
+        let mut nodes = Vec::with_capacity(most_nodes(points.len()));
         if !tree_points.is_empty() {
             build(&mut nodes, &mut tree_points, 0, SIDE_BY_SIDE_POINTS);
         }
@@ -611,6 +611,14 @@ fn tree_points(points: &[Point3<f64>]) -> Vec<([f64; 3], u32)> {
         .collect()
 }
 
+/// The most nodes a tree over `n` points has: a node of more than [`LEAF_SIZE`] points splits
+/// in halves, so every leaf holds at least half of `LEAF_SIZE + 1` (rounded down), and a binary
+/// tree has fewer than twice as many nodes as leaves. The nodes' list is made this long at
+/// once: growing it copied every node again and again.
+fn most_nodes(n: usize) -> usize {
+    2 * n / ((LEAF_SIZE + 1) / 2) + 1
+}
+
 /// Builds the subtree over `points` (which start at position `offset` of the whole array)
 /// and returns its node index; the subtrees of a node over `side_by_side_from` points or more
 /// are built side by side.
@@ -623,10 +631,12 @@ fn build(
     let id = nodes.len() as u32;
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
+    // Comparisons rather than `min` and `max`, which also look for NaN (a tree's coordinates
+    // are finite): the same box, found sooner.
     for (p, _) in points.iter() {
         for a in 0..3 {
-            lo[a] = lo[a].min(p[a]);
-            hi[a] = hi[a].max(p[a]);
+            lo[a] = if p[a] < lo[a] { p[a] } else { lo[a] };
+            hi[a] = if p[a] > hi[a] { p[a] } else { hi[a] };
         }
     }
     let (start, end) = (offset as u32, (offset + points.len()) as u32);
@@ -654,7 +664,7 @@ fn build(
         // The two subtrees side by side, each into a list of its own, then appended in the
         // order the one-by-one build gives: the same tree, node for node.
         let subtree = |points: &mut [([f64; 3], u32)], offset: usize| {
-            let mut nodes = Vec::with_capacity(2 * points.len() / LEAF_SIZE + 1);
+            let mut nodes = Vec::with_capacity(most_nodes(points.len()));
             build(&mut nodes, points, offset, side_by_side_from);
             nodes
         };

@@ -352,3 +352,22 @@ fn nearest_among_a_centres_neighbours_is_the_search_s_answer_or_none() {
         );
     }
 }
+
+/// The nodes' list is made long enough at once for any tree: every size up to a few leaves,
+/// larger clouds, and clouds of copies.
+#[test]
+fn a_tree_never_outgrows_its_nodes_list() {
+    let mut sizes: Vec<usize> = (0..200).collect();
+    sizes.extend([1000, 4097, 9000, 20_000]);
+    for n in sizes {
+        let points = random_cloud(n, n as u64);
+        let index = KnnIndex::new(&points);
+        assert!(
+            index.nodes.len() <= most_nodes(n),
+            "{n} points: {} nodes",
+            index.nodes.len()
+        );
+        let copies = vec![Point3::new(0.5, 0.5, 0.5); n];
+        assert!(KnnIndex::new(&copies).nodes.len() <= most_nodes(n));
+    }
+}
