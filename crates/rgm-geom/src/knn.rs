@@ -612,11 +612,11 @@ fn tree_points(points: &[Point3<f64>]) -> Vec<([f64; 3], u32)> {
 }
 
 /// The most nodes a tree over `n` points has: a node of more than [`LEAF_SIZE`] points splits
-/// in halves, so every leaf holds at least half of `LEAF_SIZE + 1` (rounded down), and a binary
+/// in halves, so every leaf holds at least half of `LEAF_SIZE` (rounded up), and a binary
 /// tree has fewer than twice as many nodes as leaves. The nodes' list is made this long at
 /// once: growing it copied every node again and again.
 fn most_nodes(n: usize) -> usize {
-    2 * n / ((LEAF_SIZE + 1) / 2) + 1
+    2 * n / LEAF_SIZE.div_ceil(2) + 1
 }
 
 /// Builds the subtree over `points` (which start at position `offset` of the whole array)
