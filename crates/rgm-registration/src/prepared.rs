@@ -95,10 +95,11 @@ impl<'a> Prepared<'a> {
         let sample: Vec<_> = evenly(&self.cloud.points, SPACING_SAMPLE).collect(); // (S,)
         let (first, sixteenth): (Vec<f64>, Vec<f64>) = sample
             .par_iter()
-            .filter_map(|p| {
-                let near = index.k_nearest(p, 17);
-                Some((near.get(1)?.1, near.get(16)?.1))
+            .map_init(Vec::new, |near, p| {
+                index.k_nearest_squared_into(p, 17, near);
+                Some((near.get(1)?.1.sqrt(), near.get(16)?.1.sqrt()))
             })
+            .flatten()
             .unzip();
         *self
             .spacings
