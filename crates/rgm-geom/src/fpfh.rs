@@ -58,50 +58,15 @@ pub fn pair_features(
     p2: &Point3<f64>,
     n2: &Vector3<f64>,
 ) -> [f64; 4] {
-    let [alpha_sine, alpha_cosine, phi, theta, d] = pair_terms(p1, n1, p2, n2);
-    [alpha_sine.atan2(alpha_cosine), phi, theta, d]
-}
-
-/// [`pair_features`] before α's angle is taken: `[w·n, u·n, φ, θ, d]`, α being the atan2 of
-/// the first two (all zero where the features are).
-#[inline]
-fn pair_terms(
-    p1: &Point3<f64>,
-    n1: &Vector3<f64>,
-    p2: &Point3<f64>,
-    n2: &Vector3<f64>,
-) -> [f64; 5] {
-    let mut dp = p2 - p1;
-    let d = dot(&dp, &dp).sqrt();
-    if d == 0.0 {
-        return [0.0; 5];
+    // The pair in the first lane; the others hold (p1, n1) again.
+    let mut p = [[p1.x; LANES], [p1.y; LANES], [p1.z; LANES]];
+    let mut n = [[n1.x; LANES], [n1.y; LANES], [n1.z; LANES]];
+    for axis in 0..3 {
+        p[axis][0] = p2[axis];
+        n[axis][0] = n2[axis];
     }
-    let angle1 = dot(n1, &dp) / d;
-    let angle2 = dot(n2, &dp) / d;
-    // Open3D writes `acos|a₁| > acos|a₂|`; acos is decreasing, so that is `|a₁| < |a₂|` — and
-    // on 1-ulp ties (where libm's acos returns equal values) Open3D's build decides as `<`.
-    let (u, n_other, theta) = if angle1.abs() < angle2.abs() {
-        dp = -dp;
-        (n2, n1, -angle2)
-    } else {
-        (n1, n2, angle1)
-    };
-    let v = dp.cross(u);
-    let v_norm = dot(&v, &v).sqrt();
-    if v_norm == 0.0 {
-        return [0.0; 5];
-    }
-    let v = v / v_norm;
-    let w = u.cross(&v);
-    let phi = dot(&v, n_other);
-    [dot(&w, n_other), dot(u, n_other), phi, theta, d]
-}
-
-/// `a · b`, summed x, y, z in that order (as Eigen does for 3-vectors: Open3D's features are
-/// reproduced to the last bit).
-#[inline]
-fn dot(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
-    a.x * b.x + a.y * b.y + a.z * b.z
+    let [alpha_sine, alpha_cosine, phi, theta, d] = pair_terms((p1, n1), &p, &n);
+    [alpha_sine[0].atan2(alpha_cosine[0]), phi[0], theta[0], d[0]]
 }
 
 /// The bin of `value` in [lo, lo + width) split into 11, clamped to the valid bins: the floor,
@@ -186,8 +151,8 @@ const LANES: usize = 8;
 
 /// Adds `increment` to the three bins of the pair features of (p1, n1) with each of
 /// `neighbours` (indices into `points` and `normals`) in `hist`: [`LANES`] pairs at a time, each
-/// lane doing [`pair_terms`]' operations in its order (never fused), so that every bin is the
-/// one [`pair_features`] gives. The order the pairs are added in does not matter: every
+/// lane doing [`pair_features`]' operations ([`pair_terms`]), so that every bin is the one it
+/// gives. The order the pairs are added in does not matter: every
 /// addition adds the same `increment`.
 fn add_pairs(
     hist: &mut Fpfh,
@@ -239,7 +204,7 @@ fn add_pairs_any(
                 n[axis][k] = normals[j][axis];
             }
         }
-        let [alpha_sine, alpha_cosine, phi, theta] = pair_terms_lanes((p1, n1), &p, &n);
+        let [alpha_sine, alpha_cosine, phi, theta, _] = pair_terms((p1, n1), &p, &n);
         let mut places = [[0.0; LANES]; 3];
         for k in 0..LANES {
             places[0][k] = alpha_place(alpha_sine[k], alpha_cosine[k]);
@@ -254,21 +219,26 @@ fn add_pairs_any(
     }
 }
 
-/// [`pair_terms`]' `[w·n, u·n, φ, θ]` of (p1, n1) with each lane's point and normal, by the same
-/// operations in the same order, the branches taken as selections. // (4, LANES)
+/// [`pair_features`] before α's angle is taken, for (p1, n1) with each lane's point and normal:
+/// `[w·n, u·n, φ, θ, d]`, α being the atan2 of the first two (all zero where the features
+/// are). Each lane does Open3D's operations in its order, never fused, its branches taken as
+/// selections, so that eight lanes compute side by side what one pair would. // (5, LANES)
 #[inline(always)]
-fn pair_terms_lanes(
+fn pair_terms(
     (p1, n1): (&Point3<f64>, &Vector3<f64>),
     p: &[[f64; LANES]; 3],
     n: &[[f64; LANES]; 3],
-) -> [[f64; LANES]; 4] {
-    let mut out = [[0.0; LANES]; 4];
+) -> [[f64; LANES]; 5] {
+    let mut out = [[0.0; LANES]; 5];
     for k in 0..LANES {
         let n2 = [n[0][k], n[1][k], n[2][k]];
         let dp = [p[0][k] - p1.x, p[1][k] - p1.y, p[2][k] - p1.z];
         let d = (dp[0] * dp[0] + dp[1] * dp[1] + dp[2] * dp[2]).sqrt();
         let angle1 = (n1.x * dp[0] + n1.y * dp[1] + n1.z * dp[2]) / d;
         let angle2 = (n2[0] * dp[0] + n2[1] * dp[1] + n2[2] * dp[2]) / d;
+        // Open3D writes `acos|a₁| > acos|a₂|`; acos is decreasing, so that is `|a₁| < |a₂|` —
+        // and on 1-ulp ties (where libm's acos returns equal values) Open3D's build decides as
+        // `<`. Swapped, the line runs the other way and the second normal comes first.
         let swap = angle1.abs() < angle2.abs();
         let pick = |a: f64, b: f64| if swap { a } else { b };
         let dp = [
@@ -288,8 +258,9 @@ fn pair_terms_lanes(
             u[0] * other[0] + u[1] * other[1] + u[2] * other[2],
             v[0] * other[0] + v[1] * other[1] + v[2] * other[2],
             theta,
+            d,
         ];
-        // Coinciding points, or a line along the first normal: all zero, as in `pair_terms`.
+        // Coinciding points, or a line along the first normal: all zero.
         let zero = d == 0.0 || v_norm == 0.0;
         for (o, t) in out.iter_mut().zip(terms) {
             o[k] = if zero { 0.0 } else { t };
