@@ -168,6 +168,11 @@ fn add_pairs(
             add_pairs_avx512(hist, (p1, n1), neighbours, (points, normals), increment)
         };
     }
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2.
+        return unsafe { add_pairs_avx2(hist, (p1, n1), neighbours, (points, normals), increment) };
+    }
     add_pairs_any(hist, (p1, n1), neighbours, (points, normals), increment)
 }
 
@@ -175,6 +180,20 @@ fn add_pairs(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
 unsafe fn add_pairs_avx512(
+    hist: &mut Fpfh,
+    centre: (&Point3<f64>, &Vector3<f64>),
+    neighbours: &[(usize, f64)],
+    cloud: (&[Point3<f64>], &[Vector3<f64>]),
+    increment: f64,
+) {
+    add_pairs_any(hist, centre, neighbours, cloud, increment)
+}
+
+/// [`add_pairs`] compiled with AVX2 (the processors without AVX-512): the same operations,
+/// four lanes wide.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn add_pairs_avx2(
     hist: &mut Fpfh,
     centre: (&Point3<f64>, &Vector3<f64>),
     neighbours: &[(usize, f64)],

@@ -402,3 +402,41 @@ fn features_are_invariant_to_rigid_motion() {
     // Bins may flip for values on a bin edge; that moves at most a few percent.
     assert!(max_diff < 5.0, "max difference {max_diff}");
 }
+
+/// Every build of the side-by-side pairs this processor runs adds the same histogram: AVX-512
+/// (where there is one), AVX2 (the processors without) and the plain one.
+#[test]
+fn every_build_of_the_pairs_adds_the_same_histogram() {
+    use rand::{rngs::StdRng, Rng, SeedableRng};
+    let mut rng = StdRng::seed_from_u64(3);
+    let points: Vec<Point3<f64>> = (0..300)
+        .map(|_| Point3::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0), 0.1))
+        .collect();
+    let normals: Vec<Vector3<f64>> = (0..300)
+        .map(|_| Vector3::new(rng.gen_range(-0.3..0.3), rng.gen_range(-0.3..0.3), 1.0).normalize())
+        .collect();
+    let neighbours: Vec<(usize, f64)> = (1..300).map(|j| (j, 0.0)).collect();
+    let centre = (&points[0], &normals[0]);
+    let mut plain = [0.0; FPFH_LEN];
+    add_pairs_any(&mut plain, centre, &neighbours, (&points, &normals), 0.5);
+    assert_eq!(plain.iter().sum::<f64>(), 3.0 * 0.5 * 299.0);
+    #[cfg(target_arch = "x86_64")]
+    {
+        let mut builds = Vec::new();
+        if std::arch::is_x86_feature_detected!("avx2") {
+            let mut hist = [0.0; FPFH_LEN];
+            // SAFETY: the CPU has AVX2.
+            unsafe { add_pairs_avx2(&mut hist, centre, &neighbours, (&points, &normals), 0.5) };
+            builds.push(hist);
+        }
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            let mut hist = [0.0; FPFH_LEN];
+            // SAFETY: the CPU has AVX-512F.
+            unsafe { add_pairs_avx512(&mut hist, centre, &neighbours, (&points, &normals), 0.5) };
+            builds.push(hist);
+        }
+        for hist in builds {
+            assert_eq!(hist, plain);
+        }
+    }
+}
