@@ -746,14 +746,15 @@ fn leaf_squared_distances(xyz: [&[f64]; 3], q: &[f64; 3], out: &mut [f64; LEAF_S
     }
 }
 
-/// The order of results: by distance, ties by index.
+/// Whether `a` comes before `b` in the order of results ([`distance_then_index`]).
 #[inline]
 fn is_before(a: (usize, f64), b: (usize, f64)) -> bool {
-    a.1 < b.1 || (a.1 == b.1 && a.0 < b.0)
+    distance_then_index(&a) < distance_then_index(&b)
 }
 
-/// The order of results as a key: by distance, ties by index. Every distance a search keeps is
-/// a sum of squares, never negative nor NaN, and such a float's bits order as its value.
+/// The order of results as a key: by distance, ties by index. Every distance a search keeps,
+/// and every bound it compares them with, is a sum of squares or a square (never negative), and
+/// such a float's bits order as its value.
 #[inline]
 fn distance_then_index(&(i, d2): &(usize, f64)) -> (u64, usize) {
     (d2.to_bits(), i)
