@@ -752,9 +752,8 @@ fn is_before(a: (usize, f64), b: (usize, f64)) -> bool {
     distance_then_index(&a) < distance_then_index(&b)
 }
 
-/// The order of results as a key: by distance, ties by index. Every distance a search keeps,
-/// and every bound it compares them with, is a sum of squares or a square (never negative), and
-/// such a float's bits order as its value.
+/// The order of results as a key: by distance, ties by index. Every distance and bound compared
+/// is a square or a sum of squares (never negative), whose bits order as its value.
 #[inline]
 fn distance_then_index(&(i, d2): &(usize, f64)) -> (u64, usize) {
     (d2.to_bits(), i)
